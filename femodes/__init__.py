@@ -1,0 +1,35 @@
+"""femodes: nonlinear vibration modes of finite-element structures with unilateral contact.
+
+The public face of the package (see DESIGN.md section 3). Layers, from the bottom: solvers,
+laws, models (fe, model, reduction, linear), discretise (hbm), analyses, results, outputs.
+"""
+
+from .fe import Material, Section, bar, beam, line_mesh, load_mesh
+from .laws import CubicSpring, PenaltyContact, UnilateralContact
+from .linear import IllConditionedWarning, LinearModes, LinearResponse, linear_modes, linear_response
+from .model import DofMap, HarmonicForce, StructuralModel
+from .reduction import ReducedModel, craig_bampton
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Material",
+    "Section",
+    "bar",
+    "beam",
+    "line_mesh",
+    "load_mesh",
+    "CubicSpring",
+    "PenaltyContact",
+    "UnilateralContact",
+    "IllConditionedWarning",
+    "LinearModes",
+    "LinearResponse",
+    "linear_modes",
+    "linear_response",
+    "DofMap",
+    "HarmonicForce",
+    "StructuralModel",
+    "ReducedModel",
+    "craig_bampton",
+]

@@ -1,0 +1,1 @@
+"""Application layer: the ``femodes`` command line, case files and sweeps."""

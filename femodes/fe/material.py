@@ -1,0 +1,57 @@
+"""Models layer: material and cross-section data of 1-D structural members."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Material", "Section"]
+
+
+def _pos(owner: str, name: str, v, *, allow_none: bool = False):
+    if v is None and allow_none:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{owner}: {name} must be a positive real number, got {v!r}")
+    v = float(v)
+    if not math.isfinite(v) or v <= 0:
+        raise ValueError(f"{owner}: {name} must be a finite positive number, got {v!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class Material:
+    """Linear elastic material: Young's modulus ``E`` and density ``rho`` (consistent units)."""
+
+    E: float
+    rho: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "E", _pos("Material", "E", self.E))
+        object.__setattr__(self, "rho", _pos("Material", "rho", self.rho))
+
+    @property
+    def wave_speed(self) -> float:
+        """Bar wave speed ``sqrt(E / rho)``."""
+        return math.sqrt(self.E / self.rho)
+
+
+@dataclass(frozen=True)
+class Section:
+    """Cross-section: ``area`` A (bars and beam mass) and second moment ``inertia`` I (beams).
+
+    ``rotary_inertia=True`` adds the Rayleigh rotary inertia ``rho I w'^2`` to beam kinetic energy
+    (off by default: classical Euler-Bernoulli).
+    """
+
+    area: float
+    inertia: float | None = None
+    rotary_inertia: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "area", _pos("Section", "area", self.area))
+        object.__setattr__(self, "inertia", _pos("Section", "inertia", self.inertia, allow_none=True))
+        if not isinstance(self.rotary_inertia, bool):
+            raise TypeError(f"Section: rotary_inertia must be True or False, got {self.rotary_inertia!r}")

@@ -1,0 +1,660 @@
+"""Models layer: line meshes for bars and beams (scikit-fem MeshLine with named points and subdomains).
+
+This module builds (:func:`line_mesh`) or reads (:func:`load_mesh`) the 1-D
+meshes on which femodes assembles axial bars and Euler-Bernoulli beams.
+Both functions return a ``skfem`` line mesh (an instance of
+``skfem.mesh.MeshLine1``; ``isinstance(m, skfem.MeshLine)`` is true) in the
+same *canonical form*:
+
+* ``m.p`` has shape ``(1, n + 1)`` and ``m.p[0]`` is strictly increasing;
+* ``m.t`` is ``[[0, 1, ..., n-1], [1, 2, ..., n]]``: element ``e`` joins
+  vertices ``e`` and ``e + 1``, elements are numbered from left to right;
+* every vertex is used by an element.
+
+Named points and named subdomains are stored with scikit-fem's public
+mechanisms (``Mesh.with_boundaries`` / ``Mesh.with_subdomains``) and read
+back through the public properties:
+
+* ``m.boundaries[name]`` -- ``numpy.int32`` array of *facet* indices of the
+  named point(s).  For a ``MeshLine`` the facets are the vertices and
+  scikit-fem numbers them as the sorted unique vertex indices found in
+  ``m.t`` (``Mesh.build_entities``), so because every vertex is used,
+  ``m.facets[0] == arange(n + 1)`` and a facet index *is* the vertex index:
+  ``m.p[0, m.boundaries["tip"]]`` is the coordinate of the point "tip".
+  Named points may be interior vertices (e.g. a contact point at mid span);
+  scikit-fem accepts those as facet sets.  The names can be passed directly
+  to scikit-fem, e.g. ``Basis(m, e).get_dofs("clamp")``.
+* ``m.subdomains[name]`` -- sorted ``numpy.int32`` array of element indices.
+  ``m.subdomains`` is always a ``dict`` (possibly empty), never ``None``.
+
+The names ``"left"`` and ``"right"`` are reserved: they are always present
+and denote the vertex with the smallest and the largest coordinate.  A user
+may name them explicitly only if they point at those ends.  Several names may
+refer to the same vertex (``"left"`` and ``"clamp"``, say).
+
+Subdomains may overlap and need not cover the mesh; deciding what an element
+in zero or several material subdomains means is left to the model layer.
+
+Notes
+-----
+scikit-fem 12 quirks relevant here (see also the tests):
+
+* ``skfem.MeshLine`` is a constructor *object* (``MeshLineConstructor``), not
+  a class; the class is ``skfem.mesh.MeshLine1``.
+* ``MeshLine1.with_defaults()`` raises ``AttributeError`` (it calls
+  ``self.params()`` which line meshes do not have), so the default
+  ``"left"``/``"right"`` tags are built here instead.
+* ``Mesh.refined()`` keeps named points (new vertices are appended) but
+  mislabels subdomains of a ``MeshLine``: it assumes child elements
+  ``i, i + N, ...`` while ``MeshLine1._uniform`` creates ``2 i, 2 i + 1``.
+  Rebuild the mesh with more elements instead of refining it.
+* ``meshio.read`` calls ``sys.exit(1)`` (after printing to the console) when
+  a reader rejects a file; :func:`load_mesh` guards against that and turns
+  it into a ``ValueError``.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+import numbers
+import os
+from collections.abc import Mapping
+from pathlib import Path
+
+import meshio
+import numpy as np
+import skfem
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+__all__ = ["line_mesh", "load_mesh", "POINT_RTOL", "COLLINEAR_RTOL"]
+
+#: Relative tolerance (times the mesh length) for a named point of
+#: :func:`line_mesh` to coincide with a vertex.
+POINT_RTOL = 1e-9
+
+#: Relative tolerance (times the end-to-end length) for the distance of a
+#: vertex from the straight line in :func:`load_mesh`.  Generous enough for
+#: single-precision coordinates of tilted lines.
+COLLINEAR_RTOL = 1e-6
+
+# relative length below which an element read from a file counts as zero
+_ZERO_LENGTH_RTOL = 1e-12
+
+# cell_data arrays that carry region tags, in order of preference
+_TAG_KEYS = ("gmsh:physical", "region", "regions", "subdomain", "subdomains")
+
+_RESERVED = ("left", "right")
+
+
+# ---------------------------------------------------------------------------
+# argument checking
+# ---------------------------------------------------------------------------
+def _real(func: str, what: str, value, *, positive: bool = False) -> float:
+    """Return ``value`` as a finite float or raise naming ``what``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(
+            f"{func}: {what} must be a real number, got {value!r} "
+            f"of type {type(value).__name__}"
+        )
+    x = float(value)
+    if not math.isfinite(x):
+        raise ValueError(f"{func}: {what} must be finite, got {value!r}")
+    if positive and not x > 0.0:
+        raise ValueError(f"{func}: {what} must be > 0, got {value!r}")
+    return x
+
+
+def _name(func: str, argname: str, key) -> str:
+    """Check that a dictionary key is a usable name."""
+    if not isinstance(key, str):
+        raise TypeError(
+            f"{func}: names in '{argname}' must be str, got {key!r} "
+            f"of type {type(key).__name__}"
+        )
+    if not key.strip():
+        raise ValueError(f"{func}: names in '{argname}' must be non-empty, got {key!r}")
+    return key
+
+
+def _mapping(func: str, argname: str, value) -> Mapping:
+    if not isinstance(value, Mapping):
+        raise TypeError(
+            f"{func}: argument '{argname}' must be a dict or None, got {value!r} "
+            f"of type {type(value).__name__}"
+        )
+    return value
+
+
+# ---------------------------------------------------------------------------
+# construction of the skfem mesh
+# ---------------------------------------------------------------------------
+def _build(x: np.ndarray, boundaries: dict, subdomains: dict):
+    """Create the canonical MeshLine from sorted coordinates and index sets."""
+    mesh = skfem.MeshLine(np.asarray(x, dtype=np.float64)[None, :])
+    mesh = mesh.with_boundaries(
+        {k: np.asarray(v, dtype=np.int32).reshape(-1) for k, v in boundaries.items()}
+    )
+    mesh = mesh.with_subdomains(
+        {k: np.asarray(v, dtype=np.int32).reshape(-1) for k, v in subdomains.items()}
+    )
+    return mesh
+
+
+def _coordinates(start: float, length: float, n: int, grading: float) -> np.ndarray:
+    """Vertex coordinates, element lengths in geometric progression."""
+    if grading == 1.0 or n == 1:
+        return np.linspace(start, start + length, n + 1)
+    q = grading ** (1.0 / (n - 1))
+    h = q ** np.arange(n, dtype=np.float64)
+    h *= length / h.sum()
+    x = np.empty(n + 1)
+    x[0] = start
+    x[1:] = start + np.cumsum(h)
+    x[-1] = start + length
+    return x
+
+
+def line_mesh(
+    length: float = 1.0,
+    n_elements: int = 10,
+    *,
+    boundaries: dict[str, float] | None = None,
+    subdomains: dict[str, tuple[float, float]] | None = None,
+    grading: float = 1.0,
+    start: float = 0.0,
+) -> skfem.MeshLine:
+    """Create a straight line mesh with named points and subdomains.
+
+    Parameters
+    ----------
+    length : float
+        Length of the line, finite and > 0.  The mesh covers
+        ``[start, start + length]``.
+    n_elements : int
+        Number of elements, an integer >= 1 (``bool`` is rejected).
+    boundaries : dict of str to float, optional
+        Named points, ``name -> coordinate``.  Each coordinate must coincide
+        with a mesh vertex within ``POINT_RTOL * length``; otherwise a
+        ``ValueError`` names the point and the nearest vertex.  ``"left"``
+        (at ``start``) and ``"right"`` (at ``start + length``) are always
+        added; giving them explicitly is allowed only at those ends.
+    subdomains : dict of str to (float, float), optional
+        Named subdomains, ``name -> (x0, x1)`` with ``x0 < x1``.  An element
+        belongs to the subdomain if its midpoint lies in the closed interval
+        ``[x0, x1]``.  Every interval must contain at least one element.
+        Subdomains may overlap and need not cover the line.
+    grading : float
+        Ratio ``last element length / first element length`` (> 0), element
+        lengths in geometric progression.  ``1`` gives a uniform mesh,
+        ``< 1`` refines towards ``start + length``.  Has no effect when
+        ``n_elements == 1``.
+    start : float
+        Coordinate of the left end.
+
+    Returns
+    -------
+    skfem.MeshLine
+        Canonical line mesh (see the module docstring): vertex ``k`` is the
+        ``k``-th from the left, ``mesh.boundaries[name]`` holds vertex (=
+        facet) indices and ``mesh.subdomains[name]`` element indices.
+
+    Raises
+    ------
+    TypeError
+        If an argument has the wrong type; the message names the argument.
+    ValueError
+        If an argument has an invalid value, a named point is not at a
+        vertex or a subdomain contains no element.
+
+    Examples
+    --------
+    >>> m = line_mesh(2.0, 4, boundaries={"clamp": 0.0, "contact": 1.5})
+    >>> m.p[0, m.boundaries["contact"]]
+    array([1.5])
+    """
+    f = "line_mesh"
+    length = _real(f, "argument 'length'", length, positive=True)
+    start = _real(f, "argument 'start'", start)
+    grading = _real(f, "argument 'grading'", grading, positive=True)
+    if isinstance(n_elements, (bool, np.bool_)) or not isinstance(n_elements, numbers.Integral):
+        raise TypeError(
+            f"{f}: argument 'n_elements' must be an int, got {n_elements!r} "
+            f"of type {type(n_elements).__name__}"
+        )
+    n = int(n_elements)
+    if n < 1:
+        raise ValueError(f"{f}: argument 'n_elements' must be >= 1, got {n_elements!r}")
+    if not math.isfinite(start + length):
+        raise ValueError(
+            f"{f}: arguments 'start' + 'length' overflow: start={start!r}, length={length!r}"
+        )
+
+    x = _coordinates(start, length, n, grading)
+    if not np.all(np.diff(x) > 0.0):
+        raise ValueError(
+            f"{f}: element lengths underflow for length={length!r}, "
+            f"n_elements={n_elements!r}, grading={grading!r}, start={start!r}"
+        )
+
+    # named points
+    points: dict[str, np.ndarray] = {"left": np.array([0]), "right": np.array([n])}
+    if boundaries is not None:
+        _mapping(f, "boundaries", boundaries)
+        tol = POINT_RTOL * length
+        for key, value in boundaries.items():
+            name = _name(f, "boundaries", key)
+            c = _real(f, f"boundaries[{name!r}]", value)
+            k = int(np.argmin(np.abs(x - c)))
+            dist = abs(x[k] - c)
+            if dist > tol:
+                raise ValueError(
+                    f"{f}: boundaries[{name!r}] = {value!r} is not at a mesh vertex: "
+                    f"nearest vertex is x = {float(x[k])!r} (distance {dist:.3g} > tolerance "
+                    f"{tol:.3g}); move the point or choose n_elements/grading so that "
+                    f"a vertex falls on it"
+                )
+            if name in _RESERVED and k != points[name][0]:
+                end = "start" if name == "left" else "start + length"
+                raise ValueError(
+                    f"{f}: boundaries[{name!r}] = {value!r}: the name {name!r} is "
+                    f"reserved for the end x = {float(x[points[name][0]])!r} ({end}); use "
+                    f"another name for this point"
+                )
+            points[name] = np.array([k])
+
+    # named subdomains
+    regions: dict[str, np.ndarray] = {}
+    if subdomains is not None:
+        _mapping(f, "subdomains", subdomains)
+        mid = 0.5 * (x[:-1] + x[1:])
+        for key, value in subdomains.items():
+            name = _name(f, "subdomains", key)
+            what = f"subdomains[{name!r}]"
+            if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__") \
+                    or len(value) != 2:
+                raise TypeError(
+                    f"{f}: {what} must be an interval (x0, x1), got {value!r}"
+                )
+            x0 = _real(f, f"{what}[0]", value[0])
+            x1 = _real(f, f"{what}[1]", value[1])
+            if not x0 < x1:
+                raise ValueError(f"{f}: {what} = {value!r} must satisfy x0 < x1")
+            elems = np.nonzero((mid >= x0) & (mid <= x1))[0]
+            if elems.size == 0:
+                raise ValueError(
+                    f"{f}: {what} = {value!r} contains no element midpoint "
+                    f"(mesh spans [{float(x[0])!r}, {float(x[-1])!r}] with {n} elements)"
+                )
+            regions[name] = elems
+    return _build(x, points, regions)
+
+
+# ---------------------------------------------------------------------------
+# reading files
+# ---------------------------------------------------------------------------
+def _candidate_formats(fname: str) -> list[str]:
+    """meshio format names for the file's extension (gmsh first)."""
+    ext = ""
+    out: list[str] = []
+    for suffix in reversed(Path(fname).suffixes):
+        ext = (suffix + ext).lower()
+        for fmt in meshio.extension_to_filetypes.get(ext, []):
+            if fmt not in out:
+                out.append(fmt)
+    out.sort(key=lambda fmt: fmt != "gmsh")  # ".msh" is also claimed by ansys
+    return out
+
+
+def _read_meshio(fname: str) -> meshio.Mesh:
+    """Read with meshio, turning every failure into a ValueError."""
+    formats = _candidate_formats(fname)
+    if not formats:
+        raise ValueError(
+            f"load_mesh: cannot read {fname!r}: meshio does not know the file "
+            f"extension {Path(fname).suffix!r} (use e.g. .msh, .vtu, .vtk, .xdmf)"
+        )
+    complaints = []
+    for fmt in formats:
+        buf = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+                return meshio.read(fname, file_format=fmt)
+        except SystemExit:
+            # meshio prints the reader's ReadError and calls sys.exit(1)
+            lines = [
+                ln.strip() for ln in buf.getvalue().splitlines()
+                if ln.strip() and "couldn't read file" not in ln.lower()
+            ]
+            complaints.append(f"{fmt} reader: " + ("; ".join(lines) or "not a valid file"))
+        except Exception as exc:  # noqa: BLE001 - reader errors are arbitrary
+            complaints.append(f"{fmt} reader: {type(exc).__name__}: {exc}")
+    raise ValueError(
+        f"load_mesh: cannot read mesh file {fname!r}: " + " | ".join(complaints)
+    )
+
+
+def _tag_key(cell_data: Mapping) -> str | None:
+    lower = {k.lower(): k for k in cell_data}
+    for key in _TAG_KEYS:
+        if key in lower:
+            return lower[key]
+    return None
+
+
+def _int_tags(fname: str, key: str, data, ncells: int) -> np.ndarray:
+    arr = np.asarray(data)
+    if arr.ndim == 2 and arr.shape[1] == 1:
+        arr = arr[:, 0]
+    if arr.ndim != 1 or arr.shape[0] != ncells:
+        raise ValueError(
+            f"load_mesh: {fname!r}: cell data {key!r} has shape {np.shape(data)}, "
+            f"expected one integer tag per cell ({ncells})"
+        )
+    if arr.dtype.kind in "iu":
+        return arr.astype(np.int64)
+    if arr.dtype.kind == "f" and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)):
+        return arr.astype(np.int64)
+    raise ValueError(
+        f"load_mesh: {fname!r}: cell data {key!r} must hold integer region tags, "
+        f"got dtype {arr.dtype} (e.g. {arr.ravel()[:3].tolist()})"
+    )
+
+
+def _field_names(field_data: Mapping) -> dict[tuple[int, int], str]:
+    """gmsh-style ``name -> [tag, dim]`` as ``(dim, tag) -> name``."""
+    names = {}
+    for name, value in field_data.items():
+        arr = np.asarray(value)
+        if arr.shape != (2,) or arr.dtype.kind not in "iuf":
+            continue  # not a physical-name entry (e.g. a VTK TimeValue)
+        tag, dim = arr.tolist()
+        if tag != int(tag) or dim not in (0, 1, 2, 3):
+            continue
+        names[(int(dim), int(tag))] = str(name)
+    return names
+
+
+def _fmt_point(p: np.ndarray) -> str:
+    return "(" + ", ".join(f"{v:.6g}" for v in p) + ")"
+
+
+def _is_line_type(cell_type: str) -> bool:
+    return cell_type == "line" or (
+        cell_type.startswith("line") and cell_type[4:].isdigit()
+    )
+
+
+def load_mesh(path) -> skfem.MeshLine:
+    """Read a straight 1-D mesh (bar or beam) from a file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Mesh file in any format meshio reads (gmsh ``.msh`` v2/v4 ascii or
+        binary, ``.vtu``, ``.vtk``, ``.xdmf``, ...).
+
+    Returns
+    -------
+    skfem.MeshLine
+        Canonical line mesh (see the module docstring) with the coordinate
+        ``s`` along the line; named points in ``mesh.boundaries`` and
+        subdomains in ``mesh.subdomains``.
+
+    Raises
+    ------
+    TypeError
+        If ``path`` is not a str or path-like.
+    FileNotFoundError
+        If the file does not exist.
+    ValueError
+        If meshio cannot read the file, or the mesh is not a single straight
+        unbranched line; the message names the file and the problem.
+
+    Notes
+    -----
+    *Cells.*  ``line`` cells are the elements.  Higher-order line cells
+    (``line3``, ...) are accepted but only their two end vertices are used
+    (meshio stores them first), giving linear elements; the geometry must be
+    straight anyway.  ``vertex`` cells carry named points.  Cells of other
+    types (triangles, ...) are ignored.  Vertices not used by any line cell
+    (e.g. gmsh geometry points) are dropped, vertices and elements are
+    renumbered from left to right.  Nodes are *not* merged: two elements are
+    connected only if they share a node index.  An element listed twice
+    (gmsh 2.2 repeats elements that belong to two physical groups) is kept
+    once and belongs to both groups.
+
+    *Geometry.*  Points may have 1, 2 or 3 coordinates.  They must lie on one
+    straight line (max distance ``COLLINEAR_RTOL * length``) and form a
+    single connected chain without branches, loops, folds or zero-length
+    elements.  With ``d`` the unit direction of the line, oriented so that its
+    largest component (the first one on ties) is positive, the coordinate is
+    ``s = p . d``: its origin is the foot of the perpendicular from the
+    coordinate origin.  For a line along a coordinate axis ``s`` is that
+    coordinate (a mesh along x keeps its x values exactly); for a tilted line
+    through the origin ``s`` is the distance from the origin.
+
+    *Names.*  Region tags come from the first cell-data array among
+    ``"gmsh:physical"``, ``"region"``, ``"regions"``, ``"subdomain"``,
+    ``"subdomains"`` (case-insensitive).  Tags on ``vertex`` cells become
+    named points (``mesh.boundaries``), tags on line cells subdomains
+    (``mesh.subdomains``).  A tag is named through gmsh-style ``field_data``
+    (``name -> [tag, dim]``, i.e. gmsh ``$PhysicalNames``; matched on tag
+    *and* dimension); unnamed tags get the names ``"point_<tag>"`` (0-D) and
+    ``"region_<tag>"`` (1-D).  gmsh's physical tag ``0`` (element in no
+    physical group) is ignored.  ``.vtu``/``.xdmf`` files written by meshio
+    keep the tags but not the names, so they load with the fallback names.
+    ``"left"`` and ``"right"`` are always added, as in :func:`line_mesh`.
+    """
+    if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
+        raise TypeError(
+            f"load_mesh: argument 'path' must be a str or os.PathLike, got {path!r} "
+            f"of type {type(path).__name__}"
+        )
+    fname = os.fspath(path)
+    if not isinstance(fname, str):
+        raise TypeError(f"load_mesh: argument 'path' must name a file as str, got {path!r}")
+    if not os.path.exists(fname):
+        raise FileNotFoundError(f"load_mesh: mesh file {fname!r} does not exist")
+    if os.path.isdir(fname):
+        raise ValueError(f"load_mesh: {fname!r} is a directory, not a mesh file")
+
+    raw = _read_meshio(fname)
+    return _from_meshio(raw, fname)
+
+
+def _from_meshio(raw: meshio.Mesh, fname: str):
+    """Convert a meshio mesh to the canonical MeshLine (see load_mesh)."""
+    pts = np.asarray(raw.points, dtype=np.float64)
+    if pts.ndim == 1:
+        pts = pts[:, None]
+    npts = pts.shape[0]
+    if pts.ndim != 2 or not np.all(np.isfinite(pts)):
+        raise ValueError(f"load_mesh: {fname!r}: point coordinates are not finite numbers")
+
+    key = _tag_key(raw.cell_data)
+    names = _field_names(raw.field_data or {})
+
+    def label(dim: int, tag: int) -> str | None:
+        if (dim, tag) in names:
+            return names[(dim, tag)]
+        if key == "gmsh:physical" and tag == 0:
+            return None
+        return f"point_{tag}" if dim == 0 else f"region_{tag}"
+
+    conns = []            # line connectivity blocks (old node indices)
+    line_groups: dict[str, list[np.ndarray]] = {}   # name -> indices into stacked lines
+    point_groups: dict[str, list[np.ndarray]] = {}  # name -> old node indices
+    others: dict[str, int] = {}
+    nlines = 0
+    for ib, block in enumerate(raw.cells):
+        ctype = block.type
+        data = np.asarray(block.data)
+        if _is_line_type(ctype):
+            dim = 1
+        elif ctype == "vertex":
+            dim = 0
+        else:
+            others[ctype] = others.get(ctype, 0) + len(data)
+            continue
+        if data.size and (data.min() < 0 or data.max() >= npts):
+            raise ValueError(
+                f"load_mesh: {fname!r}: {ctype} cells refer to missing nodes "
+                f"(node index out of range 0..{npts - 1})"
+            )
+        tags = None
+        if key is not None:
+            tags = _int_tags(fname, key, raw.cell_data[key][ib], len(data))
+        if dim == 1:
+            conn = data[:, :2].astype(np.int64)
+            conns.append(conn)
+            if tags is not None:
+                for tag in np.unique(tags):
+                    name = label(1, int(tag))
+                    if name is not None:
+                        line_groups.setdefault(name, []).append(
+                            nlines + np.nonzero(tags == tag)[0]
+                        )
+            nlines += len(conn)
+        elif tags is not None:
+            for tag in np.unique(tags):
+                name = label(0, int(tag))
+                if name is not None:
+                    point_groups.setdefault(name, []).append(data[tags == tag, 0])
+
+    if nlines == 0:
+        found = ", ".join(f"{n} {t}" for t, n in others.items()) or "no cells"
+        raise ValueError(
+            f"load_mesh: {fname!r} contains no line cells (1-D elements); it has "
+            f"{found}.  A bar/beam mesh needs 'line' elements (in gmsh, put the "
+            f"curve in a Physical Curve so that its elements are saved)"
+        )
+    conn = np.vstack(conns)
+    # mention ignored 2-D/3-D cells in topology errors (e.g. boundary lines
+    # of a surface mesh are not a beam)
+    note = (" (cells ignored by load_mesh: "
+            + ", ".join(f"{n} {t}" for t, n in others.items()) + ")") if others else ""
+
+    bad = np.nonzero(conn[:, 0] == conn[:, 1])[0]
+    if bad.size:
+        raise ValueError(
+            f"load_mesh: {fname!r}: {bad.size} degenerate line element(s) with "
+            f"both ends at the same node, e.g. at {_fmt_point(pts[conn[bad[0], 0]])}"
+        )
+
+    # merge repeated elements (gmsh 2.2 repeats elements in several groups)
+    uniq, inverse = np.unique(np.sort(conn, axis=1), axis=0, return_inverse=True)
+    inverse = np.asarray(inverse).reshape(-1)
+    nel = uniq.shape[0]
+
+    # drop unused nodes
+    used, local = np.unique(uniq, return_inverse=True)
+    local = np.asarray(local).reshape(uniq.shape)
+    nv = used.size
+    P = pts[used]
+
+    degree = np.bincount(local.ravel(), minlength=nv)
+    branch = np.nonzero(degree > 2)[0]
+    if branch.size:
+        where = "; ".join(
+            f"{_fmt_point(P[v])} ({degree[v]} elements)" for v in branch[:3]
+        )
+        raise ValueError(
+            f"load_mesh: {fname!r}: the line mesh branches: {branch.size} vertex/vertices "
+            f"shared by more than 2 line elements, at {where}"
+            f"{' ...' if branch.size > 3 else ''}; a bar/beam mesh must be a single "
+            f"unbranched line{note}"
+        )
+
+    graph = coo_matrix((np.ones(nel), (local[:, 0], local[:, 1])), shape=(nv, nv))
+    ncomp, comp = connected_components(graph, directed=False)
+    if ncomp > 1:
+        sizes = np.bincount(comp[local[:, 0]], minlength=ncomp)
+        parts = ", ".join(str(s) for s in sorted(sizes.tolist(), reverse=True)[:5])
+        raise ValueError(
+            f"load_mesh: {fname!r}: the line mesh is disconnected: {ncomp} separate "
+            f"parts with {parts}{' ...' if ncomp > 5 else ''} elements; a bar/beam "
+            f"mesh must be one connected line (note: coincident nodes with different "
+            f"indices are not merged - remove duplicate nodes, e.g. gmsh 'Coherence Mesh')"
+            f"{note}"
+        )
+    if nel != nv - 1:
+        raise ValueError(
+            f"load_mesh: {fname!r}: the line elements form a closed loop; a bar/beam "
+            f"mesh must be an open line with two ends{note}"
+        )
+
+    # straight line through the two ends
+    ends = np.nonzero(degree == 1)[0]
+    a = P[ends[0]]
+    dist = np.linalg.norm(P - a, axis=1)
+    far = int(np.argmax(dist))
+    length = float(dist[far])
+    if not length > 0.0:
+        raise ValueError(f"load_mesh: {fname!r}: all vertices coincide (zero length)")
+    d = (P[far] - a) / length
+    first = int(np.nonzero(np.abs(d) >= np.abs(d).max() - 1e-12)[0][0])
+    if d[first] < 0:
+        d = -d
+    rel = P - a
+    dev = np.linalg.norm(rel - np.outer(rel @ d, d), axis=1)
+    worst = int(np.argmax(dev))
+    tol = COLLINEAR_RTOL * length
+    if dev[worst] > tol:
+        raise ValueError(
+            f"load_mesh: {fname!r}: the points are not collinear: max deviation from "
+            f"the straight line through the end points is {dev[worst]:.6g} (at point "
+            f"{_fmt_point(P[worst])}; line length {length:.6g}, tolerance {tol:.3g}); "
+            f"bar/beam meshes must be straight{note}"
+        )
+
+    s = P @ d
+    order = np.argsort(s, kind="stable")
+    x = s[order]
+    gaps = np.diff(x)
+    small = np.nonzero(gaps <= _ZERO_LENGTH_RTOL * length)[0]
+    if small.size:
+        raise ValueError(
+            f"load_mesh: {fname!r}: two vertices coincide at "
+            f"{_fmt_point(P[order[small[0]]])} (zero-length element or the line "
+            f"folds back on itself)"
+        )
+    rank = np.empty(nv, dtype=np.int64)
+    rank[order] = np.arange(nv)
+    r = rank[local]
+    if np.any(np.abs(r[:, 0] - r[:, 1]) != 1):
+        e = int(np.nonzero(np.abs(r[:, 0] - r[:, 1]) != 1)[0][0])
+        raise ValueError(
+            f"load_mesh: {fname!r}: the line folds back on itself: the element from "
+            f"{_fmt_point(P[local[e, 0]])} to {_fmt_point(P[local[e, 1]])} overlaps "
+            f"other elements"
+        )
+    new_elem = r.min(axis=1)                       # per unique element
+    old_to_vertex = np.full(npts, -1, dtype=np.int64)
+    old_to_vertex[used] = rank
+
+    points: dict[str, np.ndarray] = {"left": np.array([0]), "right": np.array([nv - 1])}
+    for name, chunks in point_groups.items():
+        old = np.unique(np.concatenate(chunks))
+        verts = old_to_vertex[old]
+        if np.any(verts < 0):
+            off = old[verts < 0][0]
+            raise ValueError(
+                f"load_mesh: {fname!r}: named point {name!r} at "
+                f"{_fmt_point(pts[off])} is not a vertex of any line element"
+            )
+        verts = np.unique(verts)
+        if name in _RESERVED and not np.array_equal(verts, points[name]):
+            raise ValueError(
+                f"load_mesh: {fname!r}: point group {name!r} does not denote the "
+                f"{name} end of the line (s = {x[points[name][0]]:.6g}); the name is "
+                f"reserved, rename the group"
+            )
+        points[name] = verts
+
+    regions = {
+        name: np.unique(new_elem[inverse[np.concatenate(chunks)]])
+        for name, chunks in line_groups.items()
+    }
+    return _build(x, points, regions)

@@ -1,0 +1,1 @@
+"""Discretise layer: harmonic balance (Fourier layout, AFT, dynamic stiffness, HBM problems)."""

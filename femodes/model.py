@@ -1,0 +1,447 @@
+"""Models layer: ``StructuralModel`` (M, K, C plus declarations) and ``DofMap`` (naming of DOFs).
+
+A model describes ``M q'' + C q' + K q + f_nl(q) = sum_k f_k cos(k w t + phi_k) - w_c p`` on its
+free DOFs ``q`` (constrained DOFs are eliminated). Models are frozen: ``with_damping``,
+``with_forcing``, ``with_contact`` and ``with_nonlinearity`` return new models. Only ``DofMap``
+turns names into indices (``at="tip"``, ``at=("tip", "theta")``, ``at=3``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import scipy.sparse as sp
+
+from .laws import CubicSpring, Location, PenaltyContact, UnilateralContact, check_location
+
+__all__ = ["DofMap", "HarmonicForce", "Attached", "StructuralModel", "as_sparse_matrix"]
+
+log = logging.getLogger(__name__)
+
+CONTACT_LAWS = (UnilateralContact, PenaltyContact)
+SMOOTH_LAWS = (CubicSpring,)
+
+
+# --------------------------------------------------------------------------------------------
+# DOF naming
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class DofMap:
+    """Names of a model's DOFs; the only place where ``at=`` is turned into an index.
+
+    Parameters
+    ----------
+    n_dofs : int
+        Number of (free) DOFs.
+    components : tuple of str
+        Component names per node, e.g. ``("u",)`` for bars, ``("w", "theta")`` for beams. The
+        first one is the default when only a location name is given.
+    node_dof : ndarray of int, shape (n_nodes, n_components)
+        Model DOF of each (node, component); ``-1`` if constrained, ``-2`` if the DOF exists in
+        the parent model but was not kept (reduced models).
+    locations : mapping str -> int
+        Named locations (boundaries of the mesh) -> node index.
+    constrained_by : mapping (node, component index) -> str
+        Which support constrains a DOF (for error messages).
+    aliases : mapping str -> str
+        Alternative component names (``"u_x"`` for ``"u"``...).
+    dof_names : tuple of str, optional
+        Names of individual DOFs for discrete models (``StructuralModel(dof_names=...)``).
+    labels : tuple of str
+        Human-readable label per DOF (for messages and plots).
+    """
+
+    n_dofs: int
+    components: tuple = ()
+    node_dof: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=int))
+    locations: Mapping[str, int] = field(default_factory=dict)
+    constrained_by: Mapping[tuple, str] = field(default_factory=dict)
+    aliases: Mapping[str, str] = field(default_factory=dict)
+    dof_names: tuple = ()
+    labels: tuple = ()
+
+    @classmethod
+    def discrete(cls, n_dofs: int, dof_names: Sequence[str] | None = None) -> "DofMap":
+        """DOF map of a discrete system: DOFs addressed by index or by ``dof_names``."""
+        names: tuple = ()
+        if dof_names is not None:
+            names = tuple(dof_names)
+            if len(names) != n_dofs or not all(isinstance(n, str) and n for n in names):
+                raise ValueError(
+                    f"dof_names must be {n_dofs} non-empty strings (one per DOF), got {dof_names!r}"
+                )
+            if len(set(names)) != len(names):
+                raise ValueError(f"dof_names must be unique, got {dof_names!r}")
+        labels = names if names else tuple(f"dof {i}" for i in range(n_dofs))
+        return cls(n_dofs=n_dofs, dof_names=names, labels=labels)
+
+    def _component(self, comp: str) -> int:
+        name = self.aliases.get(comp, comp)
+        if name not in self.components:
+            raise ValueError(
+                f"unknown component {comp!r}; this model has components {list(self.components)}"
+                + (f" (aliases {dict(self.aliases)})" if self.aliases else "")
+            )
+        return self.components.index(name)
+
+    def index(self, at: Location) -> int:
+        """Model DOF index of ``at`` (a name, a (name, component) pair or an index).
+
+        Raises
+        ------
+        ValueError
+            Unknown name or component, index out of range, or a constrained / not-kept DOF
+            (the message names it and the support that constrains it).
+        """
+        at = check_location(at, "DofMap")
+        if isinstance(at, int):
+            if at >= self.n_dofs:
+                raise ValueError(f"DOF index at={at} is out of range for a model with {self.n_dofs} DOFs")
+            return at
+        if isinstance(at, str) and at in self.dof_names:
+            return self.dof_names.index(at)
+        if isinstance(at, str):
+            loc, comp = at, (self.components[0] if self.components else None)
+        else:
+            loc, comp = at
+        if loc not in self.locations:
+            known = sorted(self.locations) + list(self.dof_names)
+            raise ValueError(f"unknown location {loc!r}; known names are {known}")
+        if comp is None:
+            raise ValueError(f"location {loc!r} has no components in this model")
+        node = self.locations[loc]
+        c = self._component(comp)
+        dof = int(self.node_dof[node, c])
+        if dof == -1:
+            support = self.constrained_by.get((node, c), "a support")
+            raise ValueError(
+                f"DOF ({loc!r}, {self.components[c]!r}) is constrained by {support!r}; "
+                "contact, forcing and springs cannot act on a constrained DOF"
+            )
+        if dof == -2:
+            raise ValueError(
+                f"DOF ({loc!r}, {self.components[c]!r}) is not kept in this reduced model; "
+                f"pass keep=[({loc!r}, {self.components[c]!r})] to craig_bampton"
+            )
+        return dof
+
+    def label(self, i: int) -> str:
+        return self.labels[i] if i < len(self.labels) else f"dof {i}"
+
+    def restrict(self, kept: np.ndarray) -> "DofMap":
+        """DofMap of the DOFs ``kept`` (old indices in new order), followed by unnamed DOFs.
+
+        Old DOFs not in ``kept`` are marked "not kept" (-2); constrained ones stay constrained.
+        """
+        kept = np.asarray(kept, dtype=int)
+        new_of_old = np.full(self.n_dofs, -2, dtype=int)
+        new_of_old[kept] = np.arange(kept.size)
+        node_dof = self.node_dof.copy()
+        free = node_dof >= 0
+        node_dof[free] = new_of_old[node_dof[free]]
+        names = tuple(self.dof_names[i] for i in kept) if self.dof_names else ()
+        labels = tuple(self.label(i) for i in kept)
+        return dataclasses.replace(self, n_dofs=kept.size, node_dof=node_dof, dof_names=names, labels=labels)
+
+    def extended(self, extra_labels: Sequence[str]) -> "DofMap":
+        """The same map with unnamed extra DOFs appended (e.g. modal coordinates)."""
+        names = self.dof_names + tuple(extra_labels) if self.dof_names else ()
+        return dataclasses.replace(
+            self, n_dofs=self.n_dofs + len(extra_labels), dof_names=names, labels=self.labels + tuple(extra_labels)
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# Declarations attached to a model
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class HarmonicForce:
+    """Point force ``amplitude * cos(harmonic * w t + phase)`` at a DOF.
+
+    ``harmonic`` is the multiple of the forcing frequency ``w`` (1 = primary forcing).
+    """
+
+    at: Location
+    amplitude: float = 1.0
+    harmonic: int = 1
+    phase: float = 0.0
+
+    def __post_init__(self):
+        object.__setattr__(self, "at", check_location(self.at, "HarmonicForce"))
+        for name in ("amplitude", "phase"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
+                raise ValueError(f"HarmonicForce: {name} must be a finite real number, got {v!r}")
+            object.__setattr__(self, name, float(v))
+        h = self.harmonic
+        if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or h < 0:
+            raise ValueError(f"HarmonicForce: harmonic must be an integer >= 0 (0 = static load), got {h!r}")
+        object.__setattr__(self, "harmonic", int(h))
+
+
+@dataclass(frozen=True)
+class Attached:
+    """A declaration (law or force) bound to a model DOF index."""
+
+    item: Any
+    dof: int
+
+
+def as_sparse_matrix(A: Any, name: str, n: int | None = None) -> sp.csr_matrix:
+    """Validate a square real finite matrix (dense or sparse) and return it as CSR."""
+    if A is None:
+        raise ValueError(f"{name} is required")
+    if sp.issparse(A):
+        A = sp.csr_matrix(A, dtype=float)
+    else:
+        try:
+            arr = np.asarray(A, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"{name} must be a square real matrix (numpy array or scipy.sparse), got {type(A).__name__}") from exc
+        if arr.ndim == 0 and n == 1:
+            arr = arr.reshape(1, 1)
+        if arr.ndim != 2:
+            raise ValueError(f"{name} must be a 2-D square matrix, got shape {arr.shape}")
+        A = sp.csr_matrix(arr)
+    if A.shape[0] != A.shape[1]:
+        raise ValueError(f"{name} must be square, got shape {A.shape}")
+    if n is not None and A.shape[0] != n:
+        raise ValueError(f"{name} has shape {A.shape} but the model has {n} DOFs (M is {n}x{n})")
+    if not np.all(np.isfinite(A.data)):
+        raise ValueError(f"{name} contains NaN or infinite entries")
+    return A
+
+
+def _check_symmetric(A: sp.csr_matrix, name: str) -> None:
+    scale = abs(A).max() if A.nnz else 0.0
+    asym = abs(A - A.T).max() if A.nnz else 0.0
+    if asym > 1e-10 * max(scale, 1e-300):
+        raise ValueError(f"{name} must be symmetric: max |{name} - {name}^T| = {asym:.3e} (max |{name}| = {scale:.3e})")
+
+
+def _check_semidefinite(A: sp.csr_matrix, name: str, *, definite: bool) -> None:
+    """Reject matrices with a clearly negative eigenvalue (or a non-positive diagonal for M)."""
+    d = A.diagonal()
+    scale = float(abs(A).max()) if A.nnz else 0.0
+    if definite and np.any(d <= 0) and not np.any(d < -1e-12 * scale):
+        pass  # zero diagonal entries can be legitimate (mass redistributed away from a contact node)
+    if np.any(d < -1e-12 * max(scale, 1e-300)):
+        i = int(np.argmin(d))
+        raise ValueError(f"{name} must be positive semidefinite; diagonal entry {name}[{i},{i}] = {d[i]:.6g} < 0")
+    n = A.shape[0]
+    if n <= 400:
+        lam = np.linalg.eigvalsh(A.toarray())
+        if lam[0] < -1e-9 * max(abs(lam[-1]), 1e-300):
+            raise ValueError(f"{name} must be positive semidefinite; its smallest eigenvalue is {lam[0]:.6g}")
+        if definite and lam[-1] <= 0:
+            raise ValueError(f"{name} must not be zero")
+    # Large sparse matrices: the diagonal test above; a full eigenvalue test would cost a factorization.
+
+
+# --------------------------------------------------------------------------------------------
+# The model
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class StructuralModel:
+    """Linear structure with nonlinear declarations.
+
+    ``M q'' + C q' + K q + f_nl(q) = f(t) - w_c p`` on ``n_dofs`` free DOFs.
+
+    Parameters
+    ----------
+    M, K : array_like or scipy.sparse matrix
+        Symmetric mass (positive semidefinite, not zero) and stiffness (positive semidefinite)
+        matrices, ``n_dofs x n_dofs``.
+    C : array_like or sparse, optional
+        Symmetric damping matrix (zero if omitted).
+    dof_names : sequence of str, optional
+        Names of the DOFs of a discrete system (then ``at="x1"`` works).
+
+    Notes
+    -----
+    FE constructors (:func:`femodes.bar`, :func:`femodes.beam`) fill ``dofmap`` and ``fe`` (the
+    mesh, the scikit-fem basis and the free DOFs of the full field).
+    """
+
+    M: Any
+    K: Any
+    C: Any = None
+    dof_names: Sequence[str] | None = None
+    dofmap: DofMap | None = None
+    forces: tuple = ()
+    contacts: tuple = ()
+    nonlinearities: tuple = ()
+    fe: Any = None
+    damping_info: str = "none"
+
+    def __post_init__(self):
+        M = as_sparse_matrix(self.M, "M")
+        n = M.shape[0]
+        if n == 0:
+            raise ValueError("M must have at least one DOF")
+        K = as_sparse_matrix(self.K, "K", n)
+        C = sp.csr_matrix((n, n)) if self.C is None else as_sparse_matrix(self.C, "C", n)
+        _check_symmetric(M, "M")
+        _check_symmetric(K, "K")
+        _check_symmetric(C, "C")
+        if M.nnz == 0 or not np.any(M.diagonal() > 0):
+            raise ValueError("M must have positive mass on at least one DOF")
+        _check_semidefinite(M, "M", definite=True)
+        _check_semidefinite(K, "K", definite=False)
+        _check_semidefinite(C, "C", definite=False)
+        object.__setattr__(self, "M", M)
+        object.__setattr__(self, "K", K)
+        object.__setattr__(self, "C", C)
+        dm = self.dofmap
+        if dm is None:
+            dm = DofMap.discrete(n, self.dof_names)
+        elif dm.n_dofs != n:
+            raise ValueError(f"dofmap has {dm.n_dofs} DOFs but M is {n}x{n}")
+        object.__setattr__(self, "dofmap", dm)
+
+    # -- basic properties ---------------------------------------------------------------------
+    @property
+    def n_dofs(self) -> int:
+        return self.M.shape[0]
+
+    @property
+    def n_contacts(self) -> int:
+        return len(self.contacts)
+
+    @property
+    def is_reduced(self) -> bool:
+        return False
+
+    def dof(self, at: Location) -> int:
+        """Model DOF index of a location (see :class:`DofMap`)."""
+        return self.dofmap.index(at)
+
+    def force_vectors(self) -> dict:
+        """Complex force amplitude per harmonic: ``{k: F_k}`` with ``f(t) = Re sum F_k e^{i k w t}``."""
+        out: dict = {}
+        for a in self.forces:
+            f = a.item
+            vec = out.setdefault(f.harmonic, np.zeros(self.n_dofs, dtype=complex))
+            vec[a.dof] += f.amplitude * np.exp(1j * f.phase)
+        return out
+
+    # -- frozen updates -------------------------------------------------------------------------
+    def _replace(self, **changes) -> "StructuralModel":
+        return dataclasses.replace(self, **changes)
+
+    def with_damping(self, alpha: float = 0.0, beta: float = 0.0, *, modal: Any = None, n_modes: int | None = None) -> "StructuralModel":
+        """Return a copy with damping ``C``.
+
+        Rayleigh: ``C = alpha M + beta K``. Modal: ``modal`` is a damping ratio (scalar) or a
+        sequence of ratios ``zeta_j`` for the first modes, ``C = M Phi diag(2 zeta_j w_j) Phi^T M``
+        (dense, so limited to models of at most 5000 DOFs: reduce first for larger ones).
+        """
+        for name, v in (("alpha", alpha), ("beta", beta)):
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v) or v < 0:
+                raise ValueError(f"with_damping: {name} must be a finite non-negative number, got {v!r}")
+        if modal is None:
+            C = alpha * self.M + beta * self.K
+            return self._replace(C=C, damping_info=f"Rayleigh alpha={alpha:g}, beta={beta:g}")
+        if alpha or beta:
+            raise ValueError("with_damping: give either Rayleigh coefficients (alpha, beta) or modal=, not both")
+        zeta = np.atleast_1d(np.asarray(modal, dtype=float))
+        if zeta.ndim != 1 or not np.all(np.isfinite(zeta)) or np.any(zeta < 0):
+            raise ValueError(f"with_damping: modal must be non-negative finite damping ratios, got {modal!r}")
+        if self.n_dofs > 5000:
+            raise ValueError(
+                f"with_damping: modal damping builds a dense C; this model has {self.n_dofs} DOFs (> 5000). "
+                "Use Rayleigh damping, or apply modal damping to a craig_bampton reduced model"
+            )
+        from .linear import linear_modes
+
+        nm = n_modes if n_modes is not None else (zeta.size if zeta.size > 1 else min(self.n_dofs, 20))
+        if zeta.size == 1:
+            zeta = np.full(nm, zeta[0])
+        if zeta.size != nm:
+            raise ValueError(f"with_damping: {zeta.size} modal ratios given but n_modes={nm}")
+        modes = linear_modes(self, n=nm)
+        MPhi = self.M @ modes.shapes
+        C = MPhi @ np.diag(2.0 * zeta * modes.omega) @ MPhi.T
+        C = 0.5 * (C + C.T)
+        return self._replace(C=C, damping_info=f"modal zeta={zeta.tolist()}")
+
+    def with_forcing(self, *forces: HarmonicForce) -> "StructuralModel":
+        """Return a copy with these harmonic point forces added."""
+        if not forces:
+            raise ValueError("with_forcing: give at least one HarmonicForce")
+        new = list(self.forces)
+        for f in forces:
+            if not isinstance(f, HarmonicForce):
+                raise TypeError(f"with_forcing: expected HarmonicForce, got {type(f).__name__}")
+            new.append(Attached(f, self.dof(f.at)))
+        return self._replace(forces=tuple(new))
+
+    def without_forcing(self) -> "StructuralModel":
+        """Return a copy with no forcing (the autonomous system, for nonlinear modes)."""
+        return self._replace(forces=())
+
+    def with_contact(self, *laws) -> "StructuralModel":
+        """Return a copy with these contact laws (UnilateralContact or PenaltyContact) added."""
+        if not laws:
+            raise ValueError("with_contact: give at least one UnilateralContact or PenaltyContact")
+        new = list(self.contacts)
+        used = {a.dof for a in new}
+        for law in laws:
+            if not isinstance(law, CONTACT_LAWS):
+                raise TypeError(
+                    f"with_contact: expected UnilateralContact or PenaltyContact, got {type(law).__name__}"
+                    + (" (use with_nonlinearity for smooth springs)" if isinstance(law, SMOOTH_LAWS) else "")
+                )
+            dof = self.dof(law.at)
+            if dof in used:
+                raise ValueError(f"with_contact: DOF {self.dofmap.label(dof)!r} already has a contact law")
+            used.add(dof)
+            new.append(Attached(law, dof))
+        if any(isinstance(a.item, UnilateralContact) for a in new) and any(isinstance(a.item, PenaltyContact) for a in new):
+            log.info("model mixes complementarity and penalty contacts")
+        return self._replace(contacts=tuple(new))
+
+    def with_nonlinearity(self, *laws) -> "StructuralModel":
+        """Return a copy with these smooth nonlinear laws (e.g. CubicSpring) added."""
+        if not laws:
+            raise ValueError("with_nonlinearity: give at least one law, e.g. CubicSpring(at=0, k3=1.0)")
+        new = list(self.nonlinearities)
+        for law in laws:
+            if not isinstance(law, SMOOTH_LAWS):
+                raise TypeError(
+                    f"with_nonlinearity: expected CubicSpring, got {type(law).__name__}"
+                    + (" (use with_contact for contact laws)" if isinstance(law, CONTACT_LAWS) else "")
+                )
+            new.append(Attached(law, self.dof(law.at)))
+        return self._replace(nonlinearities=tuple(new))
+
+    # -- fields ---------------------------------------------------------------------------------
+    def nonlinear_dofs(self) -> np.ndarray:
+        """Sorted unique DOFs that carry contact or nonlinear laws."""
+        d = [a.dof for a in self.contacts] + [a.dof for a in self.nonlinearities]
+        return np.unique(np.asarray(d, dtype=int))
+
+    def expand(self, q: np.ndarray) -> np.ndarray:
+        """Model DOFs -> model DOFs (identity; a reduced model maps to its parent's DOFs)."""
+        return np.asarray(q)
+
+    def full_field(self, q: np.ndarray) -> np.ndarray:
+        """FE field with constrained DOFs set to zero, ``(..., n_fe_dofs)``; identity for discrete models."""
+        q = np.asarray(q)
+        if self.fe is None:
+            return q
+        out = np.zeros(q.shape[:-1] + (self.fe.n_full,), dtype=q.dtype)
+        out[..., self.fe.free] = q
+        return out
+
+    def __repr__(self) -> str:
+        kind = "discrete" if self.fe is None else self.fe.kind
+        return (
+            f"StructuralModel({kind}, n_dofs={self.n_dofs}, damping={self.damping_info}, forces={len(self.forces)}, "
+            f"contacts={len(self.contacts)}, nonlinearities={len(self.nonlinearities)})"
+        )

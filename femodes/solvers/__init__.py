@@ -1,0 +1,21 @@
+"""Solvers layer: generic nonlinear solvers that know only ``residual(x, p)``; imports nothing from femodes.
+
+* :func:`semismooth_newton` -- globalised (non-monotone line search)
+  semismooth Newton method for ``r(x) = 0`` with dense or sparse generalized
+  Jacobians.
+* :func:`continuation` -- pseudo-arclength continuation of ``r(x, p) = 0``
+  through folds, with step control and exact stops at the span ends.
+"""
+
+from .continuation import ContinuationOptions, ContinuationPoint, ContinuationResult, continuation
+from .newton import NewtonOptions, NewtonResult, semismooth_newton
+
+__all__ = [
+    "NewtonOptions",
+    "NewtonResult",
+    "semismooth_newton",
+    "ContinuationOptions",
+    "ContinuationPoint",
+    "ContinuationResult",
+    "continuation",
+]

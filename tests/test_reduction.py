@@ -1,0 +1,142 @@
+"""Craig-Bampton invariants and accuracy against the full FE model (shared/references.md)."""
+
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+import femodes as fm
+
+from .conftest import cantilever, fixed_free_bar
+
+
+def test_bar_w1_error_against_table():
+    model = fixed_free_bar(200)
+    w_full = fm.linear_modes(model, 1).omega[0]
+    ref = {0: 1.027e-1, 1: 4.465e-3, 2: 1.029e-3, 4: 1.821e-4, 8: 2.725e-5}
+    for k, e in ref.items():
+        rom = fm.craig_bampton(model, k, keep=["tip"])
+        err = fm.linear_modes(rom, 1).omega[0] / w_full - 1
+        assert err == pytest.approx(e, rel=2e-3), (k, err)
+
+
+def test_cantilever_first_three_within_0p1_percent_with_10_modes():
+    model = cantilever(100)
+    w_full = fm.linear_modes(model, 3).omega
+    rom = fm.craig_bampton(model, 10, keep=["tip", ("tip", "theta")])
+    w_rom = fm.linear_modes(rom, 3).omega
+    err = w_rom / w_full - 1
+    assert np.all(err >= -1e-9) and np.all(err < 1e-3), err
+
+
+def test_cantilever_errors_against_table_and_monotone():
+    model = cantilever(100)
+    w_full = fm.linear_modes(model, 3).omega
+    ref = {2: [5.850e-5, 1.091e-3, 3.698e-3], 4: [5.533e-6, 1.401e-4, 7.098e-4], 8: [4.401e-7, 9.982e-6, 6.304e-5]}
+    prev = np.full(3, np.inf)
+    for k, e in ref.items():
+        rom = fm.craig_bampton(model, k, keep=["tip", ("tip", "theta")])
+        w = fm.linear_modes(rom, 3).omega
+        err = w / w_full - 1
+        # The full model's own round-off (cond(K) of a 200-DOF Hermite beam) is ~1e-7 relative in w1,
+        # so errors are compared with 3% relative tolerance plus 3e-7 absolute.
+        np.testing.assert_allclose(err, e, rtol=3e-2, atol=3e-7)
+        assert np.all(w <= prev * (1 + 1e-12))  # adding modes lowers the upper bounds
+        assert np.all(err > -3e-7)  # upper bounds (to round-off)
+        prev = w
+
+
+def test_identity_on_kept_dofs_and_expand_roundtrip(rng):
+    model = cantilever(30).with_contact(fm.UnilateralContact(at="tip", gap=0.1))
+    rom = fm.craig_bampton(model, 6)
+    tip = model.dof("tip")
+    assert rom.n_kept == 1 and rom.kept.tolist() == [tip]
+    assert rom.contacts[0].dof == 0 and rom.dof("tip") == 0
+    np.testing.assert_array_equal(rom.basis[tip], np.eye(rom.n_dofs)[0])
+    r = rng.standard_normal(rom.n_dofs)
+    q = rom.expand(r)
+    assert q[tip] == pytest.approx(r[0])
+    # T has full column rank and T^T M T is the reduced mass: least squares recovers r
+    r_back = np.linalg.lstsq(rom.basis, q, rcond=None)[0]
+    np.testing.assert_allclose(r_back, r, atol=1e-10)
+    Q = rom.expand(rng.standard_normal((5, rom.n_dofs)))
+    assert Q.shape == (5, model.n_dofs)
+
+
+def test_exact_with_all_modes():
+    model = fixed_free_bar(40)
+    n_interior = model.n_dofs - 1
+    rom = fm.craig_bampton(model, n_interior, keep=["tip"])
+    np.testing.assert_allclose(fm.linear_modes(rom, 10).omega, fm.linear_modes(model, 10).omega, rtol=1e-10)
+
+
+def test_static_response_to_loads_at_kept_dofs_is_exact():
+    model = cantilever(40)
+    rom = fm.craig_bampton(model, 3, keep=["tip", ("tip", "theta")])
+    f = np.zeros(model.n_dofs)
+    f[model.dof("tip")] = 1.0
+    f[model.dof(("tip", "theta"))] = -0.3
+    q_full = spla.spsolve(model.K.tocsc(), f)
+    r = np.linalg.solve(rom.K.toarray(), rom.basis.T @ f)
+    np.testing.assert_allclose(rom.expand(r), q_full, rtol=1e-9, atol=1e-12 * abs(q_full).max())
+
+
+def test_declarations_reindexed_and_names_kept():
+    model = (
+        cantilever(20)
+        .with_contact(fm.UnilateralContact(at="tip", gap=0.01))
+        .with_forcing(fm.HarmonicForce(at=("tip", "theta"), amplitude=2.0))
+        .with_nonlinearity(fm.CubicSpring(at="tip", k3=5.0))
+        .with_damping(alpha=0.01)
+    )
+    rom = fm.craig_bampton(model, 4)
+    assert rom.n_kept == 2
+    assert rom.dof(("tip", "theta")) == rom.forces[0].dof
+    assert rom.dof("tip") == rom.contacts[0].dof == rom.nonlinearities[0].dof
+    assert rom.C.nnz > 0
+    with pytest.raises(ValueError, match="constrained"):
+        rom.dof(("clamp", "w"))  # constrained in the parent stays constrained
+    # a DOF that exists but was not kept names the fix
+    m2 = fm.beam(fm.line_mesh(1.0, 4, boundaries={"clamp": 0.0, "mid": 0.5, "tip": 1.0}),
+                 fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
+    r2 = fm.craig_bampton(m2, 2, keep=["tip"])
+    with pytest.raises(ValueError, match="keep="):
+        r2.dof("mid")
+
+
+def test_reduced_model_is_a_model_and_reduces_again():
+    model = fixed_free_bar(50).with_contact(fm.UnilateralContact(at="tip", gap=0.0))
+    rom = fm.craig_bampton(model, 8)
+    assert isinstance(rom, fm.StructuralModel) and rom.is_reduced
+    rom2 = rom.with_damping(modal=0.02)
+    assert rom2.parent is model and rom2.C.nnz > 0
+    rr = fm.craig_bampton(rom, 4)
+    assert rr.n_dofs == 5
+
+
+def test_craig_bampton_bad_input():
+    model = fixed_free_bar(10)
+    with pytest.raises(ValueError, match="no DOF to keep"):
+        fm.craig_bampton(model, 2)
+    with pytest.raises(ValueError, match="n_modes"):
+        fm.craig_bampton(model, -1, keep=["tip"])
+    with pytest.raises(ValueError, match="n_modes"):
+        fm.craig_bampton(model, 100, keep=["tip"])
+    with pytest.raises(ValueError, match="constrained"):
+        fm.craig_bampton(model, 2, keep=["clamp"])
+    with pytest.raises(TypeError, match="StructuralModel"):
+        fm.craig_bampton(np.eye(3), 2)
+    free_beam = fm.beam(fm.line_mesh(1.0, 10), fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0))
+    with pytest.raises(ValueError, match="singular"):
+        fm.craig_bampton(free_beam, 2, keep=["left"])  # rigid rotation about the kept w DOF remains
+
+
+def test_large_sparse_reduction_no_dense_full_matrices():
+    # 2e4-DOF bar: the reduction must go through sparse factorizations (a dense 2e4^2 matrix
+    # would be 3.2 GB); checked by the result, the memory by the benchmark.
+    model = fixed_free_bar(20000)
+    rom = fm.craig_bampton(model, 5, keep=["tip"])
+    w_full = fm.linear_modes(model, 2).omega
+    np.testing.assert_allclose(w_full, [np.pi / 2, 1.5 * np.pi], rtol=1e-7)  # P1 error (kh)^2/24 < 3e-8
+    err = fm.linear_modes(rom, 2).omega / w_full - 1
+    # between the tabulated errors for 4 and 8 modes (1.821e-4 and 2.725e-5, 200-element bar)
+    assert 2.7e-5 < err[0] < 1.83e-4, err
