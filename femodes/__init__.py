@@ -9,6 +9,10 @@ from .laws import CubicSpring, PenaltyContact, UnilateralContact
 from .linear import IllConditionedWarning, LinearModes, LinearResponse, linear_modes, linear_response
 from .model import DofMap, HarmonicForce, StructuralModel
 from .reduction import ReducedModel, craig_bampton
+from .hbm import ForcedResponseProblem, Harmonics, NonlinearModeProblem
+from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
+from .results import Branch, PeriodicSolution, load_branch
+from .analyses import frequency_response, nonlinear_mode, static_contact
 
 __version__ = "0.1.0"
 
@@ -32,4 +36,17 @@ __all__ = [
     "StructuralModel",
     "ReducedModel",
     "craig_bampton",
+    "Harmonics",
+    "ForcedResponseProblem",
+    "NonlinearModeProblem",
+    "ContinuationOptions",
+    "NewtonOptions",
+    "continuation",
+    "semismooth_newton",
+    "Branch",
+    "PeriodicSolution",
+    "load_branch",
+    "frequency_response",
+    "nonlinear_mode",
+    "static_contact",
 ]

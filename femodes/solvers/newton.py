@@ -147,7 +147,7 @@ class NewtonOptions:
         ``line_search=False`` the full step is always taken.
     min_alpha : float, default 1e-4
         Smallest trial step length, ``0 < min_alpha <= 1``.
-    nonmonotone_memory : int, default 5
+    nonmonotone_memory : int, default 1 (monotone Armijo: on harmonic balance problems memory 5 cycled, see tests/test_hbm.py)
         Number of previous merit values over which the non-monotone reference
         is taken (1 gives the classical monotone Armijo rule).
     watchdog : int, default 3
@@ -196,7 +196,7 @@ class NewtonOptions:
     max_iter: int = 30
     line_search: bool = True
     min_alpha: float = 1e-4
-    nonmonotone_memory: int = 5
+    nonmonotone_memory: int = 1
     watchdog: int = 3
     max_stall: int = 3
     stagnation_window: int = 10

@@ -1,0 +1,279 @@
+"""Analyses layer: wire a model into an HBM problem, run the continuation, wrap the result.
+
+The one module that sees both the problems (``femodes.hbm``) and the generic solvers
+(``femodes.solvers``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from typing import Any, Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from .hbm.harmonics import Harmonics
+from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
+from .hbm.system import default_contact_parameter
+from .laws import PenaltyContact, UnilateralContact
+from .model import StructuralModel
+from .results import Branch, ContactInfo
+from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
+
+__all__ = ["frequency_response", "nonlinear_mode", "static_contact", "StaticContactResult", "branch_from_continuation"]
+
+log = logging.getLogger(__name__)
+
+
+def _harmonics(h: Any, owner: str) -> Harmonics:
+    if isinstance(h, Harmonics):
+        return h
+    if isinstance(h, (int, np.integer)) and not isinstance(h, bool):
+        return Harmonics(int(h))
+    raise TypeError(f"{owner}: harmonics must be a femodes.Harmonics (or an int number of harmonics), got {h!r}")
+
+
+def _span(value: Any, name: str, owner: str, *, positive: bool) -> tuple[float, float]:
+    try:
+        a, b = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{owner}: {name} must be a pair (start, end) of numbers, got {value!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b)) or a == b or (positive and (a <= 0 or b <= 0)):
+        raise ValueError(f"{owner}: {name} must be two distinct finite{' positive' if positive else ''} numbers, got {value!r}")
+    return a, b
+
+
+def _check_model(model: Any, owner: str) -> StructuralModel:
+    if not isinstance(model, StructuralModel):
+        raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
+    return model
+
+
+def branch_from_continuation(problem, result, *, kind: str, model: StructuralModel, meta: dict | None = None) -> Branch:
+    """Wrap a :class:`~femodes.solvers.ContinuationResult` of an HBM problem into a Branch."""
+    s = problem.system
+    n_pts = result.x.shape[0]
+    omega = np.empty(n_pts)
+    Q = np.empty((n_pts, s.h.n_coef, s.n))
+    P = np.empty((n_pts, s.h.n_coef, s.n_uc))
+    energy = np.empty(n_pts)
+    xi = np.empty(n_pts)
+    for i in range(n_pts):
+        d = problem.unpack(result.x[i], result.p[i])
+        omega[i], Q[i], P[i], xi[i] = d["omega"], d["Q"], d["P"], d["xi"]
+        energy[i] = s.energy(result.x[i][: s.size], omega[i])[0]
+    return Branch(
+        kind=kind, harmonics=s.h, contacts=ContactInfo.from_system(s), omega=omega, Q=Q, P=P, energy=energy, xi=xi,
+        residual_norm=result.residual_norm, nit=result.nit, parameter=result.p, folds=result.folds,
+        success=result.success, status=result.status, message=result.message, model=model, meta=meta,
+    )
+
+
+def _progress_callback(user_cb: Callable | None, span, label: str, progress: bool):
+    if not progress and user_cb is None:
+        return None
+    t0 = time.perf_counter()
+    state = {"n": 0}
+
+    def cb(point):
+        state["n"] += 1
+        if progress:
+            frac = (point.p - span[0]) / (span[1] - span[0])
+            log.info("%s: point %d, p = %.6g (%.0f%% of span), %d Newton iterations, %.1f s",
+                     label, state["n"], point.p, 100 * frac, point.nit, time.perf_counter() - t0)
+        if user_cb is not None:
+            return user_cb(point)
+        return None
+
+    return cb
+
+
+def frequency_response(
+    model: StructuralModel,
+    omega: tuple[float, float],
+    harmonics: Harmonics | int,
+    *,
+    options: ContinuationOptions | None = None,
+    x0: np.ndarray | None = None,
+    exact_contact: bool = True,
+    progress: bool = False,
+) -> Branch:
+    """Forced frequency-response curve by HBM and pseudo-arclength continuation.
+
+    ``M q'' + C q' + K q + f_nl(q) = f cos(w t) - w_c p`` for ``w`` from ``omega[0]`` to
+    ``omega[1]`` (rad/s), through folds.
+
+    Parameters
+    ----------
+    model : StructuralModel or ReducedModel
+        With forcing; contacts and nonlinear springs as declared.
+    omega : (float, float)
+        Start and end frequencies (rad/s); the branch may run downwards.
+    harmonics : Harmonics or int
+    options : ContinuationOptions, optional
+        Step control, Newton options, callback.
+    x0 : ndarray, optional
+        Initial guess at ``omega[0]`` (default: the linear response).
+    exact_contact : bool
+        Exact Galerkin projection of the contact law (default; ``False`` only for comparison).
+    progress : bool
+        Log progress at INFO level (the command line shows it as a progress bar).
+
+    Returns
+    -------
+    Branch
+        ``success`` False (with ``message``) if the continuation could not finish the span.
+    """
+    model = _check_model(model, "frequency_response")
+    h = _harmonics(harmonics, "frequency_response")
+    span = _span(omega, "omega", "frequency_response", positive=True)
+    problem = ForcedResponseProblem(model, h, exact_contact=exact_contact)
+    if x0 is None:
+        x0 = problem.linear_guess(span[0])
+    opts = options or ContinuationOptions(step=0.05, max_step=0.5, newton=NewtonOptions(atol=1e-9, max_iter=20))
+    cb = _progress_callback(opts.callback, span, "frequency_response", progress)
+    if cb is not None:
+        opts = dataclasses.replace(opts, callback=cb)
+    res = continuation(problem, span, x0=x0, options=opts)
+    if not res.success:
+        log.warning("frequency_response: %s", res.message)
+    return branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span)})
+
+
+def nonlinear_mode(
+    model: StructuralModel,
+    mode: int = 1,
+    energy: tuple[float, float] = (1e-3, 1.0),
+    harmonics: Harmonics | int = 10,
+    *,
+    options: ContinuationOptions | None = None,
+    exact_contact: bool = True,
+    progress: bool = False,
+) -> Branch:
+    """Nonlinear mode (frequency-energy backbone) by the extended periodic motion concept.
+
+    Follows the periodic motions of the free system ``M q'' + K q + f_nl(q) = -w_c p`` that
+    continue linear mode ``mode`` from energy ``energy[0]`` to ``energy[1]`` (continuation in
+    ``log10`` of the period-averaged mechanical energy). ``branch.xi`` holds the artificial
+    damping, which is ~0 for a conservative model (a check of the solution).
+
+    Returns
+    -------
+    Branch
+        ``omega`` (rad/s) against ``energy``.
+    """
+    model = _check_model(model, "nonlinear_mode")
+    h = _harmonics(harmonics, "nonlinear_mode")
+    e0, e1 = _span(energy, "energy", "nonlinear_mode", positive=True)
+    problem = NonlinearModeProblem(model, h, mode, exact_contact=exact_contact)
+    span = (math.log10(e0), math.log10(e1))
+    x0 = problem.linear_guess(e0)
+    if options is None:
+        s = problem.system
+        # Arclength scaling: displacement coefficients by the starting amplitude, contact forces
+        # by the force that amplitude produces through the contact stiffness, w by w0.
+        aq = max(float(np.max(np.abs(x0[: s.nq]))), 1e-300)
+        cmax = max([ct.c for ct in s.unilateral] or [1.0])
+        scale = np.empty(problem.size)
+        scale[: s.nq] = aq
+        scale[s.nq : s.size] = cmax * aq
+        scale[s.size] = problem.omega0
+        scale[s.size + 1] = 0.1 * problem.omega0
+        options = ContinuationOptions(step=0.05, max_step=0.25, x_scale=scale, p_scale=1.0,
+                                      newton=NewtonOptions(atol=1e-10, max_iter=20))
+    cb = _progress_callback(options.callback, span, "nonlinear_mode", progress)
+    if cb is not None:
+        options = dataclasses.replace(options, callback=cb)
+    res = continuation(problem, span, x0=x0, options=options)
+    if not res.success:
+        log.warning("nonlinear_mode: %s", res.message)
+    return branch_from_continuation(problem, res, kind="nonlinear mode", model=model,
+                                    meta={"mode": int(mode), "energy_span": [e0, e1]})
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class StaticContactResult:
+    """Static contact solution: ``x`` displacements, ``contact_force`` per contact, scipy-style fields."""
+
+    x: np.ndarray
+    contact_force: np.ndarray
+    success: bool
+    status: int
+    message: str
+    nit: int
+    residual_norm: float
+
+    @property
+    def gap(self) -> np.ndarray:
+        return self._gaps
+
+    @property
+    def penetration(self) -> float:
+        return float(max(0.0, np.max(-self._gaps))) if self._gaps.size else 0.0
+
+
+def static_contact(model: StructuralModel, force: np.ndarray | None = None, *, x0: np.ndarray | None = None,
+                   options: NewtonOptions | None = None) -> StaticContactResult:
+    """Static equilibrium with contact: ``K q + f_nl(q) = f - W p``, ``p - max(0, p - c g_N) = 0``.
+
+    Solved with the same semismooth Newton as the dynamic problems (no harmonics). ``force``
+    defaults to the static part of the declared forcing plus the amplitudes of harmonic-1 forces
+    (a quasi-static load).
+    """
+    model = _check_model(model, "static_contact")
+    n = model.n_dofs
+    if force is None:
+        fv = model.force_vectors()
+        f = sum((v.real for v in fv.values()), np.zeros(n))
+    else:
+        f = np.asarray(force, dtype=float)
+        if f.shape != (n,) or not np.all(np.isfinite(f)):
+            raise ValueError(f"static_contact: force must be a finite vector of length {n}, got shape {f.shape}")
+    uc = [(a.item, a.dof) for a in model.contacts if isinstance(a.item, UnilateralContact)]
+    cs = [law.c if law.c is not None else default_contact_parameter(model, dof) for law, dof in uc]
+    m = len(uc)
+    K = model.K.tocsr()
+
+    def fun(x):
+        q, p = x[:n], x[n:]
+        r = np.empty(n + m)
+        r[:n] = K @ q - f
+        rows, cols, vals = [], [], []
+        for a in model.contacts:
+            if isinstance(a.item, PenaltyContact):
+                pf, dp = a.item.force(q[a.dof])
+                r[a.dof] += pf
+                rows.append(a.dof); cols.append(a.dof); vals.append(float(dp))
+        for a in model.nonlinearities:
+            ff, df = a.item.force(q[a.dof])
+            r[a.dof] += ff
+            rows.append(a.dof); cols.append(a.dof); vals.append(float(df))
+        for j, ((law, dof), c) in enumerate(zip(uc, cs)):
+            r[dof] += p[j]
+            rows.append(dof); cols.append(n + j); vals.append(1.0)
+            rr, drp, dru = law.residual(p[j], q[dof], c)
+            r[n + j] = rr
+            rows += [n + j, n + j]; cols += [n + j, dof]; vals += [float(drp), float(dru)]
+        J = sp.block_diag([K, sp.csr_matrix((m, m))], format="csr") + sp.csr_matrix((vals, (rows, cols)), shape=(n + m, n + m))
+        return r, J
+
+    x_init = np.zeros(n + m) if x0 is None else np.asarray(x0, dtype=float)
+    res = semismooth_newton(fun, x_init, options=options or NewtonOptions(atol=1e-10, max_iter=50))
+    q = res.x[:n]
+    forces = np.zeros(len(model.contacts))
+    gaps = np.zeros(len(model.contacts))
+    j = 0
+    for i, a in enumerate(model.contacts):
+        gaps[i] = a.item.gap - q[a.dof]
+        if isinstance(a.item, UnilateralContact):
+            forces[i] = res.x[n + j]
+            j += 1
+        else:
+            forces[i] = a.item.force(q[a.dof])[0]
+    out = StaticContactResult(x=q, contact_force=forces, success=res.success, status=res.status, message=res.message,
+                              nit=res.nit, residual_norm=res.residual_norm)
+    object.__setattr__(out, "_gaps", gaps)
+    return out
