@@ -333,7 +333,14 @@ def _run_child(argv: list[str], timeout: float) -> tuple[dict | None, str]:
     return None, f"child failed (exit {p.returncode}): {tail[0][:120]}"
 
 
-def _machine_info(child: dict | None) -> list[str]:
+def _loadavg() -> str:
+    try:
+        return " / ".join(f"{x:.2f}" for x in os.getloadavg())
+    except (AttributeError, OSError):
+        return "unavailable"
+
+
+def _machine_info(child: dict | None, load_start: str) -> list[str]:
     cpu = platform.processor() or "unknown"
     try:
         with open("/proc/cpuinfo") as f:
@@ -373,6 +380,7 @@ def _machine_info(child: dict | None) -> list[str]:
         lines.append(f"- BLAS: {b}")
     env = c.get("env", CHILD_ENV)
     lines.append("- child processes run with " + ", ".join(f"{k}={v}" for k, v in env.items()) + " (one fresh process per case and size)")
+    lines.append(f"- load average (1/5/15 min) at start: {load_start}; at end: {_loadavg()} (other processes share the machine)")
     return lines
 
 
@@ -478,6 +486,7 @@ def main(argv=None) -> int:
         return 3 if n >= 50000 else 5
 
     t_start = time.perf_counter()
+    load_start = _loadavg()
     info, err = _run_child(["--child-info"], 120)
     if info is None:
         print(f"warning: {err}", file=sys.stderr)
@@ -493,7 +502,7 @@ def main(argv=None) -> int:
             results.append(res)
 
     out = ["# femodes benchmark: model assembly, 20 linear modes, Craig-Bampton (20 modes)", ""]
-    out += _machine_info(info)
+    out += _machine_info(info, load_start)
     out += ["", "## Results", ""]
     out += _table(results)
     base = [r["baseline_rss_mib"] for r in results if "baseline_rss_mib" in r]

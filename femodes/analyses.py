@@ -183,7 +183,7 @@ def nonlinear_mode(
         scale[s.size] = problem.omega0
         scale[s.size + 1] = 0.1 * problem.omega0
         options = ContinuationOptions(step=0.05, max_step=0.25, x_scale=scale, p_scale=1.0,
-                                      newton=NewtonOptions(atol=1e-10, max_iter=20))
+                                      newton=NewtonOptions(atol=1e-9, max_iter=20))
     cb = _progress_callback(options.callback, span, "nonlinear_mode", progress)
     if cb is not None:
         options = dataclasses.replace(options, callback=cb)

@@ -278,6 +278,7 @@ class StructuralModel:
     nonlinearities: tuple = ()
     fe: Any = None
     damping_info: str = "none"
+    mass_redistribution: tuple = ()
 
     def __post_init__(self):
         M = as_sparse_matrix(self.M, "M")
@@ -385,8 +386,20 @@ class StructuralModel:
         """Return a copy with no forcing (the autonomous system, for nonlinear modes)."""
         return self._replace(forces=())
 
-    def with_contact(self, *laws) -> "StructuralModel":
-        """Return a copy with these contact laws (UnilateralContact or PenaltyContact) added."""
+    def with_contact(self, *laws, redistribute_mass: bool | None = None) -> "StructuralModel":
+        """Return a copy with these contact laws (UnilateralContact or PenaltyContact) added.
+
+        Parameters
+        ----------
+        redistribute_mass : bool, optional
+            Move the mass of each contact DOF to its neighbours (zero mass at the contact node,
+            total mass and centre of mass conserved; Khenous, Laborde & Renard 2008). Default
+            (``None``): on for complementarity contacts of FE models, where a massful contact
+            node makes the nonsmooth modes ill-posed under mesh refinement (Thorin & Legrand
+            2018); off for penalty contacts and discrete models.
+        """
+        if redistribute_mass is not None and not isinstance(redistribute_mass, bool):
+            raise TypeError(f"with_contact: redistribute_mass must be True, False or None, got {redistribute_mass!r}")
         if not laws:
             raise ValueError("with_contact: give at least one UnilateralContact or PenaltyContact")
         new = list(self.contacts)
@@ -402,9 +415,22 @@ class StructuralModel:
                 raise ValueError(f"with_contact: DOF {self.dofmap.label(dof)!r} already has a contact law")
             used.add(dof)
             new.append(Attached(law, dof))
+        M = self.M
+        reports = list(self.mass_redistribution)
+        for a in new[len(self.contacts):]:
+            auto = self.fe is not None and isinstance(a.item, UnilateralContact)
+            if redistribute_mass or (redistribute_mass is None and auto):
+                if self.fe is None:
+                    raise ValueError("with_contact: redistribute_mass=True needs an FE model (bar or beam), not a discrete one")
+                if M[a.dof, a.dof] > 0:
+                    from .fe.assembly import redistribute_contact_mass
+
+                    M, rep = redistribute_contact_mass(dataclasses.replace(self, M=M), a.dof)
+                    rep["dof"] = a.dof
+                    reports.append(rep)
         if any(isinstance(a.item, UnilateralContact) for a in new) and any(isinstance(a.item, PenaltyContact) for a in new):
             log.info("model mixes complementarity and penalty contacts")
-        return self._replace(contacts=tuple(new))
+        return self._replace(contacts=tuple(new), M=M, mass_redistribution=tuple(reports))
 
     def with_nonlinearity(self, *laws) -> "StructuralModel":
         """Return a copy with these smooth nonlinear laws (e.g. CubicSpring) added."""
