@@ -18,12 +18,15 @@ MESH = HERE.parent / "meshes" / "cantilever.msh"
 BETA_L = np.array([1.8751040687, 4.6940911330, 7.8547574382])
 
 mesh = fm.load_mesh(MESH)
-model = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
-model = model.with_contact(fm.UnilateralContact(at="tip", gap=0.01))
+bare = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
+error_vs_analytic = fm.linear_modes(bare, n=3).omega / BETA_L**2 - 1
+# The contact declaration moves the tip mass to its neighbours (mass redistribution, on by
+# default for complementarity contacts of FE models): the linear frequencies shift by O(h).
+model = bare.with_contact(fm.UnilateralContact(at="tip", gap=0.01))
 full = fm.linear_modes(model, n=3)
 rom = fm.craig_bampton(model, n_modes=10)
 reduced = fm.linear_modes(rom, n=3)
-error_vs_analytic = full.omega / BETA_L**2 - 1
+redistribution_shift = full.omega / fm.linear_modes(bare, n=3).omega - 1
 error_cb = reduced.omega / full.omega - 1
 
 
@@ -53,6 +56,7 @@ def main(out: Path = Path("out")) -> Path:
 
 if __name__ == "__main__":
     for j in range(3):
-        print(f"mode {j + 1}: full {full.omega[j]:.8f} rad/s (analytic error {error_vs_analytic[j]:.2e}), "
+        print(f"mode {j + 1}: full {full.omega[j]:.8f} rad/s (bare beam analytic error {error_vs_analytic[j]:.2e}, "
+              f"mass redistribution shift {redistribution_shift[j]:.2e}), "
               f"CB {reduced.omega[j]:.8f} rad/s (error {error_cb[j]:.2e})")
     print("saved", main())

@@ -163,7 +163,8 @@ def test_free_free_beam_has_rigid_body_modes():
     mesh = fm.line_mesh(length=1.0, n_elements=20)
     model = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0))
     omega = fm.linear_modes(model, n=3).omega
-    assert omega[0] < 1e-5 and omega[1] < 1e-5
+    # rigid-body modes: zero up to round-off (sqrt(eps * lambda_max) ~ 1e-4 here)
+    assert omega[0] < 1e-3 and omega[1] < 1e-3
     assert omega[2] == pytest.approx(4.7300407449**2, rel=1e-5)  # free-free = clamped-clamped roots
 
 
@@ -177,7 +178,7 @@ def test_large_sparse_path_matches_dense():
 
 
 def test_ill_conditioned_beam_warns():
-    mesh = fm.line_mesh(length=1.0, n_elements=3000)
+    mesh = fm.line_mesh(length=1.0, n_elements=8000)
     model = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="left")
     with pytest.warns(fm.IllConditionedWarning, match="ill-conditioned"):
         fm.linear_modes(model, n=1)

@@ -43,8 +43,9 @@ def run_demo(out: Path) -> dict:
     else:  # installed without the repository's meshes/: the same mesh built in code
         mesh = fm.line_mesh(1.0, 40, boundaries={"clamp": 0.0, "tip": 1.0})
         source = "line_mesh(1.0, 40)"
-    model = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
-    model = model.with_contact(fm.UnilateralContact(at="tip", gap=0.01))
+    bare = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
+    bare_omega = fm.linear_modes(bare, n=4).omega
+    model = bare.with_contact(fm.UnilateralContact(at="tip", gap=0.01))  # tip mass redistributed
     full = fm.linear_modes(model, n=4)
     rom = fm.craig_bampton(model, n_modes=10)
     red = fm.linear_modes(rom, n=4)
@@ -73,11 +74,12 @@ def run_demo(out: Path) -> dict:
     plt.close(fig)
     lines = [
         f"mesh: {source} ({mesh.t.shape[1]} elements), model: {model.n_dofs} DOFs, reduced: {rom.n_dofs} DOFs",
-        "mode  full w [rad/s]   analytic err   CB w [rad/s]   CB err",
+        "mode  beam w [rad/s]   analytic err   with contact node w   CB w [rad/s]   CB err",
     ]
     for j in range(4):
         lines.append(
-            f"{j + 1:4d}  {full.omega[j]:14.8f}   {full.omega[j] / exact[j] - 1:12.2e}   {red.omega[j]:12.8f}   {red.omega[j] / full.omega[j] - 1:8.2e}"
+            f"{j + 1:4d}  {bare_omega[j]:14.8f}   {bare_omega[j] / exact[j] - 1:12.2e}   {full.omega[j]:19.8f}   "
+            f"{red.omega[j]:12.8f}   {red.omega[j] / full.omega[j] - 1:8.2e}"
         )
     (out / "summary.txt").write_text("\n".join(lines) + "\n")
     return {"lines": lines, "plot": png, "out": out}

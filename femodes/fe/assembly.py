@@ -130,8 +130,9 @@ def build_fe_model(
     """
     nodal = np.asarray(basis.nodal_dofs)  # (n_components, n_nodes)
     n_full = basis.N
-    M = sp.lil_matrix(M)
-    K = sp.lil_matrix(K)
+    M = sp.csr_matrix(M)
+    K = sp.csr_matrix(K)
+    added = {"point_masses": ([], []), "springs": ([], [])}
     locations = {name: _location_node(mesh, name, owner, "mesh boundaries") for name in (mesh.boundaries or {})}
 
     def comp_index(comp: str, arg: str) -> int:
@@ -156,7 +157,7 @@ def build_fe_model(
             for comp in comps:
                 constrained[(node, comp_index(comp, arg))] = f"{arg}={name!r}"
 
-    for arg, table, target in (("point_masses", point_masses, M), ("springs", springs, K)):
+    for arg, table in (("point_masses", point_masses), ("springs", springs)):
         if table is None:
             continue
         if not isinstance(table, Mapping):
@@ -165,8 +166,16 @@ def build_fe_model(
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not math.isfinite(value) or value < 0:
                 raise ValueError(f"{owner}: {arg}[{at!r}] must be a finite non-negative number, got {value!r}")
             node, c = resolve(at, arg)
-            dof = nodal[c, node]
-            target[dof, dof] += float(value)
+            added[arg][0].append(int(nodal[c, node]))
+            added[arg][1].append(float(value))
+    for arg in added:
+        idx, vals = added[arg]
+        if idx:
+            D = sp.csr_matrix((vals, (idx, idx)), shape=(n_full, n_full))
+            if arg == "point_masses":
+                M = M + D
+            else:
+                K = K + D
 
     fixed_full = np.array(sorted(nodal[c, node] for node, c in constrained), dtype=int)
     free = np.setdiff1d(np.arange(n_full), fixed_full)
@@ -174,8 +183,8 @@ def build_fe_model(
     free_of_full[free] = np.arange(free.size)
     node_dof = free_of_full[nodal.T]  # (n_nodes, n_components)
 
-    M = sp.csr_matrix(M)[free][:, free]
-    K = sp.csr_matrix(K)[free][:, free]
+    M = M.tocsr()[free][:, free]
+    K = K.tocsr()[free][:, free]
     # Symmetrize to round-off: assembly sums in different orders.
     M = (0.5 * (M + M.T)).tocsr()
     K = (0.5 * (K + K.T)).tocsr()
@@ -267,17 +276,12 @@ def redistribute_contact_mass(model: StructuralModel, dof: int) -> tuple[sp.csr_
         if abs(x1 - x2) > 0:
             b = (ds - dm * x1) / (x2 - x1)
             a = dm - b
-            trial = M2.tolil()
-            trial[i1, i1] += a
-            trial[i2, i2] += b
-            trial = trial.tocsr()
+            trial = (M2 + sp.csr_matrix(([a, b], ([i1, i2], [i1, i2])), shape=M2.shape)).tocsr()
             if (a >= 0 and b >= 0) or _is_positive_definite(trial, dof):
                 applied = trial
                 report.update(com_shift=0.0, targets=[int(i1), int(i2)], added=[float(a), float(b)])
     if applied is None:
-        trial = M2.tolil()
-        trial[i1, i1] += dm
-        applied = trial.tocsr()
+        applied = (M2 + sp.csr_matrix(([dm], ([i1], [i1])), shape=M2.shape)).tocsr()
         com_shift = (dm * pos[i1] - ds) / m_tot
         report.update(com_shift=float(com_shift), targets=[int(i1)], added=[float(dm)])
         log.warning("mass redistribution at DOF %d: centre of mass shifted by %.3g to keep M definite", dof, com_shift)
