@@ -170,6 +170,7 @@ def nonlinear_mode(
     e0, e1 = _span(energy, "energy", "nonlinear_mode", positive=True)
     problem = NonlinearModeProblem(model, h, mode, exact_contact=exact_contact)
     span = (math.log10(e0), math.log10(e1))
+    problem.set_reference_energy(math.sqrt(e0 * e1))
     x0 = problem.linear_guess(e0)
     if options is None:
         s = problem.system

@@ -42,7 +42,9 @@ class ForcedResponseProblem:
             raise ValueError(
                 "ForcedResponseProblem: the model has no forcing; add model.with_forcing(HarmonicForce(at=..., amplitude=...))"
             )
-        self.system.force()  # validates the harmonic count against the forcing
+        F = self.system.force()  # validates the harmonic count against the forcing
+        # Equations are divided by the forcing amplitude so that Newton tolerances are relative.
+        self.force_scale = float(np.max(np.abs(F))) or 1.0
 
     @property
     def size(self) -> int:
@@ -50,7 +52,8 @@ class ForcedResponseProblem:
 
     def residual(self, x: np.ndarray, p: float):
         r, J, dr_dw, _ = self.system.residual(np.asarray(x, dtype=float), float(p))
-        return r, J, dr_dw
+        f = 1.0 / self.force_scale
+        return r * f, J * f, dr_dw * f
 
     def linear_guess(self, omega: float) -> np.ndarray:
         """Linear response (contacts and nonlinear springs ignored) as a starting point."""
@@ -103,6 +106,17 @@ class NonlinearModeProblem:
         self._phase_idx = s.h.global_index(s.h.sin_index(1), np.arange(s.n), s.n)
         self._Mphi = np.asarray(model.M @ self.shape).ravel()
         self.size = s.size + 2
+        # Equations are divided by the elastic force of the unit-mass-normalised mode times the
+        # amplitude of the linear mode at energy 1 (set by set_reference_energy), so tolerances
+        # are relative to the force level of the motion.
+        self._kphi = float(np.max(np.abs(model.K @ self.shape))) or 1.0
+        self.set_reference_energy(1.0)
+
+    def set_reference_energy(self, energy: float) -> None:
+        """Scale the equations for motions of about this energy (keeps Newton tolerances relative)."""
+        a = math.sqrt(2.0 * energy) / self.omega0
+        self.force_scale = self._kphi * a
+        self.phase_scale = float(np.max(np.abs(self._Mphi))) * a or 1.0
 
     def residual(self, x: np.ndarray, p: float):
         s = self.system
@@ -112,11 +126,13 @@ class NonlinearModeProblem:
         E, dE, dE_dw = s.energy(y, omega)
         E = max(E, 1e-300)
         ln10 = math.log(10.0)
+        fs = 1.0 / self.force_scale
+        r0, J0, dr_dw, dr_dxi = r0 * fs, J0 * fs, dr_dw * fs, dr_dxi * fs
         r = np.empty(self.size)
         r[: s.size] = r0
         # phase condition: first-harmonic sine part along the linear mode shape (M-orthogonal)
         gphase = np.zeros(s.size)
-        gphase[self._phase_idx] = self._Mphi
+        gphase[self._phase_idx] = self._Mphi / self.phase_scale
         r[s.size] = gphase @ y
         r[s.size + 1] = math.log10(E) - p
         gE = dE / (E * ln10)
