@@ -902,7 +902,7 @@ def continuation(
                 reject(geometric)
                 continue
             else:
-                logger.warning("accepting step at minimal step size despite: %s (kink of the branch?)", geometric)
+                logger.info("accepting step at minimal step size despite: %s (kink of the branch?)", geometric)
         prev_geo = None
 
         b = _Pt(y=y_b, t=t_b, nit=res.nit, rnorm=float(np.max(np.abs(res.fun[:n]))), step=ds)
