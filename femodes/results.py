@@ -11,6 +11,8 @@ import json
 import math
 import os
 import tempfile
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -241,6 +243,10 @@ class Branch:
 
     def attach(self, model) -> "Branch":
         """Attach the model (after :func:`load_branch`) so solutions can expand to the full field."""
+        from .model import StructuralModel
+
+        if not isinstance(model, StructuralModel):
+            raise TypeError(f"attach: model must be the StructuralModel the branch was solved on, got {type(model).__name__}")
         if model.n_dofs != self.Q.shape[2]:
             raise ValueError(f"attach: model has {model.n_dofs} DOFs but the branch was solved on {self.Q.shape[2]}")
         self.model = model
@@ -288,7 +294,8 @@ class Branch:
                 with h5py.File(tmp, "w") as f:
                     f.attrs["header"] = header
                     for k, v in self._arrays().items():
-                        f.create_dataset(k, data=v, compression="gzip" if v.size > 1000 else None)
+                        # fletcher32 checksums: a damaged file is detected on load, not read silently
+                        f.create_dataset(k, data=v, fletcher32=True, compression="gzip" if v.size > 1000 else None)
             os.replace(tmp, path)  # atomic: a crash never leaves a half-written file under `path`
         finally:
             if os.path.exists(tmp):
@@ -312,7 +319,7 @@ def load_branch(path, model=None) -> Branch:
             with h5py.File(path, "r") as f:
                 header = json.loads(f.attrs["header"])
                 arrays = {k: f[k][()] for k in f.keys()}
-    except (OSError, ValueError, KeyError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error, json.JSONDecodeError) as exc:
         raise ValueError(f"load_branch: {str(path)!r} is not a readable femodes branch file ({exc})") from exc
     if header.get("format") != "femodes.Branch":
         raise ValueError(f"load_branch: {str(path)!r} is not a femodes branch file")

@@ -147,7 +147,7 @@ class NewtonOptions:
         ``line_search=False`` the full step is always taken.
     min_alpha : float, default 1e-4
         Smallest trial step length, ``0 < min_alpha <= 1``.
-    nonmonotone_memory : int, default 1 (monotone Armijo: on harmonic balance problems memory 5 cycled, see tests/test_hbm.py)
+    nonmonotone_memory : int, default 1 (monotone Armijo: with memory 5 the forced Duffing start at w = 0.5, H = 9, cycled; tests/test_hbm.py::test_monotone_line_search_default_starts_forced_duffing)
         Number of previous merit values over which the non-monotone reference
         is taken (1 gives the classical monotone Armijo rule).
     watchdog : int, default 3
