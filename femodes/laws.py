@@ -100,8 +100,12 @@ class UnilateralContact:
         Initial gap ``g0 >= 0`` (the obstacle sits at ``q[at] = gap``).
     c : float, optional
         Complementarity parameter (force per length). With a truncated Fourier basis the weak
-        solution depends slightly on it; ``None`` picks a scale-aware default from the stiffness
-        seen at the contact DOF when the analysis is set up.
+        (Galerkin) solution depends on it: on the mission's 1-DOF case at w = 1.05, H = 20, max u
+        is 1.0184, 1.0154, 1.0111 for c = 1, 10, 100 (tests/test_hbm.py), and for the sub-harmonic
+        impact orbit of examples/subharmonic_contact.py the w/2 amplitude varies by 3 % for
+        c = 10..300, half the truncation error. ``None`` picks the static stiffness seen at the
+        contact DOF, ``1 / (K^-1)_cc``. For strongly impacting orbits a larger c (of the order of
+        the dynamic stiffness of the high harmonics) can help Newton converge.
     """
 
     at: Location
