@@ -131,9 +131,9 @@ def frequency_response(
     h = _harmonics(harmonics, "frequency_response")
     span = _span(omega, "omega", "frequency_response", positive=True)
     problem = ForcedResponseProblem(model, h, exact_contact=exact_contact)
-    if x0 is None:
-        x0 = problem.linear_guess(span[0])
     opts = options or ContinuationOptions(step=0.05, max_step=0.5, newton=NewtonOptions(atol=1e-9, max_iter=20))
+    if x0 is None:
+        x0 = _starting_point(problem, span[0], opts.newton)
     cb = _progress_callback(opts.callback, span, "frequency_response", progress)
     if cb is not None:
         opts = dataclasses.replace(opts, callback=cb)
@@ -141,6 +141,42 @@ def frequency_response(
     if not res.success:
         log.warning("frequency_response: %s", res.message)
     return branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span)})
+
+
+class _ForcingHomotopy:
+    """``r(x; lam) = r(x, w0) + (1 - lam) F``: the forced problem with the forcing scaled by ``lam``."""
+
+    def __init__(self, problem: ForcedResponseProblem, omega: float):
+        self.problem, self.omega = problem, float(omega)
+        s = problem.system
+        self.f = np.zeros(s.size)
+        self.f[: s.nq] = s.force() / problem.force_scale
+
+    def residual(self, x, lam):
+        r, J, _ = self.problem.residual(x, self.omega)
+        return r + (1.0 - lam) * self.f, J, -self.f
+
+
+def _starting_point(problem: ForcedResponseProblem, omega: float, newton: NewtonOptions) -> np.ndarray:
+    """Converged start at ``omega``: Newton from the linear response, else a forcing homotopy.
+
+    Near superharmonic resonances the linear guess can be outside Newton's basin (forced Duffing
+    at w = 0.5, H = 5); growing the forcing from 1 % by continuation from the linear solution
+    (nonlinear terms negligible at small amplitude) reaches the solution.
+    """
+    x0 = problem.linear_guess(omega)
+    res = semismooth_newton(lambda x: problem.residual(x, omega)[:2], x0, options=newton)
+    if res.success:
+        return res.x
+    log.info("frequency_response: Newton from the linear guess failed at w = %g (%s); forcing homotopy", omega, res.message)
+    hom = _ForcingHomotopy(problem, omega)
+    lam0 = 0.01
+    start = problem.linear_guess(omega) * lam0
+    out = continuation(hom, (lam0, 1.0), x0=start, options=ContinuationOptions(step=0.05, max_step=0.2, newton=newton))
+    if out.success and out.status == 0:
+        return out.x[-1]
+    log.warning("frequency_response: forcing homotopy at w = %g failed (%s)", omega, out.message)
+    return x0
 
 
 def nonlinear_mode(

@@ -387,13 +387,9 @@ def test_forced_duffing_folds_converged_in_H():
     assert 1e-6 < np.abs(w3 / w15 - 1).max() < 1e-4
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "frequency_response(forced Duffing c=0.1, eps=1, F=1, (0.5, 4.0), Harmonics(5)) returns an empty "
-    "Branch (success False, status 5): the initial semismooth Newton at w=0.5 from "
-    "ForcedResponseProblem.linear_guess stalls at ||r|| = 0.389 ('line search failed down to min_alpha'); "
-    "H = 1-4 and 7-15 converge from the same guess. w=0.5 is near the 1:3 superharmonic resonance where "
-    "the 3rd-harmonic block of the Jacobian is nearly singular"))
 def test_forced_duffing_H5_starts():
+    """Near the 1:3 superharmonic resonance (w = 0.5, H = 5) Newton from the linear guess stalls
+    (||r|| = 0.389); frequency_response then grows the forcing by continuation from 1 %."""
     br = fm.frequency_response(forced_duffing(), (0.5, 4.0), fm.Harmonics(5))
     assert br.success and len(br.folds) == 2
 
