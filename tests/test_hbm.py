@@ -868,3 +868,18 @@ def test_monotone_line_search_default_starts_forced_duffing():
     assert mono.success and mono.residual_norm < 1e-10
     nonmono = fm.semismooth_newton(fun, x0, options=fm.NewtonOptions(max_iter=60, nonmonotone_memory=5, watchdog=0))
     assert not nonmono.success
+
+
+def test_low_level_api_without_x0_as_in_the_design():
+    """fm.continuation(problem, p_span, options=...) works with the HBM problems (no x0)."""
+    model = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]])
+             .with_nonlinearity(fm.CubicSpring(at=0, k3=1.0))
+             .with_forcing(fm.HarmonicForce(at=0, amplitude=1.0)))
+    res = fm.continuation(fm.ForcedResponseProblem(model, fm.Harmonics(7)), (1.0, 4.0),
+                          options=fm.ContinuationOptions(step=0.05, max_step=0.5))
+    assert res.success and len(res.folds) == 2
+    duff = fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_nonlinearity(fm.CubicSpring(at=0, k3=1.0))
+    res = fm.continuation(fm.NonlinearModeProblem(duff, fm.Harmonics(5)), (-2.0, 0.0))
+    assert res.success and res.p[-1] == 0.0
+    with pytest.raises(TypeError, match="initial_guess"):
+        fm.continuation(object.__new__(type("P", (), {"residual": lambda self, x, p: None})), (0.0, 1.0))

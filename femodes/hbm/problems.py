@@ -55,6 +55,10 @@ class ForcedResponseProblem:
         f = 1.0 / self.force_scale
         return r * f, J * f, dr_dw * f
 
+    def initial_guess(self, p: float) -> np.ndarray:
+        """Starting point for :func:`~femodes.continuation` at ``w = p``: the linear response."""
+        return self.linear_guess(p)
+
     def linear_guess(self, omega: float) -> np.ndarray:
         """Linear response (contacts and nonlinear springs ignored) as a starting point."""
         s = self.system
@@ -142,6 +146,10 @@ class NonlinearModeProblem:
         dr_dp = np.zeros(self.size)
         dr_dp[-1] = -1.0
         return r, J, dr_dp
+
+    def initial_guess(self, p: float) -> np.ndarray:
+        """Starting point for :func:`~femodes.continuation` at ``p = log10(E)``: the linear mode."""
+        return self.linear_guess(10.0 ** p)
 
     def linear_guess(self, energy: float) -> np.ndarray:
         """The linear mode with energy ``E = a^2 w^2 / 2`` (mass-normalised shape)."""

@@ -578,7 +578,7 @@ def continuation(
     problem: Any,
     p_span: tuple[float, float],
     *,
-    x0: Any,
+    x0: Any = None,
     options: ContinuationOptions | None = None,
 ) -> ContinuationResult:
     r"""Trace the solution branch of :math:`r(x, p) = 0` from ``p_span[0]`` to ``p_span[1]``.
@@ -616,8 +616,9 @@ def continuation(
         a generalized Jacobian (semismooth ``r``).
     p_span : (float, float)
         Start and end parameter values; may be decreasing.
-    x0 : array_like, shape (n,)
-        Initial guess of the solution at ``p_span[0]``.
+    x0 : array_like, shape (n,), optional
+        Initial guess of the solution at ``p_span[0]``. If omitted, the problem
+        must provide ``initial_guess(p)`` (the HBM problems do).
     options : ContinuationOptions, optional
 
     Returns
@@ -641,6 +642,11 @@ def continuation(
     if not callable(getattr(problem, "residual", None)):
         raise TypeError("problem must have a callable method residual(x, p) -> (r, dr_dx, dr_dp)")
     p_start, p_end = _validate_span(p_span)
+    if x0 is None:
+        guess = getattr(problem, "initial_guess", None)
+        if not callable(guess):
+            raise TypeError("continuation: pass x0=, or give the problem a method initial_guess(p)")
+        x0 = guess(p_start)
     try:
         x_init = np.array(x0, dtype=float)
     except (TypeError, ValueError) as exc:
