@@ -8,9 +8,10 @@ STAMP   = $(VENV)/.installed
 .PHONY: demo test test-slow bench clean venv
 
 $(STAMP): pyproject.toml
+	@sh tools/sysdeps.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,plot,store]"
+	$(BIN)/python -m pip install --quiet -e ".[test,plot,store,render]"
 	touch $(STAMP)
 
 venv: $(STAMP)

@@ -13,6 +13,7 @@ from .hbm import ForcedResponseProblem, Harmonics, NonlinearModeProblem
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .results import Branch, PeriodicSolution, load_branch
 from .analyses import frequency_response, nonlinear_mode, static_contact
+from . import io, plot  # outputs; matplotlib is imported lazily inside plot functions
 
 __version__ = "0.1.0"
 
@@ -49,4 +50,15 @@ __all__ = [
     "frequency_response",
     "nonlinear_mode",
     "static_contact",
+    "io",
+    "plot",
 ]
+
+
+def __getattr__(name):
+    # fm.viz imports lazily: pyvista/VTK are optional (pip install "femodes[render]")
+    if name == "viz":
+        import importlib
+
+        return importlib.import_module(".viz", __name__)
+    raise AttributeError(f"module 'femodes' has no attribute {name!r}")

@@ -1,0 +1,344 @@
+"""Outputs layer: matplotlib figures of branches and periodic solutions.
+
+Every function draws on ``ax`` (a new figure if ``ax`` is None) and returns the Axes.
+matplotlib is imported only when a function is called (``pip install 'femodes[plot]'``).
+
+- :func:`frequency_energy`: backbones (nonlinear modes) and forced curves, frequency against
+  energy (log axis).
+- :func:`frequency_response`: amplitude of one DOF against frequency, folds marked.
+- :func:`time_history`: one DOF over time, contact forces on a twin axis.
+- :func:`phase_portrait`: velocity against displacement of one DOF.
+- :func:`mode_shape`: deflection snapshots along the mesh (reduced models expanded).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+
+from .results import Branch, PeriodicSolution
+
+__all__ = ["frequency_energy", "frequency_response", "time_history", "phase_portrait", "mode_shape"]
+
+log = logging.getLogger(__name__)
+
+
+def _plt():
+    try:
+        import matplotlib.pyplot as plt
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError("femodes.plot needs matplotlib: pip install 'femodes[plot]'") from exc
+    return plt
+
+
+def _axes(ax: Any, owner: str):
+    plt = _plt()
+    if ax is None:
+        _, ax = plt.subplots(layout="constrained")
+        return ax
+    from matplotlib.axes import Axes
+
+    if not isinstance(ax, Axes):
+        raise TypeError(f"{owner}: ax must be a matplotlib Axes or None, got {type(ax).__name__}")
+    return ax
+
+
+def _freq(omega: np.ndarray, hz: bool) -> np.ndarray:
+    return np.asarray(omega) / (2 * np.pi) if hz else np.asarray(omega)
+
+
+def _freq_label(hz: bool) -> str:
+    return "frequency [Hz]" if hz else r"$\omega$ [rad/s]"
+
+
+def _dof(obj: Any, dof: Any, owner: str, n_dofs: int) -> tuple[int, str]:
+    """Resolve ``dof`` (index or location name) to a model DOF index and a label."""
+    model = getattr(obj, "model", None)
+    if isinstance(dof, (str, tuple)):
+        if model is None:
+            raise ValueError(f"{owner}: dof={dof!r} is a name but no model is attached; pass an integer DOF index")
+        idx = model.dof(dof)
+        return idx, model.dofmap.label(idx) if model.dofmap.labels else str(dof)
+    if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)):
+        raise TypeError(f"{owner}: dof must be an integer index or a location name, got {type(dof).__name__}")
+    if not -n_dofs <= dof < n_dofs:
+        raise ValueError(f"{owner}: dof={dof} is out of range for {n_dofs} DOFs")
+    idx = int(dof) % n_dofs
+    label = model.dofmap.label(idx) if model is not None else f"dof {idx}"
+    return idx, label
+
+
+def _check_solution(solution: Any, owner: str) -> PeriodicSolution:
+    if not isinstance(solution, PeriodicSolution):
+        raise TypeError(f"{owner}: solution must be a PeriodicSolution (e.g. branch[i]), got {type(solution).__name__}")
+    return solution
+
+
+def frequency_energy(branches: Any, ax: Any = None, *, labels: Any = None, hz: bool = False,
+                     mark_folds: bool = True):
+    """Frequency-energy plot: backbones and forced curves on the same axes.
+
+    Parameters
+    ----------
+    branches : Branch or sequence of Branch
+        Nonlinear modes (solid lines) and forced responses (dashed lines).
+    ax : matplotlib Axes, optional
+    labels : sequence of str, optional
+        One legend label per branch (default: the branch kind, with the mode number).
+    hz : bool
+        Frequency in Hz instead of rad/s.
+    mark_folds : bool
+        Mark ``branch.folds`` with ``x`` markers (one extra line per branch with folds).
+
+    Returns
+    -------
+    matplotlib Axes
+        Frequency on the x-axis, energy on a log y-axis (as in the examples); one line per
+        branch (in order, data ``(omega, energy)``), followed by the fold markers.
+    """
+    owner = "frequency_energy"
+    if isinstance(branches, Branch):
+        branches = [branches]
+    if not isinstance(branches, (list, tuple)) or not branches or not all(isinstance(b, Branch) for b in branches):
+        raise TypeError(f"{owner}: branches must be a Branch or a non-empty list of Branch objects")
+    if labels is not None:
+        labels = list(labels)
+        if len(labels) != len(branches):
+            raise ValueError(f"{owner}: labels has {len(labels)} entries for {len(branches)} branches")
+    ax = _axes(ax, owner)
+    folds = []
+    for i, br in enumerate(branches):
+        if labels is not None:
+            label = labels[i]
+        elif br.kind == "nonlinear mode" and "mode" in br.meta:
+            label = f"nonlinear mode {br.meta['mode']}"
+        else:
+            label = br.kind
+        ls = "-" if br.kind == "nonlinear mode" else "--"
+        (line,) = ax.plot(_freq(br.omega, hz), br.energy, ls, label=label)
+        if mark_folds and br.folds:
+            folds.append((br, line.get_color()))
+    for br, color in folds:
+        idx = list(br.folds)
+        ax.plot(_freq(br.omega[idx], hz), br.energy[idx], "x", color=color, ms=8, mew=2, label="_fold")
+    ax.set_yscale("log")
+    ax.set_ylabel("energy")
+    ax.set_xlabel(_freq_label(hz))
+    ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    return ax
+
+
+def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str | None = None, hz: bool = False,
+                       mark_folds: bool = True):
+    """Amplitude ``max_t |q_dof(t)|`` against frequency, folds marked.
+
+    Parameters
+    ----------
+    branch : Branch
+    dof : int or location
+        Model DOF index, or a location name (``"tip"``, ``("tip", "theta")``) when the branch
+        carries its model.
+    ax : matplotlib Axes, optional
+    label : str, optional
+        Legend label of the curve.
+    hz : bool
+        Frequency in Hz instead of rad/s.
+    mark_folds : bool
+        Add a second line with ``x`` markers at ``branch.folds`` (only if there are folds).
+
+    Returns
+    -------
+    matplotlib Axes
+        Line 0: ``(omega, amplitude)``; line 1 (if folds): the fold points.
+    """
+    owner = "frequency_response"
+    if not isinstance(branch, Branch):
+        raise TypeError(f"{owner}: branch must be a Branch, got {type(branch).__name__}")
+    idx, dof_label = _dof(branch, dof, owner, branch.Q.shape[2])
+    ax = _axes(ax, owner)
+    amp = branch.amplitude(idx)
+    w = _freq(branch.omega, hz)
+    ax.plot(w, amp, "-", label=label or branch.kind)
+    if mark_folds and branch.folds:
+        f = list(branch.folds)
+        ax.plot(w[f], amp[f], "x", color="k", ms=8, mew=2, label="fold")
+    ax.set_xlabel(_freq_label(hz))
+    ax.set_ylabel(f"amplitude ({dof_label})")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    return ax
+
+
+def _default_dof(solution: PeriodicSolution) -> int:
+    return int(solution.contacts.dofs[0]) if solution.contacts.dofs else 0
+
+
+def time_history(solution: PeriodicSolution, dof: Any = None, ax: Any = None, n_periods: float = 1,
+                 *, n_points: int = 400, contact: bool = True):
+    """Displacement of one DOF over time, contact forces on a twin axis.
+
+    Parameters
+    ----------
+    solution : PeriodicSolution
+    dof : int or location, optional
+        Default: the first contact DOF, or DOF 0 without contacts.
+    ax : matplotlib Axes, optional
+    n_periods : float
+        Number of periods shown (> 0).
+    n_points : int
+        Samples per period.
+    contact : bool
+        Draw the contact forces (all contacts) on a twin y-axis and the gap (dotted) if ``dof``
+        is a contact DOF.
+
+    Returns
+    -------
+    matplotlib Axes
+        The displacement axes (line 0 is ``q_dof(t)``). The contact-force twin, when drawn, is
+        ``[a for a in ax.figure.axes if a is not ax and a.bbox.bounds == ax.bbox.bounds]``.
+    """
+    owner = "time_history"
+    solution = _check_solution(solution, owner)
+    idx, dof_label = _dof(solution, _default_dof(solution) if dof is None else dof, owner, solution.n_dofs)
+    if isinstance(n_periods, bool) or not isinstance(n_periods, (int, float, np.integer, np.floating)) or not (
+        0 < n_periods < 1e6
+    ):
+        raise ValueError(f"{owner}: n_periods must be a positive number, got {n_periods!r}")
+    from .io.vtk import check_int
+
+    n_points = check_int(n_points, "n_points", owner, 2)
+    ax = _axes(ax, owner)
+    T = solution.period
+    t = np.linspace(0.0, n_periods * T, max(2, int(round(n_points * n_periods))) + 1)
+    q = solution.displacement(t)[:, idx]
+    ax.plot(t, q, "-", color="C0", label=f"q ({dof_label})")
+    ci = solution.contacts
+    if contact and ci.kinds:
+        for j, d in enumerate(ci.dofs):
+            if d == idx:
+                ax.axhline(ci.gaps[j], color="0.4", ls=":", lw=1, label="gap")
+        twin = ax.twinx()
+        p = solution.contact_force(t)
+        for j in range(p.shape[1]):
+            twin.plot(t, p[:, j], "-", color=f"C{j + 1}", alpha=0.8, label=f"contact force {j}")
+        twin.set_ylabel("contact force")
+        twin.legend(loc="lower right")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel(f"displacement ({dof_label})")
+    ax.legend(loc="lower left")
+    ax.grid(True, alpha=0.3)
+    return ax
+
+
+def phase_portrait(solution: PeriodicSolution, dof: Any, ax: Any = None, *, n_points: int = 400,
+                   label: str | None = None):
+    """Phase portrait ``(q_dof, q'_dof)`` over one period.
+
+    Parameters
+    ----------
+    solution : PeriodicSolution
+    dof : int or location
+    ax : matplotlib Axes, optional
+    n_points : int
+        Samples over the period (the curve is closed).
+    label : str, optional
+
+    Returns
+    -------
+    matplotlib Axes
+        Line 0 is the closed orbit; a dotted vertical line marks the gap if ``dof`` is a contact DOF.
+    """
+    owner = "phase_portrait"
+    solution = _check_solution(solution, owner)
+    idx, dof_label = _dof(solution, dof, owner, solution.n_dofs)
+    from .io.vtk import check_int
+
+    n_points = check_int(n_points, "n_points", owner, 3)
+    ax = _axes(ax, owner)
+    t = np.linspace(0.0, solution.period, n_points + 1)
+    q = solution.displacement(t)[:, idx]
+    v = solution.velocity(t)[:, idx]
+    ax.plot(q, v, "-", label=label or f"$\\omega$ = {solution.omega:.4g} rad/s")
+    for j, d in enumerate(solution.contacts.dofs):
+        if d == idx:
+            ax.axvline(solution.contacts.gaps[j], color="0.4", ls=":", lw=1, label="gap")
+    ax.set_xlabel(f"q ({dof_label})")
+    ax.set_ylabel(f"dq/dt ({dof_label})")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    return ax
+
+
+def mode_shape(source: Any, model: Any = None, ax: Any = None, n_snapshots: int = 8, *, mode: int = 0,
+               cmap: str = "viridis", show_obstacle: bool = True):
+    """Deflection snapshots along the structure over one period.
+
+    Parameters
+    ----------
+    source : PeriodicSolution or LinearModes
+        A periodic solution, or linear modes (``mode`` selects the shape; motion ``phi cos(w t)``).
+    model : StructuralModel, optional
+        The model the result lives on (default ``solution.model``; required for linear modes).
+        Reduced models are expanded to the full mesh. Discrete models (no mesh) are drawn as
+        markers against the DOF index.
+    ax : matplotlib Axes, optional
+    n_snapshots : int
+        Snapshots at ``t_j = j T / n_snapshots`` (>= 1), coloured by ``t / T``.
+    mode : int
+        Mode index (0-based) for ``LinearModes``.
+    cmap : str
+        Colormap of the snapshots.
+    show_obstacle : bool
+        Mark the obstacle (the gap, in the motion direction) at each contact node.
+
+    Returns
+    -------
+    matplotlib Axes
+        Lines 0 .. n_snapshots-1 are the snapshots (``x``, deflection); then one marker line
+        per contact if ``show_obstacle``.
+    """
+    owner = "mode_shape"
+    from .io.vtk import _source, check_int, mesh_fields, mesh_owner, resolve_model
+
+    n_snapshots = check_int(n_snapshots, "n_snapshots", owner, 1)
+    src, j = _source(source, mode, owner)
+    model = resolve_model(src, model, owner)
+    ax = _axes(ax, owner)
+    plt = _plt()
+    colors = plt.get_cmap(cmap)(np.linspace(0.0, 0.9, n_snapshots))
+    if mesh_owner(model) is None:
+        # Discrete model: no geometry; plot the DOF values against the DOF index.
+        if j is None:
+            T = src.period
+            t = np.arange(n_snapshots) * (T / n_snapshots)
+            q = src.displacement(t)
+        else:
+            t = np.arange(n_snapshots) * (2 * np.pi / src.omega[j] / n_snapshots)
+            q = np.cos(src.omega[j] * t)[:, None] * np.asarray(src.shapes)[:, j][None, :]
+        x = np.arange(model.n_dofs)
+        for k in range(n_snapshots):
+            ax.plot(x, q[k], "o-", color=colors[k], label=f"t/T = {k / n_snapshots:.2f}" if k in (0, n_snapshots - 1) else None)
+        ax.set_xticks(x)
+        ax.set_xticklabels([model.dofmap.label(i) for i in x])
+        ax.set_xlabel("DOF")
+        ax.set_ylabel("displacement")
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+        return ax
+    f = mesh_fields(src, model, n_frames=n_snapshots, mode=j, owner=owner)
+    order = np.argsort(f.x)
+    for k in range(n_snapshots):
+        ax.plot(f.x[order], f.displacement[k, order], "-", color=colors[k],
+                label=f"t/T = {k / n_snapshots:.2f}" if k in (0, n_snapshots - 1) else None)
+    if show_obstacle:
+        for node, gap in zip(f.contact_nodes, f.contact_gaps):
+            if node >= 0:
+                ax.plot([f.x[node]], [gap], marker="_", ms=22, mew=3, color="crimson", ls="none", label="obstacle")
+    ax.set_xlabel("x")
+    ax.set_ylabel("u (axial)" if f.kind == "bar" else "w (transverse)")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    return ax

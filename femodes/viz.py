@@ -1,0 +1,265 @@
+"""Outputs layer: off-screen 3-D rendering of periodic motions to GIF / MP4 (pyvista, imageio).
+
+:func:`animate` renders one period of a periodic solution (or of a linear mode) on the FE mesh:
+the deformed structure as a tube coloured by the displacement magnitude, the obstacle of each
+contact as a small block at the gap, with a fixed camera and a fixed colour range over the
+period so that frames are comparable.
+
+pyvista is imported only when :func:`animate` is called (``pip install 'femodes[render]'``).
+Rendering is headless: with the pip VTK wheels it goes through EGL on Mesa's software renderer
+(llvmpipe), which needs the system libraries ``libEGL.so.1`` and Mesa's EGL driver (Debian /
+Ubuntu: ``apt-get install libegl1 libgl1-mesa-dri``); OSMesa (``libosmesa6``) or an X display
+work too.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import logging
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .io.vtk import check_int, check_scale, mesh_fields
+
+__all__ = ["animate", "render_backend"]
+
+log = logging.getLogger(__name__)
+
+INSTALL_HINT = (
+    "Debian/Ubuntu: apt-get install libegl1 libgl1-mesa-dri (EGL + Mesa software rendering), "
+    "or libosmesa6 for OSMesa; then pip install 'femodes[render]' (pyvista, imageio; imageio-ffmpeg for .mp4)"
+)
+
+
+def _loadable(*names: str) -> bool:
+    for name in names:
+        try:
+            ctypes.CDLL(name)
+            return True
+        except OSError:
+            continue
+    return False
+
+
+def render_backend() -> str:
+    """Choose (and set, if unset) VTK's off-screen window class before pyvista is imported.
+
+    Returns
+    -------
+    str
+        ``"egl"``, ``"osmesa"`` or ``"x"`` (a display is available), or whatever
+        ``VTK_DEFAULT_OPENGL_WINDOW`` was already set to.
+
+    Raises
+    ------
+    RuntimeError
+        No EGL, no OSMesa and no display: nothing VTK can render with (the message says what to install).
+    """
+    preset = os.environ.get("VTK_DEFAULT_OPENGL_WINDOW")
+    if preset:
+        return preset
+    if _loadable("libEGL.so.1", "libEGL.so"):
+        os.environ["VTK_DEFAULT_OPENGL_WINDOW"] = "vtkEGLRenderWindow"
+        return "egl"
+    if _loadable("libOSMesa.so.8", "libOSMesa.so.6", "libOSMesa.so"):
+        os.environ["VTK_DEFAULT_OPENGL_WINDOW"] = "vtkOSOpenGLRenderWindow"
+        return "osmesa"
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return "x"
+    raise RuntimeError(f"animate: no OpenGL backend for off-screen rendering (libEGL.so.1 not found, no display). {INSTALL_HINT}")
+
+
+def _import_pyvista():
+    render_backend()
+    try:
+        import pyvista
+    except ImportError as exc:
+        raise ImportError(f"femodes.viz needs pyvista and imageio: pip install 'femodes[render]' ({exc})") from exc
+    return pyvista
+
+
+def _check_window(window_size: Any, owner: str) -> tuple[int, int]:
+    if (not isinstance(window_size, (tuple, list)) or len(window_size) != 2
+            or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and 16 <= v <= 8192 for v in window_size)):
+        raise ValueError(f"{owner}: window_size must be (width, height) integers in [16, 8192], got {window_size!r}")
+    return int(window_size[0]), int(window_size[1])
+
+
+def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: float | None = None,
+            window_size: tuple[int, int] = (640, 360), fps: float = 12, *, mode: int | None = None,
+            cmap: str = "plasma", radius: float | None = None) -> Path:
+    """Render one period of a periodic motion to an animated GIF or an MP4 video, off screen.
+
+    Parameters
+    ----------
+    solution : PeriodicSolution or LinearModes
+        E.g. ``branch[i]``; for linear modes pass ``mode`` (0-based), motion ``phi cos(w t)``.
+    model : StructuralModel or None
+        The model the result lives on (None: ``solution.model``); reduced models are expanded
+        to the full mesh. Discrete models (no mesh) raise ValueError.
+    path : str or os.PathLike
+        Output file ending in ``.gif`` (imageio + pillow) or ``.mp4`` (needs imageio-ffmpeg;
+        the window is rounded up to multiples of 16 pixels). Parent folders are created.
+    n_frames : int
+        Frames per period (>= 2), at ``t_j = j T / n_frames``; the animation loops.
+    scale : float, optional
+        Displacement magnification. Default: the largest displacement over the period is drawn
+        as 15 % of the structure's length (the value is logged). The obstacle is drawn at
+        ``scale * gap``, so contact is shown where it happens.
+    window_size : (int, int)
+        Frame size in pixels (width, height).
+    fps : float
+        Frames per second of the output.
+    mode : int, optional
+        Mode index for ``LinearModes``.
+    cmap : str
+        Matplotlib colormap name for ``|displacement|`` (true, unscaled magnitude; the colour
+        range is fixed over the period).
+    radius : float, optional
+        Tube radius (default 1 % of the length).
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+
+    Raises
+    ------
+    ValueError
+        Bad ``n_frames``, ``window_size``, ``fps``, suffix, or a discrete model.
+    RuntimeError
+        No off-screen OpenGL available (the message names the packages to install), or the
+        renderer produced blank frames.
+    ImportError
+        pyvista / imageio (/ imageio-ffmpeg for ``.mp4``) not installed.
+    """
+    owner = "animate"
+    n_frames = check_int(n_frames, "n_frames", owner, 2)
+    scale = check_scale(scale, owner)
+    width, height = _check_window(window_size, owner)
+    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)) or not 0 < fps <= 240:
+        raise ValueError(f"{owner}: fps must be a number in (0, 240], got {fps!r}")
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"{owner}: path must be a str or os.PathLike ending in .gif or .mp4, got {type(path).__name__}")
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
+        raise ValueError(f"{owner}: path must end in .gif or .mp4, got {str(path)!r}")
+    if radius is not None and (isinstance(radius, bool) or not isinstance(radius, (int, float)) or not radius > 0):
+        raise ValueError(f"{owner}: radius must be a positive number or None, got {radius!r}")
+    if suffix == ".mp4":
+        width, height = 16 * math.ceil(width / 16), 16 * math.ceil(height / 16)
+    f = mesh_fields(solution, model, n_frames=n_frames, mode=mode, owner=owner)
+
+    try:
+        import imageio.v2 as iio
+    except ImportError as exc:
+        raise ImportError("animate needs imageio: pip install 'femodes[render]'") from exc
+    if suffix == ".mp4":
+        try:
+            import imageio_ffmpeg  # noqa: F401
+        except ImportError as exc:
+            raise ImportError("writing .mp4 needs imageio-ffmpeg: pip install imageio-ffmpeg (or write a .gif)") from exc
+    pv = _import_pyvista()
+
+    t0 = time.perf_counter()
+    x = f.x
+    length = float(np.ptp(x)) or 1.0
+    umax = float(np.max(np.abs(f.displacement)))
+    if scale is None:
+        scale = 0.15 * length / umax if umax > 0 else 1.0
+        log.info("%s: displacement scale %.4g (max |u| = %.4g drawn as 15%% of the length)", owner, scale, umax)
+    radius = 0.01 * length if radius is None else float(radius)
+    axis = 0 if f.kind == "bar" else 1
+
+    # Geometry of every frame, the obstacles, and the bounds over the whole period.
+    frames_pts = np.repeat(f.points()[None], n_frames, axis=0)
+    frames_pts[:, :, axis] += scale * f.displacement
+    magnitude = np.abs(f.displacement)
+    clim = (0.0, float(magnitude.max()) if magnitude.max() > 0 else 1.0)
+    obstacles = []
+    for node, gap in zip(f.contact_nodes, f.contact_gaps):
+        if node < 0:
+            continue
+        c = np.zeros(3)
+        c[0] = x[node]
+        th = 0.02 * length  # obstacle thickness, its face at the (scaled) gap
+        if axis == 1:
+            c[1] = scale * gap + th / 2
+            obstacles.append(pv.Box(bounds=(c[0] - 0.06 * length, c[0] + 0.06 * length, c[1] - th / 2, c[1] + th / 2,
+                                            -0.06 * length, 0.06 * length)))
+        else:
+            c[0] += scale * gap + th / 2
+            obstacles.append(pv.Box(bounds=(c[0] - th / 2, c[0] + th / 2, -0.08 * length, 0.08 * length,
+                                            -0.08 * length, 0.08 * length)))
+    lo = frames_pts.reshape(-1, 3).min(axis=0) - radius
+    hi = frames_pts.reshape(-1, 3).max(axis=0) + radius
+    for ob in obstacles:
+        b = np.asarray(ob.bounds).reshape(3, 2)
+        lo, hi = np.minimum(lo, b[:, 0]), np.maximum(hi, b[:, 1])
+    center = 0.5 * (lo + hi)
+    half_w, half_h = 0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1])
+
+    lines = np.hstack([np.full((f.cells.shape[0], 1), 2), f.cells]).ravel()
+
+    def structure(j: int):
+        poly = pv.PolyData(frames_pts[j], lines=lines)
+        poly.point_data["|u|"] = magnitude[j]
+        return poly.tube(radius=radius, n_sides=16)
+
+    plotter = pv.Plotter(off_screen=True, window_size=(width, height))
+    images = []
+    try:
+        plotter.set_background("white")
+        label = "axial displ." if axis == 0 else "deflection"
+        plotter.add_mesh(structure(0), scalars="|u|", cmap=cmap, clim=clim, name="structure", smooth_shading=True,
+                         scalar_bar_args={"title": label, "color": "black", "vertical": True, "position_x": 0.82,
+                                          "position_y": 0.12, "height": 0.7, "width": 0.05, "fmt": "%.1e",
+                                          "title_font_size": 12, "label_font_size": 11})
+        for k, ob in enumerate(obstacles):
+            plotter.add_mesh(ob, color="dimgray", opacity=0.9, name=f"obstacle{k}")
+        # Fixed camera: orthographic view of the xy-plane, fitted to the whole period.
+        aspect = 0.78 * width / height  # leave room for the colour bar
+        cam = plotter.camera
+        plotter.enable_parallel_projection()
+        cam.focal_point = tuple(center)
+        cam.position = (center[0], center[1], center[2] + 10 * length)
+        cam.up = (0.0, 1.0, 0.0)
+        cam.parallel_scale = 1.1 * max(half_h, half_w / aspect, 1e-3 * length)
+        cam.focal_point = (center[0] + 0.1 * 2 * cam.parallel_scale * width / height, center[1], center[2])
+        cam.position = (cam.focal_point[0], center[1], center[2] + 10 * length)
+        plotter.add_text(f"w = {f.omega:.4g} rad/s, displacement x{scale:.3g}", font_size=9, color="black",
+                         position="upper_left", name="title")
+        for j in range(n_frames):
+            if j:
+                plotter.add_mesh(structure(j), scalars="|u|", cmap=cmap, clim=clim, name="structure",
+                                 smooth_shading=True, show_scalar_bar=False, reset_camera=False)
+            # the time label also keeps frames distinct (GIF writers merge identical frames)
+            plotter.add_text(f"t/T = {j / n_frames:.3f}", font_size=9, color="black", position="lower_left",
+                             name="time")
+            plotter.render()
+            img = plotter.screenshot(return_img=True)
+            if img is None or img.size == 0:
+                raise RuntimeError(f"{owner}: the renderer returned no image. {INSTALL_HINT}")
+            images.append(np.asarray(img)[..., :3].copy())
+    finally:
+        plotter.close()
+    if np.all(images[0] == images[0].reshape(-1, 3)[0]):
+        raise RuntimeError(f"{owner}: the renderer produced a blank frame (broken OpenGL?). {INSTALL_HINT}")
+    t_render = time.perf_counter() - t0
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".gif":
+        iio.mimsave(path, images, duration=1000.0 / fps, loop=0)
+    else:
+        with iio.get_writer(path, fps=fps, codec="libx264", quality=7, macro_block_size=16) as w:
+            for img in images:
+                w.append_data(img)
+    log.info("%s: %d frames %dx%d rendered in %.2f s, wrote %s (%d bytes)", owner, n_frames, width, height, t_render,
+             path, path.stat().st_size)
+    return path
