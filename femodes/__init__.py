@@ -13,6 +13,7 @@ from .hbm import ForcedResponseProblem, Harmonics, NonlinearModeProblem
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .results import Branch, PeriodicSolution, load_branch
 from .analyses import frequency_response, nonlinear_mode, static_contact
+from .time import SteadyState, TimeHistory, simulate, steady_state
 from . import io, plot  # outputs; matplotlib is imported lazily inside plot functions
 
 __version__ = "0.1.0"
@@ -50,6 +51,10 @@ __all__ = [
     "frequency_response",
     "nonlinear_mode",
     "static_contact",
+    "SteadyState",
+    "TimeHistory",
+    "simulate",
+    "steady_state",
     "io",
     "plot",
 ]

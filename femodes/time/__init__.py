@@ -1,0 +1,16 @@
+"""Discretise layer: nonsmooth time integration of the same models (Moreau-Jean).
+
+* :func:`simulate` -- Moreau-Jean time-stepping (theta-method on the smooth part, Newton's
+  impact law at the velocity level for unilateral contacts; Moreau 1988, Jean 1999, Acary &
+  Brogliato 2008) of a :class:`~femodes.StructuralModel` or :class:`~femodes.ReducedModel`,
+  returning a :class:`TimeHistory`.
+* :func:`steady_state` -- integrate a forced model period by period until the state at the
+  period start repeats (period-``nu`` orbits for ``nu <= 4``), returning a :class:`SteadyState`.
+
+This layer imports the models, laws and solvers, never :mod:`femodes.hbm`: both are independent
+discretisations of the same model and can be compared.
+"""
+
+from .moreau import SteadyState, TimeHistory, simulate, steady_state
+
+__all__ = ["TimeHistory", "SteadyState", "simulate", "steady_state"]

@@ -1,0 +1,251 @@
+"""Moreau-Jean time integration (femodes.time): convergence orders, energy, impacts, FE models.
+
+Measured numbers quoted in the comments come from the runs that set the tolerances.
+"""
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import femodes as fm
+from femodes.time import SteadyState, TimeHistory, simulate, steady_state
+from femodes.time.moreau import _lcp
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+T_IMPACT = 2 * np.pi / 1.5  # free impacting oscillator, gap 1, energy 2: w = pi / (pi - arccos(1/2))
+
+
+def oscillator(**kw):
+    return fm.StructuralModel(M=[[1.0]], K=[[1.0]], **kw)
+
+
+def impacting():
+    return oscillator().with_contact(fm.UnilateralContact(at=0, gap=1.0))
+
+
+def beam_with_stop():
+    mesh = fm.line_mesh(1.0, 20, boundaries={"clamp": 0.0, "tip": 1.0})
+    b = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
+    phi = fm.linear_modes(b, n=1).shapes[:, 0]
+    tip = b.dof("tip")
+    return b, b.with_contact(fm.UnilateralContact(at="tip", gap=0.01)), 0.05 * phi / phi[tip], tip
+
+
+# ---------------------------------------------------------------------------------------- smooth
+def test_linear_second_order_and_energy():
+    dts = np.array([0.1, 0.05, 0.025, 0.0125])
+    err = []
+    for dt in dts:
+        th = simulate(oscillator(), 10.0, dt, u0=[1.0])
+        assert isinstance(th, TimeHistory) and th.t[-1] == pytest.approx(10.0)
+        err.append(abs(th.u[-1, 0] - np.cos(10.0)))
+        # trapezoidal rule: energy conserved to round-off (measured ptp <= 3e-14)
+        assert np.ptp(th.energy) < 1e-12
+    slope = np.polyfit(np.log(dts), np.log(err), 1)[0]
+    assert abs(slope - 2.0) < 0.1  # measured 2.00
+    th1 = simulate(oscillator(), 10.0, 0.01, u0=[1.0], theta=1.0)
+    # backward Euler: |amplification|^2 = 1 / (1 + dt^2) per step -> E = 0.5 (1 + dt^2)^-1000 = 0.45242
+    assert np.all(np.diff(th1.energy) < 0)
+    assert th1.energy[-1] == pytest.approx(0.5 * (1 + 0.01**2) ** -1000, rel=1e-4)
+
+
+def test_duffing_period_second_order():
+    model = oscillator().with_nonlinearity(fm.CubicSpring(at=0, k3=1.0))
+    T = 2 * np.pi / 1.317776064966
+    dts = np.array([0.04, 0.02, 0.01])
+    err = []
+    for dt in dts:
+        th = simulate(model, 10 * T, dt, u0=[1.0])
+        u = th.u[:, 0]
+        i = np.flatnonzero((u[:-1] > 0) & (u[1:] <= 0))
+        tz = th.t[i] - u[i] * (th.t[i + 1] - th.t[i]) / (u[i + 1] - u[i])
+        err.append(abs(np.polyfit(np.arange(tz.size), tz, 1)[0] / T - 1))
+        assert np.ptp(th.energy) < 0.01 * dt**2 * 1000  # trapezoidal on f_nl: O(dt^2), measured 2.1e-5 at 0.01
+    slope = np.polyfit(np.log(dts), np.log(err), 1)[0]
+    assert abs(slope - 2.0) < 0.1  # measured 2.00 (errors 2.1e-4, 5.4e-5, 1.3e-5)
+    assert err[-1] < 2e-5
+
+
+@pytest.mark.parametrize("w", [0.8, 1.3])
+def test_forced_linear_steady_state(w):
+    model = oscillator(C=[[0.1]]).with_forcing(fm.HarmonicForce(at=0, amplitude=1.0))
+    exact = 1 / np.sqrt((1 - w**2) ** 2 + (0.1 * w) ** 2)
+    errs = []
+    for dt in (0.04, 0.02):
+        ss = steady_state(model, w, dt=dt)
+        assert isinstance(ss, SteadyState) and ss.converged and ss.nu == 1
+        assert ss.period == pytest.approx(2 * np.pi / w)
+        errs.append(abs(ss.amplitude[0] / exact - 1))
+    assert errs[1] < 1e-3 and 3.0 < errs[0] / errs[1] < 5.0  # O(dt^2): measured ratios 4.07, 3.89
+
+
+def test_steady_state_reports_non_convergence():
+    model = oscillator(C=[[0.1]]).with_forcing(fm.HarmonicForce(at=0, amplitude=1.0))
+    ss = steady_state(model, 0.8, dt=0.05, n_periods_max=3, tol=1e-14)
+    assert not ss.converged and ss.n_periods == 3
+
+
+# --------------------------------------------------------------------------------------- impacts
+def test_impacting_oscillator_energy_gap_period():
+    for dt in (2e-3, 1e-3):
+        th = simulate(impacting(), 100 * T_IMPACT, dt, v0=[2.0])
+        hits = np.flatnonzero(th.impulse[:, 0] > 0)
+        assert hits.size == 100
+        # e = 1, theta = 1/2: energy conserved to round-off over 100 impacts (measured 9e-12 relative)
+        assert np.max(np.abs(th.energy - 2.0)) / 2.0 < 1e-9
+        assert np.all(th.impulse >= 0)
+        # penetration: activation on the half-step predicted gap -> at most dt/2 |v_impact| (+O(dt^2))
+        assert th.gap.min() >= -0.5 * dt * np.sqrt(3.0) * 1.01  # measured -0.69 dt, bound 0.87 dt
+        # period from impact times: the discrete orbit locks to an integer number of steps, so the
+        # error is O(dt) but not a clean power law: measured |T_h - T| = 1.6 dt, 1.2 dt, 0.4 dt at 2e-3, 1e-3, 5e-4
+        T_h = np.polyfit(np.arange(hits.size), th.t[hits], 1)[0]
+        assert abs(T_h - T_IMPACT) < 2.0 * dt
+        # velocity reverses exactly at each impact
+        np.testing.assert_allclose(th.v[hits, 0], -th.v[hits - 1, 0], rtol=1e-12)
+
+
+def test_restitution_half():
+    th = simulate(impacting(), 8.0, 1e-3, v0=[2.0], restitution=0.5)
+    hits = np.flatnonzero(th.impulse[:, 0] > 0)
+    assert hits.size >= 2
+    np.testing.assert_allclose(th.v[hits, 0] / th.v[hits - 1, 0], -0.5, rtol=1e-12)
+    # energy after impact 1: 1/2 (e v)^2 + 1/2 with v^2 = 3 -> 0.875; impact 2: 0.59375 (O(dt) from timing)
+    assert th.energy[hits[0]] == pytest.approx(0.875, abs=2e-3)
+    assert th.energy[hits[1]] == pytest.approx(0.59375, abs=2e-3)
+    assert np.all(np.diff(th.energy) <= 1e-12)
+
+
+def test_penalty_approaches_unilateral():
+    errs = []
+    for k in (1e2, 1e3, 1e4):
+        model = oscillator().with_contact(fm.PenaltyContact(at=0, gap=1.0, stiffness=k))
+        th = simulate(model, 5 * T_IMPACT, 1e-3, v0=[2.0])
+        u = th.u[:, 0]
+        i = np.flatnonzero((u[:-1] > 0) & (u[1:] <= 0))
+        tz = th.t[i] - u[i] * (th.t[i + 1] - th.t[i]) / (u[i + 1] - u[i])
+        errs.append(abs(np.polyfit(np.arange(tz.size), tz, 1)[0] / T_IMPACT - 1))
+        assert np.all(th.impulse >= 0)
+        assert np.ptp(th.energy) / 2.0 < 0.05  # implicit penalty: bounded energy error
+    assert errs[0] > errs[1] > errs[2] and errs[2] < 0.01
+
+
+def test_two_dof_chain_contact():
+    model = fm.StructuralModel(M=np.eye(2), K=[[2.0, -1.0], [-1.0, 1.0]]).with_contact(fm.UnilateralContact(at=1, gap=0.5))
+    dt = 1e-3
+    th = simulate(model, 60.0, dt, u0=[0.3, 0.0], v0=[0.0, 1.0])
+    assert (th.impulse[:, 0] > 0).sum() > 5
+    assert np.max(np.abs(th.energy - th.energy[0])) / th.energy[0] < 1e-9
+    assert th.gap.min() >= -dt * np.max(np.abs(th.v[:, 1]))
+    assert np.all(th.impulse >= 0)
+    np.testing.assert_allclose(th.contact_force()[1:], th.impulse[1:] / th.dt, rtol=1e-9)
+
+
+def test_lcp_against_enumeration(rng):
+    import itertools
+
+    for _ in range(30):
+        A = rng.standard_normal((3, 3))
+        W = A @ A.T + 0.1 * np.eye(3)
+        q = rng.standard_normal(3)
+        x, ok = _lcp(W, q, np.zeros(3))
+        assert ok
+        w = W @ x + q
+        assert np.all(x >= -1e-12) and np.all(w >= -1e-10) and abs(x @ w) < 1e-10
+        # unique solution (W is SPD): compare with enumeration of active sets
+        for act in itertools.product([0, 1], repeat=3):
+            a = np.array(act, dtype=bool)
+            y = np.zeros(3)
+            if a.any():
+                y[a] = np.linalg.solve(W[np.ix_(a, a)], -q[a])
+            if np.all(y >= -1e-12) and np.all(W @ y + q >= -1e-10):
+                np.testing.assert_allclose(x, y, atol=1e-9)
+
+
+# ------------------------------------------------------------------------------------ FE models
+def test_beam_with_massless_tip_contact():
+    beam, model, v0, tip = beam_with_stop()
+    assert model.M.diagonal()[tip] == 0.0
+    free = simulate(beam, 10.0, 1e-2, v0=v0)
+    assert np.ptp(free.energy) / free.energy[0] < 1e-9  # measured 3.6e-11
+    drift = []
+    for dt in (2.5e-3, 1.25e-3):
+        th = simulate(model, 20.0, dt, v0=v0)
+        assert (th.impulse[:, 0] > 0).sum() > 10
+        # massless contact DOF: position-level Signorini at t_{k+1}, no penetration (measured -4e-16)
+        assert th.gap.min() > -1e-12
+        assert np.all(th.impulse >= 0)
+        drift.append(np.max(np.abs(th.energy - th.energy[0])) / th.energy[0])
+    # contact switches of the quasi-static node cost an O(dt) energy error of either sign (trapezoidal
+    # rule on a switching condensed stiffness): max |E - E0| / E0 over t <= 20 measured
+    # 1.18, 0.235, 0.127, 0.021 at dt = 1e-2, 5e-3, 2.5e-3, 1.25e-3
+    assert drift[1] < drift[0] < 0.2 and drift[1] < 0.05
+
+
+def test_craig_bampton_close_to_full():
+    beam, model, v0, tip = beam_with_stop()
+    cb = fm.craig_bampton(model, 6)
+    v0r = np.linalg.lstsq(cb.basis, v0, rcond=None)[0]
+    full = simulate(model, 1.0, 2e-3, v0=v0, restitution=0.0)
+    red = simulate(cb, 1.0, 2e-3, v0=v0r, restitution=0.0)
+    t1 = full.t[np.argmax(full.impulse[:, 0] > 0)]  # first contact, measured t = 0.222
+    k = full.t <= t1
+    d = np.abs(red.u[:, cb.dof("tip")] - full.u[:, tip]) / 0.01
+    assert d[k].max() < 2e-3  # measured 4.5e-4 of the gap before contact
+    # after contact the reduced tip DOF carries Guyan mass (0.235) whereas the full tip node is
+    # massless: the impact laws differ; measured 12 % of the gap up to t = 1
+    assert d.max() < 0.2
+    assert red.gap.min() > -0.01 * 0.05
+
+
+# ------------------------------------------------------------------------------------ bad input
+@pytest.mark.parametrize(
+    "kwargs, exc, word",
+    [
+        (dict(t_end=-1.0, dt=0.1), ValueError, "t_end"),
+        (dict(t_end=1.0, dt=0.0), ValueError, "dt"),
+        (dict(t_end=1.0, dt=2.0), ValueError, "dt"),
+        (dict(t_end=1.0, dt="a"), TypeError, "dt"),
+        (dict(t_end=1.0, dt=0.1, u0=[1.0, 2.0]), ValueError, "u0"),
+        (dict(t_end=1.0, dt=0.1, v0=[np.nan]), ValueError, "v0"),
+        (dict(t_end=1.0, dt=0.1, restitution=1.5), ValueError, "restitution"),
+        (dict(t_end=1.0, dt=0.1, theta=0.3), ValueError, "theta"),
+        (dict(t_end=1.0, dt=0.1, omega=1.0), ValueError, "omega"),
+        (dict(t_end=1.0, dt=0.1, store_every=0), ValueError, "store_every"),
+    ],
+)
+def test_bad_input(kwargs, exc, word):
+    with pytest.raises(exc, match=word):
+        simulate(impacting(), **kwargs)
+
+
+def test_bad_input_forced():
+    model = oscillator(C=[[0.1]]).with_forcing(fm.HarmonicForce(at=0, amplitude=1.0))
+    with pytest.raises(ValueError, match="omega"):
+        simulate(model, 1.0, 0.1)
+    with pytest.raises(ValueError, match="omega"):
+        steady_state(model, -1.0, dt=0.1)
+    with pytest.raises(TypeError, match="model"):
+        simulate("model", 1.0, 0.1)
+
+
+# --------------------------------------------------------------------------------- the example
+def test_time_vs_hbm_example(tmp_path):
+    spec = importlib.util.spec_from_file_location("time_vs_hbm", EXAMPLES / "time_vs_hbm.py")
+    ex = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ex)
+    for w, r in ex.results.items():
+        assert r["ts"].converged
+        err = r["error"]
+        assert np.all(np.diff(err) < 0)  # monotone decrease in H
+        # measured rates -0.935 (w = 1) and -1.056 (w = 1.3): ~1/H from the velocity jumps (Gibbs)
+        assert -1.3 < r["rate"] < -0.7
+        # tolerances that tighten with H: error <= C H^-0.85 (measured err H^0.85 = 0.61..0.51 at w = 1,
+        # 2.25..1.45 at w = 1.3)
+        assert np.all(err * np.array(ex.HS, dtype=float) ** 0.85 < {1.0: 0.7, 1.3: 2.5}[w])
+        assert np.all(np.diff(r["penetration_hbm"]) < 0)
+        assert r["penetration_ts"] < 2 * ex.DT  # O(dt) (measured 0 and 2.3e-4)
+    assert ex.results[1.3]["ts"].amplitude[0] > 1.3  # the upper (impacting) branch
+    png = ex.main(tmp_path)
+    assert png.stat().st_size > 10_000
