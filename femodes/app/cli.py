@@ -1,6 +1,8 @@
 """Application layer: the ``femodes`` command line.
 
 ``femodes demo`` runs the flagship demonstration and writes its outputs to a folder it names.
+``femodes run case.toml`` runs a case file (schema: :mod:`femodes.app.cases`, examples in
+``examples/cases/``).
 """
 
 from __future__ import annotations
@@ -21,7 +23,122 @@ femodes: nonlinear vibration modes of finite-element structures with unilateral 
                              Craig-Bampton reduction, nonlinear mode 1 (backbone) and a forced
                              response by harmonic balance; plots, summary.txt and the branches
                              (.npz, reload with femodes.load_branch) in DIR (default ./out/demo)
+  femodes run CASE.toml [--out DIR] [--progress | --no-progress]
+                             build the model described by a TOML case file ([mesh], [model],
+                             [damping], [[contact]], [[force]], [[cubic]], [reduction], [analysis],
+                             [outputs]), run the nonlinear-mode or frequency-response analysis and
+                             write plot, branch (.npz), animation and summary.txt to DIR
+                             (default ./out/<case name>). Commented examples:
+                             examples/cases/cantilever_nnm.toml, examples/cases/oscillator_frc.toml;
+                             full schema: python -c "import femodes.app.cases as c; help(c)"
+                             or `femodes run --help`.
+
+Mistakes in a case file are reported as `case.toml:LINE: [table] message` (exit code 2).
 """
+
+RUN_HELP = """Run a TOML case file. Tables (see examples/cases/*.toml for commented examples):
+  [mesh]        file = "x.msh" (relative to the case file)  or  length, n_elements, boundaries = {clamp = 0.0}
+  [model]       kind = "beam" | "bar" | "discrete"; E, rho, area, inertia, clamped, pinned; discrete: M, K, C
+  [damping]     alpha, beta (Rayleigh)  or  modal = 0.02
+  [[contact]]   at = "tip" | ["tip", "w"] | 0, gap >= 0, law = "complementarity" (c) | "penalty" (stiffness)
+  [[force]]     at, amplitude, harmonic = 1, phase = 0
+  [[cubic]]     at, k3
+  [reduction]   craig_bampton = 10
+  [analysis]    type = "nonlinear_mode" (mode, energy = [a, b]) | "frequency_response" (omega = [a, b]);
+                harmonics = 10
+  [outputs]     plot = true, branch = "branch.npz", animation = true, gif = false, response_dof = "tip"
+"""
+
+
+class ProgressBar:
+    """Text progress bar on a stream: ``[#####.....]  45%  p = ...  points 37``."""
+
+    def __init__(self, span: tuple[float, float], label: str = "p", stream=None, width: int = 30):
+        self.p0, self.p1 = span
+        self.label, self.width = label, width
+        self.stream = stream if stream is not None else sys.stderr
+        self.n = 0
+        self.best = 0.0
+        self.shown = False
+
+    def fraction(self, p: float) -> float:
+        if self.p1 == self.p0:
+            return 1.0
+        return min(1.0, max(0.0, (p - self.p0) / (self.p1 - self.p0)))
+
+    def update(self, p: float, n: int | None = None) -> str:
+        self.n = self.n + 1 if n is None else n
+        f = self.fraction(p)
+        self.best = max(self.best, f)  # the branch may fold back; the bar shows the furthest point
+        k = int(round(self.best * self.width))
+        line = f"\r[{'#' * k}{'.' * (self.width - k)}] {100 * self.best:3.0f}%  {self.label} = {p:.6g}  points {self.n}"
+        self.stream.write(line)
+        self.stream.flush()
+        self.shown = True
+        return line
+
+    def close(self) -> None:
+        if self.shown:
+            self.stream.write("\n")
+            self.stream.flush()
+            self.shown = False
+
+
+class _ProgressHandler(logging.Handler):
+    """Feeds the per-point INFO records of femodes.analyses (``progress=True``) to a ProgressBar."""
+
+    def __init__(self, bar: ProgressBar):
+        super().__init__(logging.INFO)
+        self.bar = bar
+
+    def emit(self, record: logging.LogRecord) -> None:
+        args = record.args if isinstance(record.args, tuple) else ()
+        if len(args) >= 3 and "point" in str(record.msg) and isinstance(args[2], (int, float)):
+            try:
+                self.bar.update(float(args[2]), int(args[1]))
+            except Exception:  # never let the display break a run
+                pass
+
+
+def run_case_cli(path: Path, out: Path | None, progress: bool | None, verbose: bool = False) -> int:
+    """``femodes run``: returns the exit code (2 for mistakes in the case file)."""
+    from .cases import CaseError, analysis_span, load_case, run_case
+
+    try:
+        case = load_case(path)
+    except CaseError as exc:
+        print(f"femodes run: {exc}", file=sys.stderr)
+        return 2
+    out = out if out is not None else Path("out") / path.stem
+    show = sys.stderr.isatty() if progress is None else progress
+    handler = None
+    alog = logging.getLogger("femodes.analyses")
+    saved = (alog.level, alog.propagate)
+    if show:
+        label = "log10(energy)" if case.data["analysis"]["type"] == "nonlinear_mode" else "w"
+        bar = ProgressBar(analysis_span(case), label)
+        handler = _ProgressHandler(bar)
+        alog.addHandler(handler)
+        alog.setLevel(logging.INFO)
+        alog.propagate = verbose  # the bar replaces the INFO lines unless -v
+    try:
+        res = run_case(case, out, progress=show)
+    except CaseError as exc:
+        if handler:
+            handler.bar.close()
+        print(f"femodes run: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if handler:
+            handler.bar.close()
+            alog.removeHandler(handler)
+            alog.setLevel(saved[0])
+            alog.propagate = saved[1]
+    print("\n".join(res.lines))
+    names = ", ".join(Path(f).name for f in res.files)
+    print(f"outputs written to {out.resolve()} ({names})")
+    return 0 if res.branch.success else 1
+
 
 
 def _find_mesh(name: str) -> Path | None:
@@ -129,6 +246,13 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     demo = sub.add_parser("demo", help="run the flagship demonstration")
     demo.add_argument("--out", type=Path, default=Path("out") / "demo", help="output folder (default: out/demo)")
+    run = sub.add_parser("run", help="run a TOML case file (examples/cases/*.toml)", description=RUN_HELP,
+                         formatter_class=argparse.RawDescriptionHelpFormatter)
+    run.add_argument("case", type=Path, help="the case file, e.g. examples/cases/cantilever_nnm.toml")
+    run.add_argument("--out", type=Path, default=None, help="output folder (default: out/<case file name>)")
+    run.add_argument("--progress", dest="progress", action="store_true", default=None,
+                     help="show a progress bar on stderr (default: when stderr is a terminal)")
+    run.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     if args.command is None:
@@ -138,6 +262,8 @@ def main(argv: list[str] | None = None) -> int:
         res = run_demo(args.out)
         print("\n".join(res["lines"]))
         print(f"outputs written to {res['out'].resolve()} (cantilever_modes.png, frequency_energy.png, mode1.pvd, mode1.gif, summary.txt, backbone.npz, forced.npz)")
+    elif args.command == "run":
+        return run_case_cli(args.case, args.out, args.progress, args.verbose)
     return 0
 
 

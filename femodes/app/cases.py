@@ -1,0 +1,575 @@
+"""Application layer: TOML case files for ``femodes run case.toml``.
+
+A case file describes a model and one analysis; :func:`load_case` reads and checks it,
+:func:`build_model` turns it into a :class:`femodes.StructuralModel` with the public API and
+:func:`run_case` runs the analysis and writes the outputs. Every user mistake raises
+:class:`CaseError`, whose message is ``file:line: [table] message`` (the line of the offending
+key when it can be found, else of its table).
+
+Schema (see ``examples/cases/*.toml`` for commented examples)::
+
+    [mesh]                      # FE models only; either a file ...
+    file = "../../meshes/cantilever.msh"   # relative to the case file (gmsh, vtu, ... via meshio)
+    # ... or a straight line mesh:
+    # length = 1.0
+    # n_elements = 40
+    # boundaries = { clamp = 0.0, tip = 1.0 }   # named points (x coordinates)
+    # grading = 1.0
+
+    [model]
+    kind = "beam"               # "beam" | "bar" | "discrete"
+    E = 1.0                     # beam, bar
+    rho = 1.0                   # beam, bar
+    area = 1.0                  # beam, bar
+    inertia = 1.0               # beam (required)
+    clamped = ["clamp"]         # beam, bar: named points (a string or a list)
+    pinned = []                 # beam only
+    # discrete: M = [[1.0]], K = [[1.0]], C = [[0.1]] (C optional), dof_names = ["x"]
+
+    [damping]                   # optional: Rayleigh alpha, beta  or  modal = 0.02
+    alpha = 0.02
+
+    [[contact]]                 # 0..n tables
+    at = "tip"                  # a name, ["tip", "w"] or a DOF index
+    gap = 0.01                  # >= 0
+    law = "complementarity"     # or "penalty" (then stiffness = ... is required)
+    # c = 10.0                  # complementarity parameter (optional)
+
+    [[force]]                   # 0..n harmonic point forces
+    at = "tip"
+    amplitude = 0.004
+    # harmonic = 1
+    # phase = 0.0
+
+    [[cubic]]                   # 0..n cubic springs
+    # at = "tip"
+    # k3 = 1.0
+
+    [reduction]                 # optional
+    craig_bampton = 10          # number of fixed-interface modes
+
+    [analysis]                  # required
+    type = "nonlinear_mode"     # or "frequency_response"
+    mode = 1                    # nonlinear_mode
+    energy = [1e-4, 3e-3]       # nonlinear_mode: energy span
+    # omega = [3.0, 4.2]        # frequency_response: frequency span (rad/s)
+    harmonics = 10
+    # max_points = 2000         # optional cap on the number of continuation points
+
+    [outputs]                   # optional; defaults shown
+    plot = true                 # frequency_energy.png (nonlinear mode) / response.png (forced)
+    branch = "branch.npz"       # saved Branch (femodes.load_branch); false to skip
+    animation = true            # ParaView series of the last point (FE models only)
+    gif = false                 # rendered GIF (needs pyvista; skipped with a note otherwise)
+    # response_dof = "tip"      # DOF of the response plot (default: the first force)
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+__all__ = ["CaseError", "Case", "SCHEMA", "load_case", "parse_case", "build_model", "run_case", "key_line"]
+
+# table -> {key: description of the expected type}; ARRAY_TABLES are [[...]] tables.
+SCHEMA: dict[str, dict[str, str]] = {
+    "mesh": {"file": "string", "length": "number", "n_elements": "integer", "boundaries": "table",
+             "grading": "number"},
+    "model": {"kind": "string", "E": "number", "rho": "number", "area": "number", "inertia": "number",
+              "clamped": "string or list", "pinned": "string or list", "M": "matrix", "K": "matrix",
+              "C": "matrix", "dof_names": "list"},
+    "damping": {"alpha": "number", "beta": "number", "modal": "number or list"},
+    "contact": {"at": "location", "gap": "number", "law": "string", "c": "number", "stiffness": "number"},
+    "force": {"at": "location", "amplitude": "number", "harmonic": "integer", "phase": "number"},
+    "cubic": {"at": "location", "k3": "number"},
+    "reduction": {"craig_bampton": "integer"},
+    "analysis": {"type": "string", "mode": "integer", "energy": "pair", "omega": "pair", "harmonics": "integer",
+                 "max_points": "integer"},
+    "outputs": {"plot": "boolean", "branch": "string or false", "animation": "boolean", "gif": "boolean",
+                "response_dof": "location"},
+}
+ARRAY_TABLES = ("contact", "force", "cubic")
+MODEL_KINDS = ("beam", "bar", "discrete")
+ANALYSES = ("nonlinear_mode", "frequency_response")
+
+
+class CaseError(Exception):
+    """A user mistake in a case file; ``str(err)`` is ``file:line: message``."""
+
+    def __init__(self, message: str, file: str = "case", line: int | None = None):
+        super().__init__(message)
+        self.message, self.file, self.line = message, file, line
+
+    def _at(self, line: int | None) -> "CaseError":
+        self.line = line
+        return self
+
+    def __str__(self) -> str:
+        return f"{self.file}:{self.line}: {self.message}" if self.line else f"{self.file}: {self.message}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Locating keys in the text
+# ---------------------------------------------------------------------------------------------
+_HEADER = re.compile(r"^\s*(\[\[?)\s*([A-Za-z0-9_.\-\"' ]+?)\s*\]\]?\s*(#.*)?$")
+_KEY = re.compile(r"^\s*([A-Za-z0-9_\-]+|\"[^\"]*\")\s*=")
+
+
+def key_line(text: str, table: str | None, key: str | None = None, index: int = 0) -> int | None:
+    """1-based line of ``key = ...`` in ``[table]`` (the ``index``-th ``[[table]]``), else of the header.
+
+    ``table=None`` means the top level (before any header). Returns None if not found.
+    """
+    current, count, header_line = None, {}, None
+    found_header = None
+    for no, raw in enumerate(text.splitlines(), 1):
+        m = _HEADER.match(raw)
+        if m and "=" not in raw.split("#")[0]:
+            name = m.group(2).strip().strip("\"'")
+            k = count.get(name, 0)
+            count[name] = k + 1
+            current = (name, k)
+            if name == table and k == index:
+                found_header = header_line = no
+            continue
+        if key is None:
+            continue
+        km = _KEY.match(raw)
+        if km and km.group(1).strip('"') == key:
+            if (table is None and current is None) or (current == (table, index)):
+                return no
+    return found_header if key is None or found_header else header_line
+
+
+# ---------------------------------------------------------------------------------------------
+# Parsed case
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class Case:
+    """A checked case file: ``data`` as read by tomllib, plus where it came from."""
+
+    path: Path
+    text: str
+    data: dict
+    name: str = field(default="")
+
+    def __post_init__(self):
+        self.name = self.name or str(self.path)
+
+    def tables(self, name: str) -> list[dict]:
+        v = self.data.get(name)
+        if v is None:
+            return []
+        return v if isinstance(v, list) else [v]
+
+    def label(self, table: str, index: int = 0) -> str:
+        if table in ARRAY_TABLES and len(self.tables(table)) > 1:
+            return f"[{table} #{index + 1}]"
+        return f"[{table}]"
+
+    def error(self, table: str | None, key: str | None, message: str, index: int = 0) -> CaseError:
+        line = key_line(self.text, table, key, index) if table else None
+        prefix = f"{self.label(table, index)} " if table else ""
+        return CaseError(prefix + message, self.name, line)
+
+
+def _fmt(v: Any) -> str:
+    return repr(v) if isinstance(v, str) else str(v).lower() if isinstance(v, bool) else str(v)
+
+
+def _is_num(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _check_type(v: Any, kind: str) -> bool:
+    if kind == "number":
+        return _is_num(v)
+    if kind == "integer":
+        return isinstance(v, int) and not isinstance(v, bool)
+    if kind == "string":
+        return isinstance(v, str)
+    if kind == "boolean":
+        return isinstance(v, bool)
+    if kind == "table":
+        return isinstance(v, dict)
+    if kind == "pair":
+        return isinstance(v, list) and len(v) == 2 and all(_is_num(x) for x in v)
+    if kind == "string or list":
+        return isinstance(v, str) or (isinstance(v, list) and all(isinstance(x, str) for x in v))
+    if kind == "string or false":
+        return isinstance(v, str) or v is False
+    if kind == "number or list":
+        return _is_num(v) or (isinstance(v, list) and all(_is_num(x) for x in v))
+    if kind == "list":
+        return isinstance(v, list)
+    if kind == "matrix":
+        return _is_num(v) or (isinstance(v, list) and all(
+            isinstance(r, list) and all(_is_num(x) for x in r) for r in v))
+    if kind == "location":
+        return ((isinstance(v, int) and not isinstance(v, bool)) or isinstance(v, str)
+                or (isinstance(v, list) and len(v) == 2 and all(isinstance(x, str) for x in v)))
+    return True
+
+
+_TYPE_TEXT = {
+    "number": "a number", "integer": "an integer", "string": "a string", "boolean": "true or false",
+    "table": "a table like { name = value }", "pair": "a pair [start, end] of numbers",
+    "string or list": "a name or a list of names", "string or false": "a file name or false",
+    "number or list": "a number or a list of numbers", "list": "a list",
+    "matrix": "a matrix like [[1.0, 0.0], [0.0, 1.0]]",
+    "location": "a location: a name like \"tip\", a pair like [\"tip\", \"w\"] or a DOF index",
+}
+
+
+def _suggest(word: str, options) -> str:
+    close = difflib.get_close_matches(word, list(options), n=1, cutoff=0.5)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def parse_case(text: str, path: str | Path = "case.toml") -> Case:
+    """Parse and check the text of a case file (syntax, tables, keys, types, simple values)."""
+    path = Path(path)
+    name = str(path)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
+        line = int(m.group(1)) if m else None
+        msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", msg) if m else msg
+        if m is None and "end of document" in msg:
+            line = max(1, len(text.splitlines()))
+        raise CaseError(f"TOML syntax error: {msg}", name, line) from None
+    case = Case(path=path, text=text, data=data)
+    for tname, value in data.items():
+        if tname not in SCHEMA:
+            raise case.error(None, None, f"unknown table [{tname}]{_suggest(tname, SCHEMA)}; "
+                             f"valid tables are {', '.join('[' + t + ']' for t in SCHEMA)}")._at(
+                key_line(text, tname) or key_line(text, None, tname))
+        if tname in ARRAY_TABLES:
+            if isinstance(value, dict):
+                value = data[tname] = [value]  # [contact] accepted for a single table
+            if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+                raise case.error(None, None, f"{tname} must be a table [[{tname}]]")._at(key_line(text, None, tname))
+        elif not isinstance(value, dict):
+            raise case.error(None, None, f"{tname!r} must be a table [{tname}], got a value")._at(
+                key_line(text, None, tname))
+        for i, tab in enumerate(case.tables(tname)):
+            for key, v in tab.items():
+                if key not in SCHEMA[tname]:
+                    raise case.error(tname, key, f"unknown key {key!r}{_suggest(key, SCHEMA[tname])}; valid keys "
+                                     f"are {', '.join(SCHEMA[tname])}", i)
+                kind = SCHEMA[tname][key]
+                if not _check_type(v, kind):
+                    raise case.error(tname, key, f"{key} must be {_TYPE_TEXT[kind]}, got {_fmt(v)}", i)
+    _check_values(case)
+    return case
+
+
+def _check_values(case: Case) -> None:
+    d = case.data
+    if "model" not in d:
+        raise CaseError("missing table [model] (kind = \"beam\" | \"bar\" | \"discrete\", ...)", case.name, 1)
+    if "analysis" not in d:
+        raise CaseError("missing table [analysis] (type = \"nonlinear_mode\" or \"frequency_response\", ...)",
+                        case.name, 1)
+    model = d["model"]
+    kind = model.get("kind")
+    if kind is None:
+        raise case.error("model", None, "missing key kind (\"beam\", \"bar\" or \"discrete\")")
+    if kind not in MODEL_KINDS:
+        raise case.error("model", "kind", f"kind must be one of {', '.join(map(repr, MODEL_KINDS))}, got {kind!r}"
+                         f"{_suggest(kind, MODEL_KINDS)}")
+    if kind == "discrete":
+        for k in ("M", "K"):
+            if k not in model:
+                raise case.error("model", None, f"a discrete model needs {k} = [[...]]")
+        for k in ("E", "rho", "area", "inertia", "clamped", "pinned"):
+            if k in model:
+                raise case.error("model", k, f"{k} is not used by a discrete model (give M, K, C)")
+        if "mesh" in d:
+            raise case.error("mesh", None, "a discrete model has no mesh; remove [mesh]")
+    else:
+        for k in ("E", "rho", "area") + (("inertia",) if kind == "beam" else ()):
+            if k not in model:
+                raise case.error("model", None, f"a {kind} model needs {k} = ...")
+        for k in ("M", "K", "C", "dof_names") + (("pinned", "inertia") if kind == "bar" else ()):
+            if k in model:
+                raise case.error("model", k, f"{k} is not used by a {kind} model")
+        mesh = d.get("mesh")
+        if mesh is None:
+            raise CaseError(f"a {kind} model needs a [mesh] table (file = ... or length/n_elements)", case.name,
+                            key_line(case.text, "model", "kind"))
+        if "file" in mesh and any(k in mesh for k in ("length", "n_elements", "boundaries", "grading")):
+            k = next(k for k in ("length", "n_elements", "boundaries", "grading") if k in mesh)
+            raise case.error("mesh", k, f"give either file = ... or length/n_elements/boundaries, not both ({k})")
+        if "file" not in mesh and "n_elements" not in mesh:
+            raise case.error("mesh", None, "needs file = \"...\" or n_elements = ... (with length, boundaries)")
+    for i, c in enumerate(case.tables("contact")):
+        for k in ("at", "gap"):
+            if k not in c:
+                raise case.error("contact", None, f"missing key {k}", i)
+        if c["gap"] < 0:
+            raise case.error("contact", "gap", f"gap must be >= 0, got {_fmt(c['gap'])}", i)
+        law = c.get("law", "complementarity")
+        if law not in ("complementarity", "penalty"):
+            raise case.error("contact", "law", f"law must be \"complementarity\" or \"penalty\", got {law!r}"
+                             f"{_suggest(law, ('complementarity', 'penalty'))}", i)
+        if law == "penalty" and "stiffness" not in c:
+            raise case.error("contact", "law", "a penalty contact needs stiffness = ...", i)
+        if law == "penalty" and "c" in c:
+            raise case.error("contact", "c", "c is the complementarity parameter; a penalty contact uses stiffness", i)
+        if law == "complementarity" and "stiffness" in c:
+            raise case.error("contact", "stiffness", "stiffness is for law = \"penalty\"", i)
+    for tname, required in (("force", ("at",)), ("cubic", ("at", "k3"))):
+        for i, t in enumerate(case.tables(tname)):
+            for k in required:
+                if k not in t:
+                    raise case.error(tname, None, f"missing key {k}", i)
+    an = d["analysis"]
+    typ = an.get("type")
+    if typ is None:
+        raise case.error("analysis", None, "missing key type (\"nonlinear_mode\" or \"frequency_response\")")
+    if typ not in ANALYSES:
+        raise case.error("analysis", "type", f"type must be \"nonlinear_mode\" or \"frequency_response\", got "
+                         f"{typ!r}{_suggest(typ, ANALYSES)}")
+    need, forbid = (("energy",), ("omega",)) if typ == "nonlinear_mode" else (("omega",), ("energy", "mode"))
+    for k in need:
+        if k not in an:
+            raise case.error("analysis", None, f"{typ} needs {k} = [start, end]")
+    for k in forbid:
+        if k in an:
+            raise case.error("analysis", k, f"{k} is not used by {typ}")
+    if typ == "frequency_response" and not case.tables("force"):
+        raise CaseError("frequency_response needs at least one [[force]] table", case.name,
+                        key_line(case.text, "analysis", "type"))
+    for k in ("harmonics", "mode", "max_points"):
+        if k in an and an[k] < (2 if k == "max_points" else 1):
+            raise case.error("analysis", k, f"{k} must be >= {2 if k == 'max_points' else 1}, got {an[k]}")
+    red = d.get("reduction", {})
+    if "craig_bampton" in red and red["craig_bampton"] < 0:
+        raise case.error("reduction", "craig_bampton", f"craig_bampton must be >= 0, got {red['craig_bampton']}")
+    if "reduction" in d and kind == "discrete":
+        raise case.error("reduction", None, "Craig-Bampton reduction needs an FE model (beam or bar)")
+
+
+def load_case(path: str | Path) -> Case:
+    """Read and check a case file; raises CaseError (file missing, syntax, schema)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CaseError("case file not found", str(path)) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CaseError(f"cannot read case file: {exc}", str(path)) from None
+    case = parse_case(text, p)
+    return case
+
+
+# ---------------------------------------------------------------------------------------------
+# Building and running
+# ---------------------------------------------------------------------------------------------
+def _location(v: Any):
+    return tuple(v) if isinstance(v, list) else v
+
+
+def _guess_key(message: str, keys) -> str | None:
+    for k in keys:
+        if re.search(rf"\b{re.escape(k)}\b", message):
+            return k
+    return None
+
+
+class _Api:
+    """Calls into femodes, turning ValueError/TypeError into CaseError at the responsible key."""
+
+    def __init__(self, case: Case):
+        self.case = case
+
+    def __call__(self, table: str | None, keys, fn: Callable, *args, index: int = 0, **kwargs):
+        keys = [keys] if isinstance(keys, str) or keys is None else list(keys)
+        try:
+            return fn(*args, **kwargs)
+        except (ValueError, TypeError, FileNotFoundError) as exc:
+            msg = str(exc)
+            m = re.search(r"unknown location '([^']*)'; known names are \[(.*)\]", msg)
+            if m:
+                msg += _suggest(m.group(1), re.findall(r"'([^']*)'", m.group(2)))
+            key = _guess_key(msg, [k for k in keys if k]) or (keys[0] if keys else None)
+            if table is None:
+                raise CaseError(msg, self.case.name) from None
+            raise self.case.error(table, key, msg, index) from None
+
+
+def build_model(case: Case):
+    """Model of the case: FE or discrete model, damping, contacts, springs, forces, reduction.
+
+    Returns ``(model, full)``: the model to analyse (reduced if [reduction]) and the full model.
+    """
+    import numpy as np
+
+    import femodes as fm
+
+    api = _Api(case)
+    d = case.data
+    m = d["model"]
+    kind = m["kind"]
+    if kind == "discrete":
+        C = m.get("C")
+        M, K = (np.atleast_2d(np.asarray(m[k], dtype=float)) for k in ("M", "K"))
+        args = dict(M=M, K=K, C=None if C is None else np.atleast_2d(np.asarray(C, dtype=float)),
+                    dof_names=m.get("dof_names"))
+        model = api("model", ["M", "K", "C", "dof_names"], fm.StructuralModel, **args)
+    else:
+        mesh_t = d["mesh"]
+        if "file" in mesh_t:
+            f = Path(mesh_t["file"])
+            if not f.is_absolute():
+                f = case.path.parent / f
+            if not f.is_file():
+                raise case.error("mesh", "file", f"mesh file {str(f)!r} does not exist")
+            mesh = api("mesh", "file", fm.load_mesh, str(f))
+        else:
+            mesh = api("mesh", ["boundaries", "n_elements", "length", "grading"], fm.line_mesh,
+                       mesh_t.get("length", 1.0), mesh_t["n_elements"], boundaries=mesh_t.get("boundaries"),
+                       grading=mesh_t.get("grading", 1.0))
+        mat = api("model", ["E", "rho"], fm.Material, E=m["E"], rho=m["rho"])
+        sec = api("model", ["area", "inertia"], fm.Section, area=m["area"], inertia=m.get("inertia"))
+        if kind == "beam":
+            model = api("model", ["clamped", "pinned"], fm.beam, mesh, mat, sec, clamped=m.get("clamped"),
+                        pinned=m.get("pinned"))
+        else:
+            model = api("model", ["clamped"], fm.bar, mesh, mat, sec, clamped=m.get("clamped"))
+    if "damping" in d:
+        dm = d["damping"]
+        keys = list(dm)
+        if "modal" in dm:
+            if "alpha" in dm or "beta" in dm:
+                raise case.error("damping", "modal", "give either Rayleigh alpha/beta or modal, not both")
+            model = api("damping", "modal", model.with_damping, modal=dm["modal"])
+        else:
+            model = api("damping", keys, model.with_damping, alpha=dm.get("alpha", 0.0), beta=dm.get("beta", 0.0))
+    for i, c in enumerate(case.tables("contact")):
+        at = _location(c["at"])
+        if c.get("law", "complementarity") == "penalty":
+            law = api("contact", ["at", "gap", "stiffness"], fm.PenaltyContact, at=at, gap=c["gap"],
+                      stiffness=c["stiffness"], index=i)
+        else:
+            law = api("contact", ["at", "gap", "c"], fm.UnilateralContact, at=at, gap=c["gap"], c=c.get("c"), index=i)
+        model = api("contact", ["at", "gap"], model.with_contact, law, index=i)
+    for i, s in enumerate(case.tables("cubic")):
+        law = api("cubic", ["at", "k3"], fm.CubicSpring, at=_location(s["at"]), k3=s["k3"], index=i)
+        model = api("cubic", ["at", "k3"], model.with_nonlinearity, law, index=i)
+    forces = []
+    for i, f in enumerate(case.tables("force")):
+        hf = api("force", ["at", "amplitude", "harmonic", "phase"], fm.HarmonicForce, at=_location(f["at"]),
+                 amplitude=f.get("amplitude", 1.0), harmonic=f.get("harmonic", 1), phase=f.get("phase", 0.0), index=i)
+        forces.append(hf)
+        model = api("force", ["at"], model.with_forcing, hf, index=i)
+    full = model
+    if "reduction" in d and "craig_bampton" in d["reduction"]:
+        model = api("reduction", "craig_bampton", fm.craig_bampton, model, d["reduction"]["craig_bampton"])
+    if "outputs" in d and "response_dof" in d["outputs"]:
+        api("outputs", "response_dof", model.dof, _location(d["outputs"]["response_dof"]))
+    return model, full
+
+
+@dataclass
+class CaseResult:
+    branch: Any
+    model: Any
+    files: list
+    lines: list
+
+
+def analysis_span(case: Case) -> tuple[float, float]:
+    """Continuation parameter span: ``omega``, or ``log10(energy)`` for nonlinear modes."""
+    an = case.data["analysis"]
+    if an["type"] == "nonlinear_mode":
+        a, b = an["energy"]
+        if a > 0 and b > 0:
+            return math.log10(a), math.log10(b)
+        return float(a), float(b)
+    a, b = an["omega"]
+    return float(a), float(b)
+
+
+def run_case(case: Case, out: Path, *, progress: bool = False) -> CaseResult:
+    """Build the model, run the analysis (``progress`` logs points at INFO), write the outputs to ``out``."""
+    import femodes as fm
+
+    model, full = build_model(case)
+    api = _Api(case)
+    an = case.data["analysis"]
+    H = api("analysis", "harmonics", fm.Harmonics, an.get("harmonics", 10))
+    opts = {}
+    if "max_points" in an:
+        opts["max_points"] = an["max_points"]
+    if an["type"] == "nonlinear_mode":
+        if opts:
+            raise case.error("analysis", "max_points", "max_points is only supported for frequency_response")
+        branch = api("analysis", ["mode", "energy", "harmonics"], fm.nonlinear_mode, model, an.get("mode", 1),
+                     energy=tuple(an["energy"]), harmonics=H, progress=progress)
+    else:
+        options = None
+        if opts:
+            options = fm.ContinuationOptions(step=0.05, max_step=0.5, newton=fm.NewtonOptions(atol=1e-9, max_iter=20),
+                                             **opts)
+        branch = api("analysis", ["omega", "harmonics"], fm.frequency_response, model, tuple(an["omega"]), H,
+                     options=options, progress=progress)
+    outs = {"plot": True, "branch": "branch.npz", "animation": True, "gif": False}
+    outs.update(case.data.get("outputs", {}))
+    out.mkdir(parents=True, exist_ok=True)
+    files, lines = [], []
+    lines.append(f"case: {case.name}")
+    lines.append(f"model: {model!r}")
+    lines.append(f"{branch.kind}: {len(branch)} points, success={branch.success} ({branch.message}), "
+                 f"w from {branch.omega[0]:.6g} to {branch.omega[-1]:.6g} rad/s (min {branch.omega.min():.6g}, "
+                 f"max {branch.omega.max():.6g}), energy {branch.energy.min():.4g}..{branch.energy.max():.4g}")
+    if branch.kind == "nonlinear mode":
+        lines.append(f"max |xi| (artificial damping) = {abs(branch.xi).max():.2e}")
+    if len(branch.folds):
+        lines.append(f"folds at w = {', '.join(f'{w:.6g}' for w in branch.omega[list(branch.folds)])}")
+    if outs["branch"]:
+        files.append(branch.save(out / outs["branch"]))
+    if outs["plot"]:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(7, 4))
+        if an["type"] == "nonlinear_mode":
+            fm.plot.frequency_energy(branch, ax=ax)
+            png = out / "frequency_energy.png"
+        else:
+            rd = case.data.get("outputs", {}).get("response_dof")
+            dof = model.dof(_location(rd)) if rd is not None else model.forces[0].dof
+            fm.plot.frequency_response(branch, dof, ax=ax)
+            png = out / "response.png"
+        ax.set_title(f"{case.path.name}: {branch.kind}")
+        fig.tight_layout()
+        fig.savefig(png, dpi=120)
+        plt.close(fig)
+        files.append(png)
+    last = branch[len(branch) - 1]
+    if outs["animation"] or outs["gif"]:
+        if model.fe is None and not getattr(model, "is_reduced", False):
+            lines.append("animation skipped: a discrete model has no mesh")
+        else:
+            if outs["animation"]:
+                files.append(fm.io.write_animation(last, model, out / "animation", n_frames=24))
+            if outs["gif"]:
+                try:
+                    files.append(fm.viz.animate(last, model, out / "animation.gif", n_frames=24))
+                except (ImportError, RuntimeError) as exc:
+                    lines.append(f"gif skipped: {exc}")
+    summary = out / "summary.txt"
+    files.append(summary)
+    summary.write_text("\n".join(lines) + "\n")
+    return CaseResult(branch=branch, model=model, files=files, lines=lines)

@@ -1,0 +1,223 @@
+"""femodes run: TOML case files (femodes/app/cases.py) and the command line."""
+
+from __future__ import annotations
+
+import io
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import femodes as fm
+from femodes.app import cases
+from femodes.app.cli import ProgressBar, main
+
+ROOT = Path(__file__).resolve().parents[1]
+CASES = ROOT / "examples" / "cases"
+NNM = CASES / "cantilever_nnm.toml"
+FRC = CASES / "oscillator_frc.toml"
+
+
+def _run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "femodes.app.cli", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, timeout=120)
+
+
+# --------------------------------------------------------------------------------- end to end
+def test_oscillator_frc_case(tmp_path):
+    r = _run("run", FRC, "--out", tmp_path, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    assert "outputs written to" in r.stdout
+    for name in ("response.npz", "response.png", "summary.txt"):
+        assert (tmp_path / name).is_file()
+    br = fm.load_branch(tmp_path / "response.npz")
+    assert br.success and br.kind == "forced"
+    folds = sorted(br.omega[list(br.folds)])
+    assert folds == pytest.approx([1.08077, 1.38498], abs=2e-4)
+    assert br.omega[0] == pytest.approx(0.5) and br.omega[-1] == pytest.approx(2.0)
+
+
+def test_cantilever_nnm_case(tmp_path):
+    r = _run("run", NNM, "--out", tmp_path, "--progress")
+    assert r.returncode == 0, r.stderr
+    assert "100%" in r.stderr and "log10(energy)" in r.stderr  # the progress bar
+    for name in ("backbone.npz", "frequency_energy.png", "animation.pvd", "summary.txt"):
+        assert (tmp_path / name).is_file()
+    br = fm.load_branch(tmp_path / "backbone.npz")
+    assert br.success and br.kind == "nonlinear mode"
+    assert br.omega[0] == pytest.approx(3.5162, abs=2e-3)  # linear w1 with the contact node
+    assert br.omega.max() > br.omega[0] + 0.1  # stiffening by the stop
+    assert np.max(np.abs(br.xi)) < 1e-8
+    assert br.energy[0] == pytest.approx(7.725e-5, rel=1e-6) and br.energy[-1] == pytest.approx(3.09e-3, rel=1e-6)
+
+
+# --------------------------------------------------------------------------------- bad case files
+def _bad(tmp_path, name, text):
+    p = tmp_path / name
+    p.write_text(text)
+    r = _run("run", p, "--out", tmp_path / "o", "--no-progress")
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    return r.stderr.strip()
+
+
+def _frc(**subs):
+    t = FRC.read_text()
+    for a, b in subs.items():
+        assert a in t
+        t = t.replace(a, b)
+    return t
+
+
+def _nnm(**subs):
+    t = NNM.read_text().replace('"../../meshes/cantilever.msh"', repr(str(ROOT / "meshes" / "cantilever.msh")).replace("'", '"'))
+    for a, b in subs.items():
+        assert a in t
+        t = t.replace(a, b)
+    return t
+
+
+def _line(text, start):
+    return next(i for i, l in enumerate(text.splitlines(), 1) if l.startswith(start))
+
+
+def test_bad_syntax(tmp_path):
+    t = _frc(**{"gap = 1.0": "gap = 1.0 2.0"})
+    err = _bad(tmp_path, "syntax.toml", t)
+    assert f"syntax.toml:{_line(t, 'gap = ')}: TOML syntax error" in err
+
+
+def test_bad_unknown_key_suggests(tmp_path):
+    t = _frc(**{"gap = 1.0": "gpa = 1.0"})
+    err = _bad(tmp_path, "typo.toml", t)
+    assert f"typo.toml:{_line(t, 'gpa')}: [contact] unknown key 'gpa' (did you mean 'gap'?)" in err
+
+
+def test_bad_negative_gap(tmp_path):
+    t = _nnm(**{"gap = 0.01": "gap = -0.1"})
+    err = _bad(tmp_path, "neg.toml", t)
+    assert err.endswith(f"neg.toml:{_line(t, 'gap =')}: [contact] gap must be >= 0, got -0.1")
+
+
+def test_bad_missing_analysis(tmp_path):
+    t = _frc().split("[analysis]")[0]
+    err = _bad(tmp_path, "noan.toml", t)
+    assert "noan.toml:1: missing table [analysis]" in err
+
+
+def test_bad_type(tmp_path):
+    t = _frc(**{"harmonics = 20": 'harmonics = "20"'})
+    err = _bad(tmp_path, "type.toml", t)
+    assert f"type.toml:{_line(t, 'harmonics')}: [analysis] harmonics must be an integer, got '20'" in err
+
+
+def test_bad_location(tmp_path):
+    t = _nnm(**{'at = "tip"': 'at = "tipp"'})
+    err = _bad(tmp_path, "tipp.toml", t)
+    assert f"tipp.toml:{_line(t, 'at =')}: [contact]" in err and "'tipp'" in err and "did you mean 'tip'" in err
+
+
+def test_help_mentions_commands():
+    r = _run("--help")
+    assert r.returncode == 0
+    assert "run" in r.stdout and "demo" in r.stdout and "examples/cases" in r.stdout
+    r = _run("run", "--help")
+    assert r.returncode == 0 and "[[contact]]" in r.stdout and "--no-progress" in r.stdout
+
+
+def test_missing_case_file(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope.toml"), "--no-progress"]) == 2
+    assert "nope.toml: case file not found" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------------- unit tests
+def test_key_line_tables_and_arrays():
+    text = "[model]\nkind = 'beam'\n\n[[contact]]\nat = 'a'\ngap = 1\n[[contact]]\nat = 'b'\ngap = 2\n"
+    assert cases.key_line(text, "model", "kind") == 2
+    assert cases.key_line(text, "contact", "gap", 0) == 6
+    assert cases.key_line(text, "contact", "gap", 1) == 9
+    assert cases.key_line(text, "contact", None, 1) == 7
+    assert cases.key_line(text, "contact", "c", 1) == 7  # missing key: its table header
+    assert cases.key_line(text, "damping", "alpha") is None
+
+
+def test_parse_case_errors_unit():
+    good = FRC.read_text()
+    case = cases.parse_case(good, "x.toml")
+    assert case.data["analysis"]["harmonics"] == 20
+    with pytest.raises(cases.CaseError, match=r"x.toml:\d+: \[model\] kind must be one of .*did you mean 'beam'"):
+        cases.parse_case(good.replace('"discrete"', '"beem"'), "x.toml")
+    with pytest.raises(cases.CaseError, match=r"\[analysis\] type must be .*did you mean 'nonlinear_mode'"):
+        cases.parse_case(good.replace('"frequency_response"', '"nonlinear_mod"'), "x.toml")
+    with pytest.raises(cases.CaseError, match=r"penalty contact needs stiffness"):
+        cases.parse_case(good.replace("gap = 1.0", 'gap = 1.0\nlaw = "penalty"'), "x.toml")
+    with pytest.raises(cases.CaseError, match=r"unknown table \[forse\] \(did you mean 'force'\?\)"):
+        cases.parse_case(good.replace("[[force]]", "[[forse]]"), "x.toml")
+    err = None
+    try:
+        cases.parse_case(good.replace("[[force]]\nat", "[[force]]\nat").replace("amplitude = 0.2", "amplitude = true"), "x.toml")
+    except cases.CaseError as exc:
+        err = exc
+    assert err is not None and err.line == _line(good, "amplitude") and "amplitude must be a number" in str(err)
+
+
+def test_build_model_line_mesh_and_library_errors(tmp_path):
+    text = """
+[mesh]
+length = 1.0
+n_elements = 20
+boundaries = { clamp = 0.0, tip = 1.0 }
+[model]
+kind = "beam"
+E = 1.0
+rho = 1.0
+area = 1.0
+inertia = 1.0
+clamped = "clamp"
+[damping]
+modal = 0.01
+[[contact]]
+at = ["tip", "w"]
+gap = 0.01
+law = "penalty"
+stiffness = 100.0
+[[cubic]]
+at = "tip"
+k3 = 2.0
+[[force]]
+at = "tip"
+amplitude = 0.01
+[reduction]
+craig_bampton = 4
+[analysis]
+type = "frequency_response"
+omega = [3.0, 4.0]
+harmonics = 3
+"""
+    case = cases.parse_case(text, tmp_path / "c.toml")
+    model, full = cases.build_model(case)
+    assert model.is_reduced and full.n_dofs == 40 and len(full.contacts) == 1 and len(full.nonlinearities) == 1
+    # a ValueError of the library is reported at the key that caused it
+    bad = cases.parse_case(text.replace("clamp = 0.0, tip = 1.0", "clamp = 0.0, tip = 1.03"), tmp_path / "c.toml")
+    with pytest.raises(cases.CaseError) as ei:
+        cases.build_model(bad)
+    assert ei.value.line == _line(text, "boundaries") and "[mesh]" in str(ei.value)
+    bad = cases.parse_case(text.replace('clamped = "clamp"', 'clamped = "clomp"'), tmp_path / "c.toml")
+    with pytest.raises(cases.CaseError) as ei:
+        cases.build_model(bad)
+    assert ei.value.line == _line(text, "clamped")
+
+
+def test_progress_bar_fraction_clipped():
+    s = io.StringIO()
+    bar = ProgressBar((-4.0, -2.0), "log10(energy)", stream=s, width=10)
+    assert bar.fraction(-5.0) == 0.0 and bar.fraction(-1.0) == 1.0 and bar.fraction(-3.0) == 0.5
+    line = bar.update(-3.0)
+    assert "[#####.....]" in line and "50%" in line and "points 1" in line
+    bar.close()
+    assert s.getvalue().endswith("\n")
+    down = ProgressBar((2.0, 0.5), "w", stream=io.StringIO())
+    assert down.fraction(1.25) == pytest.approx(0.5)
