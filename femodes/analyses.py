@@ -72,6 +72,17 @@ def branch_from_continuation(problem, result, *, kind: str, model: StructuralMod
     )
 
 
+def _run(problem, span, x0, options: ContinuationOptions, label: str, progress: bool):
+    """Continuation with the progress callback chained in front of the user's; warns on failure."""
+    cb = _progress_callback(options.callback, span, label, progress)
+    if cb is not None:
+        options = dataclasses.replace(options, callback=cb)
+    res = continuation(problem, span, x0=x0, options=options)
+    if not res.success:
+        log.warning("%s: %s", label, res.message)
+    return res
+
+
 def _progress_callback(user_cb: Callable | None, span, label: str, progress: bool):
     if not progress and user_cb is None:
         return None
@@ -134,12 +145,7 @@ def frequency_response(
     opts = options or ContinuationOptions(step=0.05, max_step=0.5, newton=NewtonOptions(atol=1e-9, max_iter=20))
     if x0 is None:
         x0 = _starting_point(problem, span[0], opts.newton)
-    cb = _progress_callback(opts.callback, span, "frequency_response", progress)
-    if cb is not None:
-        opts = dataclasses.replace(opts, callback=cb)
-    res = continuation(problem, span, x0=x0, options=opts)
-    if not res.success:
-        log.warning("frequency_response: %s", res.message)
+    res = _run(problem, span, x0, opts, "frequency_response", progress)
     return branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span)})
 
 
@@ -208,25 +214,23 @@ def nonlinear_mode(
     span = (math.log10(e0), math.log10(e1))
     problem.set_reference_energy(math.sqrt(e0 * e1))
     x0 = problem.linear_guess(e0)
+    # Arclength scaling: displacement coefficients by the starting amplitude, contact forces
+    # by the force that amplitude produces through the contact stiffness, w by w0. Filled into
+    # user options too unless they set x_scale themselves.
+    s = problem.system
+    aq = max(float(np.max(np.abs(x0[: s.nq]))), 1e-300)
+    cmax = max([ct.c for ct in s.unilateral] or [1.0])
+    scale = np.empty(problem.size)
+    scale[: s.nq] = aq
+    scale[s.nq : s.size] = cmax * aq
+    scale[s.size] = problem.omega0
+    scale[s.size + 1] = 0.1 * problem.omega0
     if options is None:
-        s = problem.system
-        # Arclength scaling: displacement coefficients by the starting amplitude, contact forces
-        # by the force that amplitude produces through the contact stiffness, w by w0.
-        aq = max(float(np.max(np.abs(x0[: s.nq]))), 1e-300)
-        cmax = max([ct.c for ct in s.unilateral] or [1.0])
-        scale = np.empty(problem.size)
-        scale[: s.nq] = aq
-        scale[s.nq : s.size] = cmax * aq
-        scale[s.size] = problem.omega0
-        scale[s.size + 1] = 0.1 * problem.omega0
         options = ContinuationOptions(step=0.05, max_step=0.25, x_scale=scale, p_scale=1.0,
                                       newton=NewtonOptions(atol=1e-9, max_iter=20))
-    cb = _progress_callback(options.callback, span, "nonlinear_mode", progress)
-    if cb is not None:
-        options = dataclasses.replace(options, callback=cb)
-    res = continuation(problem, span, x0=x0, options=options)
-    if not res.success:
-        log.warning("nonlinear_mode: %s", res.message)
+    elif options.x_scale is None:
+        options = dataclasses.replace(options, x_scale=scale, p_scale=options.p_scale or 1.0)
+    res = _run(problem, span, x0, options, "nonlinear_mode", progress)
     return branch_from_continuation(problem, res, kind="nonlinear mode", model=model,
                                     meta={"mode": int(mode), "energy_span": [e0, e1]})
 
