@@ -21,14 +21,19 @@ contacts, treated implicitly by Newton iterations on the step) and the contact i
 Massless DOFs (zero rows of ``M``, e.g. contact nodes after mass redistribution) are algebraic
 (quasi-static): their rows use ``theta_i = 1`` (a trapezoidal rule on an algebraic equation
 would carry undamped ``(-1)^k`` oscillations), and a contact on a massless DOF is the
-position-level Signorini condition ``0 <= g_N(q_{k+1}) \perp P_{k+1} >= 0`` (exact, no drift).
+position-level Signorini condition ``0 <= g_N(q_{k+1}) \perp P_{k+1} >= 0`` (no penetration
+drift). Caveat, measured on a 40-element cantilever with a massless tip stop: every contact
+switch excites stiff modes that the trapezoidal rule neither resolves nor damps, so the energy
+jumps by O(dt^2) per switch (24 %, 7 %, 1.7 %, 0.6 % over five periods for dt = T/800 ... T/6400,
+examples/validation_cantilever.py); use small steps (or theta > 1/2) on such FE models.
 With these weights the iteration matrix is ``A = M + h Theta C + h^2 Theta K Theta``; it is
 factorized once and the contact/nonlinear DOFs ``S`` are coupled through the local Delassus
 operator ``W = B_S^T A^{-1} B_S`` (``|S|`` solves), so each step is a small complementarity
 problem on ``S``, solved exactly by semismooth Newton on the Fischer-Burmeister function.
 
 With ``theta = 1/2`` and ``e = 1`` the smooth part is the trapezoidal rule (energy conserving
-for linear systems) and impacts are conservative: ``U_{k+1} = -U_k``.
+for linear systems) and impacts of massful DOFs are conservative: ``U_{k+1} = -U_k`` (energy
+drift 9e-12 over 100 impacts of the 1-DOF oscillator).
 
 References
 ----------
