@@ -153,20 +153,6 @@ class RowScaled:
         return self.pr.unpack(x, p)
 
 
-def _border(J, rp, c):
-    """Bordered matrix [[J, rp], [c^T]] assembled from COO triplets (as _Branch.border)."""
-    import numpy as np
-    import scipy.sparse as sp
-
-    n = J.shape[0]
-    Jc = sp.coo_matrix(J)
-    ar = np.arange(n)
-    rows = np.concatenate([Jc.row, ar, np.full(n + 1, n)])
-    cols = np.concatenate([Jc.col, np.full(n, n), np.arange(n + 1)])
-    data = np.concatenate([Jc.data.astype(float, copy=False), rp, c])
-    return sp.csc_matrix((data, (rows, cols)), shape=(n + 1, n + 1))
-
-
 def _timed(fn, repeat: int):
     out, times = None, []
     for _ in range(repeat):
@@ -312,7 +298,9 @@ def child(ne: int, H: int, repeat: int, profile: bool, max_points: int = MAX_POI
     c = np.zeros(J.shape[0] + 1)
     c[-1] = 1.0
     c[:-1] = 1.0 / J.shape[0]
-    Mb, t_border = _timed(lambda: _border(J, rp, c), repeat)
+    from femodes.solvers.continuation import bordered_matrix
+
+    Mb, t_border = _timed(lambda: bordered_matrix(J, rp, c), repeat)
     rhs = np.append(r, 0.0)
     _, t_bord = _timed(lambda: orig_bs(Mb, rhs), repeat)
     rec.update(t_res=t_res, t_splu=t_lu, t_solve=t_sol, t_border=t_border, t_bordered=t_bord)
