@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 import femodes as fm
-from femodes.analyses import branch_from_continuation
+from femodes.analyses import branch_from_continuation, nonlinear_mode_options
 
 HS = (1, 5, 10, 20, 40)
 GAP = 1.0
@@ -38,16 +38,7 @@ def backbone_segments(H, energies, e_start=E_START):
     pr = fm.NonlinearModeProblem(free, fm.Harmonics(H), 1)
     pr.set_reference_energy(math.sqrt(e_start * max(energies)))
     x = pr.linear_guess(e_start)
-    s = pr.system
-    aq = max(float(np.max(np.abs(x[: s.nq]))), 1e-300)
-    cmax = max([ct.c for ct in s.unilateral] or [1.0])
-    scale = np.empty(pr.size)
-    scale[: s.nq] = aq
-    scale[s.nq: s.size] = cmax * aq
-    scale[s.size] = pr.omega0
-    scale[s.size + 1] = 0.1 * pr.omega0
-    opts = fm.ContinuationOptions(step=0.05, max_step=0.25, x_scale=scale, p_scale=1.0,
-                                  newton=fm.NewtonOptions(atol=1e-9, max_iter=20))
+    opts = nonlinear_mode_options(pr, x)
     out, e0 = [], e_start
     for E in energies:
         res = fm.continuation(pr, (math.log10(e0), math.log10(E)), x0=x, options=opts)

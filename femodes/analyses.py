@@ -23,7 +23,8 @@ from .model import StructuralModel
 from .results import Branch, ContactInfo
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 
-__all__ = ["frequency_response", "nonlinear_mode", "static_contact", "StaticContactResult", "branch_from_continuation"]
+__all__ = ["frequency_response", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
+           "branch_from_continuation"]
 
 log = logging.getLogger(__name__)
 
@@ -185,6 +186,31 @@ def _starting_point(problem: ForcedResponseProblem, omega: float, newton: Newton
     return x0
 
 
+def nonlinear_mode_options(problem: NonlinearModeProblem, x0: np.ndarray,
+                           options: ContinuationOptions | None = None) -> ContinuationOptions:
+    """Continuation options for a nonlinear mode starting at ``x0`` (used by :func:`nonlinear_mode`).
+
+    Arclength scaling: displacement coefficients by the starting amplitude, contact forces by the
+    force that amplitude produces through the contact stiffness, ``w`` by ``w0``, ``xi`` by
+    ``0.1 w0``, ``log10(E)`` by 1. With ``options`` given, the scaling is filled in only if the
+    options do not set ``x_scale`` themselves.
+    """
+    s = problem.system
+    aq = max(float(np.max(np.abs(x0[: s.nq]))), 1e-300)
+    cmax = max([ct.c for ct in s.unilateral] or [1.0])
+    scale = np.empty(problem.size)
+    scale[: s.nq] = aq
+    scale[s.nq : s.size] = cmax * aq
+    scale[s.size] = problem.omega0
+    scale[s.size + 1] = 0.1 * problem.omega0
+    if options is None:
+        return ContinuationOptions(step=0.05, max_step=0.25, x_scale=scale, p_scale=1.0,
+                                   newton=NewtonOptions(atol=1e-9, max_iter=20))
+    if options.x_scale is None:
+        return dataclasses.replace(options, x_scale=scale, p_scale=options.p_scale or 1.0)
+    return options
+
+
 def nonlinear_mode(
     model: StructuralModel,
     mode: int = 1,
@@ -214,22 +240,7 @@ def nonlinear_mode(
     span = (math.log10(e0), math.log10(e1))
     problem.set_reference_energy(math.sqrt(e0 * e1))
     x0 = problem.linear_guess(e0)
-    # Arclength scaling: displacement coefficients by the starting amplitude, contact forces
-    # by the force that amplitude produces through the contact stiffness, w by w0. Filled into
-    # user options too unless they set x_scale themselves.
-    s = problem.system
-    aq = max(float(np.max(np.abs(x0[: s.nq]))), 1e-300)
-    cmax = max([ct.c for ct in s.unilateral] or [1.0])
-    scale = np.empty(problem.size)
-    scale[: s.nq] = aq
-    scale[s.nq : s.size] = cmax * aq
-    scale[s.size] = problem.omega0
-    scale[s.size + 1] = 0.1 * problem.omega0
-    if options is None:
-        options = ContinuationOptions(step=0.05, max_step=0.25, x_scale=scale, p_scale=1.0,
-                                      newton=NewtonOptions(atol=1e-9, max_iter=20))
-    elif options.x_scale is None:
-        options = dataclasses.replace(options, x_scale=scale, p_scale=options.p_scale or 1.0)
+    options = nonlinear_mode_options(problem, x0, options)
     res = _run(problem, span, x0, options, "nonlinear_mode", progress)
     return branch_from_continuation(problem, res, kind="nonlinear mode", model=model,
                                     meta={"mode": int(mode), "energy_span": [e0, e1]})

@@ -14,20 +14,10 @@ examples/energy_frequency_harmonics.py for the tables):
 * penetration of the truncated orbit decreasing with H; artificial damping xi ~ 0 (< 1e-10).
 """
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-
-
-def load(name):
-    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from .test_examples import load
 
 
 @pytest.fixture(scope="module")
