@@ -405,11 +405,7 @@ class _Stepper:
                 return r1, J
             J[loc_a, s + np.arange(na)] += 1.0
             y = (b[ia] - (v1free[loc_a] + Wl[loc_a])) / sig
-            rr = np.sqrt(Pa * Pa + y * y)
-            r2 = Pa + y - rr
-            safe = rr > 0
-            da = np.where(safe, 1.0 - Pa / np.where(safe, rr, 1.0), 1.0 - 1.0 / math.sqrt(2.0))
-            db = np.where(safe, 1.0 - y / np.where(safe, rr, 1.0), 1.0 - 1.0 / math.sqrt(2.0))
+            r2, da, db = _fischer_burmeister(Pa, y)
             J[s:, :s] = -(db / sig)[:, None] * W[loc_a, :]
             J[s:, s:] = np.diag(da)
             return np.concatenate([r1, r2]), J
@@ -503,6 +499,18 @@ class _Stepper:
         return imp
 
 
+def _fischer_burmeister(a: np.ndarray, b: np.ndarray):
+    """``phi(a, b) = a + b - sqrt(a^2 + b^2)`` (zero iff ``0 <= a perp b >= 0``) and its partials.
+
+    At ``a = b = 0`` the element ``(1 - 1/sqrt 2, 1 - 1/sqrt 2)`` of the generalized Jacobian is used.
+    """
+    rr = np.sqrt(a * a + b * b)
+    safe = rr > 0
+    da = np.where(safe, 1.0 - a / np.where(safe, rr, 1.0), 1.0 - 1.0 / math.sqrt(2.0))
+    db = np.where(safe, 1.0 - b / np.where(safe, rr, 1.0), 1.0 - 1.0 / math.sqrt(2.0))
+    return a + b - rr, da, db
+
+
 def _lcp(W: np.ndarray, q: np.ndarray, x0: np.ndarray, tol: float = 1e-14, maxit: int = 100):
     """Solve ``0 <= x  perp  W x + q >= 0`` by semismooth Newton on Fischer-Burmeister (small W).
 
@@ -513,11 +521,7 @@ def _lcp(W: np.ndarray, q: np.ndarray, x0: np.ndarray, tol: float = 1e-14, maxit
 
     def phi(x):
         y = (W @ x + q) / d
-        rr = np.sqrt(x * x + y * y)
-        r = x + y - rr
-        safe = rr > 0
-        da = np.where(safe, 1.0 - x / np.where(safe, rr, 1.0), 1.0 - 1.0 / math.sqrt(2.0))
-        db = np.where(safe, 1.0 - y / np.where(safe, rr, 1.0), 1.0 - 1.0 / math.sqrt(2.0))
+        r, da, db = _fischer_burmeister(x, y)
         J = np.diag(da) + (db / d)[:, None] * W
         return r, J
 
