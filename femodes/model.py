@@ -425,7 +425,7 @@ class StructuralModel:
                 if M[a.dof, a.dof] > 0:
                     from .fe.assembly import redistribute_contact_mass
 
-                    M, rep = redistribute_contact_mass(dataclasses.replace(self, M=M), a.dof)
+                    M, rep = redistribute_contact_mass(self, a.dof, M)
                     rep["dof"] = a.dof
                     reports.append(rep)
         if any(isinstance(a.item, UnilateralContact) for a in new) and any(isinstance(a.item, PenaltyContact) for a in new):

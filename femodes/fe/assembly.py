@@ -222,7 +222,7 @@ def build_fe_model(
     return StructuralModel(M=M, K=K, dofmap=dofmap, fe=fe)
 
 
-def redistribute_contact_mass(model: StructuralModel, dof: int) -> tuple[sp.csr_matrix, dict]:
+def redistribute_contact_mass(model: StructuralModel, dof: int, M: sp.spmatrix | None = None) -> tuple[sp.csr_matrix, dict]:
     """Mass redistribution at a contact DOF (Khenous, Laborde & Renard 2008).
 
     The contact DOF gets zero mass (its row and column of ``M`` are removed), and the removed
@@ -240,7 +240,7 @@ def redistribute_contact_mass(model: StructuralModel, dof: int) -> tuple[sp.csr_
 
     log = logging.getLogger(__name__)
     fe = model.fe
-    M = model.M.tocsr()
+    M = (model.M if M is None else M).tocsr()  # M: the model's mass after earlier redistributions
     n = model.n_dofs
     pos = np.asarray(fe.basis.doflocs[0])[fe.free]
     if fe.kind == "beam":
