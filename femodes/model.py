@@ -228,8 +228,7 @@ def _check_semidefinite(A: sp.csr_matrix, name: str, *, definite: bool) -> None:
     """Reject matrices with a clearly negative eigenvalue (or a non-positive diagonal for M)."""
     d = A.diagonal()
     scale = float(abs(A).max()) if A.nnz else 0.0
-    if definite and np.any(d <= 0) and not np.any(d < -1e-12 * scale):
-        pass  # zero diagonal entries can be legitimate (mass redistributed away from a contact node)
+    # Zero diagonal entries are legitimate (mass redistributed away from a contact node).
     if np.any(d < -1e-12 * max(scale, 1e-300)):
         i = int(np.argmin(d))
         raise ValueError(f"{name} must be positive semidefinite; diagonal entry {name}[{i},{i}] = {d[i]:.6g} < 0")

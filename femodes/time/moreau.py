@@ -443,10 +443,7 @@ class _Stepper:
     def step(self, t0, q0, v0, Kq0, f0, f1):
         """Advance ``(q0, v0)`` by one step; returns ``q1, v1, Kq1, contact impulses``."""
         h, th = self.h, self.th
-        if self.dense:
-            Kv0 = self.K @ v0
-        else:
-            Kv0 = self.K @ v0
+        Kv0 = self.K @ v0
         r = -h * Kq0 - (h * h) * th * Kv0
         if self.has_C:
             r -= h * (self.C @ v0)
