@@ -11,7 +11,7 @@ $(STAMP): pyproject.toml
 	@sh tools/sysdeps.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,plot,store,render]"
+	$(BIN)/python -m pip install --quiet -e ".[test,plot,store,render,sweep]"
 	touch $(STAMP)
 
 venv: $(STAMP)
