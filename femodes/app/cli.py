@@ -3,6 +3,7 @@
 ``femodes demo`` runs the flagship demonstration and writes its outputs to a folder it names.
 ``femodes run case.toml`` runs a case file (schema: :mod:`femodes.app.cases`, examples in
 ``examples/cases/``).
+``femodes scaling case.toml`` times the case against N and H (:mod:`femodes.app.scaling`).
 """
 
 from __future__ import annotations
@@ -32,6 +33,12 @@ femodes: nonlinear vibration modes of finite-element structures with unilateral 
                              examples/cases/cantilever_nnm.toml, examples/cases/oscillator_frc.toml;
                              full schema: python -c "import femodes.app.cases as c; help(c)"
                              or `femodes run --help`.
+  femodes scaling CASE.toml [--elements 100,1000] [--harmonics 5,10] [--out DIR]
+                             time per Newton iteration and per continuation point and peak
+                             memory of the case against N (line meshes: [mesh] n_elements) and
+                             H, one process per case; table, fitted exponents, scaling.csv,
+                             scaling.json and a log-log plot scaling.png in DIR
+                             (default ./out/<case name>_scaling). `femodes scaling --help`.
 
 Mistakes in a case file are reported as `case.toml:LINE: [table] message` (exit code 2).
 """
@@ -253,6 +260,9 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--progress", dest="progress", action="store_true", default=None,
                      help="show a progress bar on stderr (default: when stderr is a terminal)")
     run.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    from .scaling import add_scaling_parser
+
+    add_scaling_parser(sub)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     if args.command is None:
@@ -264,6 +274,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"outputs written to {res['out'].resolve()} (cantilever_modes.png, frequency_energy.png, mode1.pvd, mode1.gif, summary.txt, backbone.npz, forced.npz)")
     elif args.command == "run":
         return run_case_cli(args.case, args.out, args.progress, args.verbose)
+    elif args.command == "scaling":
+        from .scaling import scaling_cli
+
+        return scaling_cli(args)
     return 0
 
 

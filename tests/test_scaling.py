@@ -1,0 +1,226 @@
+"""`femodes scaling` and femodes.app.scaling.scaling_study: a small study on a bar with a stop."""
+
+import csv
+import json
+import math
+
+import pytest
+
+from femodes.app import scaling as sc
+from femodes.app.cli import main
+
+BAR = """
+[mesh]
+length = 1.0
+n_elements = 20
+boundaries = {{ clamp = 0.0, tip = 1.0 }}
+
+[model]
+kind = "bar"
+E = 1.0
+rho = 1.0
+area = 1.0
+clamped = "clamp"
+
+[damping]
+alpha = 0.05
+
+[[contact]]
+at = "tip"
+gap = 0.01
+
+[[force]]
+at = "tip"
+amplitude = 0.002
+harmonic = {harmonic}
+
+[analysis]
+type = "frequency_response"
+omega = [1.3, 1.9]     # first resonance pi/2: the linear tip amplitude there exceeds the gap
+harmonics = 3
+"""
+
+DISCRETE = """
+[model]
+kind = "discrete"
+M = [[1.0]]
+K = [[1.0]]
+C = [[0.1]]
+
+[[contact]]
+at = 0
+gap = 1.0
+
+[[force]]
+at = 0
+amplitude = 0.2
+
+[analysis]
+type = "frequency_response"
+omega = [0.5, 2.0]
+harmonics = 5
+"""
+
+
+@pytest.fixture
+def bar_case(tmp_path):
+    p = tmp_path / "bar.toml"
+    p.write_text(BAR.format(harmonic=1))
+    return p
+
+
+def test_study_on_a_bar_writes_table_csv_json_png(bar_case, tmp_path):
+    out = tmp_path / "study"
+    res = sc.scaling_study(bar_case, elements=[80, 20, 40], harmonics=[5, 3], repeat=2, points=3, out=out)
+    assert res.success and not res.interrupted
+    assert [(r.n_elements, r.H) for r in res.records] == [(20, 3), (20, 5), (40, 3), (40, 5), (80, 3), (80, 5)]
+    for r in res.records:
+        assert r.ok, r.error
+        assert r.N == r.n_elements and r.n_reduced is None  # P1 bar clamped at one end: one DOF per element
+        assert r.unknowns >= (2 * r.H + 1) * r.N and r.nnz_J > r.unknowns
+        assert 0 < r.iteration_min_s <= r.iteration_median_s
+        assert r.residual_median_s > 0 and r.solve_median_s > 0
+        assert r.points == 3 and r.point_s > 0
+        assert r.peak_mib >= r.baseline_mib > 0  # small cases: the imports set the peak
+        assert r.contact_active  # linear guess near resonance + one Newton step: the stop is active
+    # files
+    assert {p.name for p in res.files} == {"scaling.csv", "scaling.json", "scaling.png"}
+    rows = list(csv.DictReader(open(out / "scaling.csv")))
+    assert len(rows) == 6 and float(rows[0]["iteration_median_s"]) > 0 and rows[0]["error"] == ""
+    doc = json.loads((out / "scaling.json").read_text())
+    assert len(doc["records"]) == 6 and doc["settings"]["harmonics"] == [3, 5]
+    assert (out / "scaling.png").stat().st_size > 10_000
+    # exponents: against N at H = 3 and 5, against H at the three N, for iteration/point/memory
+    fits = {(f.quantity, f.against, f.fixed_value): f for f in res.fits}
+    for H in (3, 5):
+        f = fits[("iteration", "N", H)]
+        assert math.isfinite(f.exponent) and f.sizes == (20, 40, 80)
+    assert math.isfinite(fits[("point", "H", 40)].exponent)
+    assert len(doc["exponents"]) == len(res.fits)
+    # markdown table: header, rule, one row per case
+    lines = res.table().splitlines()
+    assert len(lines) == 8 and lines[0].startswith("| N |") and lines[2].startswith("| 20 | - | 3 |")
+
+
+def test_fit_exponents_recovers_a_power_law():
+    recs = [sc.ScalingRecord(n_elements=n, H=H, N=n, iteration_median_s=1e-6 * n**1.5 * H**2,
+                             iteration_min_s=1e-6, point_s=1e-5 * n * H, peak_mib=100 + n * H * 1e-3,
+                             baseline_mib=100)
+            for n in (100, 1000, 10000) for H in (5, 10)]
+    fits = {(f.quantity, f.against, f.fixed_value): f.exponent for f in sc.fit_exponents(recs)}
+    assert fits[("iteration", "N", 5)] == pytest.approx(1.5)
+    assert fits[("iteration", "H", 1000)] == pytest.approx(2.0)
+    assert fits[("point", "N", 10)] == pytest.approx(1.0)
+    assert fits[("memory", "H", 100)] == pytest.approx(1.0)
+    lines = sc.ScalingResult(case="c", records=tuple(recs), fits=tuple(sc.fit_exponents(recs)), files=()).fit_lines()
+    assert lines[0] == "time per Newton iteration ~ N^a: a = 1.50 (H=5), a = 1.50 (H=10)"
+    assert len(lines) == 6
+    # failed cases are left out of the fits
+    bad = sc.ScalingRecord(n_elements=10, H=5, N=10, error="MemoryError: ")
+    assert {f.sizes for f in sc.fit_exponents(recs + [bad]) if f.against == "N"} == {(100, 1000, 10000)}
+
+
+def test_positive_int_list():
+    assert sc.positive_int_list("100, 1e3,10000") == [100, 1000, 10000]
+    import argparse
+
+    for bad in ("0", "abc", "1.5", "10,,20", "-3", "inf"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            sc.positive_int_list(bad)
+
+
+def test_elements_for_a_discrete_case_is_a_clear_error(tmp_path):
+    p = tmp_path / "osc.toml"
+    p.write_text(DISCRETE)
+    with pytest.raises(ValueError, match=r"elements: .*discrete model.*fixed"):
+        sc.scaling_study(p, elements=[10, 20], out=tmp_path / "o")
+    assert not (tmp_path / "o").exists()
+
+
+def test_elements_for_a_mesh_file_is_a_clear_error(tmp_path):
+    p = tmp_path / "file.toml"
+    p.write_text(BAR.format(harmonic=1).replace("length = 1.0\nn_elements = 20\nboundaries = { clamp = 0.0, tip = 1.0 }",
+                                                'file = "beam.msh"'))
+    with pytest.raises(ValueError, match=r"elements: .*read from a file.*beam\.msh"):
+        sc.scaling_study(p, elements=[10], out=tmp_path / "o")
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"harmonics": [0, 3]}, "harmonics must be positive"),
+    ({"harmonics": []}, "harmonics must not be empty"),
+    ({"elements": [10.5]}, "elements must be positive integers"),
+    ({"repeat": 0}, "repeat must be an integer >= 1"),
+    ({"points": 1}, "points must be 0"),
+    ({"timeout": -1}, "timeout must be a positive"),
+])
+def test_bad_arguments_name_the_argument(bar_case, tmp_path, kw, match):
+    with pytest.raises((ValueError, TypeError), match=match):
+        sc.scaling_study(bar_case, out=tmp_path / "o", **kw)
+
+
+def test_failed_case_is_recorded_and_the_study_goes_on(tmp_path):
+    p = tmp_path / "bar3.toml"
+    p.write_text(BAR.format(harmonic=3))  # a third-harmonic force needs H >= 3
+    res = sc.scaling_study(p, harmonics=[2, 3], repeat=1, points=0, out=tmp_path / "o")
+    bad, good = res.records
+    assert not bad.ok and "harmonic" in bad.error and good.ok and good.points == 0
+    assert not res.success and "harmonic" in res.table().splitlines()[2]
+    rows = list(csv.DictReader(open(tmp_path / "o" / "scaling.csv")))
+    assert rows[0]["error"] and rows[1]["error"] == "" and rows[1]["point_s"] == ""
+
+
+def test_timeout_is_recorded(bar_case, tmp_path):
+    res = sc.scaling_study(bar_case, repeat=1, points=0, timeout=0.01, out=tmp_path / "o")
+    assert "timed out" in res.records[0].error
+
+
+def test_ctrl_c_keeps_what_was_measured(bar_case, tmp_path, monkeypatch, capsys):
+    calls = []
+
+    def fake_child(spec, timeout):
+        calls.append(spec["data"]["analysis"]["harmonics"])
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return {"N": 20, "unknowns": 147, "iteration_median_s": 1e-3, "iteration_min_s": 1e-3, "peak_mib": 80.0}
+
+    monkeypatch.setattr(sc, "_run_child", fake_child)
+    res = sc.scaling_study(bar_case, harmonics=[3, 5, 7], out=tmp_path / "o", progress=True)
+    assert res.interrupted and not res.success and calls == [3, 5]
+    assert [r.H for r in res.records] == [3]
+    assert len(list(csv.DictReader(open(tmp_path / "o" / "scaling.csv")))) == 1
+    assert json.loads((tmp_path / "o" / "scaling.json").read_text())["interrupted"] is True
+    assert "1/3 cases" in capsys.readouterr().err  # the progress bar
+
+
+def test_cli_scaling_returns_0_and_prints_the_table(bar_case, tmp_path, capsys):
+    out = tmp_path / "cli"
+    rc = main(["scaling", str(bar_case), "--elements", "10,20", "--harmonics", "3", "--repeat", "1", "--points", "0",
+               "--out", str(out), "--no-progress"])
+    text = capsys.readouterr().out
+    assert rc == 0
+    assert "| 10 | - | 3 |" in text and "| 20 | - | 3 |" in text
+    assert "time per Newton iteration ~ N^" in text
+    assert (out / "scaling.csv").exists() and (out / "scaling.png").exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--elements", "0"], "argument --elements: values must be positive integers"),
+    (["--harmonics", "abc"], "argument --harmonics: expected positive integers"),
+    (["--points", "1"], "argument --points"),
+])
+def test_cli_bad_values_exit_2_without_traceback(bar_case, capsys, args, message):
+    with pytest.raises(SystemExit) as exc:
+        main(["scaling", str(bar_case), *args])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_cli_elements_for_a_discrete_case_exit_2(tmp_path, capsys):
+    p = tmp_path / "osc.toml"
+    p.write_text(DISCRETE)
+    assert main(["scaling", str(p), "--elements", "10,20", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "femodes scaling: elements: cannot vary the number of elements: the case is a discrete model" in err
+    assert main(["scaling", str(tmp_path / "missing.toml")]) == 2
+    assert "case file not found" in capsys.readouterr().err
