@@ -666,3 +666,119 @@ def test_newton_stagnation_window_option():
     assert res.status == 2
     res = semismooth_newton(_arctan, [100.0], options=NewtonOptions(nonmonotone_memory=5, stagnation_window=0, max_iter=200))
     assert res.success and abs(res.x[0]) <= 1e-10
+
+
+# --------------------------------------------------------------------------- #
+# resuming a run from a saved state (continuation(start=...))
+# --------------------------------------------------------------------------- #
+RESUME_CASES = {
+    "scurve, located folds": (lambda: SCurve(), (-1.0, 1.0), [-1.3], {}),
+    "scurve, unlocated folds": (lambda: SCurve(), (-1.0, 1.0), [-1.3], {"locate_folds": False}),
+    "scurve sparse, decreasing span": (lambda: SCurve(3, sparse=True), (1.0, -1.0), [1.3] * 3, {"every": 4}),
+    "duffing": (lambda: Duffing(0.1, 1.0, 0.3), (0.5, 2.5), [0.3, 0.0], {}),
+    "duffing, unlocated folds": (lambda: Duffing(0.1, 1.0, 0.3), (0.5, 2.5), [0.3, 0.0], {"locate_folds": False}),
+    "kink": (lambda: SpringObstacle(), (0.0, 2.0), [0.0, 0.0], {}),
+}
+
+
+@pytest.mark.parametrize("case", list(RESUME_CASES))
+def test_continuation_resume_from_every_point_equals_uninterrupted_run(case):
+    """Stop after point k (callback returns False), resume with start=point.state: the two parts together
+    are the uninterrupted branch, point for point (bitwise: same steps, tangents, folds, counters), the
+    start point not repeated. For every k, through folds (located or not) and kinks."""
+    make, span, x0, kw = RESUME_CASES[case]
+    kw = dict(kw)
+    every = kw.pop("every", 1)  # the sparse case is slower: every 4th point
+    full = continuation(make(), span, x0=x0, options=ContinuationOptions(**kw))
+    assert full.status == 0
+    n_resumed = 0
+    for k in [*range(0, full.n_points - 1, every), full.n_points - 1]:
+        seen = []
+
+        def stop_at_k(pt):
+            seen.append(pt)
+            return pt.index < k
+
+        part = continuation(make(), span, x0=x0, options=ContinuationOptions(callback=stop_at_k, **kw))
+        assert [pt.index for pt in seen] == list(range(part.n_points))
+        state = seen[-1].state
+        if k == full.n_points - 1:
+            assert state is None and part.status == 0  # the end point: nothing to continue
+            continue
+        if state is None:  # an inserted fold point: the run continues from the point before it
+            assert seen[-1].is_fold and kw.get("locate_folds", True)
+            state = seen[-2].state
+        rest = continuation(make(), span, start=state, options=ContinuationOptions(**kw))
+        assert rest.first_index == state.index + 1
+        X = np.vstack([part.x[: state.index + 1], rest.x])
+        P = np.concatenate([part.p[: state.index + 1], rest.p])
+        np.testing.assert_array_equal(X, full.x)
+        np.testing.assert_array_equal(P, full.p)
+        np.testing.assert_array_equal(rest.nit, full.nit[state.index + 1 :])
+        assert rest.folds == full.folds and rest.status == full.status
+        assert (rest.n_newton, rest.n_rejected) == (full.n_newton, full.n_rejected)
+        n_resumed += 1
+    assert n_resumed >= (full.n_points - 1) // every - len(full.folds)
+
+
+def test_continuation_state_of_points():
+    """Every regular point carries a state (next step in bounds, scales of the run, folds so far);
+    inserted fold points and the end point do not."""
+    seen = []
+    res = continuation(SCurve(), (-1.0, 1.0), x0=[-1.3], options=ContinuationOptions(callback=seen.append))
+    assert res.folds == (6, 10)
+    for pt in seen:
+        st = pt.state
+        if pt.is_fold or pt.index == res.n_points - 1:
+            assert st is None
+            continue
+        assert st.index == pt.index and st.p == pt.p and st.x is pt.x
+        np.testing.assert_array_equal(st.tangent, pt.tangent)
+        assert 1e-6 <= st.step <= 0.5 and st.dp_sign == np.sign(pt.tangent[-1])
+        np.testing.assert_array_equal(st.x_scale, res.x_scale)
+        assert st.p_scale == res.p_scale
+        assert st.folds == tuple(i for i in res.folds if i <= pt.index)
+        assert not st.x.flags.writeable and not st.tangent.flags.writeable
+
+
+def test_continuation_resume_respects_max_points_and_new_step_bounds():
+    """max_points counts the whole branch; a resumed run may change the options (the step is clipped)."""
+    seen = []
+    continuation(SCurve(), (-1.0, 1.0), x0=[-1.3], options=ContinuationOptions(callback=seen.append, max_points=4))
+    state = seen[-1].state
+    assert state.index == 3
+    rest = continuation(SCurve(), (-1.0, 1.0), start=state, options=ContinuationOptions(max_points=4))
+    assert rest.status == 2 and rest.n_points == 0 and rest.first_index == 4
+    rest = continuation(SCurve(), (-1.0, 1.0), start=state, options=ContinuationOptions(max_points=8, max_step=0.01,
+                                                                                         step=0.01))
+    assert rest.status == 2 and rest.n_points == 4 and np.all(rest.step <= 0.01 + 1e-15)
+    assert np.all(scurve_residuals(rest) <= 1e-9)
+
+
+def test_continuation_start_validation():
+    from femodes.solvers.continuation import ContinuationState
+
+    seen = []
+    continuation(SCurve(), (-1.0, 1.0), x0=[-1.3], options=ContinuationOptions(callback=seen.append, max_points=3))
+    st = seen[-1].state
+    with pytest.raises(ValueError, match="either x0= .* or start="):
+        continuation(SCurve(), (-1.0, 1.0), x0=[-1.3], start=st)
+    with pytest.raises(TypeError, match="start must be a ContinuationState"):
+        continuation(SCurve(), (-1.0, 1.0), start={"x": [1.0]})
+    with pytest.raises(ValueError, match="outside p_span"):
+        continuation(SCurve(), (0.5, 1.0), start=st)
+    good = dict(x=[1.0], p=0.0, tangent=[0.6, 0.8], step=0.1, index=3, folds=(), dp_sign=1, x_scale=[1.0], p_scale=2.0)
+    assert ContinuationState(**good).folds == ()
+    for change, pattern in [
+        ({"tangent": [1.0]}, r"tangent has shape \(1,\), expected \(2,\)"),
+        ({"x_scale": [0.0]}, "x_scale must be positive"),
+        ({"x": [np.nan]}, "x contains non-finite"),
+        ({"step": 0.0}, r"ContinuationState.step must be a positive"),
+        ({"folds": (5,)}, r"folds must be indices in \[0, index=3\]"),
+        ({"dp_sign": 0.0}, "dp_sign must be"),
+        ({"p": "a"}, "p must be a finite real number"),
+    ]:
+        with pytest.raises(ValueError, match=pattern):
+            ContinuationState(**{**good, **change})
+    with pytest.raises(TypeError, match="ContinuationState.index"):
+        ContinuationState(**{**good, "index": 1.5})

@@ -79,6 +79,7 @@ __all__ = [
     "ContinuationOptions",
     "ContinuationPoint",
     "ContinuationResult",
+    "ContinuationState",
     "continuation",
     "STATUS_MESSAGES",
     "bordered_solver",
@@ -168,7 +169,9 @@ class ContinuationOptions:
         ``callback(point: ContinuationPoint)`` called for every accepted point
         (start, regular, fold and end points).  If it returns ``False`` (the
         object ``False``, not merely falsy), the run stops cleanly after that
-        point with ``status=3`` and ``success=True``.
+        point with ``status=3`` and ``success=True``.  ``point.state`` holds
+        what :func:`continuation` needs to continue the run from that point
+        later (``start=point.state``), e.g. after saving it to a file.
     locate_folds : bool, default True
         When a fold is detected between two points, locate it by regula falsi
         (Illinois variant) on the p-component of the tangent along the
@@ -285,7 +288,14 @@ class ContinuationPoint:
         The point is a located fold, or, without localisation, the point
         nearest (smaller ``|dp/ds|``) to a detected fold.
     index : int
-        Index of the point in the branch.
+        Index of the point in the branch (counting the points before the
+        start state of a resumed run).
+    state : ContinuationState or None
+        The state of the run after this point, from which
+        ``continuation(..., start=state)`` continues exactly as this run
+        does.  ``None`` for points a run cannot continue from exactly: an
+        inserted fold point (the run continues from the point after it) and
+        the end point.
     """
 
     x: np.ndarray
@@ -296,6 +306,101 @@ class ContinuationPoint:
     step: float
     is_fold: bool
     index: int
+    state: ContinuationState | None = None
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ContinuationState:
+    """State of a run after an accepted point: what ``continuation(start=...)`` needs.
+
+    A run started from the state of point ``k`` (received by the callback as
+    ``point.state``) computes the same points ``k+1, k+2, ...`` as the run
+    that produced it (same predictor, tangent orientation, step size, fold
+    bookkeeping and arclength scaling); the start point itself is not
+    repeated in the output.  Arrays are validated and kept read-only.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n,)
+        Unknowns of the point.
+    p : float
+        Parameter of the point.
+    tangent : ndarray, shape (n+1,)
+        Unit tangent (scaled norm) at the point, oriented along the direction
+        of travel.
+    step : float
+        Pseudo-arclength step the run takes next (after step control).
+    index : int
+        Index of the point in the branch (>= 0).
+    folds : tuple of int
+        Indices of the fold points up to ``index``.
+    dp_sign : float
+        Sign (+1 or -1) of ``dp/ds`` at the last point where it was non-zero:
+        a fold is a change of this sign.
+    x_scale : ndarray, shape (n,)
+        Scales of the unknowns in the arclength norm (used instead of
+        ``ContinuationOptions.x_scale``).
+    p_scale : float
+        Scale of the parameter (used instead of ``ContinuationOptions.p_scale``).
+    n_newton, n_rejected : int, default 0
+        Newton iterations and rejected steps so far (the totals of the
+        resumed run's result include them).
+    """
+
+    x: np.ndarray
+    p: float
+    tangent: np.ndarray
+    step: float
+    index: int
+    folds: tuple[int, ...]
+    dp_sign: float
+    x_scale: np.ndarray
+    p_scale: float
+    n_newton: int = 0
+    n_rejected: int = 0
+
+    def __post_init__(self) -> None:
+        def vector(name: str, size: int | None) -> np.ndarray:
+            value = getattr(self, name)
+            try:
+                a = np.asarray(value, dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"ContinuationState: {name} must be a real 1-D array, got {_show(value)}") from exc
+            if a.ndim != 1 or a.size == 0 or (size is not None and a.size != size):
+                want = f"({size},)" if size is not None else "a non-empty 1-D array"
+                raise ValueError(f"ContinuationState: {name} has shape {a.shape}, expected {want}")
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"ContinuationState: {name} contains non-finite values (nan or inf)")
+            if a.flags.writeable:
+                a = a.copy()
+                a.flags.writeable = False
+            object.__setattr__(self, name, a)
+            return a
+
+        n = vector("x", None).size
+        vector("tangent", n + 1)
+        xs = vector("x_scale", n)
+        if np.any(xs <= 0):
+            raise ValueError(f"ContinuationState: x_scale must be positive, got {_show(self.x_scale)}")
+        if not _is_real_number(self.p) or not math.isfinite(self.p):
+            raise ValueError(f"ContinuationState: p must be a finite real number, got {_show(self.p)}")
+        object.__setattr__(self, "p", float(self.p))
+        for name in ("step", "p_scale"):
+            _check_positive(f"ContinuationState.{name}", getattr(self, name))
+            object.__setattr__(self, name, float(getattr(self, name)))
+        for name in ("index", "n_newton", "n_rejected"):
+            _check_int(f"ContinuationState.{name}", getattr(self, name), 0)
+            object.__setattr__(self, name, int(getattr(self, name)))
+        try:
+            folds = tuple(int(i) for i in self.folds)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"ContinuationState: folds must be a sequence of point indices, got {_show(self.folds)}") from exc
+        if any(not 0 <= i <= self.index for i in folds):
+            raise ValueError(f"ContinuationState: folds must be indices in [0, index={self.index}], got {folds}")
+        object.__setattr__(self, "folds", folds)
+        if self.dp_sign not in (1, -1) or isinstance(self.dp_sign, (bool, np.bool_)):
+            raise ValueError(f"ContinuationState: dp_sign must be +1 or -1, got {_show(self.dp_sign)}")
+        object.__setattr__(self, "dp_sign", float(self.dp_sign))
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -338,6 +443,10 @@ class ContinuationResult:
         Scales of the unknowns used in the arclength norm.
     p_scale : float
         Scale of the parameter used in the arclength norm.
+    first_index : int
+        Branch index of the first returned point: 0, or ``start.index + 1``
+        for a run resumed with ``start=`` (whose arrays hold only the new
+        points, while ``folds`` and the counters cover the whole branch).
     """
 
     x: np.ndarray
@@ -355,6 +464,7 @@ class ContinuationResult:
     n_rejected: int
     x_scale: np.ndarray
     p_scale: float
+    first_index: int = 0
 
     @property
     def n_points(self) -> int:
@@ -585,6 +695,7 @@ def continuation(
     *,
     x0: Any = None,
     options: ContinuationOptions | None = None,
+    start: ContinuationState | None = None,
 ) -> ContinuationResult:
     r"""Trace the solution branch of :math:`r(x, p) = 0` from ``p_span[0]`` to ``p_span[1]``.
 
@@ -612,6 +723,14 @@ def continuation(
        exactly at that ``p`` by Newton in ``x`` from a linear interpolation,
        appended, and the run stops (status 0, resp. 1).
 
+    Resuming: ``start=point.state`` (a :class:`ContinuationState` received
+    by the callback, possibly saved and rebuilt) skips steps 1-2 and
+    continues from that point with its tangent, step size, fold record and
+    arclength scales, so that the run computes exactly the points the
+    original run computed after it.  Pass the same ``problem``, ``p_span``
+    and options; the scales of ``start`` replace ``options.x_scale`` and
+    ``options.p_scale``.
+
     Parameters
     ----------
     problem : object
@@ -625,6 +744,12 @@ def continuation(
         Initial guess of the solution at ``p_span[0]``. If omitted, the problem
         must provide ``initial_guess(p)`` (the HBM problems do).
     options : ContinuationOptions, optional
+    start : ContinuationState, optional
+        Continue a run from this state instead of starting at ``p_span[0]``
+        (then ``x0`` must be omitted).  The returned arrays hold only the
+        points after ``start`` (``first_index = start.index + 1``); point
+        indices, ``folds``, ``max_points`` and the counters count the whole
+        branch.
 
     Returns
     -------
@@ -635,10 +760,12 @@ def continuation(
     Raises
     ------
     ValueError
-        Invalid ``p_span``, ``x0`` or ``x_scale`` length, or wrongly shaped
+        Invalid ``p_span``, ``x0`` or ``x_scale`` length, ``x0`` together
+        with ``start``, ``start.p`` outside ``p_span``, or wrongly shaped
         arrays returned by ``problem.residual``.
     TypeError
-        ``problem`` has no callable ``residual`` or ``options`` has the wrong type.
+        ``problem`` has no callable ``residual``, or ``options`` or ``start``
+        has the wrong type.
     """
     if options is None:
         options = ContinuationOptions()
@@ -647,25 +774,34 @@ def continuation(
     if not callable(getattr(problem, "residual", None)):
         raise TypeError("problem must have a callable method residual(x, p) -> (r, dr_dx, dr_dp)")
     p_start, p_end = _validate_span(p_span)
-    if x0 is None:
-        guess = getattr(problem, "initial_guess", None)
-        if not callable(guess):
-            raise TypeError("continuation: pass x0=, or give the problem a method initial_guess(p)")
-        x0 = guess(p_start)
-    try:
-        x_init = np.array(x0, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"x0 must be a real 1-D array, got {_show(x0)}") from exc
-    if x_init.ndim != 1 or x_init.size == 0:
-        raise ValueError(f"x0 must be a non-empty 1-D array, got shape {x_init.shape}")
-    if not np.all(np.isfinite(x_init)):
-        raise ValueError("x0 contains non-finite values (nan or inf)")
-    n = x_init.size
-    if options.x_scale is not None and not _is_real_number(options.x_scale):
-        if np.shape(options.x_scale) != (n,):
-            raise ValueError(f"x_scale has shape {np.shape(options.x_scale)}, expected ({n},) matching x0")
-
     span_sign = 1.0 if p_end > p_start else -1.0
+    if start is not None:
+        if not isinstance(start, ContinuationState):
+            raise TypeError(f"start must be a ContinuationState (point.state of a callback) or None, got {type(start).__name__}")
+        if x0 is not None:
+            raise ValueError("continuation: pass either x0= (a new run) or start= (a resumed run), not both")
+        if span_sign * (start.p - p_start) < 0 or span_sign * (start.p - p_end) > 0:
+            raise ValueError(f"start.p = {start.p:g} lies outside p_span = ({p_start:g}, {p_end:g})")
+        n = start.x.size
+    else:
+        if x0 is None:
+            guess = getattr(problem, "initial_guess", None)
+            if not callable(guess):
+                raise TypeError("continuation: pass x0=, or give the problem a method initial_guess(p)")
+            x0 = guess(p_start)
+        try:
+            x_init = np.array(x0, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"x0 must be a real 1-D array, got {_show(x0)}") from exc
+        if x_init.ndim != 1 or x_init.size == 0:
+            raise ValueError(f"x0 must be a non-empty 1-D array, got shape {x_init.shape}")
+        if not np.all(np.isfinite(x_init)):
+            raise ValueError("x0 contains non-finite values (nan or inf)")
+        n = x_init.size
+        if options.x_scale is not None and not _is_real_number(options.x_scale):
+            if np.shape(options.x_scale) != (n,):
+                raise ValueError(f"x_scale has shape {np.shape(options.x_scale)}, expected ({n},) matching x0")
+
     opt = options
     br = _Branch(problem, n, opt.newton)
     cos_max_turn = math.cos(math.radians(opt.max_turn_angle))
@@ -673,13 +809,18 @@ def continuation(
     pts: list[_Pt] = []
     folds: list[int] = []
     n_rejected = 0
+    # A resumed run keeps its start point as pts[0] (the previous point of the
+    # first step) but does not return it: branch index of pts[k] is i0 + k.
+    i0 = start.index if start is not None else 0
+    skip = 1 if start is not None else 0
 
     def build(status: int, extra: str = "") -> ContinuationResult:
         msg = STATUS_MESSAGES[status] + (f": {extra}" if extra else "")
-        if pts:
-            X = np.array([q.y[:n] for q in pts])
-            P = np.array([q.y[n] for q in pts])
-            T = np.array([q.t for q in pts]) if opt.store_tangents else None
+        out = pts[skip:]
+        if out:
+            X = np.array([q.y[:n] for q in out])
+            P = np.array([q.y[n] for q in out])
+            T = np.array([q.t for q in out]) if opt.store_tangents else None
         else:
             X = np.empty((0, n))
             P = np.empty(0)
@@ -687,10 +828,10 @@ def continuation(
         arrays = dict(
             x=X,
             p=P,
-            nit=np.array([q.nit for q in pts], dtype=int),
-            residual_norm=np.array([q.rnorm for q in pts], dtype=float),
-            converged=np.ones(len(pts), dtype=bool),
-            step=np.array([q.step for q in pts], dtype=float),
+            nit=np.array([q.nit for q in out], dtype=int),
+            residual_norm=np.array([q.rnorm for q in out], dtype=float),
+            converged=np.ones(len(out), dtype=bool),
+            step=np.array([q.step for q in out], dtype=float),
             tangents=T,
             x_scale=xs_arr,
         )
@@ -700,7 +841,7 @@ def continuation(
         success = status <= 3
         (logger.info if success else logger.warning)(
             "continuation finished: %s (%d points, %d folds, %d Newton iterations, %d rejected steps)",
-            msg, len(pts), len(folds), br.n_newton, n_rejected,
+            msg, i0 + len(pts), len(folds), br.n_newton, n_rejected,
         )
         return ContinuationResult(
             folds=tuple(folds),
@@ -710,30 +851,43 @@ def continuation(
             n_newton=br.n_newton,
             n_rejected=n_rejected,
             p_scale=ps,
+            first_index=i0 + skip,
             **arrays,
         )
 
-    # ---- 1. initial correction ------------------------------------------- #
-    init_opts = dataclasses.replace(opt.newton, max_iter=max(opt.newton.max_iter, _INITIAL_MAX_ITER))
-    res0 = br.solve_fixed_p(x_init, p_start, init_opts)
-    ps = float(opt.p_scale) if opt.p_scale is not None else abs(p_end - p_start)
-    if not res0.success:
-        xs_arr = np.ones(n) if opt.x_scale is None else np.broadcast_to(np.asarray(opt.x_scale, float), (n,)).copy()
-        return build(5, f"Newton at p={p_start:g}: {res0.message}")
-    x_start = np.array(res0.x)
+    # ---- 1. initial correction (or the state of a resumed run) ------------ #
+    if start is None:
+        init_opts = dataclasses.replace(opt.newton, max_iter=max(opt.newton.max_iter, _INITIAL_MAX_ITER))
+        res0 = br.solve_fixed_p(x_init, p_start, init_opts)
+        ps = float(opt.p_scale) if opt.p_scale is not None else abs(p_end - p_start)
+        if not res0.success:
+            xs_arr = np.ones(n) if opt.x_scale is None else np.broadcast_to(np.asarray(opt.x_scale, float), (n,)).copy()
+            return build(5, f"Newton at p={p_start:g}: {res0.message}")
+        x_start = np.array(res0.x)
 
-    # ---- scaling ----------------------------------------------------------- #
-    if opt.x_scale is None:
-        rms = float(np.sqrt(np.mean(x_start**2)))
-        xs_arr = np.full(n, rms if rms > 0 and np.isfinite(rms) else 1.0)
+        # ---- scaling ------------------------------------------------------- #
+        if opt.x_scale is None:
+            rms = float(np.sqrt(np.mean(x_start**2)))
+            xs_arr = np.full(n, rms if rms > 0 and np.isfinite(rms) else 1.0)
+        else:
+            xs_arr = np.broadcast_to(np.asarray(opt.x_scale, dtype=float), (n,)).copy()
     else:
-        xs_arr = np.broadcast_to(np.asarray(opt.x_scale, dtype=float), (n,)).copy()
+        xs_arr = np.array(start.x_scale)
+        ps = start.p_scale
+        br.n_newton = start.n_newton
+        n_rejected = start.n_rejected
+    xs_arr.flags.writeable = False  # shared by the result and every ContinuationState
     br.w = np.concatenate([1.0 / (n * xs_arr**2), [1.0 / ps**2]])
+    last_sign = 0.0  # sign of dp/ds at the last point where it was non-zero (fold detection)
 
-    def emit(q: _Pt, is_fold: bool) -> bool:
-        """Append an accepted point; return False if the callback asks to stop."""
+    def emit(q: _Pt, is_fold: bool, next_step: float | None) -> bool:
+        """Append an accepted point; return False if the callback asks to stop.
+
+        ``next_step``: the step the run takes from ``q``, or ``None`` if the
+        run does not continue from ``q`` (inserted fold point, end point).
+        """
         pts.append(q)
-        idx = len(pts) - 1
+        idx = i0 + len(pts) - 1
         if is_fold:
             folds.append(idx)
         if idx % _LOG_EVERY == 0:
@@ -742,28 +896,42 @@ def continuation(
         if opt.callback is not None:
             xv = q.y[:n].copy()
             xv.flags.writeable = False
-            cp = ContinuationPoint(x=xv, p=float(q.y[n]), tangent=q.t, nit=q.nit,
-                                   residual_norm=q.rnorm, step=q.step, is_fold=is_fold, index=idx)
+            state = None
+            if next_step is not None:
+                state = ContinuationState(
+                    x=xv, p=float(q.y[n]), tangent=q.t, step=next_step, index=idx, folds=tuple(folds),
+                    dp_sign=last_sign, x_scale=xs_arr, p_scale=ps, n_newton=br.n_newton, n_rejected=n_rejected,
+                )
+            cp = ContinuationPoint(x=xv, p=float(q.y[n]), tangent=q.t, nit=q.nit, residual_norm=q.rnorm,
+                                   step=q.step, is_fold=is_fold, index=idx, state=state)
             if opt.callback(cp) is False:
                 return False
         return True
 
-    # ---- 2. initial tangent ------------------------------------------------ #
-    e_p = np.zeros(n + 1)
-    e_p[n] = 1.0
-    y0 = np.append(x_start, p_start)
-    t0 = br.tangent_at(x_start, p_start, e_p)
-    first = _Pt(y=y0, t=t0 if t0 is not None else np.full(n + 1, np.nan), nit=res0.nit,
-                rnorm=res0.residual_norm, step=0.0)
-    if t0 is None:
-        pts.append(first)
-        return build(6, f"r_x singular at the start point p={p_start:g} (start exactly at a fold?)")
-    if np.sign(t0[n]) != opt.direction * span_sign:
-        t0 = -t0
-        t0.flags.writeable = False
-        first.t = t0
-    if not emit(first, False):
-        return build(3)
+    # ---- 2. initial tangent (or the start point of a resumed run) --------- #
+    if start is None:
+        e_p = np.zeros(n + 1)
+        e_p[n] = 1.0
+        y0 = np.append(x_start, p_start)
+        t0 = br.tangent_at(x_start, p_start, e_p)
+        first = _Pt(y=y0, t=t0 if t0 is not None else np.full(n + 1, np.nan), nit=res0.nit,
+                    rnorm=res0.residual_norm, step=0.0)
+        if t0 is None:
+            pts.append(first)
+            return build(6, f"r_x singular at the start point p={p_start:g} (start exactly at a fold?)")
+        if np.sign(t0[n]) != opt.direction * span_sign:
+            t0 = -t0
+            t0.flags.writeable = False
+            first.t = t0
+        ds = float(opt.step)
+        last_sign = float(np.sign(t0[n]))
+        if not emit(first, False, ds):
+            return build(3)
+    else:
+        pts.append(_Pt(y=np.append(start.x, start.p), t=start.tangent, nit=0, rnorm=math.nan, step=0.0))
+        folds.extend(start.folds)
+        ds = min(max(start.step, opt.min_step), opt.max_step)
+        last_sign = start.dp_sign
 
     # ---- helpers for the main loop ---------------------------------------- #
     def crossed(p: float) -> float | None:
@@ -806,9 +974,9 @@ def continuation(
             # record the point nearest to the fold (smaller |dp/ds|)
             if abs(q.t[n]) >= abs(a.t[n]):
                 fold = False
-                if not (folds and folds[-1] == len(pts) - 1):
-                    folds.append(len(pts) - 1)
-        emit(q, fold)
+                if not (folds and folds[-1] == i0 + len(pts) - 1):
+                    folds.append(i0 + len(pts) - 1)
+        emit(q, fold, None)
         return build(0 if bound == p_end else 1)
 
     def locate_fold(a: _Pt, ds: float, b: _Pt) -> _Pt | None:
@@ -847,14 +1015,12 @@ def continuation(
         return best
 
     # ---- 3. main loop ----------------------------------------------------- #
-    ds = float(opt.step)
     just_rejected = False
-    last_sign = float(np.sign(t0[n]))
     prev_geo: tuple[float, float] | None = None  # (angle, distance) of the last geometric rejection
 
     while True:
-        if len(pts) >= opt.max_points:
-            return build(2, f"{len(pts)} points, last p={pts[-1].y[n]:g}")
+        if i0 + len(pts) >= opt.max_points:
+            return build(2, f"{i0 + len(pts)} points, last p={pts[-1].y[n]:g}")
         a = pts[-1]
 
         def reject(reason: str) -> bool:
@@ -931,7 +1097,7 @@ def continuation(
         is_fold_b = False
         if sign_b != 0 and last_sign != 0 and sign_b != last_sign:
             located = None
-            if opt.locate_folds and len(pts) + 2 <= opt.max_points:
+            if opt.locate_folds and i0 + len(pts) + 2 <= opt.max_points:
                 located = locate_fold(a, ds, b)
             if located is not None and crossed(located.y[n]) is not None:
                 # the branch left the span between a and b (excursion through the
@@ -946,20 +1112,18 @@ def continuation(
                 continue
             if located is not None:
                 logger.info("continuation: fold located at p=%.8g", located.y[n])
-                if not emit(located, True):
+                if not emit(located, True, None):
                     return build(3)
-            elif abs(t_b[n]) <= abs(a.t[n]) or (folds and folds[-1] == len(pts) - 1):
+            elif abs(t_b[n]) <= abs(a.t[n]) or (folds and folds[-1] == i0 + len(pts) - 1):
                 is_fold_b = True
             else:
-                folds.append(len(pts) - 1)
+                folds.append(i0 + len(pts) - 1)
             if located is None:
                 logger.info("continuation: fold detected near p=%.8g", (b if is_fold_b else a).y[n])
         if sign_b != 0:
             last_sign = sign_b
-        if not emit(b, is_fold_b):
-            return build(3)
 
-        # ---- step control ------------------------------------------------- #
+        # ---- step control (before emitting b: its state carries the next step)
         nit = res.nit
         if nit < opt.target_iterations:
             factor = min(opt.max_growth, opt.target_iterations / max(nit, 1))
@@ -971,3 +1135,5 @@ def continuation(
             factor = min(factor, 1.0)
         just_rejected = False
         ds = min(max(ds * factor, opt.min_step), opt.max_step)
+        if not emit(b, is_fold_b, ds):
+            return build(3)
