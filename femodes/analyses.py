@@ -2,13 +2,22 @@
 
 The one module that sees both the problems (``femodes.hbm``) and the generic solvers
 (``femodes.solvers``).
+
+Long runs: ``checkpoint=path`` writes every converged point to a journal ``<path>.points/`` as it
+is found (one small file per point, written atomically, see :class:`~femodes.results.Checkpoint`)
+and the finished branch to ``path``; ``resume=True`` continues a killed run from its last saved
+point (``continuation(start=...)``), so that the final branch holds every point exactly once and
+equals the branch of an uninterrupted run.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import logging
 import math
+import os
 import time
 from typing import Any, Callable
 
@@ -20,11 +29,12 @@ from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .hbm.system import default_contact_parameter
 from .laws import PenaltyContact, UnilateralContact
 from .model import StructuralModel
-from .results import Branch, ContactInfo
+from .results import Branch, Checkpoint, ContactInfo, load_branch
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
+from .solvers.continuation import ContinuationResult, ContinuationState
 
 __all__ = ["frequency_response", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
-           "branch_from_continuation"]
+           "branch_from_continuation", "model_fingerprint"]
 
 log = logging.getLogger(__name__)
 
@@ -73,15 +83,196 @@ def branch_from_continuation(problem, result, *, kind: str, model: StructuralMod
     )
 
 
-def _run(problem, span, x0, options: ContinuationOptions, label: str, progress: bool):
-    """Continuation with the progress callback chained in front of the user's; warns on failure."""
+def _run(problem, span, x0, options: ContinuationOptions, label: str, progress: bool, *,
+         start: ContinuationState | None = None, journal: Callable | None = None):
+    """Continuation with the journal writer and the progress callback chained in front of the
+    user's callback; warns on failure."""
     cb = _progress_callback(options.callback, span, label, progress)
+    if journal is not None:
+        after = cb
+
+        def cb(point):
+            journal(point)  # saved before the user's callback can stop the run
+            return after(point) if after is not None else None
+
     if cb is not None:
         options = dataclasses.replace(options, callback=cb)
-    res = continuation(problem, span, x0=x0, options=options)
+    res = continuation(problem, span, x0=x0, options=options, start=start)
     if not res.success:
         log.warning("%s: %s", label, res.message)
     return res
+
+
+# ------------------------------------------------------------------------------------------------
+# checkpoints: what a run is (to refuse resuming a different one) and what a point stores
+# ------------------------------------------------------------------------------------------------
+def _digest(*parts: bytes) -> str:
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(len(part).to_bytes(8, "little"))
+        h.update(part)
+    return h.hexdigest()[:20]
+
+
+def _matrix_bytes(A) -> list[bytes]:
+    A = sp.csr_matrix(A, dtype=float, copy=True)
+    A.sum_duplicates()
+    A.sort_indices()
+    return [np.asarray(A.shape, dtype=np.int64).tobytes(), A.indptr.astype(np.int64).tobytes(),
+            A.indices.astype(np.int64).tobytes(), A.data.tobytes()]
+
+
+def _declarations(items) -> bytes:
+    """Canonical bytes of attached laws (type, DOF and parameters; ``at`` is the DOF)."""
+    out = []
+    for a in items:
+        law = a.item
+        params = {f.name: repr(getattr(law, f.name)) for f in dataclasses.fields(law) if f.name != "at"} \
+            if dataclasses.is_dataclass(law) else {"repr": repr(law)}
+        out.append([type(law).__name__, int(a.dof), params])
+    return json.dumps(out, sort_keys=True).encode()
+
+
+def model_fingerprint(model: StructuralModel) -> dict:
+    """Short hashes of what defines a model's equations: matrices, forcing, contacts, nonlinearities.
+
+    Stored in checkpoints (and their final branch files) so that resuming with another model is
+    refused with a message saying which part differs.
+    """
+    forces = model.force_vectors()
+    force_bytes = [np.int64(k).tobytes() + np.asarray(forces[k], dtype=complex).tobytes() for k in sorted(forces)]
+    return {
+        "n_dofs": int(model.n_dofs),
+        "matrices": _digest(*_matrix_bytes(model.M), *_matrix_bytes(model.K), *_matrix_bytes(model.C)),
+        "forcing": _digest(*force_bytes),
+        "contacts": _digest(_declarations(model.contacts)),
+        "nonlinearities": _digest(_declarations(model.nonlinearities)),
+    }
+
+
+def _differences(saved: Any, current: Any, prefix: str = "") -> list[str]:
+    if isinstance(saved, dict) and isinstance(current, dict):
+        out = []
+        for key in sorted(set(saved) | set(current), key=str):
+            out += _differences(saved.get(key, "<absent>"), current.get(key, "<absent>"), f"{prefix}{key}.")
+        return out
+    if saved != current:
+        return [f"{prefix[:-1]}: {saved!r} in the checkpoint, {current!r} in this call"]
+    return []
+
+
+def _check_same_run(saved: dict, current: dict, where, label: str) -> None:
+    diff = _differences(saved, current)
+    if diff:
+        raise ValueError(f"{label}: checkpoint {str(where)!r} was written by a different run ({'; '.join(diff)}); "
+                         "resume it with the same arguments, or use another checkpoint file")
+
+
+#: Members of every point file; resumable points (ContinuationPoint.state not None) add _STATE_KEYS.
+_POINT_KEYS = ("x", "p", "nit", "residual_norm", "step", "is_fold")
+_STATE_KEYS = ("tangent", "next_step", "folds", "dp_sign", "p_scale", "n_newton", "n_rejected")
+
+
+def _point_record(point) -> dict:
+    """What the journal stores per point: the unknowns, and the continuation state to resume from."""
+    rec = {"x": point.x, "p": point.p, "nit": point.nit, "residual_norm": point.residual_norm,
+           "step": point.step, "is_fold": point.is_fold}
+    st = point.state
+    if st is not None:
+        rec.update(tangent=st.tangent, next_step=st.step, folds=np.asarray(st.folds, dtype=np.int64),
+                   dp_sign=st.dp_sign, p_scale=st.p_scale, n_newton=st.n_newton, n_rejected=st.n_rejected)
+        if st.index == 0:
+            rec["x_scale"] = st.x_scale  # the scales are fixed for a run: stored once
+    return rec
+
+
+def _state_from_records(records: list[dict], ck: Checkpoint) -> ContinuationState:
+    k = len(records) - 1
+    r = records[k]
+    try:
+        if "x_scale" not in records[0]:
+            raise ValueError("missing x_scale")
+        return ContinuationState(
+            x=r["x"], p=float(r["p"]), tangent=r["tangent"], step=float(r["next_step"]), index=k,
+            folds=tuple(int(i) for i in np.atleast_1d(r["folds"])), dp_sign=float(r["dp_sign"]),
+            x_scale=records[0]["x_scale"], p_scale=float(r["p_scale"]), n_newton=int(r["n_newton"]),
+            n_rejected=int(r["n_rejected"]),
+        )
+    except (ValueError, TypeError) as exc:
+        bad = ck.point_path(0 if "x_scale" in str(exc) else k)
+        raise ValueError(f"checkpoint: point file {str(bad)!r} is damaged ({exc})") from exc
+
+
+def _merge(records: list[dict], res: ContinuationResult) -> ContinuationResult:
+    """Saved points followed by the points of the resumed run (whose folds cover the whole branch)."""
+    def stack(key, new, dtype):
+        old = np.array([r[key] for r in records], dtype=dtype)
+        return np.concatenate([old.reshape((len(records),) + new.shape[1:]), new])
+
+    return dataclasses.replace(
+        res, x=stack("x", res.x, float), p=stack("p", res.p, float), nit=stack("nit", res.nit, int),
+        residual_norm=stack("residual_norm", res.residual_norm, float), step=stack("step", res.step, float),
+        converged=np.ones(len(records) + res.p.size, dtype=bool), tangents=None, first_index=0,
+    )
+
+
+def _checkpointed(problem, span, options: ContinuationOptions, label: str, progress: bool, *, x0: Callable,
+                  wrap: Callable, model: StructuralModel, checkpoint, resume: bool, description: dict) -> Branch:
+    """Run (or resume, or return the finished) continuation of ``problem``; ``wrap(res, meta)`` -> Branch."""
+    if not isinstance(resume, bool):
+        raise TypeError(f"{label}: resume must be True or False, got {resume!r}")
+    if checkpoint is None:
+        if resume:
+            raise ValueError(f"{label}: resume=True needs checkpoint=<file> (the checkpoint of the run to resume)")
+        return wrap(_run(problem, span, x0(), options, label, progress), {})
+    if not isinstance(checkpoint, (str, os.PathLike)):
+        raise TypeError(f"{label}: checkpoint must be a file name (.npz or .h5), got {checkpoint!r}")
+    ck = Checkpoint(checkpoint)
+    desc = json.loads(json.dumps(description))  # as it reads back from the JSON header
+    if not resume and (ck.path.exists() or ck.journal.exists()):
+        raise FileExistsError(f"{label}: checkpoint {str(ck.path)!r} (or its journal {ck.journal.name}/) exists; "
+                              "pass resume=True to continue (or return) that run, or delete it to start over")
+    if ck.path.exists():
+        branch = load_branch(ck.path)
+        saved = branch.meta.get("checkpoint")
+        if not isinstance(saved, dict):
+            raise ValueError(f"{label}: {str(ck.path)!r} is a branch file but not the result of a checkpointed run; "
+                             "choose another checkpoint file name")
+        _check_same_run(saved, desc, ck.path, label)
+        branch.attach(model)
+        ck.remove_journal()  # left over if the run was killed while removing it
+        log.info("%s: the checkpointed run %s is finished; returning its branch", label, ck.path)
+        return branch
+
+    records: list[dict] = []
+    if ck.journal.exists() and (ck.header_path.exists() or ck.indices()):
+        _check_same_run(ck.read_header(), desc, ck.journal, label)
+        records = ck.read_points(required=_POINT_KEYS)
+        n = problem.size
+        for i, r in enumerate(records):
+            if r["x"].shape != (n,) or (("tangent" in r) and r["tangent"].shape != (n + 1,)):
+                raise ValueError(f"checkpoint: point file {str(ck.point_path(i))!r} holds {r['x'].shape} unknowns, "
+                                 f"this problem has {n}")
+        # continue from the last point the run can continue from exactly; the points after it
+        # (an inserted fold point, an end point) are computed again
+        while records and "tangent" not in records[-1]:
+            records.pop()
+        ck.discard(after=len(records) - 1)
+    else:
+        ck.create(desc)
+
+    def journal(point):
+        ck.write_point(point.index, _point_record(point))
+
+    if records:
+        start = _state_from_records(records, ck)
+        log.info("%s: resuming %s from point %d at p = %.8g", label, ck.journal, start.index, start.p)
+        res = _merge(records, _run(problem, span, None, options, label, progress, start=start, journal=journal))
+    else:
+        res = _run(problem, span, x0(), options, label, progress, journal=journal)
+    branch = wrap(res, {"checkpoint": desc})
+    ck.finish(branch)
+    return branch
 
 
 def _progress_callback(user_cb: Callable | None, span, label: str, progress: bool):
@@ -112,6 +303,8 @@ def frequency_response(
     x0: np.ndarray | None = None,
     exact_contact: bool = True,
     progress: bool = False,
+    checkpoint: str | os.PathLike | None = None,
+    resume: bool = False,
 ) -> Branch:
     """Forced frequency-response curve by HBM and pseudo-arclength continuation.
 
@@ -133,6 +326,19 @@ def frequency_response(
         Exact Galerkin projection of the contact law (default; ``False`` only for comparison).
     progress : bool
         Log progress at INFO level (the command line shows it as a progress bar).
+    checkpoint : str or PathLike, optional
+        Final branch file (``.npz`` or ``.h5``).  Every converged point is written to the journal
+        ``<checkpoint>.points/`` as it is found (one file per point, atomic, O(1) I/O per point);
+        at the end the branch is saved to ``checkpoint`` and the journal removed.  Without
+        ``resume`` an existing checkpoint is an error (``FileExistsError``), never overwritten.
+    resume : bool
+        With ``checkpoint``: continue the run from its last saved point, or return its branch if
+        it finished (any status); start a new run if there is no checkpoint yet.  The final
+        branch holds every point exactly once and equals that of an uninterrupted run.  The
+        checkpoint must come from the same model, harmonics, span and ``exact_contact``
+        (``ValueError`` saying what differs otherwise); ``options`` may change (step bounds,
+        ``max_points``...), the arclength scaling of the run is kept.  Damaged files or another
+        format version give a ``ValueError`` naming the file.
 
     Returns
     -------
@@ -144,10 +350,22 @@ def frequency_response(
     span = _span(omega, "omega", "frequency_response", positive=True)
     problem = ForcedResponseProblem(model, h, exact_contact=exact_contact)
     opts = options or ContinuationOptions(step=0.05, max_step=0.5, newton=NewtonOptions(atol=1e-9, max_iter=20))
-    if x0 is None:
-        x0 = _starting_point(problem, span[0], opts.newton)
-    res = _run(problem, span, x0, opts, "frequency_response", progress)
-    return branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span)})
+
+    def start() -> np.ndarray:
+        return _starting_point(problem, span[0], opts.newton) if x0 is None else x0
+
+    def wrap(res, meta) -> Branch:
+        return branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span), **meta})
+
+    description = {"analysis": "frequency_response", "omega": list(span), "harmonics": _harmonics_key(h),
+                   "exact_contact": bool(exact_contact), "n_unknowns": int(problem.size),
+                   "model": model_fingerprint(model)} if checkpoint is not None else {}
+    return _checkpointed(problem, span, opts, "frequency_response", progress, x0=start, wrap=wrap, model=model,
+                         checkpoint=checkpoint, resume=resume, description=description)
+
+
+def _harmonics_key(h: Harmonics) -> list:
+    return [int(h.n_harmonics), None if h.n_time is None else int(h.n_time), int(h.subharmonic)]
 
 
 class _ForcingHomotopy:
@@ -220,6 +438,8 @@ def nonlinear_mode(
     options: ContinuationOptions | None = None,
     exact_contact: bool = True,
     progress: bool = False,
+    checkpoint: str | os.PathLike | None = None,
+    resume: bool = False,
 ) -> Branch:
     """Nonlinear mode (frequency-energy backbone) by the extended periodic motion concept.
 
@@ -227,6 +447,10 @@ def nonlinear_mode(
     continue linear mode ``mode`` from energy ``energy[0]`` to ``energy[1]`` (continuation in
     ``log10`` of the period-averaged mechanical energy). ``branch.xi`` holds the artificial
     damping, which is ~0 for a conservative model (a check of the solution).
+
+    ``checkpoint`` and ``resume`` write every converged point to a journal as it is found and
+    continue a killed run from it, as for :func:`frequency_response`; the checkpoint must come
+    from the same model, ``mode``, energy span, harmonics and ``exact_contact``.
 
     Returns
     -------
@@ -241,9 +465,16 @@ def nonlinear_mode(
     problem.set_reference_energy(math.sqrt(e0 * e1))
     x0 = problem.linear_guess(e0)
     options = nonlinear_mode_options(problem, x0, options)
-    res = _run(problem, span, x0, options, "nonlinear_mode", progress)
-    return branch_from_continuation(problem, res, kind="nonlinear mode", model=model,
-                                    meta={"mode": int(mode), "energy_span": [e0, e1]})
+
+    def wrap(res, meta) -> Branch:
+        return branch_from_continuation(problem, res, kind="nonlinear mode", model=model,
+                                        meta={"mode": int(mode), "energy_span": [e0, e1], **meta})
+
+    description = {"analysis": "nonlinear_mode", "mode": int(mode), "energy": [e0, e1], "harmonics": _harmonics_key(h),
+                   "exact_contact": bool(exact_contact), "n_unknowns": int(problem.size),
+                   "model": model_fingerprint(model)} if checkpoint is not None else {}
+    return _checkpointed(problem, span, options, "nonlinear_mode", progress, x0=lambda: x0, wrap=wrap, model=model,
+                         checkpoint=checkpoint, resume=resume, description=description)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -3,6 +3,11 @@
 A solution is stored by its Fourier coefficients; everything else (time histories, contact forces,
 penetration, tension, energy) is evaluated from them. Branches save to ``.npz`` (always
 available, never pickled) or ``.h5`` (with h5py) and load back with :func:`load_branch`.
+
+Long runs write a :class:`Checkpoint`: a journal directory ``<path>.points/`` holding a header
+and one small file per converged point, each written to a temporary name and renamed into place
+(``os.replace`` is atomic on POSIX and Windows), so that a killed run leaves only complete files;
+the finished branch is then saved to ``path`` and the journal removed.
 """
 
 from __future__ import annotations
@@ -21,9 +26,13 @@ import numpy as np
 
 from .hbm.harmonics import Harmonics
 
-__all__ = ["PeriodicSolution", "Branch", "load_branch", "FORMAT_VERSION"]
+__all__ = ["PeriodicSolution", "Branch", "load_branch", "FORMAT_VERSION", "Checkpoint", "CHECKPOINT_VERSION"]
 
 FORMAT_VERSION = 1
+#: Version of the checkpoint journal layout (header and point files), checked on resume.
+CHECKPOINT_VERSION = 1
+_CHECKPOINT_FORMAT = "femodes.Checkpoint"
+_BRANCH_SUFFIXES = (".npz", ".h5", ".hdf5")
 
 
 @dataclass(frozen=True, eq=False)
@@ -277,7 +286,7 @@ class Branch:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         suffix = path.suffix.lower()
-        if suffix not in (".npz", ".h5", ".hdf5"):
+        if suffix not in _BRANCH_SUFFIXES:
             raise ValueError(f"Branch.save: use a .npz or .h5 file name, got {str(path)!r}")
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
         os.close(fd)
@@ -338,3 +347,156 @@ def load_branch(path, model=None) -> Branch:
     if model is not None:
         br.attach(model)
     return br
+
+
+# ------------------------------------------------------------------------------------------------
+# checkpoint journal of a running continuation
+# ------------------------------------------------------------------------------------------------
+_READ_ERRORS = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error, json.JSONDecodeError)
+
+
+class Checkpoint:
+    """Journal of a running continuation next to its final branch file ``path``.
+
+    Layout: ``<path>.points/header.json`` (format, version and a JSON description of the run)
+    and ``<path>.points/<index:08d>.npz``, one uncompressed ``.npz`` of named arrays per point.
+    Every file is written to a unique ``*.tmp`` name, flushed to disk (``fsync``) and renamed
+    into place, so a crash at any moment leaves complete files (plus perhaps a ``*.tmp`` that
+    readers ignore); writing a point costs O(size of the point), independently of the branch
+    length. The zip CRC-32 of every member is checked on reading, so a damaged point is
+    reported, not read. When the run ends, :meth:`finish` saves the branch to ``path``
+    (:meth:`Branch.save`, itself atomic) and only then removes the journal.
+
+    The journal knows nothing about continuation: the caller decides what a point holds
+    (:mod:`femodes.analyses` stores the unknowns and the continuation state).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Final branch file, ``.npz`` or ``.h5``/``.hdf5``.
+    """
+
+    def __init__(self, path):
+        path = Path(path)
+        if path.suffix.lower() not in _BRANCH_SUFFIXES:
+            raise ValueError(f"checkpoint: use a .npz or .h5 file name for the final branch, got {str(path)!r}")
+        self.path = path
+        self.journal = path.with_name(path.name + ".points")
+
+    def __repr__(self) -> str:
+        return f"Checkpoint({str(self.path)!r})"
+
+    @property
+    def header_path(self) -> Path:
+        return self.journal / "header.json"
+
+    def point_path(self, index: int) -> Path:
+        return self.journal / f"{int(index):08d}.npz"
+
+    # -- writing -----------------------------------------------------------------------------
+    def _write_atomic(self, target: Path, write) -> None:
+        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=target.name + ".", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                write(f)
+                f.flush()
+                os.fsync(f.fileno())  # the data is on disk before the rename makes it visible
+            os.replace(tmp, target)
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+
+    def create(self, description: dict) -> None:
+        """Start a new journal (the directory must not hold one) with ``description`` in its header."""
+        self.journal.mkdir(parents=True, exist_ok=True)
+        if self.header_path.exists():
+            raise FileExistsError(f"checkpoint: {str(self.journal)!r} already holds a journal")
+        header = {"format": _CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "run": description}
+        text = json.dumps(header, indent=1).encode()
+        self._write_atomic(self.header_path, lambda f: f.write(text))
+
+    def write_point(self, index: int, arrays: dict) -> Path:
+        """Write point ``index`` (a dict of arrays; an ``index`` member is added) atomically."""
+        target = self.point_path(index)
+        arrays = dict(arrays, index=np.asarray(int(index)))
+        self._write_atomic(target, lambda f: np.savez(f, **arrays))
+        return target
+
+    # -- reading -----------------------------------------------------------------------------
+    def read_header(self) -> dict:
+        """The description of the run; ``ValueError`` for a damaged header or another version."""
+        where = str(self.header_path)
+        try:
+            header = json.loads(self.header_path.read_text())
+        except FileNotFoundError:
+            raise ValueError(f"checkpoint: {str(self.journal)!r} has no header.json (not a femodes checkpoint, "
+                             "or damaged); delete the directory to start over") from None
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"checkpoint: header {where!r} is damaged ({exc})") from exc
+        if not isinstance(header, dict) or header.get("format") != _CHECKPOINT_FORMAT or not isinstance(
+                header.get("run"), dict):
+            raise ValueError(f"checkpoint: {where!r} is not a femodes checkpoint header")
+        if header.get("version") != CHECKPOINT_VERSION:
+            raise ValueError(f"checkpoint: {where!r} has checkpoint version {header.get('version')!r}, this femodes "
+                             f"reads version {CHECKPOINT_VERSION}; finish that run with the femodes that started it, "
+                             "or delete the directory to start over")
+        return header["run"]
+
+    def indices(self) -> list[int]:
+        """Indices of the complete point files, ascending (``*.tmp`` leftovers are ignored)."""
+        out = []
+        for p in self.journal.glob("*.npz"):
+            if p.stem.isdigit():
+                out.append(int(p.stem))
+        return sorted(out)
+
+    def read_point(self, index: int, required: tuple = ()) -> dict:
+        """Arrays of point ``index``; ``ValueError`` naming the file if it is damaged or incomplete."""
+        path = self.point_path(index)
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                arrays = {k: f[k] for k in f.files}  # reads every member: the zip CRC-32 is checked
+        except _READ_ERRORS as exc:
+            raise ValueError(f"checkpoint: point file {str(path)!r} is damaged ({type(exc).__name__}: {exc}); "
+                             "delete it and the points after it to resume from the point before") from exc
+        missing = [k for k in ("index", *required) if k not in arrays]
+        if missing:
+            raise ValueError(f"checkpoint: point file {str(path)!r} is damaged (missing {', '.join(missing)})")
+        if arrays["index"].shape != () or int(arrays["index"]) != index:
+            raise ValueError(f"checkpoint: point file {str(path)!r} is damaged (it holds index {arrays['index']!r})")
+        return arrays
+
+    def read_points(self, required: tuple = ()) -> list[dict]:
+        """All points ``0..k``; a missing index is reported as a ``ValueError``."""
+        idx = self.indices()
+        if idx != list(range(len(idx))):
+            gap = next(i for i, j in enumerate(idx) if i != j)
+            raise ValueError(f"checkpoint: {str(self.journal)!r} lacks point file {self.point_path(gap).name} "
+                             f"(has {len(idx)} point files up to index {idx[-1]}); it is damaged")
+        return [self.read_point(i, required) for i in idx]
+
+    # -- maintenance -------------------------------------------------------------------------
+    def discard(self, after: int) -> None:
+        """Remove the point files with index > ``after`` and leftover temporary files."""
+        for i in self.indices():
+            if i > after:
+                self.point_path(i).unlink()
+        for p in self.journal.glob("*.tmp"):
+            p.unlink(missing_ok=True)
+
+    def finish(self, branch: "Branch") -> Path:
+        """Save the final branch to ``path`` (atomically), then remove the journal."""
+        branch.save(self.path)
+        self.remove_journal()
+        return self.path
+
+    def remove_journal(self) -> None:
+        if not self.journal.is_dir():
+            return
+        for p in self.journal.iterdir():
+            if p.name == "header.json" or p.suffix in (".npz", ".tmp"):
+                p.unlink(missing_ok=True)
+        try:
+            self.journal.rmdir()
+        except OSError:  # a file we did not write: leave the directory to the user
+            pass
