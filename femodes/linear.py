@@ -175,6 +175,12 @@ def linear_modes(model: StructuralModel, n: int = 6, *, sigma: float | None = No
     if not isinstance(model, StructuralModel):
         raise TypeError(f"linear_modes: model must be a StructuralModel, got {type(model).__name__}")
     n = _check_n(n, model.n_dofs, "linear_modes")
+    if sigma is not None:
+        if isinstance(sigma, (bool, np.bool_)) or not isinstance(sigma, (int, float, np.integer, np.floating)):
+            raise TypeError(f"linear_modes: sigma must be a real shift (in w^2 units) or None, got {sigma!r}")
+        if not np.isfinite(sigma):
+            raise ValueError(f"linear_modes: sigma must be finite, got {sigma!r}")
+        sigma = float(sigma)
     lam, vec = generalized_eigh(model.K, model.M, n, "linear_modes", sigma=sigma)
     # Rigid-body eigenvalues come out as +-(round-off); negative ones are clipped to zero, small
     # positive ones are kept (a scale-based threshold would also zero genuine low frequencies of

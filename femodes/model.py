@@ -70,6 +70,11 @@ class DofMap:
         """DOF map of a discrete system: DOFs addressed by index or by ``dof_names``."""
         names: tuple = ()
         if dof_names is not None:
+            # a str is iterable: "ab" would silently name two DOFs "a" and "b"
+            if isinstance(dof_names, (str, bytes)) or not isinstance(dof_names, (Sequence, np.ndarray)):
+                raise TypeError(
+                    f"dof_names must be a list of {n_dofs} strings (one per DOF), got {dof_names!r}"
+                )
             names = tuple(dof_names)
             if len(names) != n_dofs or not all(isinstance(n, str) and n for n in names):
                 raise ValueError(
@@ -89,8 +94,10 @@ class DofMap:
             )
         return self.components.index(name)
 
-    def index(self, at: Location) -> int:
+    def index(self, at: Location, owner: str = "DofMap") -> int:
         """Model DOF index of ``at`` (a name, a (name, component) pair or an index).
+
+        ``owner`` (e.g. ``"with_contact"``) starts the error messages.
 
         Raises
         ------
@@ -98,10 +105,14 @@ class DofMap:
             Unknown name or component, index out of range, or a constrained / not-kept DOF
             (the message names it and the support that constrains it).
         """
-        at = check_location(at, "DofMap")
+        at = check_location(at, owner)
+        where = f"{owner}: at={at!r}"
         if isinstance(at, int):
             if at >= self.n_dofs:
-                raise ValueError(f"DOF index at={at} is out of range for a model with {self.n_dofs} DOFs")
+                raise ValueError(
+                    f"{where}: DOF index at={at} is out of range for a model with {self.n_dofs} DOFs "
+                    f"(use 0 <= at < {self.n_dofs})"
+                )
             return at
         if isinstance(at, str) and at in self.dof_names:
             return self.dof_names.index(at)
@@ -111,21 +122,24 @@ class DofMap:
             loc, comp = at
         if loc not in self.locations:
             known = sorted(self.locations) + list(self.dof_names)
-            raise ValueError(f"unknown location {loc!r}; known names are {known}")
+            raise ValueError(f"{where}: unknown location {loc!r}; known names are {known}")
         if comp is None:
-            raise ValueError(f"location {loc!r} has no components in this model")
+            raise ValueError(f"{where}: location {loc!r} has no components in this model")
         node = self.locations[loc]
-        c = self._component(comp)
+        try:
+            c = self._component(comp)
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
         dof = int(self.node_dof[node, c])
         if dof == -1:
             support = self.constrained_by.get((node, c), "a support")
             raise ValueError(
-                f"DOF ({loc!r}, {self.components[c]!r}) is constrained by {support!r}; "
+                f"{where}: DOF ({loc!r}, {self.components[c]!r}) is constrained by {support!r}; "
                 "contact, forcing and springs cannot act on a constrained DOF"
             )
         if dof == -2:
             raise ValueError(
-                f"DOF ({loc!r}, {self.components[c]!r}) is not kept in this reduced model; "
+                f"{where}: DOF ({loc!r}, {self.components[c]!r}) is not kept in this reduced model; "
                 f"pass keep=[({loc!r}, {self.components[c]!r})] to craig_bampton"
             )
         return dof
@@ -197,12 +211,24 @@ def as_sparse_matrix(A: Any, name: str, n: int | None = None) -> sp.csr_matrix:
     if A is None:
         raise ValueError(f"{name} is required")
     if sp.issparse(A):
+        if np.iscomplexobj(A.data):
+            raise TypeError(f"{name} must be a real matrix, got complex entries (dtype {A.dtype})")
         A = sp.csr_matrix(A, dtype=float)
     else:
         try:
-            arr = np.asarray(A, dtype=float)
+            raw = np.asarray(A)
+            if raw.dtype.kind == "c":
+                raise TypeError(f"{name} must be a real matrix, got complex entries (dtype {raw.dtype})")
+            if raw.dtype.kind in "SUV" or isinstance(A, (str, bytes)):
+                raise TypeError(f"{name} must be a square real matrix, got entries of type {raw.dtype} ({A!r:.60})")
+            arr = np.asarray(raw, dtype=float)
         except (TypeError, ValueError) as exc:
-            raise TypeError(f"{name} must be a square real matrix (numpy array or scipy.sparse), got {type(A).__name__}") from exc
+            if isinstance(exc, TypeError) and str(exc).startswith(name):
+                raise
+            raise TypeError(
+                f"{name} must be a square real matrix (numpy array or scipy.sparse) with rows of equal length, "
+                f"got {type(A).__name__} ({exc})"
+            ) from exc
         if arr.ndim == 0 and n == 1:
             arr = arr.reshape(1, 1)
         if arr.ndim != 2:
@@ -317,9 +343,9 @@ class StructuralModel:
     def is_reduced(self) -> bool:
         return False
 
-    def dof(self, at: Location) -> int:
-        """Model DOF index of a location (see :class:`DofMap`)."""
-        return self.dofmap.index(at)
+    def dof(self, at: Location, owner: str = "dof") -> int:
+        """Model DOF index of a location (see :class:`DofMap`); ``owner`` starts error messages."""
+        return self.dofmap.index(at, owner)
 
     def force_vectors(self) -> dict:
         """Complex force amplitude per harmonic: ``{k: F_k}`` with ``f(t) = Re sum F_k e^{i k w t}``."""
@@ -342,16 +368,39 @@ class StructuralModel:
         (dense, so limited to models of at most 5000 DOFs: reduce first for larger ones).
         """
         for name, v in (("alpha", alpha), ("beta", beta)):
-            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v) or v < 0:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise TypeError(f"with_damping: {name} must be a finite non-negative number, got {v!r}")
+            if not math.isfinite(v) or v < 0:
                 raise ValueError(f"with_damping: {name} must be a finite non-negative number, got {v!r}")
         if modal is None:
-            C = alpha * self.M + beta * self.K
+            with np.errstate(over="ignore"):
+                C = alpha * self.M + beta * self.K
+            if C.nnz and not np.all(np.isfinite(C.data)):
+                raise ValueError(
+                    f"with_damping: alpha={alpha!r}, beta={beta!r} overflow: C = alpha M + beta K has infinite entries"
+                )
             return self._replace(C=C, damping_info=f"Rayleigh alpha={alpha:g}, beta={beta:g}")
         if alpha or beta:
             raise ValueError("with_damping: give either Rayleigh coefficients (alpha, beta) or modal=, not both")
-        zeta = np.atleast_1d(np.asarray(modal, dtype=float))
-        if zeta.ndim != 1 or not np.all(np.isfinite(zeta)) or np.any(zeta < 0):
+        if isinstance(modal, (str, bytes, bool, np.bool_)):
+            raise TypeError(f"with_damping: modal must be a damping ratio or a list of ratios, got {modal!r}")
+        try:
+            zeta = np.atleast_1d(np.asarray(modal, dtype=float))
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"with_damping: modal must be a damping ratio or a list of ratios, got {modal!r}") from exc
+        if zeta.ndim != 1 or zeta.size == 0 or not np.all(np.isfinite(zeta)) or np.any(zeta < 0):
             raise ValueError(f"with_damping: modal must be non-negative finite damping ratios, got {modal!r}")
+        if n_modes is not None:
+            if isinstance(n_modes, (bool, np.bool_)) or not isinstance(n_modes, (int, np.integer)):
+                raise TypeError(f"with_damping: n_modes must be an integer >= 1 or None, got {n_modes!r}")
+            if not 1 <= n_modes <= self.n_dofs:
+                raise ValueError(
+                    f"with_damping: n_modes must be in [1, {self.n_dofs}] (the model has {self.n_dofs} DOFs), got {n_modes!r}"
+                )
+        if zeta.size > self.n_dofs:
+            raise ValueError(
+                f"with_damping: modal gives {zeta.size} damping ratios but the model has only {self.n_dofs} modes"
+            )
         if self.n_dofs > 5000:
             raise ValueError(
                 f"with_damping: modal damping builds a dense C; this model has {self.n_dofs} DOFs (> 5000). "
@@ -359,11 +408,11 @@ class StructuralModel:
             )
         from .linear import linear_modes
 
-        nm = n_modes if n_modes is not None else (zeta.size if zeta.size > 1 else min(self.n_dofs, 20))
+        nm = int(n_modes) if n_modes is not None else (zeta.size if zeta.size > 1 else min(self.n_dofs, 20))
         if zeta.size == 1:
             zeta = np.full(nm, zeta[0])
         if zeta.size != nm:
-            raise ValueError(f"with_damping: {zeta.size} modal ratios given but n_modes={nm}")
+            raise ValueError(f"with_damping: modal gives {zeta.size} ratios but n_modes={nm}")
         modes = linear_modes(self, n=nm)
         MPhi = self.M @ modes.shapes
         C = MPhi @ np.diag(2.0 * zeta * modes.omega) @ MPhi.T
@@ -378,7 +427,7 @@ class StructuralModel:
         for f in forces:
             if not isinstance(f, HarmonicForce):
                 raise TypeError(f"with_forcing: expected HarmonicForce, got {type(f).__name__}")
-            new.append(Attached(f, self.dof(f.at)))
+            new.append(Attached(f, self.dof(f.at, "with_forcing: HarmonicForce")))
         return self._replace(forces=tuple(new))
 
     def without_forcing(self) -> "StructuralModel":
@@ -409,9 +458,12 @@ class StructuralModel:
                     f"with_contact: expected UnilateralContact or PenaltyContact, got {type(law).__name__}"
                     + (" (use with_nonlinearity for smooth springs)" if isinstance(law, SMOOTH_LAWS) else "")
                 )
-            dof = self.dof(law.at)
+            dof = self.dof(law.at, f"with_contact: {type(law).__name__}")
             if dof in used:
-                raise ValueError(f"with_contact: DOF {self.dofmap.label(dof)!r} already has a contact law")
+                raise ValueError(
+                    f"with_contact: {type(law).__name__}(at={law.at!r}): DOF {self.dofmap.label(dof)!r} already has a "
+                    "contact law (one contact per DOF)"
+                )
             used.add(dof)
             new.append(Attached(law, dof))
         M = self.M
@@ -442,7 +494,7 @@ class StructuralModel:
                     f"with_nonlinearity: expected CubicSpring, got {type(law).__name__}"
                     + (" (use with_contact for contact laws)" if isinstance(law, CONTACT_LAWS) else "")
                 )
-            new.append(Attached(law, self.dof(law.at)))
+            new.append(Attached(law, self.dof(law.at, "with_nonlinearity: CubicSpring")))
         return self._replace(nonlinearities=tuple(new))
 
     # -- fields ---------------------------------------------------------------------------------

@@ -124,9 +124,16 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
     declared = [a.dof for a in model.contacts + model.forces + model.nonlinearities]
     extra = []
     if keep is not None:
-        if isinstance(keep, (str, int, tuple)) and not (isinstance(keep, tuple) and keep and isinstance(keep[0], (tuple, int))):
+        if isinstance(keep, (str, int, np.integer, tuple)) and not (
+            isinstance(keep, tuple) and keep and isinstance(keep[0], (tuple, int, np.integer))
+        ):
             keep = [keep]
-        extra = [model.dof(k) for k in keep]
+        if isinstance(keep, (bool, np.bool_)) or not isinstance(keep, (list, tuple, np.ndarray)):
+            raise TypeError(
+                "craig_bampton: keep must be a location or a list of locations (names, (name, component) pairs "
+                f"or DOF indices), got {keep!r}"
+            )
+        extra = [model.dof(k, "craig_bampton: keep") for k in keep]
     kept = np.array(sorted(set(declared) | set(extra)), dtype=int)
     if kept.size == 0:
         raise ValueError(

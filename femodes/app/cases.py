@@ -216,6 +216,17 @@ def _check_type(v: Any, kind: str) -> bool:
     return True
 
 
+def _all_finite(v: Any) -> bool:
+    """False if ``v`` is (or contains, in lists and inline tables) a nan or inf float."""
+    if isinstance(v, float):
+        return math.isfinite(v)
+    if isinstance(v, list):
+        return all(_all_finite(x) for x in v)
+    if isinstance(v, dict):
+        return all(_all_finite(x) for x in v.values())
+    return True
+
+
 _TYPE_TEXT = {
     "number": "a number", "integer": "an integer", "string": "a string", "boolean": "true or false",
     "table": "a table like { name = value }", "pair": "a pair [start, end] of numbers",
@@ -267,6 +278,9 @@ def parse_case(text: str, path: str | Path = "case.toml") -> Case:
                 kind = SCHEMA[tname][key]
                 if not _check_type(v, kind):
                     raise case.error(tname, key, f"{key} must be {_TYPE_TEXT[kind]}, got {_fmt(v)}", i)
+                if not _all_finite(v):
+                    # TOML has nan and inf; no key of the schema accepts them
+                    raise case.error(tname, key, f"{key} must be finite (no nan or inf), got {_fmt(v)}", i)
     _check_values(case)
     return case
 
@@ -348,9 +362,25 @@ def _check_values(case: Case) -> None:
     if typ == "frequency_response" and not case.tables("force"):
         raise CaseError("frequency_response needs at least one [[force]] table", case.name,
                         key_line(case.text, "analysis", "type"))
+    for k in need:
+        a, b = an[k]
+        if not (a > 0 and b > 0 and a != b):
+            raise case.error("analysis", k, f"{k} must be two distinct positive numbers [start, end], got {an[k]}")
+    if typ == "nonlinear_mode" and "max_points" in an:
+        raise case.error("analysis", "max_points", "max_points is only supported for frequency_response")
     for k in ("harmonics", "mode", "max_points"):
         if k in an and an[k] < (2 if k == "max_points" else 1):
             raise case.error("analysis", k, f"{k} must be >= {2 if k == 'max_points' else 1}, got {an[k]}")
+    if "harmonics" in an:
+        from ..hbm.harmonics import Harmonics
+
+        try:
+            Harmonics(an["harmonics"])
+        except (TypeError, ValueError) as exc:
+            raise case.error("analysis", "harmonics", f"harmonics = {an['harmonics']}: {exc}") from None
+    outs = d.get("outputs", {})
+    if isinstance(outs.get("branch"), str) and not outs["branch"].strip():
+        raise case.error("outputs", "branch", "branch must be a file name like \"branch.npz\" (or false), got ''")
     red = d.get("reduction", {})
     if "craig_bampton" in red and red["craig_bampton"] < 0:
         raise case.error("reduction", "craig_bampton", f"craig_bampton must be >= 0, got {red['craig_bampton']}")
@@ -379,10 +409,13 @@ def _location(v: Any):
 
 
 def _guess_key(message: str, keys) -> str | None:
+    """The key named first in ``message`` ("K has shape ... (M is 1x1)" is about K, not M)."""
+    best, pos = None, None
     for k in keys:
-        if re.search(rf"\b{re.escape(k)}\b", message):
-            return k
-    return None
+        m = re.search(rf"\b{re.escape(k)}\b", message)
+        if m and (pos is None or m.start() < pos):
+            best, pos = k, m.start()
+    return best
 
 
 class _Api:
@@ -420,10 +453,15 @@ def build_model(case: Case):
     m = d["model"]
     kind = m["kind"]
     if kind == "discrete":
-        C = m.get("C")
-        M, K = (np.atleast_2d(np.asarray(m[k], dtype=float)) for k in ("M", "K"))
-        args = dict(M=M, K=K, C=None if C is None else np.atleast_2d(np.asarray(C, dtype=float)),
-                    dof_names=m.get("dof_names"))
+
+        def matrix(k):
+            v = m[k]
+            if isinstance(v, list) and (not v or len({len(r) for r in v}) != 1 or len(v) != len(v[0])):
+                raise case.error("model", k, f"{k} must be a square matrix like [[1.0, 0.0], [0.0, 1.0]] (n rows of "
+                                 f"n numbers), got {_fmt(v)}")
+            return np.atleast_2d(np.asarray(v, dtype=float))
+
+        args = dict(M=matrix("M"), K=matrix("K"), C=matrix("C") if "C" in m else None, dof_names=m.get("dof_names"))
         model = api("model", ["M", "K", "C", "dof_names"], fm.StructuralModel, **args)
     else:
         mesh_t = d["mesh"]
@@ -475,7 +513,7 @@ def build_model(case: Case):
     if "reduction" in d and "craig_bampton" in d["reduction"]:
         model = api("reduction", "craig_bampton", fm.craig_bampton, model, d["reduction"]["craig_bampton"])
     if "outputs" in d and "response_dof" in d["outputs"]:
-        api("outputs", "response_dof", model.dof, _location(d["outputs"]["response_dof"]))
+        api("outputs", "response_dof", model.dof, _location(d["outputs"]["response_dof"]), "response_dof")
     return model, full
 
 
@@ -511,8 +549,6 @@ def run_case(case: Case, out: Path, *, progress: bool = False) -> CaseResult:
     if "max_points" in an:
         opts["max_points"] = an["max_points"]
     if an["type"] == "nonlinear_mode":
-        if opts:
-            raise case.error("analysis", "max_points", "max_points is only supported for frequency_response")
         branch = api("analysis", ["mode", "energy", "harmonics"], fm.nonlinear_mode, model, an.get("mode", 1),
                      energy=tuple(an["energy"]), harmonics=H, progress=progress)
     else:

@@ -17,7 +17,7 @@ import skfem
 from ..model import DofMap, StructuralModel
 from .material import Material, Section
 
-__all__ = ["FEInfo", "element_property", "build_fe_model"]
+__all__ = ["FEInfo", "element_property", "build_fe_model", "checked_basis"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,6 +58,33 @@ def _check_mesh(mesh: Any, owner: str) -> None:
         raise TypeError(
             f"{owner}: mesh must be a skfem.MeshLine (use femodes.line_mesh or femodes.load_mesh), got {type(mesh).__name__}"
         )
+
+
+def checked_basis(mesh: Any, element: Any, owner: str) -> Any:
+    """``skfem.Basis(mesh, element)``, with a degenerate mesh reported as a ValueError naming it."""
+    with np.errstate(all="ignore"):
+        try:
+            return skfem.Basis(mesh, element)
+        except np.linalg.LinAlgError as exc:
+            h = np.diff(np.asarray(mesh.p[0]))
+            raise ValueError(
+                f"{owner}: mesh element lengths {h.min():.3g}..{h.max():.3g} are too small for the "
+                f"{type(element).__name__} basis (its element map is numerically singular); rescale the length unit"
+            ) from exc
+
+
+def _check_assembled(owner: str, mesh: Any, M: sp.spmatrix, K: sp.spmatrix) -> None:
+    """Overflow/underflow of the assembled matrices, reported against the inputs that cause it."""
+    h = np.diff(np.asarray(mesh.p[0]))
+    scales = (
+        f"element lengths {h.min():.3g}..{h.max():.3g}; rescale the units of the mesh length, the material "
+        "(E, rho) and the section (area, inertia)"
+    )
+    for name, A in (("mass", M), ("stiffness", K)):
+        if not np.all(np.isfinite(A.data)):
+            raise ValueError(f"{owner}: the {name} matrix has non-finite entries (overflow) for the given material, section and {scales}")
+    if not M.nnz or not np.any(M.diagonal() > 0):
+        raise ValueError(f"{owner}: the mass matrix is zero (underflow of rho * area) for the given material, section and {scales}")
 
 
 def element_property(mesh: Any, value: Any, cls: type, owner: str, arg: str) -> np.ndarray:
@@ -132,6 +159,7 @@ def build_fe_model(
     n_full = basis.N
     M = sp.csr_matrix(M)
     K = sp.csr_matrix(K)
+    _check_assembled(owner, mesh, M, K)
     added = {"point_masses": ([], []), "springs": ([], [])}
     locations = {name: _location_node(mesh, name, owner, "mesh boundaries") for name in (mesh.boundaries or {})}
 
@@ -179,6 +207,9 @@ def build_fe_model(
 
     fixed_full = np.array(sorted(nodal[c, node] for node, c in constrained), dtype=int)
     free = np.setdiff1d(np.arange(n_full), fixed_full)
+    if free.size == 0:
+        given = ", ".join(f"{arg}={list(names)!r}" for arg, names, _ in constraints if names)
+        raise ValueError(f"{owner}: the supports ({given}) fix every DOF of the mesh; leave at least one DOF free")
     free_of_full = np.full(n_full, -1, dtype=int)
     free_of_full[free] = np.arange(free.size)
     node_dof = free_of_full[nodal.T]  # (n_nodes, n_components)

@@ -9,7 +9,7 @@ import skfem
 from skfem.helpers import dot, grad
 
 from ..model import StructuralModel
-from .assembly import _check_mesh, _names, build_fe_model, element_property, quad_field
+from .assembly import _check_mesh, _names, build_fe_model, checked_basis, element_property, quad_field
 from .material import Material, Section
 
 __all__ = ["bar"]
@@ -61,7 +61,7 @@ def bar(
         DOF component ``"u"`` (alias ``"u_x"``) at each node; P2 interior DOFs are unnamed.
     """
     _check_mesh(mesh, "bar")
-    if isinstance(order, bool) or order not in (1, 2):
+    if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer)) or order not in (1, 2):
         raise ValueError(f"bar: order must be 1 or 2, got {order!r}")
     if not isinstance(lumped, bool):
         raise TypeError(f"bar: lumped must be True or False, got {lumped!r}")
@@ -70,11 +70,12 @@ def bar(
     mats = element_property(mesh, material, Material, "bar", "material")
     secs = element_property(mesh, section, Section, "bar", "section")
     element = skfem.ElementLineP1() if order == 1 else skfem.ElementLineP2()
-    basis = skfem.Basis(mesh, element)
-    EA = quad_field(basis, [m.E * s.area for m, s in zip(mats, secs)])
-    rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])
-    K = _stiffness.assemble(basis, EA=EA)
-    M = _mass.assemble(basis, rhoA=rhoA)
+    basis = checked_basis(mesh, element, "bar")
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
+        EA = quad_field(basis, [m.E * s.area for m, s in zip(mats, secs)])
+        rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])
+        K = _stiffness.assemble(basis, EA=EA)
+        M = _mass.assemble(basis, rhoA=rhoA)
     if lumped:
         import scipy.sparse as sp
 

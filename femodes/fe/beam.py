@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
+import numpy as np
 import skfem
 from skfem.helpers import dd, ddot, dot, grad
 
 from ..model import StructuralModel
-from .assembly import _check_mesh, _names, build_fe_model, element_property, quad_field
+from .assembly import _check_mesh, _names, build_fe_model, checked_basis, element_property, quad_field
 from .material import Material, Section
 
 __all__ = ["beam"]
@@ -65,12 +66,13 @@ def beam(
     for s in set(secs):
         if s.inertia is None:
             raise ValueError("beam: section.inertia is required for beams, got Section(inertia=None)")
-    basis = skfem.Basis(mesh, skfem.ElementLineHermite())
-    EI = quad_field(basis, [m.E * s.inertia for m, s in zip(mats, secs)])
-    rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])
-    rhoI = quad_field(basis, [m.rho * s.inertia if s.rotary_inertia else 0.0 for m, s in zip(mats, secs)])
-    K = _stiffness.assemble(basis, EI=EI)
-    M = _mass.assemble(basis, rhoA=rhoA, rhoI=rhoI)
+    basis = checked_basis(mesh, skfem.ElementLineHermite(), "beam")
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
+        EI = quad_field(basis, [m.E * s.inertia for m, s in zip(mats, secs)])
+        rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])
+        rhoI = quad_field(basis, [m.rho * s.inertia if s.rotary_inertia else 0.0 for m, s in zip(mats, secs)])
+        K = _stiffness.assemble(basis, EI=EI)
+        M = _mass.assemble(basis, rhoA=rhoA, rhoI=rhoI)
     return build_fe_model(
         owner="beam",
         kind="beam",

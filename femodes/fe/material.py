@@ -53,5 +53,7 @@ class Section:
     def __post_init__(self):
         object.__setattr__(self, "area", _pos("Section", "area", self.area))
         object.__setattr__(self, "inertia", _pos("Section", "inertia", self.inertia, allow_none=True))
+        if isinstance(self.rotary_inertia, np.bool_):
+            object.__setattr__(self, "rotary_inertia", bool(self.rotary_inertia))
         if not isinstance(self.rotary_inertia, bool):
             raise TypeError(f"Section: rotary_inertia must be True or False, got {self.rotary_inertia!r}")

@@ -68,7 +68,7 @@ import skfem
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["line_mesh", "load_mesh", "POINT_RTOL", "COLLINEAR_RTOL"]
+__all__ = ["line_mesh", "load_mesh", "POINT_RTOL", "COLLINEAR_RTOL", "MAX_ELEMENTS"]
 
 #: Relative tolerance (times the mesh length) for a named point of
 #: :func:`line_mesh` to coincide with a vertex.
@@ -78,6 +78,10 @@ POINT_RTOL = 1e-9
 #: vertex from the straight line in :func:`load_mesh`.  Generous enough for
 #: single-precision coordinates of tilted lines.
 COLLINEAR_RTOL = 1e-6
+
+#: Largest number of elements :func:`line_mesh` builds (1e8 elements: 0.8 GB of
+#: coordinates alone, several GB once assembled).
+MAX_ELEMENTS = 10**8
 
 # relative length below which an element read from a file counts as zero
 _ZERO_LENGTH_RTOL = 1e-12
@@ -226,6 +230,12 @@ def line_mesh(
     n = int(n_elements)
     if n < 1:
         raise ValueError(f"{f}: argument 'n_elements' must be >= 1, got {n_elements!r}")
+    if n > MAX_ELEMENTS:
+        # fail here, naming the argument, rather than in a numpy allocation
+        raise ValueError(
+            f"{f}: argument 'n_elements' must be <= {MAX_ELEMENTS:.0e} (a line mesh of that size "
+            f"does not fit in memory with its FE matrices), got {n_elements!r}"
+        )
     if not math.isfinite(start + length):
         raise ValueError(
             f"{f}: arguments 'start' + 'length' overflow: start={start!r}, length={length!r}"

@@ -85,6 +85,11 @@ _DEGREE_TOL = 1e-16
 
 _MAX_POLISH = 100
 
+# Largest dense operator (entries) a Harmonics may need: the (N, 2H+1) synthesis and analysis
+# matrices are built on first use, so a huge H or N must fail here, naming the argument, and
+# not later in numpy ("array is too big") or as a MemoryError. 2**28 float64 = 2 GiB.
+_MAX_DENSE = 2**28
+
 
 def _check_int(name, value, minimum):
     """Return ``int(value)`` after checking it is an integer ``>= minimum``."""
@@ -155,6 +160,11 @@ class Harmonics:
         H = _check_int("n_harmonics", n_harmonics, 0)
         nu = _check_int("subharmonic", subharmonic, 1)
         if n_time is None:
+            if (2 * H + 1) * (4 * H + 1) > _MAX_DENSE:  # before next_fast_len, which fails for huge H
+                raise ValueError(
+                    f"n_harmonics={H} needs dense ({4 * H + 1} x {2 * H + 1}) Fourier operators of more than "
+                    f"{8 * _MAX_DENSE / 2**30:.0f} GiB; reduce n_harmonics"
+                )
             N = int(next_fast_len(4 * H + 1, real=True))
         else:
             N = _check_int("n_time", n_time, 1)
@@ -162,6 +172,12 @@ class Harmonics:
                 raise ValueError(
                     f"n_time must be >= 2*n_harmonics + 1 = {2 * H + 1}, got {n_time!r}"
                 )
+        if (2 * H + 1) * N > _MAX_DENSE:
+            raise ValueError(
+                f"n_harmonics={H} with n_time={N} needs dense ({N} x {2 * H + 1}) Fourier operators of "
+                f"{8 * (2 * H + 1) * N / 2**30:.3g} GiB (more than {8 * _MAX_DENSE / 2**30:.0f} GiB); "
+                "reduce n_harmonics or n_time"
+            )
         object.__setattr__(self, "_H", H)
         object.__setattr__(self, "_N", N)
         object.__setattr__(self, "_nu", nu)

@@ -227,7 +227,7 @@ class NewtonOptions:
 
     def __post_init__(self) -> None:
         _check_positive("atol", self.atol)
-        if isinstance(self.rtol, bool) or not isinstance(self.rtol, (int, float)) or not math.isfinite(self.rtol) or self.rtol < 0:
+        if not _is_real_number(self.rtol) or not math.isfinite(self.rtol) or self.rtol < 0:
             raise ValueError(f"rtol must be a finite number >= 0, got {self.rtol!r}")
         _check_positive("xtol", self.xtol)
         _check_int("max_iter", self.max_iter, 1)

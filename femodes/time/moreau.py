@@ -68,6 +68,22 @@ _DENSE_LIMIT = 200
 #: Newton tolerance of the local (contact + nonlinear DOFs) problem, relative.
 _LOCAL_TOL = 1e-13
 _LOCAL_MAXIT = 60
+#: Bounds that turn an absurd dt (or t_end) into an error naming it instead of an overflow or a
+#: failed allocation deep inside numpy: steps per run, and stored floats per history array
+#: (2**28 float64 = 2 GiB).
+_MAX_STEPS = 10**9
+_MAX_STORED = 2**28
+
+
+def _n_steps(span: float, dt: float, what: str, owner: str) -> int:
+    """``ceil(span / dt)`` steps, or a ValueError naming ``dt`` when that is not a sane count."""
+    ratio = span / dt
+    if not math.isfinite(ratio) or ratio > _MAX_STEPS:
+        raise ValueError(
+            f"{owner}: dt={dt!r} gives {ratio:.3g} steps over {what} = {span:.6g} (more than {_MAX_STEPS:.0e}); "
+            "increase dt"
+        )
+    return max(1, int(math.ceil(ratio - 1e-9)))
 
 
 # --------------------------------------------------------------------------------------------
@@ -743,6 +759,8 @@ def simulate(
     t_end = _real(t_end, "t_end")
     if t_end <= t0:
         raise ValueError(f"simulate: t_end must be > t0 = {t0}, got {t_end!r}")
+    if not math.isfinite(t_end - t0):
+        raise ValueError(f"simulate: t_end - t0 overflows: t_end={t_end!r}, t0={t0!r}")
     if dt >= t_end - t0:
         raise ValueError(f"simulate: dt must be smaller than t_end - t0 = {t_end - t0:g}, got {dt!r}")
     if isinstance(store_every, bool) or not isinstance(store_every, (int, np.integer)) or store_every < 1:
@@ -751,7 +769,13 @@ def simulate(
     n = model.n_dofs
     q = _state(u0, "u0", n)
     v = _state(v0, "v0", n)
-    n_steps = int(math.ceil((t_end - t0) / dt - 1e-9))
+    n_steps = _n_steps(t_end - t0, dt, "t_end - t0", "simulate")
+    n_stored = (n_steps // int(store_every) + 2) * max(n, 1)
+    if n_stored > _MAX_STORED:
+        raise ValueError(
+            f"simulate: storing {n_steps} steps of {n} DOFs every store_every={store_every} step(s) needs "
+            f"{n_stored:.3g} values per array (more than {_MAX_STORED:.3g}); increase store_every or dt"
+        )
     h = (t_end - t0) / n_steps
     st = _Stepper(model, h, th, e, w)
     for j, a in enumerate(model.contacts):
@@ -821,7 +845,12 @@ def steady_state(
     n = model.n_dofs
     q = _state(u0, "u0", n)
     v = _state(v0, "v0", n)
-    N = int(math.ceil(T / dt - 1e-9))
+    N = _n_steps(T, dt, "the forcing period 2 pi / omega", "steady_state")
+    if N * max(n, 1) > _MAX_STORED:
+        raise ValueError(
+            f"steady_state: dt={dt!r} gives {N} steps per period for {n} DOFs (more than {_MAX_STORED:.3g} stored "
+            "values); increase dt"
+        )
     h = T / N
     st = _Stepper(model, h, th, e, w)
     starts = [np.concatenate([q, v])]
