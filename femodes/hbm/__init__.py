@@ -1,7 +1,8 @@
-"""Discretise layer: harmonic balance (Fourier layout, AFT, dynamic stiffness, HBM problems)."""
+"""Discretise layer: harmonic balance (Fourier layout, AFT, dynamic stiffness, HBM problems, block solver)."""
 
 from .harmonics import Harmonics
+from .linsolve import HarmonicBlockJacobian
 from .problems import ForcedResponseProblem, NonlinearModeProblem
 from .system import HBMSystem, default_contact_parameter
 
-__all__ = ["Harmonics", "ForcedResponseProblem", "NonlinearModeProblem", "HBMSystem", "default_contact_parameter"]
+__all__ = ["Harmonics", "HarmonicBlockJacobian", "ForcedResponseProblem", "NonlinearModeProblem", "HBMSystem", "default_contact_parameter"]

@@ -34,10 +34,14 @@ class ForcedResponseProblem:
     harmonics : Harmonics
     exact_contact : bool, keyword-only
         Exact positive-part projection (default) or sampled (comparison only).
+    structured : bool, keyword-only
+        Jacobian kept in harmonic blocks and solved by per-harmonic factorisations + a Schur
+        complement on the nonlinear DOFs (default); ``False``: one assembled sparse matrix.
     """
 
-    def __init__(self, model: StructuralModel, harmonics: Harmonics, *, exact_contact: bool = True):
-        self.system = HBMSystem(model, harmonics, exact_contact=exact_contact)
+    def __init__(self, model: StructuralModel, harmonics: Harmonics, *, exact_contact: bool = True,
+                 structured: bool = True):
+        self.system = HBMSystem(model, harmonics, exact_contact=exact_contact, structured=structured)
         if not model.forces:
             raise ValueError(
                 "ForcedResponseProblem: the model has no forcing; add model.with_forcing(HarmonicForce(at=..., amplitude=...))"
@@ -62,14 +66,7 @@ class ForcedResponseProblem:
     def linear_guess(self, omega: float) -> np.ndarray:
         """Linear response (contacts and nonlinear springs ignored) as a starting point."""
         s = self.system
-        F = s.force()
-        S = s.linear_operator(omega).tocsc()
-        import scipy.sparse.linalg as spla
-
-        try:
-            q = spla.splu(S).solve(F)
-        except RuntimeError:
-            q = spla.lsqr(S, F)[0]
+        q = s.solve_linear(s.force(), omega)
         return s.join(q.reshape(s.h.n_coef, s.n))
 
     def unpack(self, x: np.ndarray, p: float) -> dict:
@@ -90,7 +87,8 @@ class NonlinearModeProblem:
         Linear mode (1-based) the branch starts from; its shape defines the phase condition.
     """
 
-    def __init__(self, model: StructuralModel, harmonics: Harmonics, mode: int = 1, *, exact_contact: bool = True):
+    def __init__(self, model: StructuralModel, harmonics: Harmonics, mode: int = 1, *, exact_contact: bool = True,
+                 structured: bool = True):
         from ..linear import linear_modes
 
         if isinstance(mode, bool) or not isinstance(mode, (int, np.integer)) or mode < 1:
@@ -99,7 +97,7 @@ class NonlinearModeProblem:
             raise ValueError(f"NonlinearModeProblem: mode={mode} but the model has {model.n_dofs} DOFs")
         if harmonics.n_harmonics < 1:
             raise ValueError("NonlinearModeProblem: needs n_harmonics >= 1")
-        self.system = HBMSystem(model.without_forcing(), harmonics, exact_contact=exact_contact)
+        self.system = HBMSystem(model.without_forcing(), harmonics, exact_contact=exact_contact, structured=structured)
         modes = linear_modes(model, n=int(mode))
         self.mode = int(mode)
         self.omega0 = float(modes.omega[-1])
@@ -140,9 +138,12 @@ class NonlinearModeProblem:
         r[s.size] = gphase @ y
         r[s.size + 1] = math.log10(E) - p
         gE = dE / (E * ln10)
-        cols = sp.csr_matrix(np.column_stack([dr_dw, dr_dxi]))
-        bottom = sp.csr_matrix(np.vstack([np.append(gphase, [0.0, 0.0]), np.append(gE, [dE_dw / (E * ln10), 0.0])]))
-        J = sp.vstack([sp.hstack([J0, cols]), bottom], format="csr")
+        cols = np.column_stack([dr_dw, dr_dxi])
+        rows = np.vstack([np.append(gphase, [0.0, 0.0]), np.append(gE, [dE_dw / (E * ln10), 0.0])])
+        if sp.issparse(J0):
+            J = sp.vstack([sp.hstack([J0, sp.csr_matrix(cols)]), sp.csr_matrix(rows)], format="csr")
+        else:  # structured Jacobian: the two extra unknowns become its border
+            J = J0.bordered(cols, rows[:, : s.size], rows[:, s.size:])
         dr_dp = np.zeros(self.size)
         dr_dp[-1] = -1.0
         return r, J, dr_dp

@@ -71,6 +71,7 @@ from .newton import (
     _check_positive,
     _is_real_number,
     _show,
+    _is_operator,
     default_linear_solver,
     semismooth_newton,
 )
@@ -478,6 +479,9 @@ class ContinuationResult:
 def bordered_matrix(J: Any, rp: np.ndarray, c: np.ndarray) -> Any:
     """``[[J, rp], [c^T]]`` as CSC if ``J`` is sparse, else dense (``c`` has length n + 1)."""
     n = J.shape[0]
+    if _is_operator(J):  # a structured Jacobian borders itself
+        return J.bordered(np.asarray(rp, dtype=float).reshape(n, 1), np.asarray(c[:n], dtype=float).reshape(1, n),
+                          np.asarray(c[n:], dtype=float).reshape(1, 1))
     if sp.issparse(J):
         # assembled from COO triplets: same result as sp.bmat, ~3x cheaper
         Jc = sp.coo_matrix(J)
@@ -520,6 +524,8 @@ def bordered_solver(M: Any, h: np.ndarray) -> np.ndarray:
     of ``A`` is small, which fills the factors (measured: 50x more
     non-zeros, ``O(n^2)`` memory for large ``n``).
     """
+    if _is_operator(M):  # structured: its own factorisation keeps the border in its dense part
+        return M.factorize().solve(np.asarray(h, dtype=float))
     if not sp.issparse(M):
         return np.linalg.solve(np.asarray(M, dtype=float), h)
     M = sp.csc_matrix(M)
@@ -587,8 +593,8 @@ class _Branch:
         r = np.asarray(r, dtype=float)
         if r.shape != (n,):
             raise ValueError(f"problem.residual returned r of shape {r.shape}, expected ({n},)")
-        if sp.issparse(J):
-            if J.shape != (n, n):
+        if sp.issparse(J) or _is_operator(J):
+            if tuple(J.shape) != (n, n):
                 raise ValueError(f"problem.residual returned dr_dx of shape {J.shape}, expected ({n}, {n})")
         else:
             J = np.asarray(J, dtype=float)

@@ -109,7 +109,10 @@ def _tolerance(atol: float, rtol: float, J, x) -> float:
         return atol
     try:
         ax = np.abs(x)
-        ref = (abs(J) @ ax) if sp.issparse(J) else (np.abs(J) @ ax)
+        if _is_operator(J):
+            ref = J.abs_matvec(ax)
+        else:
+            ref = (abs(J) @ ax) if sp.issparse(J) else (np.abs(J) @ ax)
         ref = float(np.max(np.abs(ref))) if np.size(ref) else 0.0
     except Exception:  # pragma: no cover - advisory only
         return atol
@@ -297,9 +300,14 @@ def default_linear_solver(A: Any, b: np.ndarray) -> np.ndarray:
 
     Sparse ``A`` (any ``scipy.sparse`` format) is converted to CSC and factorised
     with :func:`scipy.sparse.linalg.splu` (SuperLU, COLAMD ordering); dense
-    ``A`` uses :func:`numpy.linalg.solve` (LAPACK ``gesv``).  Exactly singular
-    matrices raise ``RuntimeError`` (SuperLU) or ``numpy.linalg.LinAlgError``.
+    ``A`` uses :func:`numpy.linalg.solve` (LAPACK ``gesv``).  A structured
+    operator (an object with ``shape``, ``matvec`` and ``factorize()``, such as
+    the harmonic-block Jacobian of the HBM problems) solves itself with
+    ``A.factorize().solve(b)``.  Exactly singular matrices raise
+    ``RuntimeError`` (SuperLU) or ``numpy.linalg.LinAlgError``.
     """
+    if _is_operator(A):
+        return A.factorize().solve(b)
     if sp.issparse(A):
         A = sp.csc_matrix(A)
         if not np.issubdtype(A.dtype, np.inexact):
@@ -308,9 +316,14 @@ def default_linear_solver(A: Any, b: np.ndarray) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
+def _is_operator(J: Any) -> bool:
+    """A structured Jacobian that factorises itself (duck typing: no import of femodes here)."""
+    return callable(getattr(J, "factorize", None)) and callable(getattr(J, "matvec", None))
+
+
 def _prepare_jacobian(J: Any, n: int) -> Any:
     """Validate shape; return dense ndarray or sparse matrix unchanged otherwise."""
-    if sp.issparse(J):
+    if sp.issparse(J) or _is_operator(J):
         if J.shape != (n, n):
             raise ValueError(
                 f"fun returned a Jacobian of shape {J.shape}, expected ({n}, {n}) for x of shape ({n},)"
@@ -325,6 +338,8 @@ def _prepare_jacobian(J: Any, n: int) -> Any:
 
 
 def _jacobian_finite(J: Any) -> bool:
+    if _is_operator(J):
+        return bool(J.all_finite()) if callable(getattr(J, "all_finite", None)) else True
     if sp.issparse(J):
         data = J.data if J.format in ("csr", "csc", "coo", "bsr", "dia") else J.tocoo().data
         return bool(np.all(np.isfinite(data)))

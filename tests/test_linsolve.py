@@ -1,0 +1,261 @@
+"""Structured HBM solver (per-harmonic factorisations + Schur complement) against SuperLU.
+
+Criterion: the structured and the generic (SuperLU on the assembled matrix) solutions of the same
+Newton systems agree to round-off: normwise backward error <= 1e-13 (a few hundred ulps; the
+refinement stops at 64 eps) and forward difference <= 100 eps cond_1(J) relative (both are
+backward stable, so they can differ by that much and no more).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+import femodes as fm
+from femodes.hbm.linsolve import HarmonicBlockJacobian, _Generic
+from femodes.hbm.problems import ForcedResponseProblem, NonlinearModeProblem
+from femodes.solvers.continuation import bordered_matrix, bordered_solver
+
+
+def backward_error(J, x, b):
+    A = J.tocsr()
+    return float(np.max(np.abs(A @ x - b)) / (abs(A).sum(axis=1).max() * np.max(np.abs(x)) + np.max(np.abs(b))))
+
+
+def forward_tol(Jg):
+    """Forward error allowed by the conditioning: 100 eps cond_1(J) (1-norm estimate)."""
+    A = Jg.tocsc()
+    lu = spla.splu(A)
+    inv = spla.LinearOperator(A.shape, matvec=lu.solve, rmatvec=lambda v: lu.solve(v, trans="T"))
+    cond = spla.onenormest(A) * spla.onenormest(inv)
+    return 100 * np.finfo(float).eps * cond
+
+
+def bar_model(n_el=400, n_contacts=5, damping=True):
+    mesh = fm.line_mesh(length=1.0, n_elements=n_el, boundaries={"clamp": 0.0, "tip": 1.0})
+    model = fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
+    if damping:
+        model = model.with_damping(alpha=0.02, beta=1e-4)
+    n = model.n_dofs
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for d in np.linspace(n // 5, n - 1, n_contacts).astype(int):
+            model = model.with_contact(fm.UnilateralContact(at=int(d), gap=1e-3))
+    return model.with_forcing(fm.HarmonicForce(at="tip", amplitude=1.0))
+
+
+def beam_model():
+    mesh = fm.line_mesh(length=1.0, n_elements=60, boundaries={"clamp": 0.0, "mid": 0.5, "tip": 1.0})
+    model = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
+    return (model.with_damping(alpha=0.01, beta=1e-4)
+            .with_forcing(fm.HarmonicForce(at="tip", amplitude=0.01))
+            .with_contact(fm.UnilateralContact(at="tip", gap=1e-3))
+            .with_contact(fm.PenaltyContact(at="mid", gap=1e-3, stiffness=50.0))
+            .with_nonlinearity(fm.CubicSpring(at=("mid", "w"), k3=1e3)))
+
+
+def chain(n_dofs=2):
+    K = np.diag(np.full(n_dofs, 2.0)) - np.diag(np.ones(n_dofs - 1), 1) - np.diag(np.ones(n_dofs - 1), -1)
+    return (fm.StructuralModel(M=np.eye(n_dofs), K=K, C=0.05 * np.eye(n_dofs))
+            .with_forcing(fm.HarmonicForce(at=0, amplitude=1.0))
+            .with_contact(fm.UnilateralContact(at=n_dofs - 1, gap=0.5)))
+
+
+CASES = {
+    "bar": lambda: (bar_model(), fm.Harmonics(10)),
+    "bar-undamped": lambda: (bar_model(damping=False), fm.Harmonics(6)),
+    "beam-mixed-laws": lambda: (beam_model(), fm.Harmonics(5)),
+    "chain": lambda: (chain(5), fm.Harmonics(7)),
+    "one-dof": lambda: (chain(1) if False else fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]])
+                        .with_forcing(fm.HarmonicForce(at=0, amplitude=1.0))
+                        .with_contact(fm.UnilateralContact(at=0, gap=0.5)), fm.Harmonics(8)),
+    "subharmonic": lambda: (chain(4), fm.Harmonics(6, subharmonic=2)),
+}
+
+
+def state(pr, seed, amp):
+    rng = np.random.default_rng(seed)
+    x = amp * rng.standard_normal(pr.size)
+    return x
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_structured_solve_matches_superlu(name):
+    model, h = CASES[name]()
+    pr = ForcedResponseProblem(model, h)
+    pg = ForcedResponseProblem(model, h, structured=False)
+    x = state(pr, 1, 1e-3 if "bar" in name or "beam" in name else 0.5)
+    r, J, rp = pr.residual(x, 1.3)
+    rg, Jg, rpg = pg.residual(x, 1.3)
+    assert isinstance(J, HarmonicBlockJacobian)
+    np.testing.assert_array_equal(r, rg)
+    np.testing.assert_array_equal(rp, rpg)
+    assert abs(J.toarray() - Jg.toarray()).max() == 0.0
+    b = np.random.default_rng(2).standard_normal(pr.size)
+    xs = J.factorize().solve(b)
+    xg = spla.splu(Jg.tocsc()).solve(b)
+    assert backward_error(J, xs, b) < 1e-13
+    tol = forward_tol(Jg)
+    assert np.max(np.abs(xs - xg)) <= tol * np.max(np.abs(xg))
+    # matrix right-hand sides, and the matrix-vector product
+    B = np.random.default_rng(3).standard_normal((pr.size, 3))
+    XB = spla.splu(Jg.tocsc()).solve(B)
+    np.testing.assert_allclose(J.factorize().solve(B), XB, rtol=0, atol=tol * np.abs(XB).max())
+    np.testing.assert_allclose(J @ b, Jg @ b, rtol=1e-13, atol=1e-13 * np.abs(Jg @ b).max())
+
+
+@pytest.mark.parametrize("name", ["bar", "beam-mixed-laws", "chain"])
+def test_bordered_systems_match(name):
+    """Nonlinear-mode border (w, xi) plus the continuation's arclength border, at xi != 0."""
+    model, h = CASES[name]()
+    nn = NonlinearModeProblem(model, h)
+    x = nn.linear_guess(1e-4)
+    x[:-2] += 1e-4 * np.random.default_rng(4).standard_normal(nn.size - 2)
+    x[-1] = 0.03  # xi
+    r, J, rp = nn.residual(x, -4.0)
+    ng = NonlinearModeProblem(model, h, structured=False)
+    _, Jg, _ = ng.residual(x, -4.0)
+    assert abs(J.toarray() - Jg.toarray()).max() == 0.0
+    c = np.random.default_rng(5).standard_normal(nn.size + 1)
+    Jb = bordered_matrix(J, rp, c)
+    Jbg = bordered_matrix(Jg, rp, c)
+    assert Jb.shape == (nn.size + 1,) * 2 and abs(Jb.toarray() - Jbg.toarray()).max() == 0.0
+    b = np.random.default_rng(6).standard_normal(nn.size + 1)
+    xs = bordered_solver(Jb, b)
+    xg = spla.splu(Jbg.tocsc()).solve(b)
+    assert backward_error(Jb, xs, b) < 1e-13
+    assert np.max(np.abs(xs - xg)) <= forward_tol(Jbg) * np.max(np.abs(xg))
+
+
+def test_fold_border_is_solved_accurately():
+    """At a fold J (without border) is singular; the border lives in the dense Schur part."""
+    model = chain(3)
+    pr = ForcedResponseProblem(model, fm.Harmonics(5))
+    x = state(pr, 7, 0.3)
+    _, J, rp = pr.residual(x, 1.0)
+    # make the core exactly singular: duplicate a column direction through the border instead
+    A = J.toarray()
+    u, sv, vt = np.linalg.svd(A)
+    # border with the left/right null directions of the nearly-singular part -> well-posed
+    Jb = J.bordered(u[:, -1:], vt[-1:, :], np.zeros((1, 1)))
+    b = np.random.default_rng(8).standard_normal(pr.size + 1)
+    xs = Jb.factorize().solve(b)
+    assert backward_error(Jb, xs, b) < 1e-13
+
+
+def test_free_structure_is_held_by_its_contact():
+    """Free-free bar: K is singular, but the interior (contact DOF held) is not: structured path."""
+    mesh = fm.line_mesh(length=1.0, n_elements=20, boundaries={"left": 0.0, "tip": 1.0})
+    model = (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0))
+             .with_damping(alpha=0.05)
+             .with_forcing(fm.HarmonicForce(at="tip", amplitude=1.0))
+             .with_contact(fm.UnilateralContact(at="tip", gap=0.0, c=1.0)))
+    pr = ForcedResponseProblem(model, fm.Harmonics(3))
+    s = pr.system
+    P = np.zeros((s.h.n_coef, 1))
+    P[0] = 10.0  # contact closed all period: the contact holds the rigid-body motion
+    _, J, _ = pr.residual(s.join(np.zeros((s.h.n_coef, s.n)), P), 1.0)
+    fac = J.factorize()
+    assert not isinstance(fac, _Generic)
+    b = np.random.default_rng(9).standard_normal(pr.size)
+    assert backward_error(J, fac.solve(b), b) < 1e-13
+
+
+def test_interior_resonance_falls_back_to_superlu():
+    """k w exactly at the eigenfrequency of the structure with its contact DOF held (here
+    Z_00 = 4 - (1 * 2)^2 = 0): the interior block is singular, the whole Jacobian is not."""
+    model = (fm.StructuralModel(M=np.eye(2), K=[[4.0, -1.0], [-1.0, 1.0]])
+             .with_forcing(fm.HarmonicForce(at=0, amplitude=1.0))
+             .with_contact(fm.UnilateralContact(at=1, gap=0.1)))
+    pr = ForcedResponseProblem(model, fm.Harmonics(3))
+    _, J, _ = pr.residual(state(pr, 1, 0.3), 2.0)
+    fac = J.factorize()
+    assert isinstance(fac, _Generic)
+    b = np.random.default_rng(9).standard_normal(pr.size)
+    assert backward_error(J, fac.solve(b), b) < 1e-13
+
+
+def test_singular_jacobian_raises():
+    model, h = CASES["chain"]()
+    pr = ForcedResponseProblem(model, h)
+    _, J, _ = pr.residual(state(pr, 1, 0.5), 1.1)
+    Jb = J.bordered(np.zeros((pr.size, 1)), np.zeros((1, pr.size)), np.zeros((1, 1)))
+    with pytest.raises(RuntimeError):
+        Jb.factorize().solve(np.ones(pr.size + 1))
+
+
+def test_factorisations_are_reused_at_the_same_frequency():
+    model, h = CASES["bar"]()
+    pr = ForcedResponseProblem(model, h)
+    s = pr.system
+    F1 = s.linear_factors(1.3)
+    assert s.linear_factors(1.3) is F1
+    assert s.linear_factors(1.31) is not F1
+    # a Newton iteration at fixed w after another x: same factors object
+    _, J, _ = pr.residual(state(pr, 1, 1e-3), 1.31)
+    J.factorize()
+    F2 = s.linear_factors(1.31)
+    _, J, _ = pr.residual(state(pr, 2, 1e-3), 1.31)
+    J.factorize()
+    assert s.linear_factors(1.31) is F2
+
+
+def test_threads_give_identical_results():
+    model, h = CASES["bar"]()
+    b = np.random.default_rng(10).standard_normal(ForcedResponseProblem(model, h).size)
+    out = []
+    for threads in (1, 2):
+        pr = ForcedResponseProblem(model, h)
+        pr.system.threads = threads
+        _, J, _ = pr.residual(state(pr, 1, 1e-3), 1.2)
+        out.append(J.factorize().solve(b))
+    np.testing.assert_array_equal(out[0], out[1])
+
+
+def test_superlu_interior_path(monkeypatch):
+    """Wide-band interiors (reduced models, 2-D patterns) use SuperLU per harmonic: same result."""
+    import femodes.hbm.linsolve as ls
+
+    model, h = CASES["beam-mixed-laws"]()
+    real_build = ls.build_pattern
+
+    def no_band(*a, **k):
+        p = real_build(*a, **k)
+        p.banded = False
+        return p
+
+    monkeypatch.setattr(ls, "build_pattern", no_band)
+    pr = ForcedResponseProblem(model, h)
+    _, J, _ = pr.residual(state(pr, 1, 1e-3), 1.3)
+    assert not pr.system.block_pattern().banded
+    b = np.random.default_rng(11).standard_normal(pr.size)
+    assert backward_error(J, J.factorize().solve(b), b) < 1e-13
+
+
+def test_reduced_model_uses_structure():
+    model = beam_model()
+    rom = fm.craig_bampton(model, n_modes=8)
+    pr = ForcedResponseProblem(rom, fm.Harmonics(6))
+    _, J, _ = pr.residual(state(pr, 1, 1e-3), 2.0)
+    b = np.random.default_rng(12).standard_normal(pr.size)
+    xs = J.factorize().solve(b)
+    assert backward_error(J, xs, b) < 1e-13
+
+
+def test_continuation_structured_equals_assembled():
+    """The whole forced-response branch is the same with either linear algebra."""
+    model = bar_model(n_el=40, n_contacts=2).with_damping(alpha=0.1)
+    h = fm.Harmonics(5)
+    opts = fm.ContinuationOptions(step=0.05, max_step=0.2, max_points=40,
+                                  newton=fm.NewtonOptions(atol=1e-10, max_iter=20))
+    out = []
+    for structured in (True, False):
+        pr = ForcedResponseProblem(model, h, structured=structured)
+        out.append(fm.continuation(pr, (1.0, 2.5), options=opts))
+    a, b = out
+    assert a.n_points == b.n_points >= 10
+    np.testing.assert_allclose(a.p, b.p, rtol=1e-9)
+    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9 * np.abs(b.x).max())
