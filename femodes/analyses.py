@@ -54,7 +54,16 @@ def _span(value: Any, name: str, owner: str, *, positive: bool) -> tuple[float, 
         raise TypeError(f"{owner}: {name} must be a pair (start, end) of numbers, got {value!r}") from None
     if not (math.isfinite(a) and math.isfinite(b)) or a == b or (positive and (a <= 0 or b <= 0)):
         raise ValueError(f"{owner}: {name} must be two distinct finite{' positive' if positive else ''} numbers, got {value!r}")
+    if not math.isfinite((b - a) ** 2) or (b - a) ** 2 == 0.0 or (positive and not 1e-150 < min(a, b) <= max(a, b) < 1e150):
+        raise ValueError(f"{owner}: {name} = {value!r} is out of the representable range (its width squared under- or "
+                         "overflows); rescale the units")
     return a, b
+
+
+def _options(options: Any, owner: str) -> ContinuationOptions | None:
+    if options is not None and not isinstance(options, ContinuationOptions):
+        raise TypeError(f"{owner}: options must be a femodes.ContinuationOptions or None, got {type(options).__name__}")
+    return options
 
 
 def _check_model(model: Any, owner: str) -> StructuralModel:
@@ -347,6 +356,7 @@ def frequency_response(
     """
     model = _check_model(model, "frequency_response")
     h = _harmonics(harmonics, "frequency_response")
+    _options(options, "frequency_response")
     span = _span(omega, "omega", "frequency_response", positive=True)
     problem = ForcedResponseProblem(model, h, exact_contact=exact_contact)
     opts = options or ContinuationOptions(step=0.05, max_step=0.5, newton=NewtonOptions(atol=1e-9, max_iter=20))
@@ -459,6 +469,7 @@ def nonlinear_mode(
     """
     model = _check_model(model, "nonlinear_mode")
     h = _harmonics(harmonics, "nonlinear_mode")
+    _options(options, "nonlinear_mode")
     e0, e1 = _span(energy, "energy", "nonlinear_mode", positive=True)
     problem = NonlinearModeProblem(model, h, mode, exact_contact=exact_contact)
     span = (math.log10(e0), math.log10(e1))

@@ -1030,7 +1030,7 @@ def test_case_files_accept_valid_values(base, data):
 
 
 # ------------------------------------------------------------------------------------------------
-# found by fuzzing in files this change does not own (reported; xfail until their owners fix them)
+# found by fuzzing in the analyses / continuation layers (fixed there; kept as regression tests)
 # ------------------------------------------------------------------------------------------------
 KNOWN_ELSEWHERE = {
     # hbm/problems.py:131 1.0 / force_scale with a force scale that underflows to 0 -> ZeroDivisionError
@@ -1046,8 +1046,6 @@ KNOWN_NAMES = {"tiny_energy_span": "energy", "tiny_omega_span": "omega", "option
                "float_direction": "direction"}
 
 
-@pytest.mark.xfail(reason="bad input handled in files owned by others (see the report of issue 6 part 6)",
-                   raises=(AssertionError, ZeroDivisionError, AttributeError), strict=False)
 @pytest.mark.parametrize("case", sorted(KNOWN_ELSEWHERE))
 def test_known_problems_elsewhere(case):
     with warnings.catch_warnings():

@@ -119,6 +119,10 @@ class NonlinearModeProblem:
         a = math.sqrt(2.0 * energy) / self.omega0
         self.force_scale = self._kphi * a
         self.phase_scale = float(np.max(np.abs(self._Mphi))) * a or 1.0
+        if not (math.isfinite(self.force_scale) and self.force_scale > 0 and math.isfinite(self.phase_scale)
+                and 1.0 / self.force_scale < math.inf and 1.0 / self.phase_scale < math.inf):
+            raise ValueError(f"NonlinearModeProblem: energy {energy!r} gives motions whose force scale under- or "
+                             "overflows; rescale the units (mass, stiffness) or the energy span")
 
     def residual(self, x: np.ndarray, p: float):
         s = self.system

@@ -4,10 +4,13 @@
   semismooth Newton method for ``r(x) = 0`` with dense or sparse generalized
   Jacobians.
 * :func:`continuation` -- pseudo-arclength continuation of ``r(x, p) = 0``
-  through folds, with step control and exact stops at the span ends.
+  through folds, with step control and exact stops at the span ends; a run
+  resumes exactly from a saved :class:`ContinuationState`.
+* Jacobians may be dense, ``scipy.sparse`` or structured operators that
+  factorise themselves (``J.factorize().solve(b)``, duck-typed).
 """
 
-from .continuation import ContinuationOptions, ContinuationPoint, ContinuationResult, continuation
+from .continuation import ContinuationOptions, ContinuationPoint, ContinuationResult, ContinuationState, continuation
 from .newton import NewtonOptions, NewtonResult, semismooth_newton
 
 __all__ = [
@@ -17,5 +20,6 @@ __all__ = [
     "ContinuationOptions",
     "ContinuationPoint",
     "ContinuationResult",
+    "ContinuationState",
     "continuation",
 ]

@@ -231,7 +231,8 @@ class ContinuationOptions:
         _check_positive("max_growth", self.max_growth)
         if self.max_growth < 1:
             raise ValueError(f"max_growth must be >= 1, got {_show(self.max_growth)}")
-        if isinstance(self.direction, (bool, np.bool_)) or self.direction not in (1, -1):
+        if (isinstance(self.direction, (bool, np.bool_)) or not isinstance(self.direction, (int, np.integer))
+                or self.direction not in (1, -1)):
             raise ValueError(f"direction must be +1 or -1, got {_show(self.direction)}")
         if self.x_scale is not None:
             if _is_real_number(self.x_scale):
@@ -689,6 +690,8 @@ def _validate_span(p_span: Any) -> tuple[float, float]:
         raise ValueError(
             f"p_span must be a pair of distinct finite numbers (p_start, p_end), got {_show(p_span)}"
         )
+    if not math.isfinite((p1 - p0) ** 2) or (p1 - p0) ** 2 == 0.0:
+        raise ValueError(f"p_span {_show(p_span)}: its width squared under- or overflows; rescale the parameter")
     return p0, p1
 
 
