@@ -20,6 +20,24 @@ from femodes.hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from femodes.solvers.continuation import bordered_matrix, bordered_solver
 
 
+@pytest.fixture(autouse=True)
+def always_structured(monkeypatch):
+    """Small systems normally go to SuperLU (STRUCTURED_MIN_SIZE); test the structure at any size."""
+    import femodes.hbm.linsolve as ls
+
+    monkeypatch.setattr(ls, "STRUCTURED_MIN_SIZE", 0)
+
+
+def test_small_systems_use_superlu(monkeypatch):
+    import femodes.hbm.linsolve as ls
+
+    monkeypatch.setattr(ls, "STRUCTURED_MIN_SIZE", 2000)
+    model, h = CASES["chain"]()
+    pr = ForcedResponseProblem(model, h)
+    _, J, _ = pr.residual(state(pr, 1, 0.5), 1.1)
+    assert isinstance(J.factorize(), _Generic)
+
+
 def backward_error(J, x, b):
     A = J.tocsr()
     return float(np.max(np.abs(A @ x - b)) / (abs(A).sum(axis=1).max() * np.max(np.abs(x)) + np.max(np.abs(b))))
