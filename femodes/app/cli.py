@@ -39,6 +39,10 @@ femodes: nonlinear vibration modes of finite-element structures with unilateral 
                              H, one process per case; table, fitted exponents, scaling.csv,
                              scaling.json and a log-log plot scaling.png in DIR
                              (default ./out/<case name>_scaling). `femodes scaling --help`.
+  femodes sweep CASE.toml --set PATH=V1,V2 [--set ...] [--workers 2 | --scheduler ADDRESS] [--out DIR]
+                             run the case for every combination of parameter values
+                             (contact.0.gap, force.0.amplitude, analysis.harmonics, ...) on
+                             Dask workers; one study file DIR/study.npz. `femodes sweep --help`.
 
 Mistakes in a case file are reported as `case.toml:LINE: [table] message` (exit code 2).
 """
@@ -247,6 +251,75 @@ def run_demo(out: Path) -> dict:
     return {"lines": lines, "plot": png, "out": out}
 
 
+SWEEP_HELP = """Run a case file for many parameter values, as independent tasks on Dask workers.
+
+  femodes sweep examples/cases/oscillator_frc.toml --set contact.0.gap=0.5,1.0,2.0 \\
+      --set analysis.harmonics=5,10 --workers 2 --out out/gap_sweep
+
+--set PATH=V1,V2,...   a case-file key by dotted path: table.key (analysis.harmonics,
+                       mesh.n_elements, damping.alpha) or table.index.key for [[...]] tables
+                       (contact.0.gap, force.0.amplitude); values are TOML values separated by
+                       commas (pairs: analysis.omega=[0.5,2.0],[0.5,1.5]). Repeat --set for more
+                       parameters: the sweep runs every combination.
+Cases run on an embedded local Dask cluster of --workers single-threaded processes, or on the
+running cluster at --scheduler ADDRESS (the output folder must then be shared with its workers).
+Each case writes DIR/cases/<id>/ (case.toml, branch.npz, summary.txt); the study (parameters,
+status, errors and summary numbers of every case) is DIR/study.npz (femodes.app.sweep.load_study).
+A failed case is reported with its error and the others complete; exit code 1 if any case did not
+finish, 2 for mistakes in the case file or in --set.
+"""
+
+
+def run_sweep_cli(args) -> int:
+    """``femodes sweep``: returns the exit code (2 for mistakes in the case file or in ``--set``)."""
+    from .cases import CaseError, load_case
+    from .sweep import parse_set, run_sweep
+
+    params: dict = {}
+    try:
+        for text in args.set or []:
+            path, values = parse_set(text)
+            if path in params:
+                raise ValueError(f"--set: {path} is given twice; list all its values in one --set")
+            params[path] = values
+        if not params:
+            raise ValueError("give at least one --set PATH=V1,V2,... (e.g. --set contact.0.gap=0.005,0.01)")
+        case = load_case(args.case)
+    except (ValueError, TypeError, CaseError) as exc:
+        print(f"femodes sweep: {exc}", file=sys.stderr)
+        return 2
+    out = args.out if args.out is not None else Path("out") / f"{args.case.stem}_sweep"
+    show = sys.stderr.isatty() if args.progress is None else args.progress
+    if not args.verbose:
+        try:  # distributed logs its cluster's start and stop at INFO through our root handler
+            import distributed  # noqa: F401
+
+            logging.getLogger("distributed").setLevel(logging.WARNING)
+        except ImportError:
+            pass
+
+    def report(rec, done, total):
+        vals = " ".join(f"{k}={v}" for k, v in rec.parameters.items())
+        extra = f": {rec.message}" if rec.status != "ok" else ""
+        print(f"[{done}/{total}] {rec.id} {rec.status} ({rec.wall_time:.2f} s) {vals}{extra}", file=sys.stderr,
+              flush=True)
+
+    try:
+        res = run_sweep(case, params, out=out, scheduler=args.scheduler, n_workers=args.workers,
+                        callback=report if show else None)
+    except (ValueError, TypeError) as exc:
+        print(f"femodes sweep: {exc}", file=sys.stderr)
+        return 2
+    except (OSError, TimeoutError, ImportError) as exc:  # no scheduler at the address, no dask installed
+        print(f"femodes sweep: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    print(res.table())
+    n_ok = sum(r.ok for r in res)
+    print(f"{n_ok} of {len(res)} cases ok in {res.elapsed:.1f} s; study written to {res.study} "
+          f"(branches in {res.study.parent / 'cases'})")
+    return 0 if res.success else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="femodes", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
@@ -263,6 +336,17 @@ def main(argv: list[str] | None = None) -> int:
     from .scaling import add_scaling_parser
 
     add_scaling_parser(sub)
+    sweep = sub.add_parser("sweep", help="run a case file over parameter values on Dask workers", description=SWEEP_HELP,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+    sweep.add_argument("case", type=Path, help="the base case file, e.g. examples/cases/oscillator_frc.toml")
+    sweep.add_argument("--set", action="append", metavar="PATH=V1,V2", help="parameter values (repeatable)")
+    sweep.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="address of a running Dask scheduler, e.g. tcp://host:8786 (default: a local cluster)")
+    sweep.add_argument("--workers", type=int, default=2, help="workers of the local cluster (default 2)")
+    sweep.add_argument("--out", type=Path, default=None, help="output folder (default: out/<case name>_sweep)")
+    sweep.add_argument("--progress", dest="progress", action="store_true", default=None,
+                       help="one line per finished case on stderr (default: when stderr is a terminal)")
+    sweep.add_argument("--no-progress", dest="progress", action="store_false", help="no progress lines")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     if args.command is None:
@@ -278,6 +362,8 @@ def main(argv: list[str] | None = None) -> int:
         from .scaling import scaling_cli
 
         return scaling_cli(args)
+    elif args.command == "sweep":
+        return run_sweep_cli(args)
     return 0
 
 
