@@ -225,11 +225,16 @@ def test_threads_give_identical_results():
     model, h = CASES["bar"]()
     b = np.random.default_rng(10).standard_normal(ForcedResponseProblem(model, h).size)
     out = []
+    import femodes.hbm.linsolve as ls
+
+    ls.THREAD_MIN_SIZE, keep = 0, ls.THREAD_MIN_SIZE
     for threads in (1, 2):
         pr = ForcedResponseProblem(model, h)
         pr.system.threads = threads
         _, J, _ = pr.residual(state(pr, 1, 1e-3), 1.2)
         out.append(J.factorize().solve(b))
+        assert pr.system.linear_factors(1.2).threads == threads
+    ls.THREAD_MIN_SIZE = keep
     np.testing.assert_array_equal(out[0], out[1])
 
 

@@ -26,7 +26,10 @@ its :meth:`~HarmonicBlockJacobian.factorize` solves Newton steps by
    *boundary* ``B`` (coefficients of the nonlinear DOFs, contact forces, border unknowns);
 2. factorising ``Z_k[I, I]`` for each harmonic independently: LAPACK band LU (``?gbtrf``) after a
    reverse Cuthill-McKee ordering when the band is narrow (line meshes: bandwidth 1-3), SuperLU
-   otherwise; the ``H + 1`` factorisations run in threads (LAPACK and SuperLU release the GIL);
+   otherwise; the ``H + 1`` factorisations are independent and can run in threads
+   (``HBMSystem(threads=...)``; LAPACK and SuperLU release the GIL). Default one thread: on the
+   2-core test machine two threads were slower (1e5-DOF bar, H = 20: 1283 ms vs 1118 ms per
+   Newton iteration, ``benchmarks/README.md``), the band solves being memory-bound;
 3. condensing onto ``B``: a dense Schur complement of size ``n_b (2H+1) + n_p + m`` whose linear
    part is the condensed dynamic stiffness ``Z_k[b,b] - Z_k[b,I] Z_k[I,I]^{-1} Z_k[I,b]``,
    factorised by dense LU with partial pivoting (the borders are inside it, so the solve stays
@@ -37,8 +40,9 @@ its :meth:`~HarmonicBlockJacobian.factorize` solves Newton steps by
    nonlinear DOFs held) falls back to SuperLU on the assembled matrix.
 
 The per-harmonic factorisations and condensed stiffnesses depend only on ``(w, xi)``: they are
-cached on the system (the tangent solve after a converged corrector, fixed-frequency Newton and
-repeated solves reuse them). Cost per Newton iteration: ``O(N H bw^2)`` for the band LUs,
+cached on the system: Newton at a fixed frequency (the start of a frequency response, the forcing
+homotopy, sweeps at fixed ``w``) reuses them at every iteration; inside a continuation ``w`` is an
+unknown and changes at every iteration, so there they are rebuilt. Cost per Newton iteration: ``O(N H bw^2)`` for the band LUs,
 ``O(N H (n_b + m))`` for the condensation solves and ``O((n_b (2H+1))^3)`` for the dense LU.
 """
 
@@ -79,11 +83,11 @@ THREAD_MIN_SIZE = 20000
 
 
 def _threads(n_tasks: int, threads: int | None, size: int) -> int:
-    if threads is not None:
-        return max(1, min(int(threads), n_tasks))
-    if size < THREAD_MIN_SIZE:
+    if threads is None or size < THREAD_MIN_SIZE:
         return 1
-    return max(1, min(os.cpu_count() or 1, n_tasks))
+    if threads == 0:  # all CPUs
+        threads = os.cpu_count() or 1
+    return max(1, min(int(threads), n_tasks))
 
 
 # --------------------------------------------------------------------------------------------

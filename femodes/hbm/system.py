@@ -86,7 +86,8 @@ class HBMSystem:
         solved by per-harmonic factorisations and a Schur complement on the nonlinear DOFs;
         ``False`` assembles one sparse matrix (solved by SuperLU; for checks and comparisons).
     threads : int, optional
-        Threads for the per-harmonic factorisations (default: the number of CPUs).
+        Threads for the per-harmonic factorisations of large models (``0``: all CPUs; default
+        one, which measured faster on 2 shared cores).
     """
 
     def __init__(self, model: StructuralModel, harmonics: Harmonics, *, exact_contact: bool = True,
