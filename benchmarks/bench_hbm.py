@@ -73,6 +73,8 @@ import subprocess
 import sys
 import time
 
+from _machine import cpu_model  # noqa: E402 - benchmarks/ is on sys.path when run as a script
+
 WINDOW = (3.2, 4.0)
 FORCE = 0.01
 GAP = 0.03
@@ -353,15 +355,7 @@ def machine_info() -> dict:
     import numpy
     import scipy
 
-    cpu = platform.processor() or ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
+    cpu = cpu_model("")
     try:
         from importlib.metadata import version
 

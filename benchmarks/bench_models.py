@@ -73,6 +73,8 @@ import sys
 import time
 from pathlib import Path
 
+from _machine import cpu_model  # noqa: E402 - benchmarks/ is on sys.path when run as a script
+
 CHILD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 CASES = {
     # name: (kind, order, DOFs per element)
@@ -382,15 +384,7 @@ def _loadavg() -> str:
 
 
 def _machine_info(child: dict | None, load_start: str) -> list[str]:
-    cpu = platform.processor() or "unknown"
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
+    cpu = cpu_model("unknown")
     mem = ""
     try:
         with open("/proc/meminfo") as f:

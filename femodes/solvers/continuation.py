@@ -72,6 +72,7 @@ from .newton import (
     _is_real_number,
     _show,
     _is_operator,
+    _start_vector,
     default_linear_solver,
     semismooth_newton,
 )
@@ -798,14 +799,7 @@ def continuation(
             if not callable(guess):
                 raise TypeError("continuation: pass x0=, or give the problem a method initial_guess(p)")
             x0 = guess(p_start)
-        try:
-            x_init = np.array(x0, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"x0 must be a real 1-D array, got {_show(x0)}") from exc
-        if x_init.ndim != 1 or x_init.size == 0:
-            raise ValueError(f"x0 must be a non-empty 1-D array, got shape {x_init.shape}")
-        if not np.all(np.isfinite(x_init)):
-            raise ValueError("x0 contains non-finite values (nan or inf)")
+        x_init = _start_vector(x0)
         n = x_init.size
         if options.x_scale is not None and not _is_real_number(options.x_scale):
             if np.shape(options.x_scale) != (n,):

@@ -316,6 +316,19 @@ def default_linear_solver(A: Any, b: np.ndarray) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
+def _start_vector(x0: Any) -> np.ndarray:
+    """``x0`` as a fresh finite 1-D float array, or a ValueError naming ``x0``."""
+    try:
+        x = np.array(x0, dtype=float)  # copy
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"x0 must be a real 1-D array, got {_show(x0)}") from exc
+    if x.ndim != 1 or x.size == 0:
+        raise ValueError(f"x0 must be a non-empty 1-D array, got shape {x.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("x0 contains non-finite values (nan or inf)")
+    return x
+
+
 def _is_operator(J: Any) -> bool:
     """A structured Jacobian that factorises itself (duck typing: no import of femodes here)."""
     return callable(getattr(J, "factorize", None)) and callable(getattr(J, "matvec", None))
@@ -402,14 +415,7 @@ def semismooth_newton(
     elif not isinstance(options, NewtonOptions):
         raise TypeError(f"options must be a NewtonOptions instance or None, got {type(options).__name__}")
 
-    try:
-        x = np.array(x0, dtype=float)  # copy
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"x0 must be a real 1-D array, got {_show(x0)}") from exc
-    if x.ndim != 1 or x.size == 0:
-        raise ValueError(f"x0 must be a non-empty 1-D array, got shape {x.shape}")
-    if not np.all(np.isfinite(x)):
-        raise ValueError("x0 contains non-finite values (nan or inf)")
+    x = _start_vector(x0)
     n = x.size
 
     solve = options.linear_solver if options.linear_solver is not None else default_linear_solver
