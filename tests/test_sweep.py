@@ -249,3 +249,20 @@ def test_cli_bad_set_exits_2(tmp_path, capsys, args, message):
     err = capsys.readouterr().err
     assert err.startswith("femodes sweep: ") and message in err and "Traceback" not in err
     assert not (tmp_path / "study.npz").exists()
+
+
+def test_interrupted_sweep_keeps_a_study_file(tmp_path):
+    """The study file follows every finished case: Ctrl-C after the first case loses nothing."""
+
+    def stop(rec, k, n):
+        if k == 1 and rec.status == "ok":
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        with cf.ThreadPoolExecutor(1) as ex:
+            run_sweep(FRC, _cases(*GAPS), out=tmp_path, executor=ex, callback=stop)
+    st = load_study(tmp_path / "study.npz")
+    statuses = [r.status for r in st]
+    assert statuses.count("ok") == 1 and statuses.count("pending") == 2
+    done = next(r for r in st if r.status == "ok")
+    assert st.load_branch(done.id).omega.size == done.n_points > 0

@@ -86,8 +86,8 @@ class CaseRecord:
     """Summary of one sweep case.
 
     ``status`` is ``"ok"`` (branch complete), ``"incomplete"`` (branch saved, continuation stopped
-    before the end of the span: see ``message``) or ``"failed"`` (no branch; ``message`` is the
-    error). ``wall_time`` and ``cpu_time`` (of the thread that ran it, so robust to a loaded
+    before the end of the span: see ``message``), ``"failed"`` (no branch; ``message`` is the
+    error) or ``"pending"`` (not finished: the study file of an interrupted sweep). ``wall_time`` and ``cpu_time`` (of the thread that ran it, so robust to a loaded
     machine) are the task's, in seconds, measured in its worker (``worker`` = host:pid).
     ``branch`` is the branch file relative to the study file's folder ("" if none). The numbers
     summarise the branch: frequency and energy ranges, ``max_amplitude`` = max over the branch of
@@ -636,9 +636,18 @@ def run_sweep(case, parameters, *, out, executor=None, scheduler: str | None = N
     (out / "cases").mkdir(parents=True, exist_ok=True)
     records: dict[str, CaseRecord] = {}
     n = len(combos)
+    pending = {cid: CaseRecord(id=cid, parameters=ov, status="pending", message="not finished")
+               for cid, ov in zip(ids, combos)}
+
+    def snapshot() -> SweepResult:
+        return SweepResult(cases=tuple(records.get(i, pending[i]) for i in ids), parameters=paths,
+                           study=out / study, case=base.name, elapsed=time.perf_counter() - t_start)
 
     def done(rec: CaseRecord) -> None:
         records[rec.id] = rec
+        # the study file follows every finished case (small, atomic): an interrupted sweep keeps
+        # its finished cases, the others are marked "pending"
+        save_study(snapshot(), text=base.text)
         if progress:
             log.info("case %s (%d/%d) %s in %.2f s: %s %s", rec.id, len(records), n, rec.status, rec.wall_time,
                      ", ".join(f"{k}={_fmt_value(v)}" for k, v in rec.parameters.items()), rec.message)
@@ -665,8 +674,7 @@ def run_sweep(case, parameters, *, out, executor=None, scheduler: str | None = N
                 except Exception as exc:  # noqa: BLE001 - the task itself could not run (worker lost, ...)
                     raw = {"id": cid, "status": "failed", "message": f"{type(exc).__name__}: {exc}"}
                 done(_record(raw, ov, out))
-    res = SweepResult(cases=tuple(records[i] for i in ids), parameters=paths, study=out / study, case=base.name,
-                      elapsed=time.perf_counter() - t_start)
+    res = snapshot()
     save_study(res, text=base.text)
     return res
 
