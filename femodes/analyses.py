@@ -362,7 +362,14 @@ def frequency_response(
     opts = options or ContinuationOptions(step=0.05, max_step=0.5, newton=NewtonOptions(atol=1e-9, max_iter=20))
 
     def start() -> np.ndarray:
-        return _starting_point(problem, span[0], opts.newton) if x0 is None else x0
+        if x0 is not None:
+            return x0
+        with np.errstate(all="ignore"):
+            xs = _starting_point(problem, span[0], opts.newton)
+        if not np.all(np.isfinite(xs)):
+            raise ValueError(f"frequency_response: the response at omega = {span[0]:g} is not finite in floating point: "
+                             "the forcing amplitude (HarmonicForce amplitude) is too large for these units; rescale them")
+        return xs
 
     def wrap(res, meta) -> Branch:
         return branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span), **meta})
