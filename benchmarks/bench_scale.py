@@ -434,6 +434,18 @@ def case_ref(args) -> dict:
     return rec
 
 
+def _full_state(rec: dict, N: int, H: int, workdir) -> tuple:
+    """Full model, its forced-response problem and the benchmark state; RSS and state info into ``rec``."""
+    import femodes as fm
+
+    model = build_model(N)
+    rec["rss_model"] = _rss_mib()
+    pr = fm.ForcedResponseProblem(model, fm.Harmonics(H))
+    x, w, info = get_state(pr, N, H, workdir)
+    rec.update(info)
+    return model, pr, x, w
+
+
 def case_newton(args) -> dict:
     import numpy as np
     import scipy.sparse.linalg as spla
@@ -526,15 +538,9 @@ def case_floor(args) -> dict:
     import numpy as np
     import scipy.sparse as sp
 
-    import femodes as fm
-
     N, H, R = args.N, args.H, args.repeat
     rec = {"part": "floor", "N": N, "H": H, "repeat": R}
-    model = build_model(N)
-    rec["rss_model"] = _rss_mib()
-    pr = fm.ForcedResponseProblem(model, fm.Harmonics(H))
-    x, w, info = get_state(pr, N, H, args.workdir)
-    rec.update(info)
+    model, pr, x, w = _full_state(rec, N, H, args.workdir)
     s = pr.system
     h = s.h
     rc = [0] + [int(h.cos_index(k)) for k in range(1, H + 1)]
@@ -543,7 +549,6 @@ def case_floor(args) -> dict:
     bd = s.nonlinear_dofs
     fd = FloorData(s.K, s.M, s.C, bd, rc, rsn, s.np)
     rec["t_floor_setup"] = time.perf_counter() - t
-    nb = bd.size
     # boundary unknowns in the floor's order: q of the boundary DOFs (coefficient-major), then p
     gB = np.concatenate([(np.arange(h.n_coef)[:, None] * s.n + bd[None, :]).ravel(), s.nq + np.arange(s.np)])
     D1 = sp.csr_matrix(np.asarray(h.derivative_domega()))
@@ -642,15 +647,10 @@ def _points(model, H, x0, w0, K) -> dict:
 
 
 def case_points(args) -> dict:
-    import femodes as fm
 
     N, H = args.N, args.H
     rec = {"part": "points", "N": N, "H": H}
-    model = build_model(N)
-    rec["rss_model"] = _rss_mib()
-    pr = fm.ForcedResponseProblem(model, fm.Harmonics(H))
-    x, w, info = get_state(pr, N, H, args.workdir)
-    rec.update(info)
+    model, pr, x, w = _full_state(rec, N, H, args.workdir)
     del pr
     out, br = _points(model, H, x, w, args.max_points)
     rec.update(out)
@@ -713,15 +713,9 @@ def case_dense(args) -> dict:
     import numpy as np
     import scipy.sparse.linalg as spla
 
-    import femodes as fm
-
     N, H, R, Rd = args.N, args.H, args.repeat, args.dense_repeat
     rec = {"part": "dense", "N": N, "H": H, "repeat": R, "dense_repeat": Rd}
-    model = build_model(N)
-    rec["rss_model"] = _rss_mib()
-    pr = fm.ForcedResponseProblem(model, fm.Harmonics(H))
-    x, w, info = get_state(pr, N, H, args.workdir)
-    rec.update(info)
+    model, pr, x, w = _full_state(rec, N, H, args.workdir)
     rec["unknowns"] = int(pr.size)
 
     def ws(i):
@@ -766,10 +760,7 @@ def case_time(args) -> dict:
 
     N, H, K = args.N, args.H, args.max_points
     rec = {"part": "time", "N": N, "H": H}
-    model = build_model(N)
-    pr = fm.ForcedResponseProblem(model, fm.Harmonics(H))
-    x, w, info = get_state(pr, N, H, args.workdir)
-    rec.update(info)
+    model, pr, x, w = _full_state(rec, N, H, args.workdir)
     out, br = _points(model, H, x, w, K)
     rec["hbm"] = out
     tip = model.dof("tip")
