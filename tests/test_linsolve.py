@@ -241,6 +241,7 @@ def test_threads_give_identical_results():
 def test_superlu_interior_path(monkeypatch):
     """Wide-band interiors (reduced models, 2-D patterns) use SuperLU per harmonic: same result."""
     import femodes.hbm.linsolve as ls
+    import femodes.hbm.system
 
     model, h = CASES["beam-mixed-laws"]()
     real_build = ls.build_pattern
@@ -250,7 +251,7 @@ def test_superlu_interior_path(monkeypatch):
         p.banded = False
         return p
 
-    monkeypatch.setattr(ls, "build_pattern", no_band)
+    monkeypatch.setattr(femodes.hbm.system, "build_pattern", no_band)
     pr = ForcedResponseProblem(model, h)
     _, J, _ = pr.residual(state(pr, 1, 1e-3), 1.3)
     assert not pr.system.block_pattern().banded

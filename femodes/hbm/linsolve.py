@@ -53,7 +53,6 @@ import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import scipy.linalg as sla
@@ -129,20 +128,21 @@ def build_pattern(M: sp.spmatrix, K: sp.spmatrix, C: sp.spmatrix, bdofs: np.ndar
     M, K, C = (sp.csr_matrix(A, dtype=float) for A in (M, K, C))
     MII, KII, CII = (A[interior][:, interior] for A in (M, K, C))
     nI = interior.size
+    # union pattern of the interior block with aligned values: one linear combination per
+    # harmonic, no sparse adds
+    U = (abs(MII) + abs(KII) + abs(CII)).tocoo()
     perm = np.arange(nI)
-    if nI:
-        pat = (abs(MII) + abs(KII) + abs(CII)).tocoo()
-        natural = int(np.max(np.abs(pat.row - pat.col))) if pat.nnz else 0
-        rcm = np.asarray(reverse_cuthill_mckee(pat.tocsr(), symmetric_mode=True), dtype=int)
+    if U.nnz:
+        natural = int(np.max(np.abs(U.row - U.col)))
+        rcm = np.asarray(reverse_cuthill_mckee(U.tocsr(), symmetric_mode=True), dtype=int)
         inv = np.empty(nI, dtype=int)
         inv[rcm] = np.arange(nI)
-        if pat.nnz and int(np.max(np.abs(inv[pat.row] - inv[pat.col]))) < natural:
+        if int(np.max(np.abs(inv[U.row] - inv[U.col]))) < natural:
             perm = rcm  # keep the natural order when it is as narrow (no permutation copies)
     inv = np.empty(nI, dtype=int)
     inv[perm] = np.arange(nI)
-    # union pattern with aligned values: one linear combination per harmonic, no sparse adds
-    U = (abs(MII) + abs(KII) + abs(CII)).tocoo()
     r, c = inv[U.row], inv[U.col]
+
     def vals(A):
         return np.asarray(A[U.row, U.col]).ravel() if U.nnz else np.zeros(0)
     kv, mv, cv = vals(KII), vals(MII), vals(CII)
@@ -473,7 +473,6 @@ class _Factorization:
             off = self.gB.size
 
             def border(blk: _Harmonic):
-                a_rows = [blk.k] if blk.s is None else [blk.k, blk.s]
                 # columns: z = Z^-1 (u_c - i u_s); interior solution (Re z, -Im z)
                 rho = Ui[blk.k] - (1j * Ui[blk.s] if blk.s is not None else 0.0)
                 z = blk.lu.solve(rho)
@@ -483,7 +482,7 @@ class _Factorization:
                 out = {}
                 # T[q_b rows, border cols] -= real form of Z_bI z  (scale: s * (1/s))
                 Wz = blk.Zbi @ z[pat.R]
-                out["qb_m"] = (a_rows, Wz)
+                out["qb_m"] = Wz
                 # T[border rows, q_b cols] -= (Re, Im) of y^T Z_Ib
                 yZ = (blk.Zib.T @ y[pat.R]).T  # (m, nb)
                 out["m_qb"] = yZ
@@ -495,7 +494,7 @@ class _Factorization:
                 return blk, out
 
             for blk, out in F.map(border):
-                _, Wz = out["qb_m"]
+                Wz = out["qb_m"]
                 T[np.ix_(qpos(blk.k), off + np.arange(m))] -= Wz.real
                 if blk.s is not None:
                     T[np.ix_(qpos(blk.s), off + np.arange(m))] -= -Wz.imag
@@ -508,9 +507,10 @@ class _Factorization:
             raise StructureFailure("non-finite Schur complement")
         # ||J||_inf bound for the refinement test (row sums of |K|, |M|, |C - xi M| at the top harmonic)
         s_max = h.n_harmonics * J.omega / h.subharmonic
-        rs = lambda A: float(abs(A).sum(axis=1).max()) if A.nnz else 0.0  # noqa: E731
-        lin = rs(s.K) + s_max ** 2 * rs(s.M) + s_max * (rs(s.C) + abs(J.xi) * rs(s.M))
-        self.norm_bound = (abs(sc) * (lin + (rs(J.N) if J.N.nnz else 0.0)) + float(np.abs(J.U).sum(axis=1).max(initial=0.0))
+        rK, rM, rC = s.abs_row_sums()
+        lin = rK + s_max ** 2 * rM + s_max * (rC + abs(J.xi) * rM)
+        rN = float(abs(J.N).sum(axis=1).max()) if J.N.nnz else 0.0
+        self.norm_bound = (abs(sc) * (lin + rN) + float(np.abs(J.U).sum(axis=1).max(initial=0.0))
                            + float(np.abs(np.hstack([J.V, J.D])).sum(axis=1).max(initial=0.0)))
         self.T = T
         if nB:

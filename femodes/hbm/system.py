@@ -29,6 +29,7 @@ import scipy.sparse.linalg as spla
 from ..laws import CubicSpring, PenaltyContact, UnilateralContact
 from ..model import StructuralModel
 from .harmonics import Harmonics
+from .linsolve import HarmonicBlockJacobian, LinearFactors, StructureFailure, _BlockLU, build_pattern
 
 __all__ = ["HBMSystem", "default_contact_parameter"]
 
@@ -158,7 +159,7 @@ class HBMSystem:
         Q = np.asarray(q, dtype=float).reshape(self.h.n_coef, self.n)
         M, K, C, D1 = self.M, self.K, self.C, self.D1
         if absolute:
-            M, K, C, D1 = abs(M), abs(K), abs(C), abs(D1)
+            M, K, C, D1 = self._abs_operators()
             omega, xi = abs(omega), -abs(xi)
         MQ = _mul(M, Q)
         out = _mul(K, Q)
@@ -169,18 +170,26 @@ class HBMSystem:
         out += omega * (D1 @ CQ)
         return out.ravel()
 
+    def _abs_operators(self):
+        """``|M|, |K|, |C|, |D1|`` (cached: the Newton tolerance asks for them every iteration)."""
+        if "abs" not in self._cache:
+            self._cache["abs"] = (abs(self.M), abs(self.K), abs(self.C), abs(self.D1))
+        return self._cache["abs"]
+
+    def abs_row_sums(self) -> tuple[float, float, float]:
+        """``max_i sum_j |A_ij|`` of ``K, M, C`` (for norm bounds of the Jacobian)."""
+        absM, absK, absC, _ = self._abs_operators()
+        rs = [float(A.sum(axis=1).max()) if A.nnz else 0.0 for A in (absK, absM, absC)]
+        return rs[0], rs[1], rs[2]
+
     def block_pattern(self):
         """Interior/boundary split and sparsity pattern for the structured solver (cached)."""
         if "pattern" not in self._cache:
-            from .linsolve import build_pattern
-
             self._cache["pattern"] = build_pattern(self.M, self.K, self.C, self.nonlinear_dofs)
         return self._cache["pattern"]
 
     def linear_factors(self, omega: float, xi: float = 0.0, threads: int | None = None):
         """Per-harmonic interior factorisations at ``(w, xi)``; the last one is cached and reused."""
-        from .linsolve import LinearFactors
-
         key = (float(omega), float(xi))
         hit = self._cache.get("factors")
         if hit is not None and hit[0] == key:
@@ -243,8 +252,6 @@ class HBMSystem:
         Falls back to a least-squares solution of the assembled operator if a harmonic block is
         singular (a rigid-body mode at harmonic 0, ``k w`` exactly at an eigenfrequency).
         """
-        from .linsolve import StructureFailure, _BlockLU, build_pattern
-
         h, n = self.h, self.n
         R = np.asarray(rhs, dtype=float).reshape(h.n_coef, n)
         if "pattern_all" not in self._cache:
@@ -339,8 +346,6 @@ class HBMSystem:
                               shape=(self.size, self.size))
         else:
             N = sp.csr_matrix((self.size, self.size))
-        from .linsolve import HarmonicBlockJacobian
-
         J = HarmonicBlockJacobian(self, omega, xi, N)
         if not self.structured:
             J = J.tocsr()

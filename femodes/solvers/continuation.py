@@ -807,7 +807,6 @@ def continuation(
 
     opt = options
     br = _Branch(problem, n, opt.newton)
-    cos_max_turn = math.cos(math.radians(opt.max_turn_angle))
 
     pts: list[_Pt] = []
     folds: list[int] = []
