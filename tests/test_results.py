@@ -153,8 +153,11 @@ def test_penetration_and_tension(mixed, duffing_branch):
     ref_ten = max(0.0, float(np.max(-p)))
     tol = (np.pi * 6 / 2048) ** 2 / 2
     u_max = np.abs(s.displacement(th)).max()
-    assert ref_pen - tol * u_max <= s.penetration <= ref_pen + 1e-15
-    assert ref_ten - tol * np.abs(p).max() <= s.tension <= ref_ten + 1e-15
+    # "never above" up to the rounding of two evaluations of the series, ~eps (1 + 2 pi H) sum|coef|
+    # (was 1e-15 absolute, ~4 eps max|u|: below that rounding scale)
+    ev = 4 * np.finfo(float).eps * (1 + 2 * np.pi * s.harmonics.n_harmonics)
+    assert ref_pen - tol * u_max <= s.penetration <= ref_pen + ev * np.abs(s.Q).sum()
+    assert ref_ten - tol * np.abs(p).max() <= s.tension <= ref_ten + ev * np.abs(s.P).sum()
     # low-frequency point: no contact anywhere -> exactly zero
     s0 = mixed[0]
     assert np.all(s0.displacement(th) < np.array([0.2, 0.5]))
@@ -203,13 +206,17 @@ def test_branch_amplitude_is_max_over_fine_grid(which, request):
     # below by at most the sampling error. At the maximum u' = 0, the nearest sample is within
     # pi/n and |u''| <= H^2 max|u| (Bernstein), so the deficit is <= (pi H / n)^2 / 2 * max|u|
     # (6.8e-4 for H = 6, 9.2e-4 for H = 7; measured <= 6.6e-5, and 1.5e-4 for nu = 2).
-    assert np.all(amp <= ref * (1 + 1e-14))
+    # The three evaluate the series at common phases by different code, which differ by rounding
+    # ~eps (1 + 2 pi H) sum|Q_k| (k theta is rounded): "never above" holds up to that (was 1e-14
+    # relative = 45 eps max|u|, below this scale; 0.03 of it used with Prescott/no-AVX2 kernels)
     H = br.harmonics.n_harmonics
+    ev = 4 * np.finfo(float).eps * (1 + 2 * np.pi * H) * np.abs(br.Q[:, :, 0]).sum(axis=1)
+    assert np.all(amp <= ref + ev)
     assert np.all(amp >= ref * (1 - (np.pi * H / 512) ** 2 / 2))
     # PeriodicSolution.amplitude (2048-phase grid, nested) lies in between
     for i in (0, len(br) // 2, len(br) - 1):
         a = br[i].amplitude(0)
-        assert amp[i] * (1 - 1e-14) <= a <= ref[i] * (1 + 1e-14)
+        assert amp[i] - ev[i] <= a <= ref[i] + ev[i]
 
 
 # ========================================================================= persistence
