@@ -17,6 +17,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import scipy.sparse as sp
 
+from .eigen import generalized_eigh, mass_normalize
+from .fe.redistribution import redistribute_contact_mass
 from .laws import CubicSpring, Location, PenaltyContact, UnilateralContact, check_location
 
 __all__ = ["DofMap", "HarmonicForce", "Attached", "StructuralModel", "as_sparse_matrix"]
@@ -143,6 +145,18 @@ class DofMap:
                 f"pass keep=[({loc!r}, {self.components[c]!r})] to craig_bampton"
             )
         return dof
+
+    def node_dofs(self, at: Location, owner: str = "DofMap") -> list[int]:
+        """Model DOFs of ``at``: every free component of a named point (a node is taken whole),
+        or the single DOF of a ``(name, component)`` pair, a DOF name or an index."""
+        at = check_location(at, owner)
+        if isinstance(at, str) and at in self.locations and at not in self.dof_names:
+            node = self.locations[at]
+            dofs = [int(d) for d in self.node_dof[node] if d >= 0]
+            if not dofs:
+                raise ValueError(f"{owner}: at={at!r}: every component of {at!r} is constrained or not kept")
+            return dofs
+        return [self.index(at, owner)]
 
     def label(self, i: int) -> str:
         return self.labels[i] if i < len(self.labels) else f"dof {i}"
@@ -323,6 +337,8 @@ class StructuralModel:
         object.__setattr__(self, "M", M)
         object.__setattr__(self, "K", K)
         object.__setattr__(self, "C", C)
+        if self.damping_info == "none" and C.nnz and np.any(C.data != 0):
+            object.__setattr__(self, "damping_info", "matrix C")  # given directly (StructuralModel(C=...))
         dm = self.dofmap
         if dm is None:
             dm = DofMap.discrete(n, self.dof_names)
@@ -406,18 +422,18 @@ class StructuralModel:
                 f"with_damping: modal damping builds a dense C; this model has {self.n_dofs} DOFs (> 5000). "
                 "Use Rayleigh damping, or apply modal damping to a craig_bampton reduced model"
             )
-        from .linear import linear_modes
-
         nm = int(n_modes) if n_modes is not None else (zeta.size if zeta.size > 1 else min(self.n_dofs, 20))
         if zeta.size == 1:
             zeta = np.full(nm, zeta[0])
         if zeta.size != nm:
             raise ValueError(f"with_damping: modal gives {zeta.size} ratios but n_modes={nm}")
-        modes = linear_modes(self, n=nm)
-        MPhi = self.M @ modes.shapes
-        C = MPhi @ np.diag(2.0 * zeta * modes.omega) @ MPhi.T
+        lam, phi = generalized_eigh(self.K, self.M, nm, "with_damping")
+        omega = np.sqrt(np.maximum(lam, 0.0))
+        MPhi = self.M @ mass_normalize(phi, self.M)
+        C = MPhi @ np.diag(2.0 * zeta * omega) @ MPhi.T
         C = 0.5 * (C + C.T)
-        return self._replace(C=C, damping_info=f"modal zeta={zeta.tolist()}")
+        ratios = f"{zeta[0]:g}" if np.all(zeta == zeta[0]) else f"{zeta.min():g}..{zeta.max():g}"
+        return self._replace(C=C, damping_info=f"modal zeta={ratios} on {nm} modes")
 
     def with_forcing(self, *forces: HarmonicForce) -> "StructuralModel":
         """Return a copy with these harmonic point forces added."""
@@ -474,9 +490,7 @@ class StructuralModel:
                 if self.fe is None:
                     raise ValueError("with_contact: redistribute_mass=True needs an FE model (bar or beam), not a discrete one")
                 if M[a.dof, a.dof] > 0:
-                    from .fe.assembly import redistribute_contact_mass
-
-                    M, rep = redistribute_contact_mass(self, a.dof, M)
+                    M, rep = redistribute_contact_mass(self.fe, M, a.dof)
                     rep["dof"] = a.dof
                     reports.append(rep)
         if any(isinstance(a.item, UnilateralContact) for a in new) and any(isinstance(a.item, PenaltyContact) for a in new):
@@ -506,6 +520,22 @@ class StructuralModel:
     def expand(self, q: np.ndarray) -> np.ndarray:
         """Model DOFs -> model DOFs (identity; a reduced model maps to its parent's DOFs)."""
         return np.asarray(q)
+
+    @property
+    def mesh_owner(self) -> "StructuralModel | None":
+        """The model that owns the FE mesh: this one for FE models, None for discrete ones
+        (a reduced model answers with its parent's owner)."""
+        return self if self.fe is not None else None
+
+    def to_owner(self, q: np.ndarray) -> np.ndarray:
+        """Coordinates ``(..., n_dofs)`` on the DOFs of :attr:`mesh_owner` (identity here; a
+        reduced model expands through every reduction level)."""
+        return np.asarray(q)
+
+    def fe_dof(self, dof: int) -> int | None:
+        """Index in the full FE field of a DOF of this model; None for a discrete model (and for
+        the modal coordinates of a reduced one)."""
+        return None if self.fe is None else int(np.asarray(self.fe.free)[dof])
 
     def full_field(self, q: np.ndarray) -> np.ndarray:
         """FE field with constrained DOFs set to zero, ``(..., n_fe_dofs)``; identity for discrete models."""

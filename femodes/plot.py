@@ -77,7 +77,7 @@ def _check_solution(solution: Any, owner: str) -> PeriodicSolution:
 
 
 def frequency_energy(branches: Any, ax: Any = None, *, labels: Any = None, hz: bool = False,
-                     mark_folds: bool = True):
+                     mark_folds: bool = True, show_points: bool = False):
     """Frequency-energy plot: backbones and forced curves on the same axes.
 
     Parameters
@@ -90,7 +90,13 @@ def frequency_energy(branches: Any, ax: Any = None, *, labels: Any = None, hz: b
     hz : bool
         Frequency in Hz instead of rad/s.
     mark_folds : bool
-        Mark ``branch.folds`` with ``x`` markers (one extra line per branch with folds).
+        Mark ``branch.folds`` (turning points in frequency, located by the continuation) with
+        ``x`` markers in the branch colour: one extra line per branch with folds, hidden from
+        the legend (its label starts with ``_fold``). Default on.
+    show_points : bool
+        Also draw a small dot at every computed point. Between points the curve is a straight
+        segment; the dots show where the continuation actually solved, so a long segment (e.g.
+        across a contact onset) is not mistaken for a feature of the solution.
 
     Returns
     -------
@@ -117,7 +123,8 @@ def frequency_energy(branches: Any, ax: Any = None, *, labels: Any = None, hz: b
         else:
             label = br.kind
         ls = "-" if br.kind == "nonlinear mode" else "--"
-        (line,) = ax.plot(_freq(br.omega, hz), br.energy, ls, label=label)
+        (line,) = ax.plot(_freq(br.omega, hz), br.energy, ls, label=label,
+                          **({"marker": ".", "ms": 3} if show_points else {}))
         if mark_folds and br.folds:
             folds.append((br, line.get_color()))
     for br, color in folds:
@@ -207,9 +214,9 @@ def time_history(solution: PeriodicSolution, dof: Any = None, ax: Any = None, n_
         0 < n_periods < 1e6
     ):
         raise ValueError(f"{owner}: n_periods must be a positive number, got {n_periods!r}")
-    from .io.vtk import check_int
+    from .solvers.checks import check_int
 
-    n_points = check_int(n_points, "n_points", owner, 2)
+    n_points = check_int("n_points", n_points, 2, owner=owner)
     ax = _axes(ax, owner)
     T = solution.period
     t = np.linspace(0.0, n_periods * T, max(2, int(round(n_points * n_periods))) + 1)
@@ -254,9 +261,9 @@ def phase_portrait(solution: PeriodicSolution, dof: Any, ax: Any = None, *, n_po
     owner = "phase_portrait"
     solution = _check_solution(solution, owner)
     idx, dof_label = _dof(solution, dof, owner, solution.n_dofs)
-    from .io.vtk import check_int
+    from .solvers.checks import check_int
 
-    n_points = check_int(n_points, "n_points", owner, 3)
+    n_points = check_int("n_points", n_points, 3, owner=owner)
     ax = _axes(ax, owner)
     t = np.linspace(0.0, solution.period, n_points + 1)
     q = solution.displacement(t)[:, idx]
@@ -272,7 +279,7 @@ def phase_portrait(solution: PeriodicSolution, dof: Any, ax: Any = None, *, n_po
     return ax
 
 
-def mode_shape(source: Any, model: Any = None, ax: Any = None, n_snapshots: int = 8, *, mode: int = 0,
+def mode_shape(source: Any, model: Any = None, ax: Any = None, n_snapshots: int = 8, *, mode: int = 1,
                cmap: str = "viridis", show_obstacle: bool = True):
     """Deflection snapshots along the structure over one period.
 
@@ -288,7 +295,7 @@ def mode_shape(source: Any, model: Any = None, ax: Any = None, n_snapshots: int 
     n_snapshots : int
         Snapshots at ``t_j = j T / n_snapshots`` (>= 1), coloured by ``t / T``.
     mode : int
-        Mode index (0-based) for ``LinearModes``.
+        Mode number (1 = the first mode) for ``LinearModes``.
     cmap : str
         Colormap of the snapshots.
     show_obstacle : bool
@@ -301,15 +308,16 @@ def mode_shape(source: Any, model: Any = None, ax: Any = None, n_snapshots: int 
         per contact if ``show_obstacle``.
     """
     owner = "mode_shape"
-    from .io.vtk import _source, check_int, mesh_fields, mesh_owner, resolve_model
+    from .fields import mesh_fields, periodic_source, resolve_model
+    from .solvers.checks import check_int
 
-    n_snapshots = check_int(n_snapshots, "n_snapshots", owner, 1)
-    src, j = _source(source, mode, owner)
+    n_snapshots = check_int("n_snapshots", n_snapshots, 1, owner=owner)
+    src, j = periodic_source(source, mode, owner)
     model = resolve_model(src, model, owner)
     ax = _axes(ax, owner)
     plt = _plt()
     colors = plt.get_cmap(cmap)(np.linspace(0.0, 0.9, n_snapshots))
-    if mesh_owner(model) is None:
+    if model.mesh_owner is None:
         # Discrete model: no geometry; plot the DOF values against the DOF index.
         if j is None:
             T = src.period
@@ -328,7 +336,7 @@ def mode_shape(source: Any, model: Any = None, ax: Any = None, n_snapshots: int 
         ax.grid(True, alpha=0.3)
         ax.legend()
         return ax
-    f = mesh_fields(src, model, n_frames=n_snapshots, mode=j, owner=owner)
+    f = mesh_fields(src, model, n_frames=n_snapshots, mode=mode, owner=owner)
     order = np.argsort(f.x)
     for k in range(n_snapshots):
         ax.plot(f.x[order], f.displacement[k, order], "-", color=colors[k],

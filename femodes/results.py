@@ -4,35 +4,27 @@ A solution is stored by its Fourier coefficients; everything else (time historie
 penetration, tension, energy) is evaluated from them. Branches save to ``.npz`` (always
 available, never pickled) or ``.h5`` (with h5py) and load back with :func:`load_branch`.
 
-Long runs write a :class:`Checkpoint`: a journal directory ``<path>.points/`` holding a header
-and one small file per converged point, each written to a temporary name and renamed into place
-(``os.replace`` is atomic on POSIX and Windows), so that a killed run leaves only complete files;
-the finished branch is then saved to ``path`` and the journal removed.
+Files are written by :mod:`femodes.store` (atomic writes; the checkpoint journal of long runs).
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import tempfile
-import zipfile
-import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .hbm.harmonics import Harmonics
+from .laws import PenaltyContact, UnilateralContact
+from .store import RECORD_SUFFIXES, read_record, write_record
 
-__all__ = ["PeriodicSolution", "Branch", "load_branch", "FORMAT_VERSION", "Checkpoint", "CHECKPOINT_VERSION"]
+__all__ = ["PeriodicSolution", "Branch", "load_branch", "FORMAT_VERSION"]
 
 FORMAT_VERSION = 1
 #: Version of the checkpoint journal layout (header and point files), checked on resume.
-CHECKPOINT_VERSION = 1
-_CHECKPOINT_FORMAT = "femodes.Checkpoint"
-_BRANCH_SUFFIXES = (".npz", ".h5", ".hdf5")
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,9 +60,43 @@ class ContactInfo:
     def to_json(self) -> dict:
         return {k: list(getattr(self, k)) for k in ("kinds", "dofs", "gaps", "stiffness", "slots", "c")}
 
+    @cached_property
+    def laws(self) -> tuple:
+        """The contact laws (``at`` = their DOF index), rebuilt from the stored parameters: results
+        evaluate gaps and penalty forces with the formulas of :mod:`femodes.laws`."""
+        return tuple(
+            UnilateralContact(at=d, gap=g, c=c) if kind == "complementarity"
+            else PenaltyContact(at=d, gap=g, stiffness=k)
+            for kind, d, g, k, c in zip(self.kinds, self.dofs, self.gaps, self.stiffness, self.c)
+        )
+
     @classmethod
     def from_json(cls, d: dict) -> "ContactInfo":
         return cls(*(tuple(d[k]) for k in ("kinds", "dofs", "gaps", "stiffness", "slots", "c")))
+
+
+def _fine_points(harmonics: Harmonics) -> int:
+    """Samples per period of the fine grid on which contact quality is measured."""
+    return max(2048, 64 * harmonics.n_coef)
+
+
+def _penetration(harmonics: Harmonics, contacts: ContactInfo, Q: np.ndarray) -> np.ndarray:
+    """Max penetration ``max(0, max_t -g_N(t))`` over all contacts, per point.
+
+    ``Q`` of shape ``(n_points, n_coef, n_dofs)``; the fine grid is ``_fine_points`` equidistant
+    phases over the period, one synthesis matrix for all points (only the contact DOFs are
+    evaluated). The single definition behind :attr:`PeriodicSolution.penetration` and
+    :attr:`Branch.penetration`.
+    """
+    worst = np.zeros(Q.shape[0])
+    if not contacts.kinds or not Q.shape[0]:
+        return worst
+    n = _fine_points(harmonics)
+    E = harmonics.synthesis(2 * np.pi * np.arange(n) / n)
+    for law, dof in zip(contacts.laws, contacts.dofs):
+        g = law.gap_function(E @ Q[:, :, dof].T)  # (n, n_points)
+        worst = np.maximum(worst, np.max(-g, axis=0))
+    return worst
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,25 +167,25 @@ class PeriodicSolution:
             else:
                 if u is None:
                     u = self.displacement(t)
-                out[:, j] = ci.stiffness[j] * np.maximum(0.0, u[:, ci.dofs[j]] - ci.gaps[j])
+                out[:, j] = ci.laws[j].force(u[:, ci.dofs[j]])[0]
         return out
 
     def gap(self, t) -> np.ndarray:
         """Normal gaps ``g_N(t) = gap - q_c(t)``, shape ``(len(t), n_contacts)``."""
         u = self.displacement(t)
         ci = self.contacts
-        return np.asarray(ci.gaps)[None, :] - u[:, list(ci.dofs)]
+        if not ci.kinds:
+            return np.zeros((u.shape[0], 0))
+        return np.column_stack([law.gap_function(u[:, dof]) for law, dof in zip(ci.laws, ci.dofs)])
 
     def _fine_t(self) -> np.ndarray:
-        n = max(2048, 64 * self.harmonics.n_coef)
+        n = _fine_points(self.harmonics)
         return np.arange(n) * (self.period / n)
 
     @property
     def penetration(self) -> float:
         """Max penetration ``max(0, max_t -g_N(t))`` over a fine time grid (0 without contacts)."""
-        if not self.contacts.kinds:
-            return 0.0
-        return float(max(0.0, np.max(-self.gap(self._fine_t()))))
+        return float(_penetration(self.harmonics, self.contacts, self.Q[None])[0])
 
     @property
     def tension(self) -> float:
@@ -176,12 +202,7 @@ class PeriodicSolution:
         """Displacement expanded to the full model (Craig-Bampton parents) DOFs."""
         if self.model is None:
             raise ValueError("full_displacement needs the model: this solution was loaded from a file; use Branch.attach(model)")
-        q = self.displacement(t)
-        m = self.model
-        while getattr(m, "is_reduced", False):
-            q = m.expand(q)
-            m = m.parent
-        return q
+        return self.model.to_owner(self.displacement(t))
 
 
 class Branch:
@@ -226,7 +247,11 @@ class Branch:
     def __getitem__(self, i: int) -> PeriodicSolution:
         if isinstance(i, slice) or not isinstance(i, (int, np.integer)):
             raise TypeError("Branch indices must be integers; use the array attributes for slices")
-        i = range(len(self))[i]
+        try:
+            i = range(len(self))[i]
+        except IndexError:
+            raise IndexError(f"branch index {i} is out of range for a branch of {len(self)} points "
+                             f"(valid: 0 .. {len(self) - 1}, or negative from the end)") from None
         return PeriodicSolution(
             omega=float(self.omega[i]), Q=self.Q[i], P=self.P[i], harmonics=self.harmonics, contacts=self.contacts,
             energy=float(self.energy[i]), xi=float(self.xi[i]), residual_norm=float(self.residual_norm[i]),
@@ -244,7 +269,10 @@ class Branch:
 
     @property
     def penetration(self) -> np.ndarray:
-        return np.array([s.penetration for s in self])
+        """:attr:`PeriodicSolution.penetration` at every point (one synthesis for the branch)."""
+        if not len(self):
+            return np.zeros(0)
+        return _penetration(self.harmonics, self.contacts, self.Q)
 
     @property
     def tension(self) -> np.ndarray:
@@ -286,29 +314,9 @@ class Branch:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         suffix = path.suffix.lower()
-        if suffix not in _BRANCH_SUFFIXES:
+        if suffix not in RECORD_SUFFIXES:
             raise ValueError(f"Branch.save: use a .npz or .h5 file name, got {str(path)!r}")
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-        os.close(fd)
-        try:
-            header = json.dumps(self._header())
-            if suffix == ".npz":
-                with open(tmp, "wb") as f:
-                    np.savez_compressed(f, header=np.array(header), **self._arrays())
-            else:
-                try:
-                    import h5py
-                except ImportError as exc:
-                    raise ImportError("saving .h5 needs h5py (pip install 'femodes[store]'), or use a .npz file name") from exc
-                with h5py.File(tmp, "w") as f:
-                    f.attrs["header"] = header
-                    for k, v in self._arrays().items():
-                        # fletcher32 checksums: a damaged file is detected on load, not read silently
-                        f.create_dataset(k, data=v, fletcher32=True, compression="gzip" if v.size > 1000 else None)
-            os.replace(tmp, path)  # atomic: a crash never leaves a half-written file under `path`
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
+        write_record(path, self._header(), self._arrays())  # atomic: never a half-written file under `path`
         return path
 
 
@@ -318,17 +326,8 @@ def load_branch(path, model=None) -> Branch:
     if not path.is_file():
         raise FileNotFoundError(f"load_branch: no such file {str(path)!r}")
     try:
-        if path.suffix.lower() == ".npz":
-            with np.load(path, allow_pickle=False) as f:
-                header = json.loads(str(f["header"]))
-                arrays = {k: f[k] for k in f.files if k != "header"}
-        else:
-            import h5py
-
-            with h5py.File(path, "r") as f:
-                header = json.loads(f.attrs["header"])
-                arrays = {k: f[k][()] for k in f.keys()}
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error, json.JSONDecodeError) as exc:
+        header, arrays = read_record(path)
+    except ValueError as exc:
         raise ValueError(f"load_branch: {str(path)!r} is not a readable femodes branch file ({exc})") from exc
     if header.get("format") != "femodes.Branch":
         raise ValueError(f"load_branch: {str(path)!r} is not a femodes branch file")
@@ -347,156 +346,3 @@ def load_branch(path, model=None) -> Branch:
     if model is not None:
         br.attach(model)
     return br
-
-
-# ------------------------------------------------------------------------------------------------
-# checkpoint journal of a running continuation
-# ------------------------------------------------------------------------------------------------
-_READ_ERRORS = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error, json.JSONDecodeError)
-
-
-class Checkpoint:
-    """Journal of a running continuation next to its final branch file ``path``.
-
-    Layout: ``<path>.points/header.json`` (format, version and a JSON description of the run)
-    and ``<path>.points/<index:08d>.npz``, one uncompressed ``.npz`` of named arrays per point.
-    Every file is written to a unique ``*.tmp`` name, flushed to disk (``fsync``) and renamed
-    into place, so a crash at any moment leaves complete files (plus perhaps a ``*.tmp`` that
-    readers ignore); writing a point costs O(size of the point), independently of the branch
-    length. The zip CRC-32 of every member is checked on reading, so a damaged point is
-    reported, not read. When the run ends, :meth:`finish` saves the branch to ``path``
-    (:meth:`Branch.save`, itself atomic) and only then removes the journal.
-
-    The journal knows nothing about continuation: the caller decides what a point holds
-    (:mod:`femodes.analyses` stores the unknowns and the continuation state).
-
-    Parameters
-    ----------
-    path : str or PathLike
-        Final branch file, ``.npz`` or ``.h5``/``.hdf5``.
-    """
-
-    def __init__(self, path):
-        path = Path(path)
-        if path.suffix.lower() not in _BRANCH_SUFFIXES:
-            raise ValueError(f"checkpoint: use a .npz or .h5 file name for the final branch, got {str(path)!r}")
-        self.path = path
-        self.journal = path.with_name(path.name + ".points")
-
-    def __repr__(self) -> str:
-        return f"Checkpoint({str(self.path)!r})"
-
-    @property
-    def header_path(self) -> Path:
-        return self.journal / "header.json"
-
-    def point_path(self, index: int) -> Path:
-        return self.journal / f"{int(index):08d}.npz"
-
-    # -- writing -----------------------------------------------------------------------------
-    def _write_atomic(self, target: Path, write) -> None:
-        fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=target.name + ".", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                write(f)
-                f.flush()
-                os.fsync(f.fileno())  # the data is on disk before the rename makes it visible
-            os.replace(tmp, target)
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-
-    def create(self, description: dict) -> None:
-        """Start a new journal (the directory must not hold one) with ``description`` in its header."""
-        self.journal.mkdir(parents=True, exist_ok=True)
-        if self.header_path.exists():
-            raise FileExistsError(f"checkpoint: {str(self.journal)!r} already holds a journal")
-        header = {"format": _CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "run": description}
-        text = json.dumps(header, indent=1).encode()
-        self._write_atomic(self.header_path, lambda f: f.write(text))
-
-    def write_point(self, index: int, arrays: dict) -> Path:
-        """Write point ``index`` (a dict of arrays; an ``index`` member is added) atomically."""
-        target = self.point_path(index)
-        arrays = dict(arrays, index=np.asarray(int(index)))
-        self._write_atomic(target, lambda f: np.savez(f, **arrays))
-        return target
-
-    # -- reading -----------------------------------------------------------------------------
-    def read_header(self) -> dict:
-        """The description of the run; ``ValueError`` for a damaged header or another version."""
-        where = str(self.header_path)
-        try:
-            header = json.loads(self.header_path.read_text())
-        except FileNotFoundError:
-            raise ValueError(f"checkpoint: {str(self.journal)!r} has no header.json (not a femodes checkpoint, "
-                             "or damaged); delete the directory to start over") from None
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"checkpoint: header {where!r} is damaged ({exc})") from exc
-        if not isinstance(header, dict) or header.get("format") != _CHECKPOINT_FORMAT or not isinstance(
-                header.get("run"), dict):
-            raise ValueError(f"checkpoint: {where!r} is not a femodes checkpoint header")
-        if header.get("version") != CHECKPOINT_VERSION:
-            raise ValueError(f"checkpoint: {where!r} has checkpoint version {header.get('version')!r}, this femodes "
-                             f"reads version {CHECKPOINT_VERSION}; finish that run with the femodes that started it, "
-                             "or delete the directory to start over")
-        return header["run"]
-
-    def indices(self) -> list[int]:
-        """Indices of the complete point files, ascending (``*.tmp`` leftovers are ignored)."""
-        out = []
-        for p in self.journal.glob("*.npz"):
-            if p.stem.isdigit():
-                out.append(int(p.stem))
-        return sorted(out)
-
-    def read_point(self, index: int, required: tuple = ()) -> dict:
-        """Arrays of point ``index``; ``ValueError`` naming the file if it is damaged or incomplete."""
-        path = self.point_path(index)
-        try:
-            with np.load(path, allow_pickle=False) as f:
-                arrays = {k: f[k] for k in f.files}  # reads every member: the zip CRC-32 is checked
-        except _READ_ERRORS as exc:
-            raise ValueError(f"checkpoint: point file {str(path)!r} is damaged ({type(exc).__name__}: {exc}); "
-                             "delete it and the points after it to resume from the point before") from exc
-        missing = [k for k in ("index", *required) if k not in arrays]
-        if missing:
-            raise ValueError(f"checkpoint: point file {str(path)!r} is damaged (missing {', '.join(missing)})")
-        if arrays["index"].shape != () or int(arrays["index"]) != index:
-            raise ValueError(f"checkpoint: point file {str(path)!r} is damaged (it holds index {arrays['index']!r})")
-        return arrays
-
-    def read_points(self, required: tuple = ()) -> list[dict]:
-        """All points ``0..k``; a missing index is reported as a ``ValueError``."""
-        idx = self.indices()
-        if idx != list(range(len(idx))):
-            gap = next(i for i, j in enumerate(idx) if i != j)
-            raise ValueError(f"checkpoint: {str(self.journal)!r} lacks point file {self.point_path(gap).name} "
-                             f"(has {len(idx)} point files up to index {idx[-1]}); it is damaged")
-        return [self.read_point(i, required) for i in idx]
-
-    # -- maintenance -------------------------------------------------------------------------
-    def discard(self, after: int) -> None:
-        """Remove the point files with index > ``after`` and leftover temporary files."""
-        for i in self.indices():
-            if i > after:
-                self.point_path(i).unlink()
-        for p in self.journal.glob("*.tmp"):
-            p.unlink(missing_ok=True)
-
-    def finish(self, branch: "Branch") -> Path:
-        """Save the final branch to ``path`` (atomically), then remove the journal."""
-        branch.save(self.path)
-        self.remove_journal()
-        return self.path
-
-    def remove_journal(self) -> None:
-        if not self.journal.is_dir():
-            return
-        for p in self.journal.iterdir():
-            if p.name == "header.json" or p.suffix in (".npz", ".tmp"):
-                p.unlink(missing_ok=True)
-        try:
-            self.journal.rmdir()
-        except OSError:  # a file we did not write: leave the directory to the user
-            pass

@@ -3,7 +3,11 @@
 :func:`animate` renders one period of a periodic solution (or of a linear mode) on the FE mesh:
 the deformed structure as a tube coloured by the displacement magnitude, the obstacle of each
 contact as a small block at the gap, with a fixed camera and a fixed colour range over the
-period so that frames are comparable.
+period so that frames are comparable. For periodic solutions with contacts the contact quality
+is shown, not hidden: a caption states the maximum penetration over the period (relative to the
+gap; a truncated Fourier series lets the structure pass the obstacle slightly), each frame states
+the current gap, and the contact node is drawn as a ball that turns red in frames where it is
+inside the obstacle.
 
 pyvista is imported only when :func:`animate` is called (``pip install 'femodes[render]'``).
 Rendering is headless: with the pip VTK wheels it goes through EGL on Mesa's software renderer
@@ -24,7 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from .io.vtk import check_int, check_scale, mesh_fields
+from .fields import check_scale, mesh_fields
+from .solvers.checks import check_int
 
 __all__ = ["animate", "render_backend"]
 
@@ -90,15 +95,76 @@ def _check_window(window_size: Any, owner: str) -> tuple[int, int]:
     return int(window_size[0]), int(window_size[1])
 
 
+class _ContactQuality:
+    """Contact state of a periodic solution over the animated frames (for the overlay of :func:`animate`)."""
+
+    def __init__(self, nodes, gaps, frame_gaps, penetration, label):
+        self.nodes = nodes                  # mesh node of each drawn contact
+        self.gaps = gaps                    # initial gap of each drawn contact
+        self.frame_gaps = frame_gaps        # g_N(t_j), (n_frames, n_drawn)
+        self.penetration = penetration      # max_t(-g_N) over a fine grid, per drawn contact
+        self.label = label                  # DOF label of each drawn contact ("" if unknown)
+        w = int(np.argmax(self._relative(penetration)))
+        pen, gap = float(penetration[w]), float(gaps[w])
+        rel = f" = {100 * pen / gap:.1f} % of the gap {gap:.3g}" if gap > 0 else f" (gap {gap:.3g})"
+        where = f" at {label[w]}" if label[w] else ""
+        self.caption = (f"max penetration{where}: {pen:.2e}{rel}" if pen > 0
+                        else f"no penetration{where} (gap {gap:.3g})")
+        scale = np.maximum(np.abs(gaps), 1e-12)
+        self.tol = 1e-3 * scale
+
+    def _relative(self, values):
+        return np.where(self.gaps > 0, values / np.where(self.gaps > 0, self.gaps, 1.0), values)
+
+    def penetrating(self, j: int) -> np.ndarray:
+        return self.frame_gaps[j] < -self.tol
+
+    def frame_text(self, j: int) -> str:
+        g = self.frame_gaps[j]
+        c = int(np.argmin(g))
+        if g[c] < -self.tol[c]:
+            rel = f" ({100 * -g[c] / self.gaps[c]:.1f} % of gap)" if self.gaps[c] > 0 else ""
+            return f"penetration now {-g[c]:.2e}{rel}"
+        return f"gap now {max(g[c], 0.0):.2e}"
+
+
+def _contact_quality(solution: Any, f: Any, model: Any) -> _ContactQuality | None:
+    """Gaps of the contacts that sit on mesh nodes, at the frames and over a fine grid; None if none."""
+    from .results import PeriodicSolution
+
+    if not isinstance(solution, PeriodicSolution) or not solution.contacts.kinds:
+        return None
+    keep = [c for c, node in enumerate(f.contact_nodes) if node >= 0]
+    if not keep:
+        return None
+    # a fine grid as for PeriodicSolution.penetration (64 samples per Fourier coefficient): the frames
+    # alone would miss the deepest instant
+    n = max(2048, 64 * solution.harmonics.n_coef)
+    fine = solution.gap(np.arange(n) * (solution.period / n))[:, keep]
+    frame_gaps = solution.gap(f.t)[:, keep]
+    model = model if model is not None else solution.model
+    labels = []
+    for c in keep:
+        dof = int(solution.contacts.dofs[c])
+        try:
+            labels.append(model.dofmap.label(dof) if model.dofmap.labels else "")
+        except (AttributeError, IndexError):  # pragma: no cover - models without DOF labels
+            labels.append("")
+    return _ContactQuality(nodes=[int(f.contact_nodes[c]) for c in keep],
+                           gaps=np.asarray(f.contact_gaps, dtype=float)[keep], frame_gaps=frame_gaps,
+                           penetration=np.maximum(0.0, np.max(-fine, axis=0)), label=labels)
+
+
 def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: float | None = None,
             window_size: tuple[int, int] = (640, 360), fps: float = 12, *, mode: int | None = None,
-            cmap: str = "plasma", radius: float | None = None) -> Path:
+            cmap: str = "plasma", radius: float | None = None, show_contact: bool = True,
+            unit: str | None = None, title: str | None = None) -> Path:
     """Render one period of a periodic motion to an animated GIF or an MP4 video, off screen.
 
     Parameters
     ----------
     solution : PeriodicSolution or LinearModes
-        E.g. ``branch[i]``; for linear modes pass ``mode`` (0-based), motion ``phi cos(w t)``.
+        E.g. ``branch[i]``; for linear modes pass ``mode`` (1 = the first mode), motion ``phi cos(w t)``.
     model : StructuralModel or None
         The model the result lives on (None: ``solution.model``); reduced models are expanded
         to the full mesh. Discrete models (no mesh) raise ValueError.
@@ -122,6 +188,19 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
         range is fixed over the period).
     radius : float, optional
         Tube radius (default 1 % of the length).
+    show_contact : bool
+        For a :class:`~femodes.results.PeriodicSolution` with contacts: caption line with the
+        maximum penetration ``max_t (-g_N)`` over a fine time grid (the value of
+        ``solution.penetration``) as a length and as a percentage of the gap of the worst
+        contact; per frame the smallest current gap ``g_N(t_j)`` (red with the penetration
+        when negative); a ball at each contact node, red in frames where ``g_N < 0`` beyond
+        ``1e-3`` of the gap. Linear modes (arbitrary amplitude) get no contact overlay.
+    unit : str, optional
+        Length unit shown in the colour bar title, e.g. ``"m"`` or ``"L"`` (dimensionless
+        models); default: no unit.
+    title : str, optional
+        Extra first caption line (e.g. what is shown); the frequency and the displacement
+        scale are always stated below it.
 
     Returns
     -------
@@ -139,7 +218,7 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
         pyvista / imageio (/ imageio-ffmpeg for ``.mp4``) not installed.
     """
     owner = "animate"
-    n_frames = check_int(n_frames, "n_frames", owner, 2)
+    n_frames = check_int("n_frames", n_frames, 2, owner=owner)
     scale = check_scale(scale, owner)
     width, height = _check_window(window_size, owner)
     if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)) or not 0 < fps <= 240:
@@ -152,9 +231,13 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
         raise ValueError(f"{owner}: path must end in .gif or .mp4, got {str(path)!r}")
     if radius is not None and (isinstance(radius, bool) or not isinstance(radius, (int, float)) or not radius > 0):
         raise ValueError(f"{owner}: radius must be a positive number or None, got {radius!r}")
+    for name, value in (("unit", unit), ("title", title)):
+        if value is not None and not isinstance(value, str):
+            raise TypeError(f"{owner}: {name} must be a str or None, got {type(value).__name__}")
     if suffix == ".mp4":
         width, height = 16 * math.ceil(width / 16), 16 * math.ceil(height / 16)
     f = mesh_fields(solution, model, n_frames=n_frames, mode=mode, owner=owner)
+    quality = _contact_quality(solution, f, model) if show_contact else None
 
     try:
         import imageio.v2 as iio
@@ -216,7 +299,9 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
     images = []
     try:
         plotter.set_background("white")
-        label = "axial displ." if axis == 0 else "deflection"
+        label = "abs. axial displ." if axis == 0 else "abs. deflection"  # VTK fonts have no "|"
+        if unit:
+            label += f" [{unit}]"
         plotter.add_mesh(structure(0), scalars="|u|", cmap=cmap, clim=clim, name="structure", smooth_shading=True,
                          scalar_bar_args={"title": label, "color": "black", "vertical": True, "position_x": 0.82,
                                           "position_y": 0.12, "height": 0.7, "width": 0.05, "fmt": "%.1e",
@@ -233,15 +318,29 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
         cam.parallel_scale = 1.1 * max(half_h, half_w / aspect, 1e-3 * length)
         cam.focal_point = (center[0] + 0.1 * 2 * cam.parallel_scale * width / height, center[1], center[2])
         cam.position = (cam.focal_point[0], center[1], center[2] + 10 * length)
-        plotter.add_text(f"w = {f.omega:.4g} rad/s, displacement x{scale:.3g}", font_size=9, color="black",
-                         position="upper_left", name="title")
+        caption = [title] if title else []
+        caption.append(f"w = {f.omega:.5g} rad/s, displacement x{scale:.3g}")
+        if quality is not None:
+            caption.append(quality.caption)
+        plotter.add_text("\n".join(caption), font_size=9, color="black", position="upper_left", name="title")
+        ball = 2.2 * radius
+        # the contact balls sit in front of the obstacle blocks (same x, y in the orthographic view)
+        z_front = 0.1 * length + ball
         for j in range(n_frames):
             if j:
                 plotter.add_mesh(structure(j), scalars="|u|", cmap=cmap, clim=clim, name="structure",
                                  smooth_shading=True, show_scalar_bar=False, reset_camera=False)
             # the time label also keeps frames distinct (GIF writers merge identical frames)
-            plotter.add_text(f"t/T = {j / n_frames:.3f}", font_size=9, color="black", position="lower_left",
-                             name="time")
+            now = f"t/T = {j / n_frames:.3f}"
+            color = "black"
+            if quality is not None:
+                now += "   " + quality.frame_text(j)
+                color = "red" if quality.penetrating(j).any() else "black"
+                for c, node in enumerate(quality.nodes):
+                    plotter.add_mesh(pv.Sphere(radius=ball, center=frames_pts[j, node] + (0.0, 0.0, z_front)),
+                                     name=f"contact{c}",
+                                     color="red" if quality.penetrating(j)[c] else "black", reset_camera=False)
+            plotter.add_text(now, font_size=9, color=color, position="lower_left", name="time")
             plotter.render()
             img = plotter.screenshot(return_img=True)
             if img is None or img.size == 0:

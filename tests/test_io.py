@@ -99,7 +99,7 @@ def test_bar_displacement_along_x(tmp_path):
     mesh = fm.line_mesh(1.0, 6, boundaries={"clamp": 0.0, "tip": 1.0})
     bar = fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
     modes = fm.linear_modes(bar, 2)
-    pvd = write_linear_mode(modes, 0, bar, tmp_path / "bar", n_frames=4)
+    pvd = write_linear_mode(modes, bar, tmp_path / "bar", n_frames=4, mode=1)
     entries = read_pvd(pvd)
     T = 2 * np.pi / modes.omega[0]
     assert [t for t, _ in entries] == [j * T / 4 for j in range(4)]
@@ -119,7 +119,7 @@ def test_bar_displacement_along_x(tmp_path):
 def test_linear_mode_of_reduced_model(cantilever_nnm, tmp_path):
     beam, _, red, _ = cantilever_nnm
     modes = fm.linear_modes(red, 3)
-    pvd = write_linear_mode(modes, 1, red, tmp_path / "lin" / "m2", n_frames=5, scale=2.0)
+    pvd = write_linear_mode(modes, red, tmp_path / "lin" / "m2", n_frames=5, scale=2.0, mode=2)
     entries = read_pvd(pvd)
     assert len(entries) == 5
     m = meshio.read(pvd.parent / entries[0][1])
@@ -137,8 +137,11 @@ def test_frame_names_widen_for_many_frames(cantilever_nnm, tmp_path):
 def test_bad_input(cantilever_nnm, tmp_path):
     beam, model, red, nnm = cantilever_nnm
     sol = nnm[-1]
-    for bad in (1, 0, 2.5, True, "6"):
-        with pytest.raises(ValueError, match="n_frames"):
+    for bad in (1, 0):  # too few frames
+        with pytest.raises(ValueError, match="n_frames must be an integer >= 2"):
+            write_animation(sol, red, tmp_path / "x", n_frames=bad)
+    for bad in (2.5, True, "6"):  # not an integer: a type error, as everywhere in femodes
+        with pytest.raises(TypeError, match="n_frames must be an integer >= 2"):
             write_animation(sol, red, tmp_path / "x", n_frames=bad)
     with pytest.raises(TypeError, match="solution"):
         write_animation(nnm, red, tmp_path / "x")
@@ -153,12 +156,14 @@ def test_bad_input(cantilever_nnm, tmp_path):
     with pytest.raises(TypeError, match="scale"):
         write_animation(sol, red, tmp_path / "x", scale="big")
     modes = fm.linear_modes(beam, 2)
-    with pytest.raises(ValueError, match="mode=5"):
-        write_linear_mode(modes, 5, beam, tmp_path / "x")
+    with pytest.raises(ValueError, match=r"mode=3 is out of range.*mode=1 \.\. 2"):
+        write_linear_mode(modes, beam, tmp_path / "x", mode=3)
+    with pytest.raises(ValueError, match="mode must be an integer >= 1"):
+        write_linear_mode(modes, beam, tmp_path / "x", mode=0)
     with pytest.raises(ValueError, match="model"):
-        write_linear_mode(modes, 0, None, tmp_path / "x")
+        write_linear_mode(modes, None, tmp_path / "x")
     with pytest.raises(TypeError, match="modes"):
-        write_linear_mode(sol, 0, beam, tmp_path / "x")
+        write_linear_mode(sol, beam, tmp_path / "x")
     assert not list(tmp_path.glob("x*"))
 
 
@@ -180,4 +185,4 @@ def test_discrete_model_is_rejected(tmp_path):
     with pytest.raises(ValueError, match=re.escape("no mesh")):
         write_animation(nnm[0], model, tmp_path / "x")
     with pytest.raises(ValueError, match="no mesh"):
-        write_linear_mode(fm.linear_modes(model, 1), 0, model, tmp_path / "x")
+        write_linear_mode(fm.linear_modes(model, 1), model, tmp_path / "x")

@@ -52,7 +52,7 @@ def test_mp4_and_linear_mode(nnm, tmp_path):
 
     red = nnm.model
     modes = fm.linear_modes(red, 2)
-    path = animate(modes, red, tmp_path / "lin.mp4", n_frames=4, window_size=(200, 120), mode=1)
+    path = animate(modes, red, tmp_path / "lin.mp4", n_frames=4, window_size=(200, 120), mode=2)
     assert path.stat().st_size > 500
     with iio2.get_reader(path) as r:
         frames = [f for f in r]
@@ -69,7 +69,7 @@ def test_bar(tmp_path):
     bar = fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
     model = bar.with_contact(fm.UnilateralContact(at="tip", gap=0.02))
     modes = fm.linear_modes(model, 1)
-    path = animate(modes, model, tmp_path / "bar.gif", n_frames=3, window_size=(160, 96), mode=0, scale=0.1)
+    path = animate(modes, model, tmp_path / "bar.gif", n_frames=3, window_size=(160, 96), mode=1, scale=0.1)
     assert iio.imread(path, index=None).shape[0] == 3
 
 
@@ -87,5 +87,5 @@ def test_bad_input(nnm, tmp_path):
         animate(sol, None, tmp_path / "x.gif", fps=0)
     model = fm.StructuralModel(M=np.eye(2), K=np.array([[2.0, -1.0], [-1.0, 2.0]]))
     with pytest.raises(ValueError, match="no mesh"):
-        animate(fm.linear_modes(model, 1), model, tmp_path / "x.gif", mode=0)
+        animate(fm.linear_modes(model, 1), model, tmp_path / "x.gif", mode=1)
     assert not list(tmp_path.iterdir())

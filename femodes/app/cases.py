@@ -517,6 +517,29 @@ def build_model(case: Case):
     return model, full
 
 
+class OutputFolderError(ValueError):
+    """An output folder that cannot be used (a file in the way, no permission)."""
+
+
+def usable_folder(folder: Path, option: str) -> Path:
+    """Create ``folder`` (and parents) and check it is writable, or raise one-sentence
+    :class:`OutputFolderError` naming ``option`` and what to change."""
+    folder = Path(folder)
+    blocker = next((p for p in (folder, *folder.parents) if p.exists() and not p.is_dir()), None)
+    if blocker is not None:
+        raise OutputFolderError(f"{option} {str(folder)!r}: {str(blocker)!r} is a file, not a folder; "
+                                f"choose another {option}")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / ".femodes-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise OutputFolderError(f"{option} {str(folder)!r} is not writable ({exc.strerror or exc}); "
+                                f"choose another {option}") from None
+    return folder
+
+
 @dataclass
 class CaseResult:
     branch: Any
@@ -537,9 +560,14 @@ def analysis_span(case: Case) -> tuple[float, float]:
     return float(a), float(b)
 
 
-def run_case(case: Case, out: Path, *, progress: bool = False) -> CaseResult:
-    """Build the model, run the analysis (``progress`` logs points at INFO), write the outputs to ``out``."""
+def run_case(case: Case, out: Path, *, progress: bool | Callable = False) -> CaseResult:
+    """Build the model, run the analysis, write the outputs to ``out``.
+
+    ``progress`` goes to the analysis: ``True`` logs points at INFO, a callable receives every
+    accepted continuation point (the command line's :class:`~femodes.app.progress.BranchProgress`).
+    """
     import femodes as fm
+    from ..analyses import frequency_response_options
 
     model, full = build_model(case)
     api = _Api(case)
@@ -552,10 +580,7 @@ def run_case(case: Case, out: Path, *, progress: bool = False) -> CaseResult:
         branch = api("analysis", ["mode", "energy", "harmonics"], fm.nonlinear_mode, model, an.get("mode", 1),
                      energy=tuple(an["energy"]), harmonics=H, progress=progress)
     else:
-        options = None
-        if opts:
-            options = fm.ContinuationOptions(step=0.05, max_step=0.5, newton=fm.NewtonOptions(atol=1e-9, max_iter=20),
-                                             **opts)
+        options = frequency_response_options(**opts) if opts else None
         branch = api("analysis", ["omega", "harmonics"], fm.frequency_response, model, tuple(an["omega"]), H,
                      options=options, progress=progress)
     outs = {"plot": True, "branch": "branch.npz", "animation": True, "gif": False}

@@ -13,7 +13,7 @@ import logging
 import sys
 from pathlib import Path
 
-import numpy as np
+from .progress import BranchProgress
 
 log = logging.getLogger(__name__)
 
@@ -61,95 +61,36 @@ RUN_HELP = """Run a TOML case file. Tables (see examples/cases/*.toml for commen
 """
 
 
-class ProgressBar:
-    """Text progress bar on a stream: ``[#####.....]  45%  p = ...  points 37``."""
-
-    def __init__(self, span: tuple[float, float], label: str = "p", stream=None, width: int = 30):
-        self.p0, self.p1 = span
-        self.label, self.width = label, width
-        self.stream = stream if stream is not None else sys.stderr
-        self.n = 0
-        self.best = 0.0
-        self.shown = False
-
-    def fraction(self, p: float) -> float:
-        if self.p1 == self.p0:
-            return 1.0
-        return min(1.0, max(0.0, (p - self.p0) / (self.p1 - self.p0)))
-
-    def update(self, p: float, n: int | None = None) -> str:
-        self.n = self.n + 1 if n is None else n
-        f = self.fraction(p)
-        self.best = max(self.best, f)  # the branch may fold back; the bar shows the furthest point
-        k = int(round(self.best * self.width))
-        line = f"\r[{'#' * k}{'.' * (self.width - k)}] {100 * self.best:3.0f}%  {self.label} = {p:.6g}  points {self.n}"
-        self.stream.write(line)
-        self.stream.flush()
-        self.shown = True
-        return line
-
-    def close(self) -> None:
-        if self.shown:
-            self.stream.write("\n")
-            self.stream.flush()
-            self.shown = False
-
-
-class _ProgressHandler(logging.Handler):
-    """Feeds the per-point INFO records of femodes.analyses (``progress=True``) to a ProgressBar."""
-
-    def __init__(self, bar: ProgressBar):
-        super().__init__(logging.INFO)
-        self.bar = bar
-
-    def emit(self, record: logging.LogRecord) -> None:
-        args = record.args if isinstance(record.args, tuple) else ()
-        if len(args) >= 3 and "point" in str(record.msg) and isinstance(args[2], (int, float)):
-            try:
-                self.bar.update(float(args[2]), int(args[1]))
-            except Exception:  # never let the display break a run
-                pass
-
-
-def run_case_cli(path: Path, out: Path | None, progress: bool | None, verbose: bool = False) -> int:
-    """``femodes run``: returns the exit code (2 for mistakes in the case file)."""
-    from .cases import CaseError, analysis_span, load_case, run_case
+def run_case_cli(path: Path, out: Path | None, progress: bool | None) -> int:
+    """``femodes run``: returns the exit code (2 for mistakes in the case file or the output folder)."""
+    from .cases import CaseError, OutputFolderError, analysis_span, load_case, run_case, usable_folder
 
     try:
         case = load_case(path)
-    except CaseError as exc:
+        out = usable_folder(out if out is not None else Path("out") / path.stem, "--out")
+    except (CaseError, OutputFolderError) as exc:
         print(f"femodes run: {exc}", file=sys.stderr)
         return 2
-    out = out if out is not None else Path("out") / path.stem
     show = sys.stderr.isatty() if progress is None else progress
-    handler = None
-    alog = logging.getLogger("femodes.analyses")
-    saved = (alog.level, alog.propagate)
+    bar = None
     if show:
         label = "log10(energy)" if case.data["analysis"]["type"] == "nonlinear_mode" else "w"
-        bar = ProgressBar(analysis_span(case), label)
-        handler = _ProgressHandler(bar)
-        alog.addHandler(handler)
-        alog.setLevel(logging.INFO)
-        alog.propagate = verbose  # the bar replaces the INFO lines unless -v
+        bar = BranchProgress(analysis_span(case), label)
     try:
-        res = run_case(case, out, progress=show)
+        res = run_case(case, out, progress=bar.update if bar else False)
     except CaseError as exc:
-        if handler:
-            handler.bar.close()
         print(f"femodes run: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # the folder became unwritable during the run, the disk is full...
+        print(f"femodes run: cannot write the outputs to {str(out)!r}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     finally:
-        if handler:
-            handler.bar.close()
-            alog.removeHandler(handler)
-            alog.setLevel(saved[0])
-            alog.propagate = saved[1]
+        if bar:
+            bar.close()
     print("\n".join(res.lines))
     names = ", ".join(Path(f).name for f in res.files)
     print(f"outputs written to {out.resolve()} ({names})")
     return 0 if res.branch.success else 1
-
 
 
 SWEEP_HELP = """Run a case file for many parameter values, as independent tasks on Dask workers.
@@ -173,7 +114,7 @@ finish, 2 for mistakes in the case file or in --set.
 
 def run_sweep_cli(args) -> int:
     """``femodes sweep``: returns the exit code (2 for mistakes in the case file or in ``--set``)."""
-    from .cases import CaseError, load_case
+    from .cases import CaseError, OutputFolderError, load_case, usable_folder
     from .sweep import parse_set, run_sweep
 
     params: dict = {}
@@ -189,7 +130,11 @@ def run_sweep_cli(args) -> int:
     except (ValueError, TypeError, CaseError) as exc:
         print(f"femodes sweep: {exc}", file=sys.stderr)
         return 2
-    out = args.out if args.out is not None else Path("out") / f"{args.case.stem}_sweep"
+    try:
+        out = usable_folder(args.out if args.out is not None else Path("out") / f"{args.case.stem}_sweep", "--out")
+    except OutputFolderError as exc:
+        print(f"femodes sweep: {exc}", file=sys.stderr)
+        return 2
     show = sys.stderr.isatty() if args.progress is None else args.progress
     if not args.verbose:
         try:  # distributed logs its cluster's start and stop at INFO through our root handler
@@ -254,14 +199,20 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     if args.command == "demo":
+        from .cases import OutputFolderError, usable_folder
         from .demo import run_demo
 
-        res = run_demo(args.out)
+        try:
+            out = usable_folder(args.out, "--out")
+        except OutputFolderError as exc:
+            print(f"femodes demo: {exc}", file=sys.stderr)
+            return 2
+        res = run_demo(out)
         print("\n".join(res["lines"]))
         names = ", ".join(Path(f).name for f in res["files"])
         print(f"outputs written to {res['out'].resolve()} ({names})")
     elif args.command == "run":
-        return run_case_cli(args.case, args.out, args.progress, args.verbose)
+        return run_case_cli(args.case, args.out, args.progress)
     elif args.command == "scaling":
         from .scaling import scaling_cli
 

@@ -1,0 +1,228 @@
+"""Discretise layer: sign changes of real trigonometric polynomials (for the exact positive part).
+
+The real roots of ``phi(θ) = c0 + sum_k (c_k cos kθ + s_k sin kθ)`` are found as eigenvalues of
+a colleague matrix (Chebyshev form of ``phi(α+θ) phi(α-θ)``; I. J. Good 1961) or of a companion
+matrix (``z^H phi(z)``, ``z = exp(iθ)``; J. P. Boyd 2006), then bracketed by sign changes and
+polished by safeguarded Newton iteration. Used by :mod:`femodes.hbm.positive_part`.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+__all__ = ["DEGREE_TOL", "candidates", "sign_changes", "trig_eval"]
+
+_TWO_PI = 2.0 * np.pi
+_EPS = np.finfo(float).eps
+
+# Rotation of the phase used by the real (Chebyshev) root finder: roots are
+# searched for phi(alpha + theta) * phi(alpha - theta), which is even in theta.
+# A generic, irrational-looking alpha avoids the degenerate double roots that
+# the choice alpha = 0 would produce for signals symmetric about theta = 0
+# (e.g. cosine-only responses), and keeps roots away from x = cos(.) = +-1,
+# where arccos is ill-conditioned.  (0.739085... is the fixed point of cos.)
+_ALPHA = 0.7390851332151607
+
+# A root of the polynomial is kept as a candidate sign change if it lies this
+# close to the unit circle (companion) or to the real segment [-1, 1]
+# (colleague).  Generous on purpose: spurious candidates only split an
+# interval, a missing one loses a sign change.
+_ROOT_ACCEPT = 1e-2
+
+# Harmonic k is considered absent (effective degree < H) when
+# max(|c_k|, |s_k|) <= DEGREE_TOL * max|coefficient|; such terms change phi by
+# less than rounding of its evaluation.
+DEGREE_TOL = 1e-16
+
+_MAX_POLISH = 100
+
+def trig_eval(A, x, derivative=False):
+    """Values (and d/dθ) of the series with coefficient rows ``A`` (p, L) at ``x`` (p, q).
+
+    Horner's rule in ``z = exp(iθ)``:
+    ``phi = c0 + Re sum_k (c_k - i s_k) z^k``,
+    ``phi' = Re sum_k i k (c_k - i s_k) z^k``.
+    """
+    H = (A.shape[1] - 1) // 2
+    if H == 0:
+        f = np.broadcast_to(A[:, :1], x.shape).copy()
+        return (f, np.zeros_like(x)) if derivative else f
+    coef = (A[:, 1::2] - 1j * A[:, 2::2])[:, None, :]  # (p, 1, H)
+    z = np.exp(1j * x)
+    acc = np.broadcast_to(coef[..., H - 1], x.shape).copy()
+    if derivative:
+        dcoef = coef * np.arange(1, H + 1)
+        dacc = np.broadcast_to(dcoef[..., H - 1], x.shape).copy()
+    for k in range(H - 2, -1, -1):
+        acc *= z
+        acc += coef[..., k]
+        if derivative:
+            dacc *= z
+            dacc += dcoef[..., k]
+    f = A[:, :1] + (acc * z).real
+    if not derivative:
+        return f
+    return f, -(dacc * z).imag
+
+
+@functools.lru_cache(maxsize=128)
+def _colleague_tables(h):
+    """Constant data of the colleague root finder for effective degree ``h``.
+
+    Returns the rotation factors ``exp(i k alpha)`` (k = -h..h), the matrix
+    ``S`` mapping the flattened products ``Re(b_k b_j)`` to the Chebyshev
+    coefficients ``[g_0, 2 g_1, ..., 2 g_2h]`` (``g_n = sum_{k-j=n} b_k b_j``),
+    and the tridiagonal part of the transposed colleague matrix
+    (``x T_0 = T_1``, ``x T_k = (T_{k-1} + T_{k+1})/2``; upper Hessenberg).
+    """
+    n = 2 * h
+    kk = np.arange(-h, h + 1)
+    rot = np.exp(1j * _ALPHA * kk)
+    shift = (kk[:, None] - kk[None, :]).ravel()
+    S = np.zeros((shift.size, n + 1))
+    keep = shift >= 0
+    S[np.nonzero(keep)[0], shift[keep]] = np.where(shift[keep] > 0, 2.0, 1.0)
+    T = np.zeros((n, n))
+    T[1, 0] = 1.0
+    i = np.arange(1, n - 1)
+    T[i - 1, i] = 0.5
+    T[i + 1, i] = 0.5
+    T[n - 2, n - 1] = 0.5
+    return rot, S, T
+
+
+def candidates(A, heff, method):
+    """Sorted candidate sign-change angles in [0, 2π), padded with inf, shape (m, R)."""
+    m = A.shape[0]
+    R = 2 * int(heff.max(initial=0))
+    if method == "colleague":
+        R *= 2
+    out = np.full((m, max(R, 1)), np.inf)
+    for h in np.unique(heff):
+        if h == 0:
+            continue
+        rows = np.nonzero(heff == h)[0]
+        n = 2 * h
+        # complex coefficients a_k, k = -h..h, of phi(θ) = sum a_k e^{ikθ}
+        c = A[rows, 1 : 2 * h : 2]
+        s = A[rows, 2 : 2 * h + 1 : 2]
+        a_pos = 0.5 * (c - 1j * s)  # k = 1..h
+        a = np.concatenate([np.conj(a_pos[:, ::-1]), A[rows, :1].astype(complex), a_pos], axis=1)
+        if method == "companion":
+            # companion (upper Hessenberg) of p(z) = z^h phi(z) = sum_j a_{j-h} z^j
+            Cm = np.zeros((rows.size, n, n), dtype=complex)
+            Cm[:, np.arange(1, n), np.arange(n - 1)] = 1.0
+            Cm[:, :, -1] = -a[:, :n] / a[:, n:]
+            z = np.linalg.eigvals(Cm)
+            ok = np.abs(np.abs(z) - 1.0) <= _ROOT_ACCEPT
+            ang = np.where(ok, np.mod(np.angle(z), _TWO_PI), np.inf)
+        else:
+            # g(θ) = phi(α+θ) phi(α-θ) = sum_n g_n e^{inθ}, g_n = sum_k b_k b_{k-n},
+            # b_k = a_k e^{ikα}; direct convolution keeps the leading
+            # coefficient g_{2h} = |b_h|^2 relatively accurate.
+            rot, S, template = _colleague_tables(int(h))
+            b = a * rot
+            prod = (b[:, :, None] * b[:, None, :]).real.reshape(rows.size, -1)
+            cheb = prod @ S  # g(x) = sum_n cheb_n T_n(x), x = cos θ
+            Cm = np.repeat(template[None], rows.size, axis=0)
+            Cm[:, :, n - 1] -= cheb[:, :n] / (2.0 * cheb[:, n:])
+            x = np.linalg.eigvals(Cm)
+            ok = (np.abs(x.imag) <= _ROOT_ACCEPT) & (np.abs(x.real) <= 1.0 + _ROOT_ACCEPT)
+            acos = np.arccos(np.clip(x.real, -1.0, 1.0))
+            ang = np.concatenate([_ALPHA + acos, _ALPHA - acos], axis=1)
+            ang = np.where(np.concatenate([ok, ok], axis=1), np.mod(ang, _TWO_PI), np.inf)
+        out[rows, : ang.shape[1]] = ang
+    out.sort(axis=1)
+    return out
+
+
+def sign_changes(A, cand):
+    """Polished sign changes of the series ``A`` (m, L) from candidate angles (m, R).
+
+    Returns ``rows, rho, w, wrap, sign_const`` (see ``Harmonics._positive_gram``);
+    ``sign_const`` is the sign of each signal where it has no sign change.
+    """
+    m, R = cand.shape
+    r = np.sum(np.isfinite(cand), axis=1)
+    rmax = int(r.max(initial=0))
+    sign_const = np.where(A[:, 0] > 0, 1, -1)  # mean has the sign of a one-signed phi
+    empty = (np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0), np.zeros(m, dtype=bool))
+    if rmax == 0:
+        return (*empty, sign_const)
+    cand = cand[:, :rmax]
+    j = np.arange(rmax)
+    valid = j < r[:, None]
+    c = np.where(valid, cand, 0.0)
+    nxt = np.where(j + 1 < r[:, None], np.roll(c, -1, axis=1), c[:, :1] + _TWO_PI)
+    mid = 0.5 * (c + nxt)
+    # test points t = c_0, mid_0, c_1, mid_1, ... (cyclically increasing)
+    t = np.stack([c, mid], axis=2).reshape(m, 2 * rmax)
+    tvalid = np.repeat(valid, 2, axis=1)
+    nt = 2 * r
+    f = trig_eval(A, t)
+    tol = 8.0 * _EPS * np.sum(np.abs(A), axis=1)
+    s = np.where(np.abs(f) > tol[:, None], np.sign(f), 0.0)
+    s[~tvalid] = 0.0
+    # undetermined points inherit the sign of the previous determined point (cyclically)
+    k = np.arange(2 * rmax)
+    last = np.maximum.accumulate(np.where(s != 0, k, -1), axis=1)
+    last_row = last[:, -1]
+    fill = np.where(last >= 0, last, last_row[:, None])
+    s = np.take_along_axis(s, np.maximum(fill, 0), axis=1)
+    undetermined = last_row < 0
+    s[undetermined] = np.where(sign_const[undetermined] > 0, 1.0, -1.0)[:, None]
+    has_pts = r > 0
+    sign_const = np.where(has_pts, np.where(s[:, 0] > 0, 1, -1), sign_const)
+
+    prev = np.where(k == 0, nt[:, None] - 1, k - 1)
+    prev = np.where(tvalid, prev, 0)
+    s_prev = np.take_along_axis(s, prev, axis=1)
+    change = tvalid & (s != s_prev)
+    rows, kk = np.nonzero(change)
+    if rows.size == 0:
+        return (*empty, sign_const)
+    hi = t[rows, kk]
+    lo = np.where(kk == 0, t[rows, nt[rows] - 1] - _TWO_PI, t[rows, np.maximum(kk - 1, 0)])
+    x0 = np.where(kk % 2 == 0, hi, lo)  # the candidate end of the bracket
+    rho = _polish(A[rows], x0, lo, hi, s_prev[rows, kk])
+    w = np.where(s[rows, kk] > 0, -1.0, 1.0)
+    wrap = np.zeros(m, dtype=bool)
+    wrap[has_pts] = s[has_pts, nt[has_pts] - 1] > 0
+    return rows, rho, w, wrap, sign_const
+
+
+def _polish(A, x, lo, hi, sign_lo):
+    """Safeguarded Newton for one root of each series ``A[p]`` in ``[lo[p], hi[p]]``.
+
+    ``sign_lo`` is the sign of the series on the ``lo`` side.  Newton steps
+    leaving the (shrinking) bracket are replaced by bisection, so the
+    iteration converges to a root inside the bracket.
+    """
+    x, lo, hi = x.copy(), lo.copy(), hi.copy()
+    active = np.arange(x.size)
+    tol_f = 8.0 * _EPS * np.sum(np.abs(A), axis=1)
+    for _ in range(_MAX_POLISH):
+        if active.size == 0:
+            break
+        xa = x[active]
+        f, fp = trig_eval(A[active], xa[:, None], derivative=True)
+        f, fp = f[:, 0], fp[:, 0]
+        root = np.abs(f) <= tol_f[active]
+        same = np.sign(f) == sign_lo[active]
+        lo[active] = np.where(same & ~root, xa, lo[active])
+        hi[active] = np.where(~same & ~root, xa, hi[active])
+        la, ha = lo[active], hi[active]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xn = xa - f / fp
+        bad = ~np.isfinite(xn) | (xn <= la) | (xn >= ha)
+        xn = np.where(bad, 0.5 * (la + ha), xn)
+        step = np.abs(xn - xa)
+        small = 4.0 * _EPS * (1.0 + np.abs(xa))
+        done = root | (step <= small) | (ha - la <= small)
+        # at a rounding-level residual take one last Newton step (if it stays
+        # in the bracket): it lands within ~eps |phi| / |phi'| of the root
+        x[active] = np.where(root & bad, xa, xn)
+        active = active[~done]
+    return x

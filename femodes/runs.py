@@ -1,0 +1,260 @@
+"""Analyses layer: running the continuation of an analysis, with progress and checkpoints.
+
+:func:`run_continuation` is what :func:`~femodes.frequency_response` and
+:func:`~femodes.nonlinear_mode` call: it chains the progress callback and the checkpoint journal in
+front of the user's callback, and with ``checkpoint=path`` writes every converged point to a
+journal ``<path>.points/`` as it is found (one small file per point, written atomically, see
+:class:`~femodes.store.Checkpoint`) and the finished branch to ``path``; ``resume=True``
+continues a killed run from its last saved point (``continuation(start=...)``), so that the final
+branch holds every point exactly once and equals the branch of an uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import os
+import time
+from typing import Any, Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from .model import StructuralModel
+from .results import Branch, load_branch
+from .store import Checkpoint
+from .solvers import ContinuationOptions, continuation
+from .solvers.continuation import ContinuationResult, ContinuationState
+
+__all__ = ["run_continuation", "model_fingerprint"]
+
+log = logging.getLogger(__name__)
+
+
+def _run(problem, span, x0, options: ContinuationOptions, label: str, progress, *,
+         start: ContinuationState | None = None, journal: Callable | None = None):
+    """Continuation with the journal writer and the progress callback chained in front of the
+    user's callback."""
+    cb = _progress_callback(options.callback, span, label, progress)
+    if journal is not None:
+        after = cb
+
+        def cb(point):
+            journal(point)  # saved before the user's callback can stop the run
+            return after(point) if after is not None else None
+
+    if cb is not None:
+        options = dataclasses.replace(options, callback=cb)
+    return continuation(problem, span, x0=x0, options=options, start=start)
+
+
+# ------------------------------------------------------------------------------------------------
+# checkpoints: what a run is (to refuse resuming a different one) and what a point stores
+# ------------------------------------------------------------------------------------------------
+def _digest(*parts: bytes) -> str:
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(len(part).to_bytes(8, "little"))
+        h.update(part)
+    return h.hexdigest()[:20]
+
+
+def _matrix_bytes(A) -> list[bytes]:
+    A = sp.csr_matrix(A, dtype=float, copy=True)
+    A.sum_duplicates()
+    A.sort_indices()
+    return [np.asarray(A.shape, dtype=np.int64).tobytes(), A.indptr.astype(np.int64).tobytes(),
+            A.indices.astype(np.int64).tobytes(), A.data.tobytes()]
+
+
+def _declarations(items) -> bytes:
+    """Canonical bytes of attached laws (type, DOF and parameters; ``at`` is the DOF)."""
+    out = []
+    for a in items:
+        law = a.item
+        params = {f.name: repr(getattr(law, f.name)) for f in dataclasses.fields(law) if f.name != "at"} \
+            if dataclasses.is_dataclass(law) else {"repr": repr(law)}
+        out.append([type(law).__name__, int(a.dof), params])
+    return json.dumps(out, sort_keys=True).encode()
+
+
+def model_fingerprint(model: StructuralModel) -> dict:
+    """Short hashes of what defines a model's equations: matrices, forcing, contacts, nonlinearities.
+
+    Stored in checkpoints (and their final branch files) so that resuming with another model is
+    refused with a message saying which part differs.
+    """
+    forces = model.force_vectors()
+    force_bytes = [np.int64(k).tobytes() + np.asarray(forces[k], dtype=complex).tobytes() for k in sorted(forces)]
+    return {
+        "n_dofs": int(model.n_dofs),
+        "matrices": _digest(*_matrix_bytes(model.M), *_matrix_bytes(model.K), *_matrix_bytes(model.C)),
+        "forcing": _digest(*force_bytes),
+        "contacts": _digest(_declarations(model.contacts)),
+        "nonlinearities": _digest(_declarations(model.nonlinearities)),
+    }
+
+
+def _differences(saved: Any, current: Any, prefix: str = "") -> list[str]:
+    if isinstance(saved, dict) and isinstance(current, dict):
+        out = []
+        for key in sorted(set(saved) | set(current), key=str):
+            out += _differences(saved.get(key, "<absent>"), current.get(key, "<absent>"), f"{prefix}{key}.")
+        return out
+    if saved != current:
+        return [f"{prefix[:-1]}: {saved!r} in the checkpoint, {current!r} in this call"]
+    return []
+
+
+def _check_same_run(saved: dict, current: dict, where, label: str) -> None:
+    diff = _differences(saved, current)
+    if diff:
+        raise ValueError(f"{label}: checkpoint {str(where)!r} was written by a different run ({'; '.join(diff)}); "
+                         "resume it with the same arguments, or use another checkpoint file")
+
+
+#: Members of every point file; resumable points (ContinuationPoint.state not None) add _STATE_KEYS.
+_POINT_KEYS = ("x", "p", "nit", "residual_norm", "step", "is_fold")
+_STATE_KEYS = ("tangent", "next_step", "folds", "dp_sign", "p_scale", "n_newton", "n_rejected")
+
+
+def _point_record(point) -> dict:
+    """What the journal stores per point: the unknowns, and the continuation state to resume from."""
+    rec = {"x": point.x, "p": point.p, "nit": point.nit, "residual_norm": point.residual_norm,
+           "step": point.step, "is_fold": point.is_fold}
+    st = point.state
+    if st is not None:
+        rec.update(tangent=st.tangent, next_step=st.step, folds=np.asarray(st.folds, dtype=np.int64),
+                   dp_sign=st.dp_sign, p_scale=st.p_scale, n_newton=st.n_newton, n_rejected=st.n_rejected)
+        if st.index == 0:
+            rec["x_scale"] = st.x_scale  # the scales are fixed for a run: stored once
+    return rec
+
+
+def _state_from_records(records: list[dict], ck: Checkpoint) -> ContinuationState:
+    k = len(records) - 1
+    r = records[k]
+    try:
+        if "x_scale" not in records[0]:
+            raise ValueError("missing x_scale")
+        return ContinuationState(
+            x=r["x"], p=float(r["p"]), tangent=r["tangent"], step=float(r["next_step"]), index=k,
+            folds=tuple(int(i) for i in np.atleast_1d(r["folds"])), dp_sign=float(r["dp_sign"]),
+            x_scale=records[0]["x_scale"], p_scale=float(r["p_scale"]), n_newton=int(r["n_newton"]),
+            n_rejected=int(r["n_rejected"]),
+        )
+    except (ValueError, TypeError) as exc:
+        bad = ck.point_path(0 if "x_scale" in str(exc) else k)
+        raise ValueError(f"checkpoint: point file {str(bad)!r} is damaged ({exc})") from exc
+
+
+def _merge(records: list[dict], res: ContinuationResult) -> ContinuationResult:
+    """Saved points followed by the points of the resumed run (whose folds cover the whole branch)."""
+    def stack(key, new, dtype):
+        old = np.array([r[key] for r in records], dtype=dtype)
+        return np.concatenate([old.reshape((len(records),) + new.shape[1:]), new])
+
+    return dataclasses.replace(
+        res, x=stack("x", res.x, float), p=stack("p", res.p, float), nit=stack("nit", res.nit, int),
+        residual_norm=stack("residual_norm", res.residual_norm, float), step=stack("step", res.step, float),
+        tangents=None, first_index=0,
+    )
+
+
+def run_continuation(problem, span, options: ContinuationOptions, label: str, progress, *, x0: Callable,
+                  wrap: Callable, model: StructuralModel, checkpoint, resume: bool, description: dict) -> Branch:
+    """Run (or resume, or return the finished) continuation of ``problem``; ``wrap(res, meta)`` -> Branch.
+
+    ``x0(options)`` gives a new run's start point and its options (which may depend on the start,
+    e.g. the arclength scale); a resumed run keeps the scales saved with its state.
+
+    Warns (in the analysis' terms, from ``wrap``) when a run does not finish its span."""
+    wrap_result = wrap
+
+    def wrap(res, meta) -> Branch:
+        branch = wrap_result(res, meta)
+        if not branch.success:
+            log.warning("%s: %s", label, branch.message)
+        return branch
+
+    if not isinstance(resume, bool):
+        raise TypeError(f"{label}: resume must be True or False, got {resume!r}")
+    if not isinstance(progress, bool) and not callable(progress):
+        raise TypeError(f"{label}: progress must be True, False or a callable(point), got {progress!r}")
+    if checkpoint is None:
+        if resume:
+            raise ValueError(f"{label}: resume=True needs checkpoint=<file> (the checkpoint of the run to resume)")
+        start_x, start_options = x0(options)
+        return wrap(_run(problem, span, start_x, start_options, label, progress), {})
+    if not isinstance(checkpoint, (str, os.PathLike)):
+        raise TypeError(f"{label}: checkpoint must be a file name (.npz or .h5), got {checkpoint!r}")
+    ck = Checkpoint(checkpoint)
+    desc = json.loads(json.dumps(description))  # as it reads back from the JSON header
+    if not resume and (ck.path.exists() or ck.journal.exists()):
+        raise FileExistsError(f"{label}: checkpoint {str(ck.path)!r} (or its journal {ck.journal.name}/) exists; "
+                              "pass resume=True to continue (or return) that run, or delete it to start over")
+    if ck.path.exists():
+        branch = load_branch(ck.path)
+        saved = branch.meta.get("checkpoint")
+        if not isinstance(saved, dict):
+            raise ValueError(f"{label}: {str(ck.path)!r} is a branch file but not the result of a checkpointed run; "
+                             "choose another checkpoint file name")
+        _check_same_run(saved, desc, ck.path, label)
+        branch.attach(model)
+        ck.remove_journal()  # left over if the run was killed while removing it
+        log.info("%s: the checkpointed run %s is finished; returning its branch", label, ck.path)
+        return branch
+
+    records: list[dict] = []
+    if ck.journal.exists() and (ck.header_path.exists() or ck.indices()):
+        _check_same_run(ck.read_header(), desc, ck.journal, label)
+        records = ck.read_points(required=_POINT_KEYS)
+        n = problem.size
+        for i, r in enumerate(records):
+            if r["x"].shape != (n,) or (("tangent" in r) and r["tangent"].shape != (n + 1,)):
+                raise ValueError(f"checkpoint: point file {str(ck.point_path(i))!r} holds {r['x'].shape} unknowns, "
+                                 f"this problem has {n}")
+        # continue from the last point the run can continue from exactly; the points after it
+        # (an inserted fold point, an end point) are computed again
+        while records and "tangent" not in records[-1]:
+            records.pop()
+        ck.discard(after=len(records) - 1)
+    else:
+        ck.create(desc)
+
+    def journal(point):
+        ck.write_point(point.index, _point_record(point))
+
+    if records:
+        start = _state_from_records(records, ck)
+        log.info("%s: resuming %s from point %d at p = %.8g", label, ck.journal, start.index, start.p)
+        res = _merge(records, _run(problem, span, None, options, label, progress, start=start, journal=journal))
+    else:
+        start_x, start_options = x0(options)
+        res = _run(problem, span, start_x, start_options, label, progress, journal=journal)
+    branch = wrap(res, {"checkpoint": desc})
+    ck.finish(branch)
+    return branch
+
+
+def _progress_callback(user_cb: Callable | None, span, label: str, progress: bool | Callable):
+    if progress is False and user_cb is None:
+        return None
+    t0 = time.perf_counter()
+    state = {"n": 0}
+
+    def cb(point):
+        state["n"] += 1
+        if callable(progress):
+            progress(point)
+        elif progress:
+            frac = (point.p - span[0]) / (span[1] - span[0])
+            log.info("%s: point %d, p = %.6g (%.0f%% of span), %d Newton iterations, %.1f s",
+                     label, state["n"], point.p, 100 * frac, point.nit, time.perf_counter() - t0)
+        if user_cb is not None:
+            return user_cb(point)
+        return None
+
+    return cb

@@ -1,0 +1,251 @@
+"""Results layer: persistence of results (files written safely, checkpoint journals).
+
+Every file femodes saves (branches, checkpoint journals, sweep studies, ParaView collections)
+goes through :func:`atomic_write`: the data is written to a temporary file in the target's folder
+and renamed over the target, so a crash or a full disk never leaves a half-written file under the
+target's name, and readers see either the old or the new file. :func:`write_record` and
+:func:`read_record` store a JSON header with named arrays (``.npz`` or ``.h5``); :class:`Checkpoint`
+is the journal of a running continuation.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+import zlib
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["atomic_write", "write_record", "read_record", "Checkpoint", "CHECKPOINT_VERSION", "RECORD_SUFFIXES"]
+
+#: Version of the checkpoint journal layout (header.json + one .npz per point).
+CHECKPOINT_VERSION = 1
+_CHECKPOINT_FORMAT = "femodes.Checkpoint"
+#: What reading a damaged or foreign file raises.
+READ_ERRORS = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error, json.JSONDecodeError)
+#: File names a record (and so a branch) can be saved under.
+RECORD_SUFFIXES = (".npz", ".h5", ".hdf5")
+
+
+def _file_mode() -> int:
+    """Permissions of a newly created file under the process' umask (as ``open`` would give).
+
+    ``tempfile.mkstemp`` creates its file with mode 0600; without this the saved results would be
+    private while every other output (plots, VTK frames) is readable under the usual umask.
+    """
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def atomic_write(target, write: Callable[[str], None], *, durable: bool = False) -> Path:
+    """Write ``target`` through ``write(tmp_name)`` and rename the result over ``target``.
+
+    ``write`` receives the name of a new empty file in ``target``'s folder (libraries such as
+    h5py open files by name). With ``durable`` the data is flushed to disk (``fsync``) before the
+    rename, so that after a power loss the target is either the old or the complete new file.
+    The target gets the permissions a plain ``open`` would give it (``0666 & ~umask``).
+    """
+    target = Path(target)
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=target.name + ".", suffix=".tmp")
+    os.close(fd)
+    try:
+        write(tmp)
+        if durable:
+            with open(tmp, "rb+") as f:
+                os.fsync(f.fileno())
+        os.chmod(tmp, _file_mode())
+        os.replace(tmp, target)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return target
+
+
+def write_record(path, header: dict, arrays: dict) -> Path:
+    """Write a JSON ``header`` and named arrays atomically to ``.npz`` (compressed) or
+    ``.h5``/``.hdf5`` (needs h5py; Fletcher-32 checksums, so a damaged file is detected on
+    reading, not read silently)."""
+    path = Path(path)
+    text = json.dumps(header)
+
+    def write(tmp: str) -> None:
+        if path.suffix.lower() == ".npz":
+            with open(tmp, "wb") as f:
+                np.savez_compressed(f, header=np.array(text), **arrays)
+            return
+        try:
+            import h5py
+        except ImportError as exc:
+            raise ImportError(f"saving {path.name} needs h5py (pip install 'femodes[store]'), or use a .npz file "
+                              "name") from exc
+        with h5py.File(tmp, "w") as f:
+            f.attrs["header"] = text
+            for k, v in arrays.items():
+                f.create_dataset(k, data=v, fletcher32=True, compression="gzip" if v.size > 1000 else None)
+
+    return atomic_write(path, write)
+
+
+def read_record(path) -> tuple[dict, dict]:
+    """``(header, arrays)`` of a file written by :func:`write_record`; ValueError if it cannot be
+    read (damaged, truncated, not such a file)."""
+    path = Path(path)
+    try:
+        if path.suffix.lower() == ".npz":
+            with np.load(path, allow_pickle=False) as f:
+                return json.loads(str(f["header"])), {k: f[k] for k in f.files if k != "header"}
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            return json.loads(f.attrs["header"]), {k: f[k][()] for k in f.keys()}
+    except READ_ERRORS as exc:
+        raise ValueError(str(exc)) from exc
+
+
+class Checkpoint:
+    """Journal of a running continuation next to its final branch file ``path``.
+
+    Layout: ``<path>.points/header.json`` (format, version and a JSON description of the run)
+    and ``<path>.points/<index:08d>.npz``, one uncompressed ``.npz`` of named arrays per point.
+    Every file is written to a unique ``*.tmp`` name, flushed to disk (``fsync``) and renamed
+    into place, so a crash at any moment leaves complete files (plus perhaps a ``*.tmp`` that
+    readers ignore); writing a point costs O(size of the point), independently of the branch
+    length. The zip CRC-32 of every member is checked on reading, so a damaged point is
+    reported, not read. When the run ends, :meth:`finish` saves the branch to ``path``
+    (:meth:`Branch.save`, itself atomic) and only then removes the journal.
+
+    The journal knows nothing about continuation: the caller decides what a point holds
+    (:mod:`femodes.analyses` stores the unknowns and the continuation state).
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Final branch file, ``.npz`` or ``.h5``/``.hdf5``.
+    """
+
+    def __init__(self, path):
+        path = Path(path)
+        if path.suffix.lower() not in RECORD_SUFFIXES:
+            raise ValueError(f"checkpoint: use a .npz or .h5 file name for the final branch, got {str(path)!r}")
+        self.path = path
+        self.journal = path.with_name(path.name + ".points")
+
+    def __repr__(self) -> str:
+        return f"Checkpoint({str(self.path)!r})"
+
+    @property
+    def header_path(self) -> Path:
+        return self.journal / "header.json"
+
+    def point_path(self, index: int) -> Path:
+        return self.journal / f"{int(index):08d}.npz"
+
+    # -- writing -----------------------------------------------------------------------------
+    def _write_atomic(self, target: Path, write) -> None:
+        """Write a journal file durably (fsync before the rename): the journal is what survives a crash."""
+
+        def to_file(tmp: str) -> None:
+            with open(tmp, "wb") as f:
+                write(f)
+
+        atomic_write(target, to_file, durable=True)
+
+    def create(self, description: dict) -> None:
+        """Start a new journal (the directory must not hold one) with ``description`` in its header."""
+        self.journal.mkdir(parents=True, exist_ok=True)
+        if self.header_path.exists():
+            raise FileExistsError(f"checkpoint: {str(self.journal)!r} already holds a journal")
+        header = {"format": _CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "run": description}
+        text = json.dumps(header, indent=1).encode()
+        self._write_atomic(self.header_path, lambda f: f.write(text))
+
+    def write_point(self, index: int, arrays: dict) -> Path:
+        """Write point ``index`` (a dict of arrays; an ``index`` member is added) atomically."""
+        target = self.point_path(index)
+        arrays = dict(arrays, index=np.asarray(int(index)))
+        self._write_atomic(target, lambda f: np.savez(f, **arrays))
+        return target
+
+    # -- reading -----------------------------------------------------------------------------
+    def read_header(self) -> dict:
+        """The description of the run; ``ValueError`` for a damaged header or another version."""
+        where = str(self.header_path)
+        try:
+            header = json.loads(self.header_path.read_text())
+        except FileNotFoundError:
+            raise ValueError(f"checkpoint: {str(self.journal)!r} has no header.json (not a femodes checkpoint, "
+                             "or damaged); delete the directory to start over") from None
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"checkpoint: header {where!r} is damaged ({exc})") from exc
+        if not isinstance(header, dict) or header.get("format") != _CHECKPOINT_FORMAT or not isinstance(
+                header.get("run"), dict):
+            raise ValueError(f"checkpoint: {where!r} is not a femodes checkpoint header")
+        if header.get("version") != CHECKPOINT_VERSION:
+            raise ValueError(f"checkpoint: {where!r} has checkpoint version {header.get('version')!r}, this femodes "
+                             f"reads version {CHECKPOINT_VERSION}; finish that run with the femodes that started it, "
+                             "or delete the directory to start over")
+        return header["run"]
+
+    def indices(self) -> list[int]:
+        """Indices of the complete point files, ascending (``*.tmp`` leftovers are ignored)."""
+        out = []
+        for p in self.journal.glob("*.npz"):
+            if p.stem.isdigit():
+                out.append(int(p.stem))
+        return sorted(out)
+
+    def read_point(self, index: int, required: tuple = ()) -> dict:
+        """Arrays of point ``index``; ``ValueError`` naming the file if it is damaged or incomplete."""
+        path = self.point_path(index)
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                arrays = {k: f[k] for k in f.files}  # reads every member: the zip CRC-32 is checked
+        except READ_ERRORS as exc:
+            raise ValueError(f"checkpoint: point file {str(path)!r} is damaged ({type(exc).__name__}: {exc}); "
+                             "delete it and the points after it to resume from the point before") from exc
+        missing = [k for k in ("index", *required) if k not in arrays]
+        if missing:
+            raise ValueError(f"checkpoint: point file {str(path)!r} is damaged (missing {', '.join(missing)})")
+        if arrays["index"].shape != () or int(arrays["index"]) != index:
+            raise ValueError(f"checkpoint: point file {str(path)!r} is damaged (it holds index {arrays['index']!r})")
+        return arrays
+
+    def read_points(self, required: tuple = ()) -> list[dict]:
+        """All points ``0..k``; a missing index is reported as a ``ValueError``."""
+        idx = self.indices()
+        if idx != list(range(len(idx))):
+            gap = next(i for i, j in enumerate(idx) if i != j)
+            raise ValueError(f"checkpoint: {str(self.journal)!r} lacks point file {self.point_path(gap).name} "
+                             f"(has {len(idx)} point files up to index {idx[-1]}); it is damaged")
+        return [self.read_point(i, required) for i in idx]
+
+    # -- maintenance -------------------------------------------------------------------------
+    def discard(self, after: int) -> None:
+        """Remove the point files with index > ``after`` and leftover temporary files."""
+        for i in self.indices():
+            if i > after:
+                self.point_path(i).unlink()
+        for p in self.journal.glob("*.tmp"):
+            p.unlink(missing_ok=True)
+
+    def finish(self, branch) -> Path:
+        """Save the final branch to ``path`` (atomically), then remove the journal."""
+        branch.save(self.path)
+        self.remove_journal()
+        return self.path
+
+    def remove_journal(self) -> None:
+        if not self.journal.is_dir():
+            return
+        for p in self.journal.iterdir():
+            if p.name == "header.json" or p.suffix in (".npz", ".tmp"):
+                p.unlink(missing_ok=True)
+        try:
+            self.journal.rmdir()
+        except OSError:  # a file we did not write: leave the directory to the user
+            pass
