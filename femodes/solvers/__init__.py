@@ -8,6 +8,12 @@
   resumes exactly from a saved :class:`ContinuationState`.
 * Jacobians may be dense, ``scipy.sparse`` or structured operators that
   factorise themselves (``J.factorize().solve(b)``, duck-typed).
+
+Modules: ``newton`` (semismooth Newton), ``continuation`` (the driver and its
+tracer), ``continuation_types`` (options, points, states, results),
+``arclength`` (the problem's evaluation, scaled geometry, tangent and corrector
+solves), ``bordered`` (bordered matrices and their solver), ``checks`` (the
+argument validators shared by the solvers and the layers above).
 """
 
 from .continuation import ContinuationOptions, ContinuationPoint, ContinuationResult, ContinuationState, continuation

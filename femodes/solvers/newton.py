@@ -37,13 +37,25 @@ from __future__ import annotations
 
 import logging
 import math
-import numbers
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+
+from .checks import (
+    LINSOLVE_ERRORS,
+    check_bool,
+    check_callable,
+    check_int,
+    check_nonnegative,
+    check_positive,
+    inf_norm,
+    is_operator,
+    show,
+    start_vector,
+)
 
 __all__ = [
     "NewtonOptions",
@@ -60,65 +72,10 @@ _ARMIJO_SIGMA = 1e-4
 #: Stagnation test: progress means reducing the smallest residual norm by 1 %.
 _NO_PROGRESS_FACTOR = 0.99
 
-#: Exceptions of a linear solve that mean "singular / failed factorisation".
-_LINSOLVE_ERRORS = (np.linalg.LinAlgError, RuntimeError, ArithmeticError)
-
-
-# --------------------------------------------------------------------------- #
-# option validation helpers (shared with continuation.py)
-# --------------------------------------------------------------------------- #
-def _show(value: Any) -> str:
-    """Representation of ``value`` for error messages (numpy scalars unwrapped)."""
-    if isinstance(value, np.generic):
-        value = value.item()
-    return repr(value)
-
-
-def _is_real_number(value: Any) -> bool:
-    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
-
-
-def _check_positive(name: str, value: Any) -> None:
-    if not _is_real_number(value) or not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be a positive finite number, got {_show(value)}")
-
-
-def _check_int(name: str, value: Any, minimum: int) -> None:
-    if not isinstance(value, numbers.Integral) or isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be an integer >= {minimum}, got {_show(value)}")
-    if value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {_show(value)}")
-
-
-def _check_bool(name: str, value: Any) -> None:
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be a bool, got {_show(value)}")
-
-
-def _check_callable(name: str, value: Any) -> None:
-    if value is not None and not callable(value):
-        raise TypeError(f"{name} must be callable or None, got {_show(value)}")
-
 
 # --------------------------------------------------------------------------- #
 # options / result
 # --------------------------------------------------------------------------- #
-def _tolerance(atol: float, rtol: float, J, x) -> float:
-    """``max(atol, rtol * || |J| |x| ||_inf)``: absolute or backward-error tolerance."""
-    if not rtol:
-        return atol
-    try:
-        ax = np.abs(x)
-        if _is_operator(J):
-            ref = J.abs_matvec(ax)
-        else:
-            ref = (abs(J) @ ax) if sp.issparse(J) else (np.abs(J) @ ax)
-        ref = float(np.max(np.abs(ref))) if np.size(ref) else 0.0
-    except Exception:  # pragma: no cover - advisory only
-        return atol
-    return max(atol, rtol * ref) if math.isfinite(ref) else atol
-
-
 @dataclass(frozen=True, kw_only=True)
 class NewtonOptions:
     """Options of :func:`semismooth_newton`.
@@ -229,21 +186,20 @@ class NewtonOptions:
     callback: Callable[[int, np.ndarray, float], Any] | None = None
 
     def __post_init__(self) -> None:
-        _check_positive("atol", self.atol)
-        if not _is_real_number(self.rtol) or not math.isfinite(self.rtol) or self.rtol < 0:
-            raise ValueError(f"rtol must be a finite number >= 0, got {self.rtol!r}")
-        _check_positive("xtol", self.xtol)
-        _check_int("max_iter", self.max_iter, 1)
-        _check_bool("line_search", self.line_search)
-        _check_positive("min_alpha", self.min_alpha)
+        check_positive("atol", self.atol)
+        check_nonnegative("rtol", self.rtol)
+        check_positive("xtol", self.xtol)
+        check_int("max_iter", self.max_iter, 1)
+        check_bool("line_search", self.line_search)
+        check_positive("min_alpha", self.min_alpha)
         if self.min_alpha > 1:
-            raise ValueError(f"min_alpha must be in (0, 1], got {_show(self.min_alpha)}")
-        _check_int("nonmonotone_memory", self.nonmonotone_memory, 1)
-        _check_int("watchdog", self.watchdog, 0)
-        _check_int("max_stall", self.max_stall, 1)
-        _check_int("stagnation_window", self.stagnation_window, 0)
-        _check_callable("linear_solver", self.linear_solver)
-        _check_callable("callback", self.callback)
+            raise ValueError(f"min_alpha must be in (0, 1], got {show(self.min_alpha)}")
+        check_int("nonmonotone_memory", self.nonmonotone_memory, 1)
+        check_int("watchdog", self.watchdog, 0)
+        check_int("max_stall", self.max_stall, 1)
+        check_int("stagnation_window", self.stagnation_window, 0)
+        check_callable("linear_solver", self.linear_solver)
+        check_callable("callback", self.callback)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -306,7 +262,7 @@ def default_linear_solver(A: Any, b: np.ndarray) -> np.ndarray:
     ``A.factorize().solve(b)``.  Exactly singular matrices raise
     ``RuntimeError`` (SuperLU) or ``numpy.linalg.LinAlgError``.
     """
-    if _is_operator(A):
+    if is_operator(A):
         return A.factorize().solve(b)
     if sp.issparse(A):
         A = sp.csc_matrix(A)
@@ -316,27 +272,9 @@ def default_linear_solver(A: Any, b: np.ndarray) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
-def _start_vector(x0: Any) -> np.ndarray:
-    """``x0`` as a fresh finite 1-D float array, or a ValueError naming ``x0``."""
-    try:
-        x = np.array(x0, dtype=float)  # copy
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"x0 must be a real 1-D array, got {_show(x0)}") from exc
-    if x.ndim != 1 or x.size == 0:
-        raise ValueError(f"x0 must be a non-empty 1-D array, got shape {x.shape}")
-    if not np.all(np.isfinite(x)):
-        raise ValueError("x0 contains non-finite values (nan or inf)")
-    return x
-
-
-def _is_operator(J: Any) -> bool:
-    """A structured Jacobian that factorises itself (duck typing: no import of femodes here)."""
-    return callable(getattr(J, "factorize", None)) and callable(getattr(J, "matvec", None))
-
-
 def _prepare_jacobian(J: Any, n: int) -> Any:
     """Validate shape; return dense ndarray or sparse matrix unchanged otherwise."""
-    if sp.issparse(J) or _is_operator(J):
+    if sp.issparse(J) or is_operator(J):
         if J.shape != (n, n):
             raise ValueError(
                 f"fun returned a Jacobian of shape {J.shape}, expected ({n}, {n}) for x of shape ({n},)"
@@ -351,7 +289,7 @@ def _prepare_jacobian(J: Any, n: int) -> Any:
 
 
 def _jacobian_finite(J: Any) -> bool:
-    if _is_operator(J):
+    if is_operator(J):
         return bool(J.all_finite()) if callable(getattr(J, "all_finite", None)) else True
     if sp.issparse(J):
         data = J.data if J.format in ("csr", "csc", "coo", "bsr", "dia") else J.tocoo().data
@@ -359,8 +297,20 @@ def _jacobian_finite(J: Any) -> bool:
     return bool(np.all(np.isfinite(J)))
 
 
-def _inf_norm(v: np.ndarray) -> float:
-    return float(np.max(np.abs(v))) if v.size else 0.0
+def _tolerance(atol: float, rtol: float, J, x) -> float:
+    """``max(atol, rtol * || |J| |x| ||_inf)``: absolute or backward-error tolerance."""
+    if not rtol:
+        return atol
+    try:
+        ax = np.abs(x)
+        if is_operator(J):
+            ref = J.abs_matvec(ax)
+        else:
+            ref = (abs(J) @ ax) if sp.issparse(J) else (np.abs(J) @ ax)
+        ref = float(np.max(np.abs(ref))) if np.size(ref) else 0.0
+    except Exception:  # pragma: no cover - advisory only
+        return atol
+    return max(atol, rtol * ref) if math.isfinite(ref) else atol
 
 
 # --------------------------------------------------------------------------- #
@@ -414,19 +364,132 @@ def semismooth_newton(
         options = NewtonOptions()
     elif not isinstance(options, NewtonOptions):
         raise TypeError(f"options must be a NewtonOptions instance or None, got {type(options).__name__}")
+    return _Iteration(fun, start_vector(x0), options).run()
 
-    x = _start_vector(x0)
-    n = x.size
 
-    solve = options.linear_solver if options.linear_solver is not None else default_linear_solver
-    atol = float(options.atol)
-    loose_atol = math.sqrt(atol)
-    nfev = 0
+class _Stop(Exception):
+    """End of the iteration with ``status`` after ``nit`` steps (``use_best``: return the iterate
+    with the smallest residual if it is better than the last one)."""
 
-    def evaluate(xv: np.ndarray) -> tuple[np.ndarray, Any]:
-        nonlocal nfev
-        nfev += 1
-        out = fun(xv)
+    def __init__(self, status: int, message: str, nit: int, use_best: bool) -> None:
+        super().__init__(message)
+        self.status, self.message, self.nit, self.use_best = status, message, nit, use_best
+
+
+@dataclass
+class _Step:
+    """A step taken: ``x = x_from + alpha * dx`` with ``r(x)``, ``J(x)``; ``ok`` is False when the
+    line search failed down to ``min_alpha`` (the best trial was taken anyway)."""
+
+    alpha: float
+    dx: np.ndarray
+    x: np.ndarray
+    r: np.ndarray
+    J: Any
+    ok: bool
+    kind: str  # for the log: "full", "relaxed", "backtracked", "line search failed"
+
+
+class _Watchdog:
+    """Watch points of the non-monotone stabilisation (Grippo, Lampariello & Lucidi 1991).
+
+    "Watch points" are iterates that passed the sufficient-decrease test; from a watch point up
+    to ``watchdog`` full Newton steps are taken without any test.  As soon as an iterate passes
+    the non-monotone Armijo test relative to the watch point, it becomes the new watch point; if
+    none does, the iteration returns to the watch point and backtracks along its direction.
+    """
+
+    def __init__(self, x: np.ndarray, r: np.ndarray, options: NewtonOptions) -> None:
+        self.merits = [0.5 * float(r @ r)]  # merit values of the watch points
+        self.x = x  # current watch point
+        self.dx: np.ndarray | None = None  # Newton direction at the watch point
+        self.relaxed = 0  # relaxed steps taken since the watch point
+        self.budget = options.watchdog
+        self.memory = options.nonmonotone_memory
+        self.on = options.watchdog > 0  # off after a failed relaxed phase until a full step passes the test
+
+    def new_direction(self, dx: np.ndarray) -> None:
+        """Record ``dx`` as the watch point's direction if the iterate is the watch point."""
+        if self.relaxed == 0:
+            self.dx = dx
+
+    def references(self) -> tuple[float, float]:
+        """Merit at the watch point, and the non-monotone reference: the largest merit of the
+        last ``nonmonotone_memory`` watch points."""
+        return self.merits[-1], max(self.merits[-self.memory:])
+
+    def may_relax(self) -> bool:
+        return self.on and self.relaxed < self.budget
+
+    def move_to(self, x: np.ndarray, phi: float) -> None:
+        """``x`` (merit ``phi``) becomes the watch point."""
+        self.x, self.relaxed = x, 0
+        self.merits.append(phi)
+
+
+def _backtrack(evaluate: Callable, x0: np.ndarray, dx: np.ndarray, phi0: float, phi_ref: float, alpha: float,
+               min_alpha: float):
+    """Non-monotone Armijo backtracking [GLL86]_ from ``x0`` along ``dx``, trials ``alpha, alpha/2, ...``
+    down to ``min_alpha``.
+
+    Returns ``(accepted, alpha, x, r, J)``: the first trial that passes the test, or (``accepted``
+    False) the trial with the smallest merit; ``None`` if every trial residual was non-finite.
+    """
+    slope = -2.0 * phi0  # d/dalpha phi(x + alpha dx) at 0 for an exact Newton step
+    trial_best = None
+    while True:
+        x_try = x0 + alpha * dx
+        r_try, J_try = evaluate(x_try)
+        phi_try = 0.5 * float(r_try @ r_try) if np.all(np.isfinite(r_try)) else math.inf
+        if np.isfinite(phi_try):
+            if trial_best is None or phi_try < trial_best[0]:
+                trial_best = (phi_try, alpha, x_try, r_try, J_try)
+            if phi_try <= phi_ref + _ARMIJO_SIGMA * alpha * slope:
+                return True, alpha, x_try, r_try, J_try
+        if alpha <= min_alpha:
+            break
+        # plain halving: quadratic interpolation of phi(alpha) is misled by
+        # the kinks of a semismooth merit; a non-finite trial is cut harder.
+        alpha = max(0.5 * alpha if np.isfinite(phi_try) else 0.1 * alpha, min_alpha)
+    if trial_best is None:
+        return None
+    return (False,) + trial_best[1:]
+
+
+def _converged_message(rnorm: float) -> str:
+    return f"converged: residual norm {rnorm:.3e} <= max(atol, rtol |J||x|)"
+
+
+class _Iteration:
+    """One run of :func:`semismooth_newton`: current and best iterates, watchdog, stall counters.
+
+    The methods are the parts of an iteration: Newton direction, globalised step (relaxed
+    watchdog step or backtracking line search), acceptance, stopping tests; they end the run by
+    raising :class:`_Stop`, which :meth:`run` turns into the :class:`NewtonResult`.
+    """
+
+    def __init__(self, fun: Callable, x: np.ndarray, options: NewtonOptions) -> None:
+        self.fun = fun
+        self.options = options
+        self.n = x.size
+        self.solve = options.linear_solver if options.linear_solver is not None else default_linear_solver
+        self.atol = float(options.atol)
+        self.nfev = 0
+        self.x = x
+        self.r, self.J = self.evaluate(x)
+        self.rnorm = inf_norm(self.r)
+        self.history = [self.rnorm]
+        # best (smallest residual) finite iterate, returned on failure
+        self.best = (x.copy(), self.r, self.J, self.rnorm)
+        self.best_it = 0  # iteration at which ``best`` last improved by >= 1 %
+        self.stall = 0
+        self.watchdog: _Watchdog | None = None
+
+    def evaluate(self, x: np.ndarray) -> tuple[np.ndarray, Any]:
+        """``fun(x)`` with its output checked (and counted in ``nfev``)."""
+        n = self.n
+        self.nfev += 1
+        out = self.fun(x)
         try:
             r_raw, J_raw = out
         except (TypeError, ValueError):
@@ -438,195 +501,157 @@ def semismooth_newton(
             )
         return r, _prepare_jacobian(J_raw, n)
 
-    r, J = evaluate(x)
-    rnorm = _inf_norm(r)
-    history = [rnorm]
-    # best (smallest residual) finite iterate, returned on failure
-    best = (x.copy(), r, J, rnorm)
+    def run(self) -> NewtonResult:
+        try:
+            self.start()
+            for it in range(1, self.options.max_iter + 1):
+                step = self.step(it, self.direction(it))
+                step_norm = self.accept(it, step)
+                self.stopping_tests(it, step, step_norm)
+            raise _Stop(
+                1,
+                f"max_iter={self.options.max_iter} reached without convergence "
+                f"(residual norm {self.rnorm:.3e} > atol={self.atol:g})",
+                self.options.max_iter,
+                True,
+            )
+        except _Stop as stop:
+            return self.result(stop)
 
-    def finish(status: int, message: str, nit: int, use_best: bool) -> NewtonResult:
-        if use_best and best[3] < rnorm:
-            xb, rb, Jb, nb = best
+    def start(self) -> None:
+        """Report ``x0``; stop if it is non-finite or already converged; set up the watchdog."""
+        if self.options.callback is not None:
+            self.options.callback(0, self.x.copy(), self.rnorm)
+        logger.debug("newton it=0 |r|=%.3e", self.rnorm)
+        if not np.isfinite(self.rnorm):
+            raise _Stop(3, "non-finite residual at x0", 0, False)
+        if not _jacobian_finite(self.J) and self.rnorm > self.atol:
+            raise _Stop(3, "non-finite Jacobian at x0", 0, False)
+        if self.rnorm <= _tolerance(self.atol, self.options.rtol, self.J, self.x):
+            raise _Stop(0, _converged_message(self.rnorm), 0, False)
+        self.watchdog = _Watchdog(self.x, self.r, self.options)
+
+    def direction(self, it: int) -> np.ndarray:
+        """Newton direction ``dx = -J^{-1} r`` at the current iterate."""
+        try:
+            sol = self.solve(self.J, self.r)
+        except LINSOLVE_ERRORS as exc:
+            raise _Stop(3, f"singular or failed linear solve at iteration {it}: {exc}", it - 1, True) from exc
+        dx = -np.asarray(sol, dtype=float).reshape(-1)
+        if dx.shape != (self.n,):
+            raise ValueError(f"linear_solver returned shape {np.shape(sol)}, expected ({self.n},)")
+        if not np.all(np.isfinite(dx)):
+            raise _Stop(3, f"non-finite Newton step at iteration {it} (singular Jacobian?)", it - 1, True)
+        self.watchdog.new_direction(dx)
+        return dx
+
+    def step(self, it: int, dx: np.ndarray) -> _Step:
+        """The full step (``line_search=False``), a relaxed watchdog step, or a backtracking line
+        search from the watch point."""
+        if not self.options.line_search:
+            x_new = self.x + dx
+            r_new, J_new = self.evaluate(x_new)
+            if not np.all(np.isfinite(r_new)):
+                raise _Stop(3, f"non-finite residual after step {it}", it - 1, True)
+            return _Step(1.0, dx, x_new, r_new, J_new, ok=True, kind="full")
+        phi_w, phi_ref = self.watchdog.references()
+        alpha0 = 1.0  # ordinary line search from the current (watch) point
+        if self.watchdog.may_relax():
+            relaxed = self.relaxed_step(dx, phi_w, phi_ref)
+            if relaxed is not None:
+                return relaxed
+            alpha0 = 0.5  # the full step from the watch point has been tried
+        return self.backtrack_from_watch(it, phi_w, phi_ref, alpha0)
+
+    def relaxed_step(self, dx: np.ndarray, phi_w: float, phi_ref: float) -> _Step | None:
+        """Unchecked full step; ``None`` when the iteration must return to the watch point."""
+        wd = self.watchdog
+        x_new = self.x + dx
+        r_new, J_new = self.evaluate(x_new)
+        if np.all(np.isfinite(r_new)):
+            wd.relaxed += 1
+            phi_new = 0.5 * float(r_new @ r_new)
+            if phi_new <= phi_ref - _ARMIJO_SIGMA * 2.0 * phi_w:
+                # sufficient decrease w.r.t. the watch point: new watch point
+                wd.move_to(x_new, phi_new)
+                return _Step(1.0, dx, x_new, r_new, J_new, ok=True, kind="full")
+            if wd.relaxed < wd.budget:
+                return _Step(1.0, dx, x_new, r_new, J_new, ok=True, kind="relaxed")
+            # budget exhausted
+        wd.on = False  # until a full step passes the line search again
+        return None
+
+    def backtrack_from_watch(self, it: int, phi_w: float, phi_ref: float, alpha0: float) -> _Step:
+        """Line search along the watch point's direction; its result is the new watch point."""
+        wd = self.watchdog
+        out = _backtrack(self.evaluate, wd.x, wd.dx, phi_w, phi_ref, alpha0, self.options.min_alpha)
+        if out is None:
+            raise _Stop(3, f"non-finite residual at all line-search trials of step {it}", it - 1, True)
+        ok, alpha, x_new, r_new, J_new = out
+        if ok and alpha == 1.0 and self.options.watchdog > 0:
+            wd.on = True  # full Newton steps work again: re-enable relaxed steps
+        wd.move_to(x_new, 0.5 * float(r_new @ r_new))
+        return _Step(alpha, wd.dx, x_new, r_new, J_new, ok=ok, kind="backtracked" if ok else "line search failed")
+
+    def accept(self, it: int, step: _Step) -> float:
+        """Move to the step's point, update the best iterate; return the step length (inf-norm)."""
+        step_norm = step.alpha * inf_norm(step.dx)
+        self.x, self.r, self.J = step.x, step.r, step.J
+        self.rnorm = inf_norm(self.r)
+        self.history.append(self.rnorm)
+        if self.rnorm < self.best[3]:
+            if self.rnorm <= _NO_PROGRESS_FACTOR * self.best[3]:
+                self.best_it = it
+            self.best = (self.x, self.r, self.J, self.rnorm)
+        logger.debug("newton it=%d |r|=%.3e alpha=%.3g |dx|=%.3e (%s)",
+                     it, self.rnorm, step.alpha, step_norm, step.kind)
+        if self.options.callback is not None:
+            self.options.callback(it, self.x.copy(), self.rnorm)
+        return step_norm
+
+    def stopping_tests(self, it: int, step: _Step, step_norm: float) -> None:
+        """Convergence (residual, or negligible full step on the round-off floor) and failure
+        (non-finite Jacobian, stalls, stagnation) tests after step ``it``."""
+        opt, rnorm = self.options, self.rnorm
+        if not _jacobian_finite(self.J) and rnorm > self.atol:
+            raise _Stop(3, f"non-finite Jacobian after step {it}", it, True)
+        if rnorm <= _tolerance(self.atol, opt.rtol, self.J, self.x):
+            raise _Stop(0, _converged_message(rnorm), it, False)
+        small_step = step_norm <= opt.xtol * (1.0 + inf_norm(self.x))
+        if small_step and step.alpha == 1.0 and rnorm <= math.sqrt(self.atol):
+            raise _Stop(0, f"converged: full step {step_norm:.3e} below xtol*(1+|x|) with residual "
+                           f"{rnorm:.3e} <= sqrt(atol)", it, False)
+        self.stall = self.stall + 1 if small_step or not step.ok else 0
+        if self.stall >= opt.max_stall:
+            why = "negligible steps" if small_step else "line search failed down to min_alpha"
+            raise _Stop(2, f"no progress: {why} in {self.stall} consecutive iterations (residual norm {rnorm:.3e})",
+                        it, True)
+        if opt.stagnation_window and it - self.best_it >= opt.stagnation_window:
+            raise _Stop(2, f"no progress: smallest residual norm {self.best[3]:.3e} not reduced by 1 % in "
+                           f"{opt.stagnation_window} iterations (local minimum of ||r|| or cycling?)", it, True)
+
+    def result(self, stop: _Stop) -> NewtonResult:
+        """The result of a stopped run: the last iterate, or the best one (``stop.use_best``)."""
+        message = stop.message
+        if stop.use_best and self.best[3] < self.rnorm:
+            xb, rb, Jb, nb = self.best
             message += f"; returning the iterate with the smallest residual norm ({nb:.3e})"
         else:
-            xb, rb, Jb, nb = x, r, J, rnorm
+            xb, rb, Jb, nb = self.x, self.r, self.J, self.rnorm
         xb = np.array(xb, dtype=float)
         rb = np.array(rb, dtype=float)
         xb.flags.writeable = False
         rb.flags.writeable = False
-        logger.debug("semismooth_newton: %s (nit=%d, |r|=%.3e, nfev=%d)", message, nit, nb, nfev)
+        logger.debug("semismooth_newton: %s (nit=%d, |r|=%.3e, nfev=%d)", message, stop.nit, nb, self.nfev)
         return NewtonResult(
             x=xb,
-            success=status == 0,
-            status=status,
+            success=stop.status == 0,
+            status=stop.status,
             message=message,
-            nit=nit,
+            nit=stop.nit,
             fun=rb,
             residual_norm=float(nb),
-            nfev=nfev,
-            history=tuple(history),
+            nfev=self.nfev,
+            history=tuple(self.history),
             jac=Jb,
         )
-
-    if options.callback is not None:
-        options.callback(0, x.copy(), rnorm)
-    logger.debug("newton it=0 |r|=%.3e", rnorm)
-
-    if not np.isfinite(rnorm):
-        return finish(3, "non-finite residual at x0", 0, use_best=False)
-    if not _jacobian_finite(J) and rnorm > atol:
-        return finish(3, "non-finite Jacobian at x0", 0, use_best=False)
-    if rnorm <= _tolerance(atol, options.rtol, J, x):
-        return finish(0, f"converged: residual norm {rnorm:.3e} <= max(atol, rtol |J||x|)", 0, use_best=False)
-
-    # Non-monotone stabilisation (Grippo, Lampariello & Lucidi 1991): "watch
-    # points" are iterates that passed the sufficient-decrease test; from a
-    # watch point up to ``watchdog`` full Newton steps are taken without any
-    # test.  As soon as an iterate passes the non-monotone Armijo test relative
-    # to the watch point, it becomes the new watch point; if none does, the
-    # iteration returns to the watch point and backtracks along its direction.
-    watch_merits = [0.5 * float(r @ r)]  # merit values of the watch points
-    watch = (x, r, J)  # current watch point
-    watch_dx: np.ndarray | None = None  # Newton direction at the watch point
-    relaxed = 0  # relaxed steps taken since the watch point
-    watch_on = options.watchdog > 0  # off after a failed relaxed phase until a full step passes the test
-    stall = 0
-    best_it = 0  # iteration at which ``best`` last improved by >= 1 %
-
-    def backtrack(x0_: np.ndarray, dx_: np.ndarray, phi0: float, phi_ref: float, alpha: float):
-        """Non-monotone Armijo backtracking; returns (accepted?, alpha, x, r, J) or None if all non-finite."""
-        slope = -2.0 * phi0  # d/dalpha phi(x + alpha dx) at 0 for an exact Newton step
-        trial_best = None
-        while True:
-            x_try = x0_ + alpha * dx_
-            r_try, J_try = evaluate(x_try)
-            phi_try = 0.5 * float(r_try @ r_try) if np.all(np.isfinite(r_try)) else math.inf
-            if np.isfinite(phi_try):
-                if trial_best is None or phi_try < trial_best[0]:
-                    trial_best = (phi_try, alpha, x_try, r_try, J_try)
-                if phi_try <= phi_ref + _ARMIJO_SIGMA * alpha * slope:
-                    return True, alpha, x_try, r_try, J_try
-            if alpha <= options.min_alpha:
-                break
-            # plain halving: quadratic interpolation of phi(alpha) is misled by
-            # the kinks of a semismooth merit; a non-finite trial is cut harder.
-            alpha = max(0.5 * alpha if np.isfinite(phi_try) else 0.1 * alpha, options.min_alpha)
-        if trial_best is None:
-            return None
-        return (False,) + trial_best[1:]
-
-    for it in range(1, options.max_iter + 1):
-        # ---- Newton direction -------------------------------------------- #
-        try:
-            sol = solve(J, r)
-        except _LINSOLVE_ERRORS as exc:
-            return finish(3, f"singular or failed linear solve at iteration {it}: {exc}", it - 1, True)
-        dx = -np.asarray(sol, dtype=float).reshape(-1)
-        if dx.shape != (n,):
-            raise ValueError(f"linear_solver returned shape {np.shape(sol)}, expected ({n},)")
-        if not np.all(np.isfinite(dx)):
-            return finish(3, f"non-finite Newton step at iteration {it} (singular Jacobian?)", it - 1, True)
-        if relaxed == 0:
-            watch_dx = dx
-
-        # ---- step ---------------------------------------------------------- #
-        alpha = 1.0
-        ls_ok = True
-        kind = "full"
-        if not options.line_search:
-            x_new = x + dx
-            r_new, J_new = evaluate(x_new)
-            if not np.all(np.isfinite(r_new)):
-                return finish(3, f"non-finite residual after step {it}", it - 1, True)
-        else:
-            phi_w = watch_merits[-1]
-            phi_ref = max(watch_merits[-options.nonmonotone_memory:])
-            back_to_watch = True
-            if watch_on and relaxed < options.watchdog:
-                # relaxed (unchecked) full step
-                x_new = x + dx
-                r_new, J_new = evaluate(x_new)
-                if np.all(np.isfinite(r_new)):
-                    back_to_watch = False
-                    relaxed += 1
-                    kind = "relaxed"
-                    phi_new = 0.5 * float(r_new @ r_new)
-                    if phi_new <= phi_ref - _ARMIJO_SIGMA * 2.0 * phi_w:
-                        # sufficient decrease w.r.t. the watch point: new watch point
-                        watch, relaxed = (x_new, r_new, J_new), 0
-                        watch_merits.append(phi_new)
-                        kind = "full"
-                    elif relaxed >= options.watchdog:
-                        back_to_watch = True  # budget exhausted
-                if back_to_watch:
-                    watch_on = False  # until a full step passes the line search again
-                alpha0 = 0.5  # the full step from the watch point has been tried
-            else:
-                alpha0 = 1.0  # ordinary line search from the current (watch) point
-            if back_to_watch:
-                xw = watch[0]
-                out = backtrack(xw, watch_dx, phi_w, phi_ref, alpha0)
-                if out is None:
-                    return finish(3, f"non-finite residual at all line-search trials of step {it}", it - 1, True)
-                ls_ok, alpha, x_new, r_new, J_new = out
-                if ls_ok and alpha == 1.0 and options.watchdog > 0:
-                    watch_on = True  # full Newton steps work again: re-enable relaxed steps
-                dx = watch_dx
-                watch, relaxed = (x_new, r_new, J_new), 0
-                watch_merits.append(0.5 * float(r_new @ r_new))
-                kind = "backtracked" if ls_ok else "line search failed"
-
-        step_norm = alpha * _inf_norm(dx)
-        x, r, J = x_new, r_new, J_new
-        rnorm = _inf_norm(r)
-        history.append(rnorm)
-        if rnorm < best[3]:
-            if rnorm <= _NO_PROGRESS_FACTOR * best[3]:
-                best_it = it
-            best = (x, r, J, rnorm)
-        logger.debug("newton it=%d |r|=%.3e alpha=%.3g |dx|=%.3e (%s)", it, rnorm, alpha, step_norm, kind)
-        if options.callback is not None:
-            options.callback(it, x.copy(), rnorm)
-
-        # ---- convergence / failure tests --------------------------------- #
-        if not _jacobian_finite(J) and rnorm > atol:
-            return finish(3, f"non-finite Jacobian after step {it}", it, True)
-        if rnorm <= _tolerance(atol, options.rtol, J, x):
-            return finish(0, f"converged: residual norm {rnorm:.3e} <= max(atol, rtol |J||x|)", it, False)
-        small_step = step_norm <= options.xtol * (1.0 + _inf_norm(x))
-        if small_step and alpha == 1.0 and rnorm <= loose_atol:
-            return finish(
-                0,
-                f"converged: full step {step_norm:.3e} below xtol*(1+|x|) with residual "
-                f"{rnorm:.3e} <= sqrt(atol)",
-                it,
-                False,
-            )
-        if small_step or not ls_ok:
-            stall += 1
-        else:
-            stall = 0
-        if stall >= options.max_stall:
-            why = "negligible steps" if small_step else "line search failed down to min_alpha"
-            return finish(
-                2,
-                f"no progress: {why} in {stall} consecutive iterations (residual norm {rnorm:.3e})",
-                it,
-                True,
-            )
-
-        if options.stagnation_window and it - best_it >= options.stagnation_window:
-            return finish(
-                2,
-                f"no progress: smallest residual norm {best[3]:.3e} not reduced by 1 % in "
-                f"{options.stagnation_window} iterations (local minimum of ||r|| or cycling?)",
-                it,
-                True,
-            )
-
-    return finish(
-        1,
-        f"max_iter={options.max_iter} reached without convergence (residual norm {rnorm:.3e} > atol={atol:g})",
-        options.max_iter,
-        True,
-    )
