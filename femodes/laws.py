@@ -1,8 +1,9 @@
 """Laws layer: pointwise nonlinear laws in time (contact complementarity, penalty, cubic spring).
 
 Each law is a frozen declaration (where it acts, its parameters) plus its pointwise value and
-generalized derivative. The same objects are used by the harmonic balance (``femodes.hbm``) and
-by time integration; nothing here knows about harmonics or meshes.
+generalized derivative. This module is the only place where their formulas are written: the
+harmonic balance (``femodes.hbm``), time integration (``femodes.time``) and the results
+(``femodes.results``) call the methods below; nothing here knows about harmonics or meshes.
 
 Sign conventions (fixed once for the whole package)
 ---------------------------------------------------
@@ -19,16 +20,36 @@ complementarity function of Shi & Legrand (2016)::
 
 which, in ours, is ``p - max(0, p - c g_N) = 0`` for any constant ``c > 0``. (Check: if
 ``p - c g_N <= 0`` the equation gives ``p = 0`` and then ``g_N >= 0``; otherwise it gives
-``c g_N = 0`` with ``p >= 0``.) Its generalized derivative is taken with the convention
-``d max(0, s)/ds = 1 if s > 0 else 0``.
+``c g_N = 0`` with ``p >= 0``.)
 
 The penalty law is ``p = k_p max(0, -g_N)`` and the cubic spring ``f = k3 q_i^3``.
+
+Generalized derivatives: ``d max(0, s)/ds = 1 if s > 0 else 0``, i.e. at a kink (``s = 0``)
+the inactive side is taken (Clarke's generalized gradient contains both one-sided values).
+
+Interface
+---------
+Every method is vectorised: ``u`` and ``p`` are arrays of samples of any shape (time samples,
+or several laws at once, see ``stack``) and the results have their broadcast shape.
+
+``UnilateralContact``
+    ``gap_function(u)`` normal gap ``g_N``; ``residual(p, u, c)`` the complementarity function
+    and its generalized partial derivatives; ``positive_part_form(c)`` what an exact Galerkin
+    projection of ``max(0, .)`` needs (slope and kink offset).
+``PenaltyContact``
+    ``gap_function(u)``; ``force(u)`` the contact force and ``dp/du``; ``potential(u)`` the stored
+    energy (``potential' = force``); ``positive_part_form()`` (slope and kink offset).
+``CubicSpring``
+    ``force(u)`` the internal force and ``df/du``; ``potential(u)`` (``potential' = force``).
+``Law.stack(laws)`` (each class)
+    One object evaluating several laws of that class at once: its parameters are arrays with
+    one entry per law (last axis), so ``stack(laws).force(u)`` takes ``u[..., j]`` at law ``j``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Union
 
 import numpy as np
@@ -84,8 +105,40 @@ def _finite(value: Any, name: str, owner: str) -> float:
     return v
 
 
+def _normal_gap(gap, u):
+    """``g_N = gap - u`` (the one kinematic relation of every contact law)."""
+    return gap - np.asarray(u, dtype=float)
+
+
+class _Stackable:
+    """``stack(laws)``: one evaluation object for several laws of the same class."""
+
+    @classmethod
+    def stack(cls, laws):
+        """Several ``cls`` laws as one object whose parameters are arrays (one entry per law).
+
+        ``at`` becomes the tuple of the laws' locations and every numeric field a float array
+        (``None`` -> ``nan``), so the methods evaluate all laws at once with ``u[..., j]`` the
+        value at law ``j``: the same formulas, vectorised over laws as well as samples. The
+        result is for evaluation only (its fields are arrays: do not compare, hash or attach it
+        to a model).
+        """
+        laws = tuple(laws)
+        for law in laws:
+            if type(law) is not cls:
+                raise TypeError(f"{cls.__name__}.stack: expected {cls.__name__} laws, got {type(law).__name__}")
+        out = object.__new__(cls)
+        for f in fields(cls):
+            vals = [getattr(law, f.name) for law in laws]
+            if f.name == "at":
+                object.__setattr__(out, f.name, tuple(vals))
+            else:
+                object.__setattr__(out, f.name, np.array([math.nan if v is None else v for v in vals], dtype=float))
+        return out
+
+
 @dataclass(frozen=True)
-class UnilateralContact:
+class UnilateralContact(_Stackable):
     """Rigid obstacle at a DOF, Signorini conditions by the complementarity function.
 
     ``p - max(0, p - c g_N) = 0`` with ``g_N = gap - q[at]`` (see the module docstring for the
@@ -100,8 +153,9 @@ class UnilateralContact:
         Initial gap ``g0 >= 0`` (the obstacle sits at ``q[at] = gap``).
     c : float, optional
         Complementarity parameter (force per length). With a truncated Fourier basis the weak
-        (Galerkin) solution depends on it: on the mission's 1-DOF case at w = 1.05, H = 20, max u
-        is 1.0184, 1.0154, 1.0111 for c = 1, 10, 100 (tests/test_hbm.py), and for the sub-harmonic
+        (Galerkin) solution depends on it: for ``u'' + 0.1 u' + u = 0.2 cos(w t)`` against a stop at 1
+        (Shi & Legrand 2016) at w = 1.05, H = 20, max u is 1.0184, 1.0154, 1.0111 for c = 1, 10,
+        100, and for the sub-harmonic
         impact orbit of examples/subharmonic_contact.py the w/2 amplitude varies by 3 % for
         c = 10..300, half the truncation error. ``None`` picks the static stiffness seen at the
         contact DOF, ``1 / (K^-1)_cc``. For strongly impacting orbits a larger c (of the order of
@@ -119,13 +173,14 @@ class UnilateralContact:
             object.__setattr__(self, "c", _positive(self.c, "c", "UnilateralContact"))
 
     def gap_function(self, u):
-        """Normal gap ``g_N = gap - u``."""
-        return self.gap - np.asarray(u, dtype=float)
+        """Normal gap ``g_N = gap - u`` (negative: penetration)."""
+        return _normal_gap(self.gap, u)
 
     def residual(self, p, u, c):
-        """Complementarity function ``p - max(0, p - c g_N)`` and its generalized derivatives.
+        """Complementarity function ``r = p - max(0, p - c g_N)`` and its generalized derivatives.
 
-        Returns ``(r, dr_dp, dr_du)``, arrays shaped like ``p``.
+        Returns ``(r, dr_dp, dr_du)``, arrays of the broadcast shape of ``p``, ``u`` (and ``c``):
+        ``(0, -c)`` where ``p - c g_N > 0`` (contact), ``(1, 0)`` elsewhere, the kink included.
         """
         p = np.asarray(p, dtype=float)
         s = p - c * self.gap_function(u)
@@ -135,9 +190,17 @@ class UnilateralContact:
         dr_du = np.where(active, -c, 0.0)
         return r, dr_dp, dr_du
 
+    def positive_part_form(self, c):
+        """``(slope, offset)`` with ``r = p - max(0, p + slope (u - offset))``: ``(c, gap)``.
+
+        The complementarity function as a positive part of an affine argument, for an exact
+        Galerkin projection of ``max(0, .)`` on Fourier coefficients (``femodes.hbm``).
+        """
+        return float(c), self.gap
+
 
 @dataclass(frozen=True)
-class PenaltyContact:
+class PenaltyContact(_Stackable):
     """Regularized (penalty) contact: ``p = stiffness * max(0, -g_N)``, ``g_N = gap - q[at]``.
 
     The classic alternative to complementarity; it allows a penetration of order
@@ -153,20 +216,36 @@ class PenaltyContact:
         object.__setattr__(self, "gap", _positive(self.gap, "gap", "PenaltyContact", allow_zero=True))
         object.__setattr__(self, "stiffness", _positive(self.stiffness, "stiffness", "PenaltyContact"))
 
+    def gap_function(self, u):
+        """Normal gap ``g_N = gap - u`` (negative: penetration)."""
+        return _normal_gap(self.gap, u)
+
     def force(self, u):
-        """Contact force (compression positive) and its generalized derivative ``dp/du``."""
-        pen = np.asarray(u, dtype=float) - self.gap
+        """Contact force ``p = stiffness max(0, u - gap)`` (compression positive) and ``dp/du``.
+
+        ``dp/du = stiffness`` where ``u > gap``, 0 elsewhere (at the kink ``u = gap`` the
+        inactive side). Returns ``(p, dp_du)``.
+        """
+        pen = np.asarray(u, dtype=float) - self.gap  # -g_N
         active = pen > 0.0
         return self.stiffness * np.maximum(0.0, pen), np.where(active, self.stiffness, 0.0)
 
     def potential(self, u):
-        """Stored energy ``stiffness/2 * max(0, u - gap)^2``."""
+        """Stored energy ``stiffness/2 * max(0, u - gap)^2`` (its derivative is :meth:`force`)."""
         pen = np.maximum(0.0, np.asarray(u, dtype=float) - self.gap)
         return 0.5 * self.stiffness * pen**2
 
+    def positive_part_form(self):
+        """``(slope, offset)`` with ``p = slope max(0, u - offset)``: ``(stiffness, gap)``.
+
+        For an exact Galerkin projection of ``max(0, .)`` on Fourier coefficients
+        (``femodes.hbm``); the potential is then ``slope/2 max(0, u - offset)^2``.
+        """
+        return self.stiffness, self.gap
+
 
 @dataclass(frozen=True)
-class CubicSpring:
+class CubicSpring(_Stackable):
     """Grounded cubic (Duffing) spring: internal force ``k3 q[at]^3`` added to ``K q``.
 
     ``k3 > 0`` hardens, ``k3 < 0`` softens.
@@ -183,11 +262,11 @@ class CubicSpring:
         object.__setattr__(self, "k3", k3)
 
     def force(self, u):
-        """Internal force ``k3 u^3`` and its derivative ``3 k3 u^2``."""
+        """Internal force ``k3 u^3`` and its derivative ``3 k3 u^2``. Returns ``(f, df_du)``."""
         u = np.asarray(u, dtype=float)
         return self.k3 * u**3, 3.0 * self.k3 * u**2
 
     def potential(self, u):
-        """Potential ``k3 u^4 / 4``."""
+        """Potential ``k3 u^4 / 4`` (its derivative is :meth:`force`)."""
         u = np.asarray(u, dtype=float)
         return 0.25 * self.k3 * u**4

@@ -13,7 +13,8 @@ operator at ``w = 1``, ``x`` the Kronecker product) block diagonal over harmonic
 nonlinear terms living only on the rows/columns of the nonlinear DOFs. The positive part is
 projected *exactly* (integration between the sign changes of the trigonometric polynomial,
 :meth:`Harmonics.positive_part`): sampling it makes the map piecewise linear with jumps and
-semismooth Newton cycles (measured in the tests). Cubic springs use alias-free sampling
+semismooth Newton cycles (a sampled continuation of the 1-DOF contact case of Shi & Legrand
+stalls near its resonance, where the exact one runs through both folds). Cubic springs use alias-free sampling
 (``N >= 4H + 1``).
 """
 
@@ -29,7 +30,7 @@ import scipy.sparse.linalg as spla
 from ..laws import CubicSpring, PenaltyContact, UnilateralContact
 from ..model import StructuralModel
 from .harmonics import Harmonics
-from .linsolve import HarmonicBlockJacobian, LinearFactors, StructureFailure, _BlockLU, build_pattern
+from .linsolve import HarmonicBlockJacobian, LinearFactors, StructureFailure, BlockLU, build_pattern
 
 __all__ = ["HBMSystem", "default_contact_parameter"]
 
@@ -259,11 +260,11 @@ class HBMSystem:
         pat = self._cache["pattern_all"]
         out = np.empty_like(R)
         try:
-            out[0] = _BlockLU(pat, 0.0, 0.0, 0.0).solve(R[0][:, None]).real[:, 0]
+            out[0] = BlockLU(pat, 0.0, 0.0, 0.0).solve(R[0][:, None]).real[:, 0]
             for k in range(1, h.n_harmonics + 1):
                 f = k * omega / h.subharmonic
                 c, si = h.cos_index(k), h.sin_index(k)
-                z = _BlockLU(pat, f * f, f, 0.0).solve((R[c] - 1j * R[si])[:, None])[:, 0]
+                z = BlockLU(pat, f * f, f, 0.0).solve((R[c] - 1j * R[si])[:, None])[:, 0]
                 out[c], out[si] = z.real, -z.imag
         except StructureFailure:
             out = spla.lsqr(self.linear_operator(omega), R.ravel())[0].reshape(R.shape)
@@ -316,19 +317,25 @@ class HBMSystem:
             r[idx] += self.Pa @ f
             block(idx, idx, self.Pa @ (df[:, None] * self.E))
         for law, dof in self.penalty:
+            # the law is slope * max(0, u - offset): project the positive part of u - offset
+            slope, offset = law.positive_part_form()
             phi = Q[:, dof].copy()
-            phi[0] -= law.gap
+            phi[0] -= offset
             proj, G = self._positive(phi)
             idx = self.q_index(dof)
-            r[idx] += law.stiffness * proj
-            block(idx, idx, law.stiffness * G)
+            r[idx] += slope * proj
+            block(idx, idx, slope * G)
         if self.n_uc:
             P = x[nq : self.size].reshape(h.n_coef, self.n_uc)
             phis = np.empty((h.n_coef, self.n_uc))
+            slopes = np.empty(self.n_uc)
             for ct in self.unilateral:
-                phi = P[:, ct.slot] + ct.c * Q[:, ct.dof]
-                phi[0] -= ct.c * ct.law.gap
+                # the law is p - max(0, p + slope (u - offset)), slope = c
+                slope, offset = ct.law.positive_part_form(ct.c)
+                phi = P[:, ct.slot] + slope * Q[:, ct.dof]
+                phi[0] -= slope * offset
                 phis[:, ct.slot] = phi
+                slopes[ct.slot] = slope
             proj, G = self._positive(phis)
             eye = np.eye(h.n_coef)
             for ct in self.unilateral:
@@ -340,7 +347,7 @@ class HBMSystem:
                 block(qi, pi, eye)
                 r[pi] = P[:, ct.slot] - pr
                 block(pi, pi, eye - Gi)
-                block(pi, qi, -ct.c * Gi)
+                block(pi, qi, -slopes[ct.slot] * Gi)
         if rows:
             N = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                               shape=(self.size, self.size))
@@ -381,10 +388,12 @@ class HBMSystem:
             f, _ = law.force(ut)
             grad[self.q_index(dof)] += (f @ self.E) / N
         for law, dof in self.penalty:
+            # potential slope/2 max(0, u - offset)^2, projected exactly: <max(0, phi)^2> = phi.W G phi
+            slope, offset = law.positive_part_form()
             phi = Q[:, dof].copy()
-            phi[0] -= law.gap
+            phi[0] -= offset
             _, G = self._positive(phi)
             WG = self.w[:, None] * G
-            pe += 0.5 * law.stiffness * phi @ WG @ phi
-            grad[self.q_index(dof)] += law.stiffness * (WG @ phi)
+            pe += 0.5 * slope * phi @ WG @ phi
+            grad[self.q_index(dof)] += slope * (WG @ phi)
         return float(ke + pe), grad, float(2.0 * ke / omega) if omega else 0.0
