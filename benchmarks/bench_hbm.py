@@ -172,6 +172,7 @@ def child(ne: int, H: int, repeat: int, profile: bool, max_points: int = MAX_POI
 
     import femodes as fm
     import femodes.analyses as fa
+    import femodes.runs as fr
     import importlib
 
     # (femodes.solvers re-exports the *function* continuation, which shadows the submodule name)
@@ -202,7 +203,7 @@ def child(ne: int, H: int, repeat: int, profile: bool, max_points: int = MAX_POI
     cnt = {"residual": 0, "t_residual": 0.0, "bordered": 0, "t_bordered": 0.0, "fixed": 0, "t_fixed": 0.0}
     orig_res = fm.ForcedResponseProblem.residual
     orig_bs, orig_dls = fc.bordered_solver, fn.default_linear_solver
-    orig_cont = fa.continuation
+    orig_cont = fr.continuation
     captured = {}
 
     def res_w(self, x, p):
@@ -237,7 +238,7 @@ def child(ne: int, H: int, repeat: int, profile: bool, max_points: int = MAX_POI
     fm.ForcedResponseProblem.residual = res_w
     fc.bordered_solver = bs_w
     fn.default_linear_solver = dls_w
-    fa.continuation = cont_w
+    fr.continuation = cont_w
     prof = None
     if profile:
         import cProfile
@@ -255,7 +256,7 @@ def child(ne: int, H: int, repeat: int, profile: bool, max_points: int = MAX_POI
     if prof is not None:
         prof.disable()
     fm.ForcedResponseProblem.residual = orig_res
-    fc.bordered_solver, fn.default_linear_solver, fa.continuation = orig_bs, orig_dls, orig_cont
+    fc.bordered_solver, fn.default_linear_solver, fr.continuation = orig_bs, orig_dls, orig_cont
 
     cres = captured.get("res")
     rec.update(

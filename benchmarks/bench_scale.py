@@ -612,10 +612,10 @@ def case_floor(args) -> dict:
 
 
 def _capture_continuation():
-    """Wrap femodes.analyses.continuation to get the ContinuationResult (n_newton, n_rejected)."""
-    import femodes.analyses as fa
+    """Wrap the continuation the analyses run (femodes.runs) to get the ContinuationResult (n_newton, n_rejected)."""
+    import femodes.runs as fr
 
-    orig = fa.continuation
+    orig = fr.continuation
     box = {}
 
     def wrap(*a, **k):
@@ -623,8 +623,8 @@ def _capture_continuation():
         box["res"] = res
         return res
 
-    fa.continuation = wrap
-    return box, lambda: setattr(fa, "continuation", orig)
+    fr.continuation = wrap
+    return box, lambda: setattr(fr, "continuation", orig)
 
 
 def _points(model, H, x0, w0, K) -> dict:

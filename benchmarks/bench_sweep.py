@@ -181,9 +181,9 @@ def default_cluster(n_workers):
     """LocalCluster with Dask's default nanny environment; our os.environ restored afterwards."""
     from distributed import LocalCluster
 
-    from femodes.app.sweep import _restored_environ
+    from femodes.app.sweep.executors import restored_environ
 
-    with _restored_environ():
+    with restored_environ():
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True,
                             dashboard_address="127.0.0.1:0")
 

@@ -35,8 +35,7 @@ def impact_frequency(energy, gap=GAP):
 
 def backbone_segments(H, energies, e_start=E_START):
     """Chained continuation of one NonlinearModeProblem (same scaling as fm.nonlinear_mode)."""
-    pr = fm.NonlinearModeProblem(free, fm.Harmonics(H), 1)
-    pr.set_reference_energy(math.sqrt(e_start * max(energies)))
+    pr = fm.NonlinearModeProblem(free, fm.Harmonics(H), 1, reference_energy=math.sqrt(e_start * max(energies)))
     x = pr.linear_guess(e_start)
     opts = nonlinear_mode_options(pr, x)
     out, e0 = [], e_start

@@ -61,8 +61,7 @@ def mode_at_energies(model, H, energies, e_start):
     Returns the list of Branch segments; ``segment[-1]`` is the solution at that energy.
     """
     h = fm.Harmonics(H)
-    pr = fm.NonlinearModeProblem(model, h, 1)
-    pr.set_reference_energy(math.sqrt(e_start * max(energies)))
+    pr = fm.NonlinearModeProblem(model, h, 1, reference_energy=math.sqrt(e_start * max(energies)))
     x = pr.linear_guess(e_start)
     opts = nonlinear_mode_options(pr, x)
     out, e0 = [], e_start

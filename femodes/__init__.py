@@ -1,7 +1,8 @@
 """femodes: nonlinear vibration modes of finite-element structures with unilateral contact.
 
-The public face of the package (see DESIGN.md section 3). Layers, from the bottom: solvers,
-laws, models (fe, model, reduction, linear), discretise (hbm), analyses, results, outputs.
+The public face of the package. Layers, from the bottom: solvers, laws, models (fe, model,
+reduction, linear, eigen), discretise (hbm, time), results (results, store), analyses, outputs
+(fields, plot, io, viz), application (app); README "How the code is organised".
 """
 
 from .fe import Material, Section, bar, beam, line_mesh, load_mesh
@@ -10,9 +11,10 @@ from .linear import IllConditionedWarning, LinearModes, LinearResponse, linear_m
 from .model import DofMap, HarmonicForce, StructuralModel
 from .reduction import ReducedModel, craig_bampton
 from .hbm import ForcedResponseProblem, Harmonics, NonlinearModeProblem
-from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
+from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState, NewtonOptions, NewtonResult,
+                      continuation, semismooth_newton)
 from .results import Branch, PeriodicSolution, load_branch
-from .analyses import frequency_response, nonlinear_mode, static_contact
+from .analyses import StaticContactResult, frequency_response, nonlinear_mode, static_contact
 from .time import SteadyState, TimeHistory, simulate, steady_state
 from . import io, plot  # outputs; matplotlib is imported lazily inside plot functions
 
@@ -42,7 +44,10 @@ __all__ = [
     "ForcedResponseProblem",
     "NonlinearModeProblem",
     "ContinuationOptions",
+    "ContinuationResult",
+    "ContinuationState",
     "NewtonOptions",
+    "NewtonResult",
     "continuation",
     "semismooth_newton",
     "Branch",
@@ -51,6 +56,7 @@ __all__ = [
     "frequency_response",
     "nonlinear_mode",
     "static_contact",
+    "StaticContactResult",
     "SteadyState",
     "TimeHistory",
     "simulate",

@@ -10,15 +10,16 @@ tall-dense products are formed, so 1e5-DOF models reduce without dense full-size
 from __future__ import annotations
 
 import logging
+import warnings
 from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
-import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .linear import DENSE_LIMIT, _normalize, check_conditioning
+from .eigen import IllConditionedWarning, check_conditioning, generalized_eigh, mass_normalize
 from .model import Attached, StructuralModel
+from .solvers.checks import check_int
 
 __all__ = ["ReducedModel", "craig_bampton"]
 
@@ -73,12 +74,16 @@ class ReducedModel(StructuralModel):
         return self.parent.full_field(self.expand(q))
 
     @property
-    def fe_model(self) -> StructuralModel:
-        """The model that owns the mesh (the parent, recursively)."""
-        p = self.parent
-        while isinstance(p, ReducedModel):
-            p = p.parent
-        return p
+    def mesh_owner(self) -> StructuralModel | None:
+        return self.parent.mesh_owner
+
+    def to_owner(self, q: np.ndarray) -> np.ndarray:
+        return self.parent.to_owner(self.expand(q))
+
+    def fe_dof(self, dof: int) -> int | None:
+        if dof >= self.n_kept:
+            return None  # a modal coordinate
+        return self.parent.fe_dof(int(np.asarray(self.kept)[dof]))
 
     def __repr__(self) -> str:
         return (
@@ -88,8 +93,7 @@ class ReducedModel(StructuralModel):
 
 
 def _check_n_modes(n_modes, n_interior: int) -> int:
-    if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) or n_modes < 0:
-        raise ValueError(f"craig_bampton: n_modes must be an integer >= 0, got {n_modes!r}")
+    n_modes = check_int("n_modes", n_modes, 0, owner="craig_bampton")
     if n_modes > n_interior:
         raise ValueError(f"craig_bampton: n_modes={n_modes} exceeds the {n_interior} interior DOFs")
     return int(n_modes)
@@ -104,9 +108,11 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
         Full (or already reduced) model with its declarations.
     n_modes : int
         Number of fixed-interface modes (0 gives a Guyan/static condensation).
-    keep : sequence of locations, optional
-        Extra DOFs to keep physical (names, (name, component) pairs or indices). Contact,
-        forcing and nonlinear DOFs are always kept.
+    keep : location or sequence of locations, optional
+        Extra DOFs to keep physical: a named point keeps the whole node (every free component,
+        e.g. ``w`` and ``theta`` of a beam node, as Craig-Bampton interfaces are usually kept); a
+        ``(name, component)`` pair or a DOF index keeps that one DOF. Contact, forcing and
+        nonlinear DOFs are always kept.
 
     Returns
     -------
@@ -133,7 +139,7 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
                 "craig_bampton: keep must be a location or a list of locations (names, (name, component) pairs "
                 f"or DOF indices), got {keep!r}"
             )
-        extra = [model.dof(k, "craig_bampton: keep") for k in keep]
+        extra = [d for k in keep for d in model.dofmap.node_dofs(k, "craig_bampton: keep")]
     kept = np.array(sorted(set(declared) | set(extra)), dtype=int)
     if kept.size == 0:
         raise ValueError(
@@ -161,10 +167,6 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
             ) from exc
         cond = check_conditioning(KII, lu.solve, nI, "craig_bampton", warn=False)
         if 1e-2 < cond * np.finfo(float).eps <= 10.0:
-            import warnings
-
-            from .linear import IllConditionedWarning
-
             warnings.warn(
                 f"craig_bampton: the interior stiffness is ill-conditioned (cond_1 ~ {cond:.1e}); low frequencies lose "
                 "digits. Euler-Bernoulli beams reach this near 1e4 DOFs; use bars for larger studies.",
@@ -182,16 +184,9 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
             raise ValueError("craig_bampton: the interior stiffness K_II is singular (non-finite constraint modes)")
         T[interior, :nB] = psi
         if n_modes:
-            if nI <= DENSE_LIMIT or n_modes >= nI - 1:
-                import scipy.linalg as sla
-
-                lam, phi = sla.eigh(KII.toarray(), MII.toarray(), subset_by_index=[0, n_modes - 1])
-            else:
-                op = spla.LinearOperator(KII.shape, matvec=lu.solve, dtype=float)
-                lam, phi = spla.eigsh(KII, k=n_modes, M=MII, sigma=0.0, which="LM", OPinv=op, tol=1e-12)
-                order = np.argsort(lam)
-                lam, phi = lam[order], phi[:, order]
-            phi = _normalize(phi, MII)
+            # K_II is definite here (factorised above): shift-invert at 0 reuses its factor
+            lam, phi = generalized_eigh(KII, MII, n_modes, "craig_bampton", sigma=0.0, factor=lu, check=False)
+            phi = mass_normalize(phi, MII)
             T[interior, nB:] = phi
             omega_i = np.sqrt(np.maximum(lam, 0.0))
 

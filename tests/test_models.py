@@ -187,7 +187,7 @@ def test_damping_bad_input():
 
 def test_linear_api_bad_input():
     m = fm.StructuralModel(M=np.eye(2), K=np.eye(2))
-    with pytest.raises(ValueError, match="n must be a positive integer"):
+    with pytest.raises(ValueError, match="n must be an integer >= 1"):
         fm.linear_modes(m, n=0)
     with pytest.raises(ValueError, match="only 2 DOFs"):
         fm.linear_modes(m, n=3)

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import femodes as fm
-from femodes.results import CHECKPOINT_VERSION, Checkpoint
+from femodes.store import CHECKPOINT_VERSION, Checkpoint
 from femodes.solvers import ContinuationOptions, NewtonOptions
 
 SPAN = (0.8, 1.6)

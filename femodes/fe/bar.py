@@ -9,7 +9,7 @@ import skfem
 from skfem.helpers import dot, grad
 
 from ..model import StructuralModel
-from .assembly import _check_mesh, _names, build_fe_model, checked_basis, element_property, quad_field
+from .assembly import check_mesh, support_names, build_fe_model, checked_basis, element_property, quad_field
 from .material import Material, Section
 
 __all__ = ["bar"]
@@ -60,7 +60,7 @@ def bar(
     StructuralModel
         DOF component ``"u"`` (alias ``"u_x"``) at each node; P2 interior DOFs are unnamed.
     """
-    _check_mesh(mesh, "bar")
+    check_mesh(mesh, "bar")
     if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer)) or order not in (1, 2):
         raise ValueError(f"bar: order must be 1 or 2, got {order!r}")
     if not isinstance(lumped, bool):
@@ -89,7 +89,7 @@ def bar(
         K=K,
         components=("u",),
         aliases={"u_x": "u"},
-        constraints=[("clamped", _names(clamped, "bar", "clamped"), ("u",))],
+        constraints=[("clamped", support_names(clamped, "bar", "clamped"), ("u",))],
         point_masses=point_masses,
         springs=springs,
     )

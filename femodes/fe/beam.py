@@ -9,7 +9,7 @@ import skfem
 from skfem.helpers import dd, ddot, dot, grad
 
 from ..model import StructuralModel
-from .assembly import _check_mesh, _names, build_fe_model, checked_basis, element_property, quad_field
+from .assembly import check_mesh, support_names, build_fe_model, checked_basis, element_property, quad_field
 from .material import Material, Section
 
 __all__ = ["beam"]
@@ -60,7 +60,7 @@ def beam(
     eigenvalues lose all accuracy (:func:`femodes.linear_modes` warns). Use bars for the largest
     scaling studies.
     """
-    _check_mesh(mesh, "beam")
+    check_mesh(mesh, "beam")
     mats = element_property(mesh, material, Material, "beam", "material")
     secs = element_property(mesh, section, Section, "beam", "section")
     for s in set(secs):
@@ -83,8 +83,8 @@ def beam(
         components=("w", "theta"),
         aliases={"u_y": "w", "w_x": "theta", "theta_z": "theta"},
         constraints=[
-            ("clamped", _names(clamped, "beam", "clamped"), ("w", "theta")),
-            ("pinned", _names(pinned, "beam", "pinned"), ("w",)),
+            ("clamped", support_names(clamped, "beam", "clamped"), ("w", "theta")),
+            ("pinned", support_names(pinned, "beam", "pinned"), ("w",)),
         ],
         point_masses=point_masses,
         springs=springs,

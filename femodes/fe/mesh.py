@@ -60,6 +60,7 @@ import math
 import numbers
 import os
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 import meshio
@@ -474,15 +475,38 @@ def load_mesh(path) -> skfem.MeshLine:
     return _from_meshio(raw, fname)
 
 
+@dataclass
+class _Cells:
+    """Line and vertex cells of a meshio mesh, with the names of their physical groups."""
+
+    conn: np.ndarray                           # (n_lines, 2) node indices of the line elements
+    line_groups: dict[str, list[np.ndarray]]   # name -> indices into conn
+    point_groups: dict[str, list[np.ndarray]]  # name -> node indices
+    note: str                                  # the ignored 2-D/3-D cells, for error messages
+
+
 def _from_meshio(raw: meshio.Mesh, fname: str):
     """Convert a meshio mesh to the canonical MeshLine (see load_mesh)."""
     pts = np.asarray(raw.points, dtype=np.float64)
     if pts.ndim == 1:
         pts = pts[:, None]
-    npts = pts.shape[0]
     if pts.ndim != 2 or not np.all(np.isfinite(pts)):
         raise ValueError(f"load_mesh: {fname!r}: point coordinates are not finite numbers")
+    cells = _collect_cells(raw, pts.shape[0], fname)
+    uniq, inverse, used, local = _unique_elements(cells.conn, pts, fname)
+    P = pts[used]
+    _check_single_open_line(local, P, fname, cells.note)
+    x, rank = _positions_along_line(local, P, fname, cells.note)
+    old_to_vertex = np.full(pts.shape[0], -1, dtype=np.int64)
+    old_to_vertex[used] = rank
+    points = _named_points(cells.point_groups, old_to_vertex, pts, x, fname)
+    new_elem = rank[local].min(axis=1)  # element number of each unique element
+    regions = {name: np.unique(new_elem[inverse[np.concatenate(chunks)]]) for name, chunks in cells.line_groups.items()}
+    return _build(x, points, regions)
 
+
+def _collect_cells(raw: meshio.Mesh, npts: int, fname: str) -> _Cells:
+    """Line elements and named point/line groups (gmsh physical groups or other integer tags)."""
     key = _tag_key(raw.cell_data)
     names = _field_names(raw.field_data or {})
 
@@ -493,9 +517,9 @@ def _from_meshio(raw: meshio.Mesh, fname: str):
             return None
         return f"point_{tag}" if dim == 0 else f"region_{tag}"
 
-    conns = []            # line connectivity blocks (old node indices)
-    line_groups: dict[str, list[np.ndarray]] = {}   # name -> indices into stacked lines
-    point_groups: dict[str, list[np.ndarray]] = {}  # name -> old node indices
+    conns = []
+    line_groups: dict[str, list[np.ndarray]] = {}
+    point_groups: dict[str, list[np.ndarray]] = {}
     others: dict[str, int] = {}
     nlines = 0
     for ib, block in enumerate(raw.cells):
@@ -513,9 +537,7 @@ def _from_meshio(raw: meshio.Mesh, fname: str):
                 f"load_mesh: {fname!r}: {ctype} cells refer to missing nodes "
                 f"(node index out of range 0..{npts - 1})"
             )
-        tags = None
-        if key is not None:
-            tags = _int_tags(fname, key, raw.cell_data[key][ib], len(data))
+        tags = _int_tags(fname, key, raw.cell_data[key][ib], len(data)) if key is not None else None
         if dim == 1:
             conn = data[:, :2].astype(np.int64)
             conns.append(conn)
@@ -523,16 +545,13 @@ def _from_meshio(raw: meshio.Mesh, fname: str):
                 for tag in np.unique(tags):
                     name = label(1, int(tag))
                     if name is not None:
-                        line_groups.setdefault(name, []).append(
-                            nlines + np.nonzero(tags == tag)[0]
-                        )
+                        line_groups.setdefault(name, []).append(nlines + np.nonzero(tags == tag)[0])
             nlines += len(conn)
         elif tags is not None:
             for tag in np.unique(tags):
                 name = label(0, int(tag))
                 if name is not None:
                     point_groups.setdefault(name, []).append(data[tags == tag, 0])
-
     if nlines == 0:
         found = ", ".join(f"{n} {t}" for t, n in others.items()) or "no cells"
         raise ValueError(
@@ -540,43 +559,43 @@ def _from_meshio(raw: meshio.Mesh, fname: str):
             f"{found}.  A bar/beam mesh needs 'line' elements (in gmsh, put the "
             f"curve in a Physical Curve so that its elements are saved)"
         )
-    conn = np.vstack(conns)
-    # mention ignored 2-D/3-D cells in topology errors (e.g. boundary lines
-    # of a surface mesh are not a beam)
+    # mention ignored 2-D/3-D cells in topology errors (e.g. boundary lines of a surface mesh
+    # are not a beam)
     note = (" (cells ignored by load_mesh: "
             + ", ".join(f"{n} {t}" for t, n in others.items()) + ")") if others else ""
+    return _Cells(conn=np.vstack(conns), line_groups=line_groups, point_groups=point_groups, note=note)
 
+
+def _unique_elements(conn: np.ndarray, pts: np.ndarray, fname: str):
+    """Elements without repeats (gmsh 2.2 repeats elements in several groups) on the used nodes.
+
+    Returns ``(uniq, inverse, used, local)``: unique elements (old node numbers), the unique
+    element of each input element, the used old nodes, and the unique elements in used-node
+    numbering."""
     bad = np.nonzero(conn[:, 0] == conn[:, 1])[0]
     if bad.size:
         raise ValueError(
             f"load_mesh: {fname!r}: {bad.size} degenerate line element(s) with "
             f"both ends at the same node, e.g. at {_fmt_point(pts[conn[bad[0], 0]])}"
         )
-
-    # merge repeated elements (gmsh 2.2 repeats elements in several groups)
     uniq, inverse = np.unique(np.sort(conn, axis=1), axis=0, return_inverse=True)
-    inverse = np.asarray(inverse).reshape(-1)
-    nel = uniq.shape[0]
-
-    # drop unused nodes
     used, local = np.unique(uniq, return_inverse=True)
-    local = np.asarray(local).reshape(uniq.shape)
-    nv = used.size
-    P = pts[used]
+    return uniq, np.asarray(inverse).reshape(-1), used, np.asarray(local).reshape(uniq.shape)
 
+
+def _check_single_open_line(local: np.ndarray, P: np.ndarray, fname: str, note: str) -> None:
+    """One connected, unbranched, open chain of elements."""
+    nel, nv = local.shape[0], P.shape[0]
     degree = np.bincount(local.ravel(), minlength=nv)
     branch = np.nonzero(degree > 2)[0]
     if branch.size:
-        where = "; ".join(
-            f"{_fmt_point(P[v])} ({degree[v]} elements)" for v in branch[:3]
-        )
+        where = "; ".join(f"{_fmt_point(P[v])} ({degree[v]} elements)" for v in branch[:3])
         raise ValueError(
             f"load_mesh: {fname!r}: the line mesh branches: {branch.size} vertex/vertices "
             f"shared by more than 2 line elements, at {where}"
             f"{' ...' if branch.size > 3 else ''}; a bar/beam mesh must be a single "
             f"unbranched line{note}"
         )
-
     graph = coo_matrix((np.ones(nel), (local[:, 0], local[:, 1])), shape=(nv, nv))
     ncomp, comp = connected_components(graph, directed=False)
     if ncomp > 1:
@@ -595,7 +614,12 @@ def _from_meshio(raw: meshio.Mesh, fname: str):
             f"mesh must be an open line with two ends{note}"
         )
 
-    # straight line through the two ends
+
+def _positions_along_line(local: np.ndarray, P: np.ndarray, fname: str, note: str):
+    """Abscissa of the vertices along the straight line through the two ends, sorted, and the
+    rank of each vertex in that order; checks collinearity and element order."""
+    nv = P.shape[0]
+    degree = np.bincount(local.ravel(), minlength=nv)
     ends = np.nonzero(degree == 1)[0]
     a = P[ends[0]]
     dist = np.linalg.norm(P - a, axis=1)
@@ -618,12 +642,10 @@ def _from_meshio(raw: meshio.Mesh, fname: str):
             f"{_fmt_point(P[worst])}; line length {length:.6g}, tolerance {tol:.3g}); "
             f"bar/beam meshes must be straight{note}"
         )
-
     s = P @ d
     order = np.argsort(s, kind="stable")
     x = s[order]
-    gaps = np.diff(x)
-    small = np.nonzero(gaps <= _ZERO_LENGTH_RTOL * length)[0]
+    small = np.nonzero(np.diff(x) <= _ZERO_LENGTH_RTOL * length)[0]
     if small.size:
         raise ValueError(
             f"load_mesh: {fname!r}: two vertices coincide at "
@@ -640,10 +662,12 @@ def _from_meshio(raw: meshio.Mesh, fname: str):
             f"{_fmt_point(P[local[e, 0]])} to {_fmt_point(P[local[e, 1]])} overlaps "
             f"other elements"
         )
-    new_elem = r.min(axis=1)                       # per unique element
-    old_to_vertex = np.full(npts, -1, dtype=np.int64)
-    old_to_vertex[used] = rank
+    return x, rank
 
+
+def _named_points(point_groups: dict, old_to_vertex: np.ndarray, pts: np.ndarray, x: np.ndarray, fname: str) -> dict:
+    """Vertices of the named point groups, plus the two ends "left" and "right"."""
+    nv = x.size
     points: dict[str, np.ndarray] = {"left": np.array([0]), "right": np.array([nv - 1])}
     for name, chunks in point_groups.items():
         old = np.unique(np.concatenate(chunks))
@@ -662,9 +686,4 @@ def _from_meshio(raw: meshio.Mesh, fname: str):
                 f"reserved, rename the group"
             )
         points[name] = verts
-
-    regions = {
-        name: np.unique(new_elem[inverse[np.concatenate(chunks)]])
-        for name, chunks in line_groups.items()
-    }
-    return _build(x, points, regions)
+    return points

@@ -2,7 +2,8 @@
 
 from .harmonics import Harmonics
 from .linsolve import HarmonicBlockJacobian
-from .problems import ForcedResponseProblem, NonlinearModeProblem
+from .problems import ForcedResponseProblem, HBMUnknowns, NonlinearModeProblem
 from .system import HBMSystem, default_contact_parameter
 
-__all__ = ["Harmonics", "HarmonicBlockJacobian", "ForcedResponseProblem", "NonlinearModeProblem", "HBMSystem", "default_contact_parameter"]
+__all__ = ["Harmonics", "HarmonicBlockJacobian", "ForcedResponseProblem", "NonlinearModeProblem", "HBMUnknowns",
+           "HBMSystem", "default_contact_parameter"]

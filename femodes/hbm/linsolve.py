@@ -165,7 +165,7 @@ def build_pattern(M: sp.spmatrix, K: sp.spmatrix, C: sp.spmatrix, bdofs: np.ndar
     )
 
 
-class _BlockLU:
+class BlockLU:
     """LU of the interior block ``Z = K - a M + i b C_eff`` of one harmonic (band LAPACK or SuperLU).
 
     ``solve(R, trans)`` takes and returns complex arrays ``(nI, k)`` in the *original* interior
@@ -234,7 +234,7 @@ class _Harmonic:
     s: int | None          # coefficient row of the sine (None for the mean)
     a: float               # (k w / nu)^2
     b: float               # k w / nu
-    lu: _BlockLU | None
+    lu: BlockLU | None
     Zc: np.ndarray         # condensed dynamic stiffness on the boundary DOFs (complex n_b x n_b)
     Zib: np.ndarray        # Z[I, b] on the coupled rows R (complex len(R) x n_b)
     Zbi: np.ndarray        # Z[b, I] on the coupled columns R (complex n_b x len(R))
@@ -257,7 +257,7 @@ class LinearFactors:
         def one(job):
             row_c, row_s, f = job
             a, b = f * f, f
-            lu = _BlockLU(pat, a, b, self.xi) if pat.perm.size else None
+            lu = BlockLU(pat, a, b, self.xi) if pat.perm.size else None
             Cb = pat.Cbb - self.xi * pat.Mbb
             Zbb = pat.Kbb - a * pat.Mbb + 1j * b * Cb
             Zib = pat.Kib - a * pat.Mib + 1j * b * (pat.Cib - self.xi * pat.Mib)

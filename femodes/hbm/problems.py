@@ -13,15 +13,43 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
+from ..linear import linear_modes
 from ..model import StructuralModel
 from .harmonics import Harmonics
 from .system import HBMSystem
 
-__all__ = ["ForcedResponseProblem", "NonlinearModeProblem"]
+__all__ = ["ForcedResponseProblem", "NonlinearModeProblem", "HBMUnknowns"]
+
+
+@dataclass(frozen=True, eq=False)
+class HBMUnknowns:
+    """The unknowns of an HBM problem at one point, by name (callers never slice ``x``).
+
+    Attributes
+    ----------
+    y : ndarray
+        The harmonic balance unknowns ``[Q; P]`` of the system (:class:`~femodes.hbm.HBMSystem`
+        layout).
+    Q : ndarray (n_coef, n_dofs)
+        Fourier coefficients of the displacements.
+    P : ndarray (n_coef, n_unilateral)
+        Fourier coefficients of the complementarity contact forces.
+    omega : float
+        Angular frequency (rad/s).
+    xi : float
+        Artificial damping of a nonlinear mode (0 for forced responses).
+    """
+
+    y: np.ndarray
+    Q: np.ndarray
+    P: np.ndarray
+    omega: float
+    xi: float
 
 
 class ForcedResponseProblem:
@@ -69,9 +97,15 @@ class ForcedResponseProblem:
         q = s.solve_linear(s.force(), omega)
         return s.join(q.reshape(s.h.n_coef, s.n))
 
-    def unpack(self, x: np.ndarray, p: float) -> dict:
-        Q, P = self.system.split(np.asarray(x))
-        return {"Q": Q, "P": P, "omega": float(p), "xi": 0.0}
+    def forcing(self) -> np.ndarray:
+        """The forcing's part of the residual (in the residual's scaling): ``r(x, w) = A(w) x + g(x) - forcing()``."""
+        s = self.system
+        return s.join(s.force().reshape(s.h.n_coef, s.n)) / self.force_scale
+
+    def unpack(self, x: np.ndarray, p: float) -> HBMUnknowns:
+        x = np.asarray(x, dtype=float)
+        Q, P = self.system.split(x)
+        return HBMUnknowns(y=x, Q=Q, P=P, omega=float(p), xi=0.0)
 
 
 class NonlinearModeProblem:
@@ -87,10 +121,8 @@ class NonlinearModeProblem:
         Linear mode (1-based) the branch starts from; its shape defines the phase condition.
     """
 
-    def __init__(self, model: StructuralModel, harmonics: Harmonics, mode: int = 1, *, exact_contact: bool = True,
-                 structured: bool = True):
-        from ..linear import linear_modes
-
+    def __init__(self, model: StructuralModel, harmonics: Harmonics, mode: int = 1, *, reference_energy: float = 1.0,
+                 exact_contact: bool = True, structured: bool = True):
         if isinstance(mode, bool) or not isinstance(mode, (int, np.integer)) or mode < 1:
             raise ValueError(f"NonlinearModeProblem: mode must be a positive integer (1 = first mode), got {mode!r}")
         if mode > model.n_dofs:
@@ -109,38 +141,49 @@ class NonlinearModeProblem:
         self._Mphi = np.asarray(model.M @ self.shape).ravel()
         self.size = s.size + 2
         # Equations are divided by the elastic force of the unit-mass-normalised mode times the
-        # amplitude of the linear mode at energy 1 (set by set_reference_energy), so tolerances
-        # are relative to the force level of the motion.
-        self._kphi = float(np.max(np.abs(model.K @ self.shape))) or 1.0
-        self.set_reference_energy(1.0)
-
-    def set_reference_energy(self, energy: float) -> None:
-        """Scale the equations for motions of about this energy (keeps Newton tolerances relative)."""
-        a = math.sqrt(2.0 * energy) / self.omega0
-        self.force_scale = self._kphi * a
+        # amplitude of the linear mode at the reference energy, so that Newton tolerances are
+        # relative to the force level of the motions traced (nonlinear_mode passes the geometric
+        # mean of its energy span).
+        energy = float(reference_energy)
+        a = math.sqrt(2.0 * energy) / self.omega0 if energy > 0 else math.nan
+        self.reference_energy = energy
+        self.force_scale = (float(np.max(np.abs(model.K @ self.shape))) or 1.0) * a
         self.phase_scale = float(np.max(np.abs(self._Mphi))) * a or 1.0
         if not (math.isfinite(self.force_scale) and self.force_scale > 0 and math.isfinite(self.phase_scale)
                 and 1.0 / self.force_scale < math.inf and 1.0 / self.phase_scale < math.inf):
-            raise ValueError(f"NonlinearModeProblem: energy {energy!r} gives motions whose force scale under- or "
-                             "overflows; rescale the units (mass, stiffness) or the energy span")
+            raise ValueError(f"NonlinearModeProblem: reference_energy={reference_energy!r} gives motions whose force "
+                             "scale under- or overflows; rescale the units (mass, stiffness) or the energy span")
+
+    def _parts(self, x: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """``x = [y; w; xi]``: the system unknowns, the frequency and the artificial damping."""
+        n = self.system.size
+        return x[:n], float(x[n]), float(x[n + 1])
+
+    def arclength_scale(self, x0: np.ndarray) -> np.ndarray:
+        """Scales of the unknowns for the continuation's arclength norm, from the start ``x0``:
+        displacement coefficients by the starting amplitude, contact forces by the force that
+        amplitude produces through the contact stiffness, ``w`` by ``w0``, ``xi`` by ``0.1 w0``."""
+        s = self.system
+        Q, _ = s.split(self._parts(np.asarray(x0, dtype=float))[0])
+        aq = max(float(np.max(np.abs(Q))), 1e-300)
+        cmax = max([ct.c for ct in s.unilateral] or [1.0])
+        Qs = np.full((s.h.n_coef, s.n), aq)
+        Ps = np.full((s.h.n_coef, s.n_uc), cmax * aq)
+        return np.concatenate([s.join(Qs, Ps), [self.omega0, 0.1 * self.omega0]])
 
     def residual(self, x: np.ndarray, p: float):
         s = self.system
-        x = np.asarray(x, dtype=float)
-        y, omega, xi = x[: s.size], float(x[s.size]), float(x[s.size + 1])
+        y, omega, xi = self._parts(np.asarray(x, dtype=float))
         r0, J0, dr_dw, dr_dxi = s.residual(y, omega, xi=xi, forced=False)
         E, dE, dE_dw = s.energy(y, omega)
         E = max(E, 1e-300)
         ln10 = math.log(10.0)
         fs = 1.0 / self.force_scale
         r0, J0, dr_dw, dr_dxi = r0 * fs, J0 * fs, dr_dw * fs, dr_dxi * fs
-        r = np.empty(self.size)
-        r[: s.size] = r0
         # phase condition: first-harmonic sine part along the linear mode shape (M-orthogonal)
         gphase = np.zeros(s.size)
         gphase[self._phase_idx] = self._Mphi / self.phase_scale
-        r[s.size] = gphase @ y
-        r[s.size + 1] = math.log10(E) - p
+        r = np.concatenate([r0, [gphase @ y, math.log10(E) - p]])
         gE = dE / (E * ln10)
         cols = np.column_stack([dr_dw, dr_dxi])
         rows = np.vstack([np.append(gphase, [0.0, 0.0]), np.append(gE, [dE_dw / (E * ln10), 0.0])])
@@ -164,7 +207,7 @@ class NonlinearModeProblem:
         Q[s.h.cos_index(1)] = a * self.shape
         return np.concatenate([s.join(Q), [self.omega0, 0.0]])
 
-    def unpack(self, x: np.ndarray, p: float) -> dict:
-        s = self.system
-        Q, P = s.split(np.asarray(x)[: s.size])
-        return {"Q": Q, "P": P, "omega": float(x[s.size]), "xi": float(x[s.size + 1])}
+    def unpack(self, x: np.ndarray, p: float) -> HBMUnknowns:
+        y, omega, xi = self._parts(np.asarray(x, dtype=float))
+        Q, P = self.system.split(y)
+        return HBMUnknowns(y=y, Q=Q, P=P, omega=omega, xi=xi)

@@ -289,32 +289,34 @@ class _Stepper:
         self.S = np.asarray(S, dtype=int)
         pos = {d: i for i, d in enumerate(S)}
         s = len(S)
-        # smooth laws on local DOFs, vectorised: cubic k3 and penalty (k, gap) per local index
-        self.k3 = np.zeros(s)
-        self.kp_loc, self.kp_k, self.kp_g = [], [], []
-        for law, d in smooth:
-            if isinstance(law, CubicSpring):
-                self.k3[pos[d]] += law.k3
-            else:
-                self.kp_loc.append(pos[d])
-                self.kp_k.append(law.stiffness)
-                self.kp_g.append(law.gap)
-        self.kp_loc = np.asarray(self.kp_loc, dtype=int)
-        self.kp_k = np.asarray(self.kp_k)
-        self.kp_g = np.asarray(self.kp_g)
-        self.has_smooth = bool(np.any(self.k3 != 0) or self.kp_loc.size)
+        # smooth laws on local DOFs, each kind evaluated at once by its stacked law (femodes.laws):
+        # (stacked law, local positions, whether a position repeats) per kind; the positions are a
+        # slice when contiguous (a view: smooth_force runs in every local Newton iteration)
+        cubic = sorted(((law, pos[d]) for law, d in smooth if isinstance(law, CubicSpring)), key=lambda ld: ld[1])
+        penalty = [(law, pos[d]) for law, d in smooth if isinstance(law, PenaltyContact)]
+        self.smooth_laws = []
+        for kind, group in ((CubicSpring, cubic), (PenaltyContact, penalty)):
+            if group:
+                loc = np.asarray([i for _, i in group], dtype=int)
+                if np.array_equal(loc, np.arange(loc[0], loc[0] + loc.size)):
+                    loc = slice(int(loc[0]), int(loc[0]) + loc.size)
+                repeats = not isinstance(loc, slice) and np.unique(loc).size < loc.size
+                self.smooth_laws.append((kind.stack(law for law, _ in group), loc, repeats))
+        self.has_smooth = bool(self.smooth_laws)
+        self.smooth_everywhere = (len(self.smooth_laws) == 1 and isinstance(self.smooth_laws[0][1], slice)
+                                  and self.smooth_laws[0][1] == slice(0, s))
         # unilateral contacts
         self.uc = [j for j, a in enumerate(contacts) if isinstance(a.item, UnilateralContact)]
         self.uc_loc = np.asarray([pos[contacts[j].dof] for j in self.uc], dtype=int)
         self.uc_dof = np.asarray([contacts[j].dof for j in self.uc], dtype=int)
-        self.uc_gap = np.asarray([contacts[j].item.gap for j in self.uc], dtype=float)
+        self.uc_law = UnilateralContact.stack(contacts[j].item for j in self.uc)
         self.uc_massless = massless[self.uc_dof] if self.uc else np.zeros(0, dtype=bool)
         self.pc = [j for j, a in enumerate(contacts) if isinstance(a.item, PenaltyContact)]
         self.pc_dof = np.asarray([contacts[j].dof for j in self.pc], dtype=int)
         self.pc_law = [contacts[j].item for j in self.pc]
         self.n_contacts = len(contacts)
         self.c_dof = np.asarray([a.dof for a in contacts], dtype=int)
-        self.c_gap = np.asarray([a.item.gap for a in contacts], dtype=float)
+        self.c_law = [a.item for a in contacts]
         self.thS = th[self.S]
         if s:
             B = np.zeros((n, s))
@@ -351,22 +353,31 @@ class _Stepper:
 
     def smooth_force(self, qS: np.ndarray):
         """Local smooth forces (cubic + penalty) and derivatives on the local DOFs."""
-        f = self.k3 * qS**3
-        df = 3.0 * self.k3 * qS**2
-        if self.kp_loc.size:
-            pen = qS[self.kp_loc] - self.kp_g
-            act = pen > 0
-            np.add.at(f, self.kp_loc, np.where(act, self.kp_k * pen, 0.0))
-            np.add.at(df, self.kp_loc, np.where(act, self.kp_k, 0.0))
+        if self.smooth_everywhere:  # one kind of law, one on every local DOF
+            return self.smooth_laws[0][0].force(qS)
+        f = np.zeros(qS.shape)
+        df = np.zeros(qS.shape)
+        for law, loc, repeats in self.smooth_laws:
+            fl, dfl = law.force(qS[loc])
+            if repeats:  # several laws on one DOF (cubic springs): accumulate
+                np.add.at(f, loc, fl)
+                np.add.at(df, loc, dfl)
+            else:
+                f[loc] += fl
+                df[loc] += dfl
         return f, df
+
+    def smooth_potential(self, qS: np.ndarray) -> np.ndarray:
+        """Potential energy of the smooth laws, ``qS`` of shape ``(..., |S|)`` -> shape ``(...)``."""
+        E = np.zeros(qS.shape[:-1])
+        for law, loc, _ in self.smooth_laws:
+            E += np.sum(law.potential(qS[..., loc]), axis=-1)
+        return E
 
     def energy(self, q, v, Kq) -> float:
         E = 0.5 * float(v @ (self.M @ v)) + 0.5 * float(q @ Kq)
         if self.S.size:
-            qS = q[self.S]
-            E += float(np.sum(0.25 * self.k3 * qS**4))
-            if self.kp_loc.size:
-                E += float(np.sum(0.5 * self.kp_k * np.maximum(0.0, qS[self.kp_loc] - self.kp_g) ** 2))
+            E += float(self.smooth_potential(q[self.S]))
         return E
 
     # -- the local problem ------------------------------------------------------------------------
@@ -476,7 +487,7 @@ class _Stepper:
             dvfS = dvf[S]
             if self.uc:
                 qc, vc = q0[self.uc_dof], v0[self.uc_dof]
-                g0 = self.uc_gap - qc
+                g0 = self.uc_law.gap_function(qc)
                 # massless: position-level Signorini at t_{k+1} (always in the problem)
                 # massive: Newton impact law, active if the predicted gap g0 - h/2 v0 <= 0
                 active = self.uc_massless | (g0 - 0.5 * h * vc <= 0.0)
@@ -580,10 +591,7 @@ def _energies(st: _Stepper, U: np.ndarray, V: np.ndarray) -> np.ndarray:
     KU = np.asarray(st.K @ U.T).T
     E = 0.5 * np.einsum("ij,ij->i", V, MV) + 0.5 * np.einsum("ij,ij->i", U, KU)
     if st.S.size:
-        US = U[:, st.S]
-        E += np.sum(0.25 * st.k3 * US**4, axis=1)
-        if st.kp_loc.size:
-            E += np.sum(0.5 * st.kp_k * np.maximum(0.0, US[:, st.kp_loc] - st.kp_g) ** 2, axis=1)
+        E += st.smooth_potential(U[:, st.S])
     return E
 
 
@@ -623,7 +631,7 @@ def _integrate(st: _Stepper, t0: float, n_steps: int, q, v, store_every: int = 1
         uc = st.uc
         if uc:
             ucd, ucv = st.uc_dof, n + st.uc_dof
-            gapc, mless, e = st.uc_gap, st.uc_massless, st.e
+            gap_function, mless, e = st.uc_law.gap_function, st.uc_massless, st.e
             nless = not np.any(mless)
         vS_idx = n + S
         for k in range(n_steps):
@@ -637,7 +645,7 @@ def _integrate(st: _Stepper, t0: float, n_steps: int, q, v, store_every: int = 1
                     xf += Psi @ (-h * (1.0 - st.thS) * fs0)
                 if uc:
                     qc, vc = x[ucd], x[ucv]
-                    g0 = gapc - qc
+                    g0 = gap_function(qc)
                     if nless:
                         active = g0 - 0.5 * h * vc <= 0.0
                         if not st.has_smooth and not active.any():
@@ -695,7 +703,8 @@ def _integrate(st: _Stepper, t0: float, n_steps: int, q, v, store_every: int = 1
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
         raise FloatingPointError("Moreau-Jean integration diverged (non-finite state); reduce dt")
     E = _energies(st, U, V)
-    G = st.c_gap[None, :] - U[:, st.c_dof] if nc else np.zeros((ns, 0))
+    G = (np.column_stack([law.gap_function(U[:, d]) for law, d in zip(st.c_law, st.c_dof)]) if nc
+         else np.zeros((ns, 0)))
     return tk[idx], U, V, IMP, E, G
 
 
@@ -779,8 +788,9 @@ def simulate(
     h = (t_end - t0) / n_steps
     st = _Stepper(model, h, th, e, w)
     for j, a in enumerate(model.contacts):
-        if a.item.gap - q[a.dof] < 0:
-            log.warning("simulate: initial penetration %.3g at contact %d", a.item.gap - q[a.dof], j)
+        g = float(a.item.gap_function(q[a.dof]))
+        if g < 0:
+            log.warning("simulate: initial penetration %.3g at contact %d", g, j)
     T, U, V, IMP, E, G = _integrate(st, t0, n_steps, q, v, int(store_every))
     log.info("simulate: %d steps of %.4g, %d local Newton failures", n_steps, h, st.n_newton_fail)
     return TimeHistory(t=T, u=U, v=V, impulse=IMP, energy=E, gap=G, dt=h)

@@ -1,0 +1,200 @@
+"""Application layer: :func:`run_sweep`, a case file run for many parameter values as
+independent tasks, gathered into one study file.
+
+Steps: check the arguments (nothing starts on a mistake), prepare every case's text and reject
+the cases that the case-file checks refuse, submit the others to the executor, and record each
+finished case in the study file as it arrives.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from ..cases import Case, CaseError, load_case, parse_case
+from .executors import check_main_guarded, check_where, open_executor
+from .overrides import case_text, sweep_cases
+from .records import CaseRecord, SweepResult, fmt_value, record_from_task
+from .study import save_study
+from .task import run_sweep_case
+
+__all__ = ["run_sweep"]
+
+log = logging.getLogger(__name__)
+
+
+# ---------------------------------------------------------------------------------------------
+# Arguments
+# ---------------------------------------------------------------------------------------------
+def _check_arguments(*, out, study, callback, executor, scheduler, n_workers) -> None:
+    """TypeError/ValueError quoting the first bad argument of :func:`run_sweep`."""
+    if out is None or not isinstance(out, (str, os.PathLike)):
+        raise TypeError(f"run_sweep: out must be a folder path, got {out!r}")
+    if (not isinstance(study, str) or Path(study).suffix.lower() not in (".npz", ".h5", ".hdf5")
+            or Path(study).name != study):
+        raise ValueError(f"run_sweep: study must be a file name ending in .npz or .h5, got {study!r}")
+    if callback is not None and not callable(callback):
+        raise TypeError(f"run_sweep: callback must be callable(record, n_done, n_total), got {callback!r}")
+    check_where(executor, scheduler, n_workers)
+    if executor is None and scheduler is None:
+        check_main_guarded("run_sweep")
+
+
+def _base_case(case) -> Case:
+    if isinstance(case, Case):
+        return case
+    if isinstance(case, (str, os.PathLike)):
+        return load_case(case)
+    raise TypeError(f"run_sweep: case must be a case file path or a Case (femodes.app.cases.load_case), "
+                    f"got {type(case).__name__}")
+
+
+# ---------------------------------------------------------------------------------------------
+# Cases
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Plan:
+    """The cases of a sweep: ids ``c000, c001, ...``, their overrides and case texts, and the
+    parameter paths in first-seen order."""
+
+    base: Case
+    ids: tuple[str, ...]
+    overrides: tuple[dict, ...]
+    texts: tuple[str, ...]
+    paths: tuple[str, ...]
+
+
+def _plan(base: Case, parameters) -> _Plan:
+    combos = sweep_cases(parameters)
+    width = max(3, len(str(len(combos) - 1)))
+    ids = tuple(f"c{i:0{width}d}" for i in range(len(combos)))
+    texts = tuple(case_text(base, ov) for ov in combos)  # a path that does not fit the case: ValueError, nothing run
+    paths = tuple(dict.fromkeys(p for c in combos for p in c))
+    return _Plan(base=base, ids=ids, overrides=tuple(combos), texts=texts, paths=paths)
+
+
+class _Ledger:
+    """The records of a running sweep: every finished case rewrites the study file (small,
+    atomic), so an interrupted sweep keeps its finished cases and marks the others "pending"."""
+
+    def __init__(self, plan: _Plan, study: Path, *, t_start: float, progress: bool,
+                 callback: Callable[[CaseRecord, int, int], None] | None):
+        self.plan, self.study, self.t_start = plan, study, t_start
+        self.progress, self.callback = progress, callback
+        self.records: dict[str, CaseRecord] = {}
+        self.pending = {cid: CaseRecord(id=cid, parameters=ov, status="pending", message="not finished")
+                        for cid, ov in zip(plan.ids, plan.overrides)}
+
+    def snapshot(self) -> SweepResult:
+        return SweepResult(cases=tuple(self.records.get(i, self.pending[i]) for i in self.plan.ids),
+                           parameters=self.plan.paths, study=self.study, case=self.plan.base.name,
+                           elapsed=time.perf_counter() - self.t_start)
+
+    def save(self) -> SweepResult:
+        res = self.snapshot()
+        save_study(res, text=self.plan.base.text)
+        return res
+
+    def done(self, rec: CaseRecord) -> None:
+        self.records[rec.id] = rec
+        self.save()
+        n, k = len(self.plan.ids), len(self.records)
+        if self.progress:
+            log.info("case %s (%d/%d) %s in %.2f s: %s %s", rec.id, k, n, rec.status, rec.wall_time,
+                     ", ".join(f"{p}={fmt_value(v)}" for p, v in rec.parameters.items()), rec.message)
+        if self.callback is not None:
+            self.callback(rec, k, n)
+
+
+def _checked_jobs(plan: _Plan, out: Path, ledger: _Ledger) -> list[tuple[str, dict, str]]:
+    """The ``(id, overrides, text)`` that pass the case-file checks in this process (a rejected
+    value costs no task); the others are recorded as failed with the check's message."""
+    jobs = []
+    for cid, ov, text in zip(plan.ids, plan.overrides, plan.texts):
+        try:
+            parse_case(text, out / "cases" / cid / "case.toml")
+        except CaseError as exc:
+            ledger.done(CaseRecord(id=cid, parameters=ov, status="failed", message=exc.message, wall_time=0.0))
+            continue
+        jobs.append((cid, ov, text))
+    return jobs
+
+
+# ---------------------------------------------------------------------------------------------
+# Execution
+# ---------------------------------------------------------------------------------------------
+def _task_answer(fut: cf.Future, case_id: str) -> Mapping[str, Any]:
+    try:
+        return fut.result()
+    except Exception as exc:  # noqa: BLE001 - the task itself could not run (worker lost, ...)
+        return {"id": case_id, "status": "failed", "message": f"{type(exc).__name__}: {exc}"}
+
+
+def _execute(jobs: list[tuple[str, dict, str]], out: Path, ledger: _Ledger, *, executor, scheduler,
+             n_workers: int) -> None:
+    """Submit one :func:`~femodes.app.sweep.task.run_sweep_case` per job; record each as it finishes."""
+    with open_executor(executor, scheduler, n_workers) as (ex, where):
+        log.info("sweep of %s: %d cases (%d to run) on %s", ledger.plan.base.name, len(ledger.plan.ids), len(jobs),
+                 where)
+        futures = {ex.submit(run_sweep_case, cid, text, str(out / "cases" / cid)): (cid, ov)
+                   for cid, ov, text in jobs}
+        for fut in cf.as_completed(futures):
+            cid, ov = futures[fut]
+            ledger.done(record_from_task(_task_answer(fut, cid), ov, out))
+
+
+def run_sweep(case, parameters, *, out, executor=None, scheduler: str | None = None, n_workers: int = 2,
+              study: str = "study.npz", progress: bool = False,
+              callback: Callable[[CaseRecord, int, int], None] | None = None) -> SweepResult:
+    """Run a case file for many parameter values as independent tasks; gather one study file.
+
+    Every case ``i`` is the base case with its overrides applied; it runs
+    :func:`~femodes.app.cases.run_case` in a task and saves ``out/cases/c<i>/branch.npz``. A case
+    the case-file checks reject, or whose task raises, gets ``status = "failed"`` with the error;
+    the other cases complete.
+
+    Parameters
+    ----------
+    case : str, Path or Case
+        The base case file (or a parsed :class:`~femodes.app.cases.Case`).
+    parameters : dict or list of dict
+        ``{path: [values]}`` (Cartesian product) or ``[{path: value}, ...]``; paths like
+        ``"contact.0.gap"``, ``"analysis.harmonics"`` (see :mod:`femodes.app.sweep.overrides`).
+    out : str or Path
+        Output folder: ``cases/<id>/`` per case and the study file.
+    executor : concurrent.futures.Executor or distributed.Client, optional
+        Where the tasks run; not shut down by the sweep. Worker environments are the caller's.
+    scheduler : str, optional
+        Address of a running Dask scheduler (``"tcp://host:8786"``); ``out`` must be shared.
+    n_workers : int
+        Workers of the embedded :func:`~femodes.app.sweep.local_cluster` used when neither of the
+        above is given.
+    study : str
+        Study file name in ``out``: ``*.npz`` or ``*.h5`` (needs h5py).
+    progress : bool
+        Log one INFO line per finished case (logger ``femodes.app.sweep.run``).
+    callback : callable, optional
+        ``callback(record, n_done, n_total)`` after each finished case, in the calling process.
+
+    Returns
+    -------
+    SweepResult
+        Records in case order; ``result.study`` is the study file (read with
+        :func:`~femodes.app.sweep.load_study`).
+    """
+    t_start = time.perf_counter()
+    _check_arguments(out=out, study=study, callback=callback, executor=executor, scheduler=scheduler,
+                     n_workers=n_workers)
+    plan = _plan(_base_case(case), parameters)
+    out = Path(out).resolve()
+    (out / "cases").mkdir(parents=True, exist_ok=True)
+    ledger = _Ledger(plan, out / study, t_start=t_start, progress=progress, callback=callback)
+    jobs = _checked_jobs(plan, out, ledger)
+    if jobs:
+        _execute(jobs, out, ledger, executor=executor, scheduler=scheduler, n_workers=n_workers)
+    return ledger.save()

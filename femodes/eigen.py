@@ -1,0 +1,124 @@
+"""Models layer (leaf): the generalized symmetric eigenproblem ``K phi = lam M phi``.
+
+Shared by linear modes (:mod:`femodes.linear`), modal damping (:mod:`femodes.model`) and the
+fixed-interface modes of Craig-Bampton (:mod:`femodes.reduction`); imports nothing of femodes.
+"""
+
+from __future__ import annotations
+
+import logging
+import warnings
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+__all__ = ["DENSE_LIMIT", "IllConditionedWarning", "check_conditioning", "mass_normalize", "generalized_eigh"]
+
+log = logging.getLogger(__name__)
+
+#: Below this size a dense symmetric eigensolver is used (exact, all modes, no shift needed).
+DENSE_LIMIT = 600
+
+
+class IllConditionedWarning(UserWarning):
+    """Stiffness matrix so ill-conditioned that low eigenvalues lose most of their digits."""
+
+
+def check_conditioning(K: sp.spmatrix, solve, n: int, owner: str, *, warn: bool = True) -> float:
+    """Estimate cond_1(K) = ||K||_1 ||K^-1||_1 (Hager/Higham estimator) and warn if hopeless.
+
+    ``solve`` applies ``K^-1`` (from an existing factorization). Low eigenvalues computed in
+    double precision carry a relative error of about ``cond * eps``; we warn when that exceeds
+    1e-2 (cond > 4.5e13; the estimate is pessimistic: at cond ~ 2e12 a 1e3-DOF beam still has
+    w1 to 5e-7), which for Euler-Bernoulli beams (cond ~ (N/2)^4) happens near 1e4 DOFs, where
+    about 3 digits are lost, and makes 1e5-DOF beams meaningless (benchmarks/README.md).
+    """
+    try:
+        Kinv = spla.LinearOperator((n, n), matvec=solve, rmatvec=solve, dtype=float)
+        est = spla.onenormest(Kinv) * spla.norm(K, 1)
+    except Exception as exc:  # pragma: no cover - the estimate is advisory only
+        log.debug("condition estimate failed: %s", exc)
+        return float("nan")
+    if warn and est * np.finfo(float).eps > 1e-2:
+        warnings.warn(
+            f"{owner}: the stiffness matrix is ill-conditioned (cond_1(K) ~ {est:.1e}, so low frequencies "
+            f"carry relative errors up to ~{est * np.finfo(float).eps:.0e}). Euler-Bernoulli beams reach this "
+            "near 1e4-1e5 DOFs; use a coarser mesh, Craig-Bampton on a coarser model, or bars for scaling studies.",
+            IllConditionedWarning,
+            stacklevel=3,
+        )
+    return float(est)
+
+
+def mass_normalize(shapes: np.ndarray, M) -> np.ndarray:
+    """Columns scaled to ``phi^T M phi = 1``, sign fixed so that the largest entry is positive."""
+    mm = np.einsum("ij,ij->j", shapes, M @ shapes)
+    shapes = shapes / np.sqrt(mm)
+    idx = np.argmax(np.abs(shapes), axis=0)
+    signs = np.sign(shapes[idx, np.arange(shapes.shape[1])])
+    signs[signs == 0] = 1.0
+    return shapes * signs
+
+
+def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigma: float | None = None,
+                     factor=None, check: bool = True):
+    """Lowest ``n`` eigenpairs of ``K phi = lam M phi`` (symmetric, M semidefinite), ascending.
+
+    Dense LAPACK below :data:`DENSE_LIMIT` DOFs; otherwise ARPACK in shift-invert mode around
+    ``sigma`` (default: 0, or a small negative shift if ``K`` is singular, so that rigid-body
+    modes of free structures are found). ``factor``: an existing factorisation of
+    ``K - sigma M`` (an object with ``solve``) to reuse. ``check`` estimates cond(K) and warns
+    (:class:`IllConditionedWarning`) when the low eigenvalues lose most of their digits.
+    """
+    N = K.shape[0]
+    if N <= DENSE_LIMIT or n >= N - 1:
+        Kd, Md = K.toarray(), M.toarray()
+        if np.any(np.diag(Md) <= 0):
+            # Singular mass (e.g. redistributed contact mass): eliminate massless DOFs statically.
+            lam, vec = sla.eig(Kd, Md)
+            ok = np.isfinite(lam)
+            lam, vec = lam[ok].real, vec[:, ok].real
+            order = np.argsort(lam)[:n]
+            lam, vec = lam[order], vec[:, order]
+        else:
+            try:
+                # Inverse problem M phi = mu K phi (mu = 1/lambda) when K is definite: the wanted low
+                # modes are then the dominant ones and get relative accuracy ~eps instead of
+                # ~eps * lambda_max / lambda_1 (1e-7..1e-6 for fine Hermite beams).
+                mu, vec = sla.eigh(Md, Kd, subset_by_index=[N - n, N - 1])
+                if np.all(mu > 0):
+                    return 1.0 / mu[::-1], vec[:, ::-1]
+            except (np.linalg.LinAlgError, ValueError):
+                pass  # K singular (free structure): direct problem below
+            lam, vec = sla.eigh(Kd, Md, subset_by_index=[0, n - 1])
+        return lam, vec
+    lu = factor
+    if sigma is None and lu is None:
+        # Shift-invert at 0 suits supported structures (near-rigid modes of free ones become the
+        # largest Ritz values and converge first). Only if K is exactly singular do we shift below 0.
+        sigma = 0.0
+        try:
+            lu = spla.splu(K.tocsc())
+        except RuntimeError:
+            d = K.diagonal() / np.maximum(M.diagonal(), 1e-300)
+            d = d[np.isfinite(d) & (d > 0)]
+            sigma = -1e-3 * float(d.min()) if d.size else -1.0
+            log.info("%s: K is singular, shift-invert with sigma=%g", owner, sigma)
+    if sigma is None:
+        sigma = 0.0
+    if lu is None:
+        lu = spla.splu((K - sigma * M).tocsc())
+    if check and sigma <= 0:
+        check_conditioning(K, lu.solve, N, owner)
+    op = spla.LinearOperator(K.shape, matvec=lu.solve, dtype=float)
+    try:
+        lam, vec = spla.eigsh(K, k=n, M=M, sigma=sigma, which="LM", OPinv=op, tol=1e-12, maxiter=max(500, 50 * n))
+    except spla.ArpackNoConvergence as exc:
+        raise RuntimeError(
+            f"{owner}: the Lanczos eigensolver did not converge for {n} modes of a {N}-DOF model "
+            "(ill-conditioned K, or pass sigma= close to the frequencies of interest squared)"
+        ) from exc
+    order = np.argsort(lam)
+    return lam[order], vec[:, order]
