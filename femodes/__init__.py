@@ -6,6 +6,7 @@ reduction, linear, eigen), discretise (hbm, time), results (results, store), ana
 """
 
 from .fe import Material, Section, bar, beam, line_mesh, load_mesh
+from .fe.redistribution import ConsistentMass, RedistributeMass
 from .laws import CubicSpring, PenaltyContact, UnilateralContact
 from .linear import IllConditionedWarning, LinearModes, LinearResponse, linear_modes, linear_response
 from .model import DofMap, HarmonicForce, StructuralModel
@@ -27,6 +28,8 @@ __all__ = [
     "beam",
     "line_mesh",
     "load_mesh",
+    "RedistributeMass",
+    "ConsistentMass",
     "CubicSpring",
     "PenaltyContact",
     "UnilateralContact",

@@ -93,7 +93,7 @@ def frequency_response(
     *,
     options: ContinuationOptions | None = None,
     x0: np.ndarray | None = None,
-    exact_contact: bool = True,
+    projection=None,
     progress: bool | Callable = False,
     checkpoint: str | os.PathLike | None = None,
     resume: bool = False,
@@ -114,8 +114,10 @@ def frequency_response(
         Step control, Newton options, callback.
     x0 : ndarray, optional
         Initial guess at ``omega[0]`` (default: the linear response).
-    exact_contact : bool
-        Exact Galerkin projection of the contact law (default; ``False`` only for comparison).
+    projection : ExactProjection or SampledProjection, optional
+        How ``max(0, .)`` of the contact laws is projected on the harmonics: exactly (default,
+        ``femodes.hbm.ExactProjection()``) or sampled (``femodes.hbm.SampledProjection()``, only
+        for comparison).
     progress : bool or callable
         ``True`` logs one INFO line per point; a callable is called with every accepted
         :class:`~femodes.solvers.ContinuationPoint` (the command line passes its progress display,
@@ -129,7 +131,7 @@ def frequency_response(
         With ``checkpoint``: continue the run from its last saved point, or return its branch if
         it finished (any status); start a new run if there is no checkpoint yet.  The final
         branch holds every point exactly once and equals that of an uninterrupted run.  The
-        checkpoint must come from the same model, harmonics, span and ``exact_contact``
+        checkpoint must come from the same model, harmonics, span and ``projection``
         (``ValueError`` saying what differs otherwise); ``options`` may change (step bounds,
         ``max_points``...), the arclength scaling of the run is kept.  Damaged files or another
         format version give a ``ValueError`` naming the file.
@@ -143,7 +145,7 @@ def frequency_response(
     h = _harmonics(harmonics, "frequency_response")
     _options(options, "frequency_response")
     span = _span(omega, "omega", "frequency_response", positive=True)
-    problem = ForcedResponseProblem(model, h, exact_contact=exact_contact)
+    problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
 
     def start(run_options: ContinuationOptions) -> tuple[np.ndarray, ContinuationOptions]:
@@ -164,7 +166,7 @@ def frequency_response(
         return branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span), **meta})
 
     description = {"analysis": "frequency_response", "omega": list(span), "harmonics": _harmonics_key(h),
-                   "exact_contact": bool(exact_contact), "n_unknowns": int(problem.size),
+                   "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
     return run_continuation(problem, span, opts, "frequency_response", progress, x0=start, wrap=wrap, model=model,
                          checkpoint=checkpoint, resume=resume, description=description)
@@ -261,7 +263,7 @@ def nonlinear_mode(
     harmonics: Harmonics | int = 10,
     *,
     options: ContinuationOptions | None = None,
-    exact_contact: bool = True,
+    projection=None,
     progress: bool | Callable = False,
     checkpoint: str | os.PathLike | None = None,
     resume: bool = False,
@@ -276,7 +278,7 @@ def nonlinear_mode(
     ``progress`` (bool or callable), ``checkpoint`` and ``resume`` are as for
     :func:`frequency_response`: ``checkpoint`` and ``resume`` write every converged point to a journal as it is found and
     continue a killed run from it, as for :func:`frequency_response`; the checkpoint must come
-    from the same model, ``mode``, energy span, harmonics and ``exact_contact``.
+    from the same model, ``mode``, energy span, harmonics and ``projection``.
 
     Returns
     -------
@@ -291,7 +293,8 @@ def nonlinear_mode(
         raise ValueError(f"nonlinear_mode: energy must increase, got energy={tuple(energy)!r}: the backbone starts "
                          f"from the linear mode at energy[0], where the motion is nearly linear; pass "
                          f"energy=({e1:g}, {e0:g})")
-    problem = NonlinearModeProblem(model, h, mode, reference_energy=math.sqrt(e0 * e1), exact_contact=exact_contact)
+    problem = NonlinearModeProblem(model, h, mode, reference_energy=math.sqrt(e0 * e1),
+                                   projection=projection)
     span = (math.log10(e0), math.log10(e1))
     x0 = problem.linear_guess(e0)
     options = nonlinear_mode_options(problem, x0, options)
@@ -306,7 +309,7 @@ def nonlinear_mode(
                                         meta={"mode": int(mode), "energy_span": [e0, e1], **meta})
 
     description = {"analysis": "nonlinear_mode", "mode": int(mode), "energy": [e0, e1], "harmonics": _harmonics_key(h),
-                   "exact_contact": bool(exact_contact), "n_unknowns": int(problem.size),
+                   "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
     return run_continuation(problem, span, options, "nonlinear_mode", progress, x0=lambda o: (x0, o), wrap=wrap, model=model,
                          checkpoint=checkpoint, resume=resume, description=description)

@@ -18,7 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .eigen import generalized_eigh, mass_normalize
-from .fe.redistribution import redistribute_contact_mass
+from .fe.redistribution import ConsistentMass, RedistributeMass
 from .laws import CubicSpring, Location, PenaltyContact, UnilateralContact, check_location
 
 __all__ = ["DofMap", "HarmonicForce", "Attached", "StructuralModel", "as_sparse_matrix"]
@@ -450,20 +450,22 @@ class StructuralModel:
         """Return a copy with no forcing (the autonomous system, for nonlinear modes)."""
         return self._replace(forces=())
 
-    def with_contact(self, *laws, redistribute_mass: bool | None = None) -> "StructuralModel":
+    def with_contact(self, *laws, contact_mass=None) -> "StructuralModel":
         """Return a copy with these contact laws (UnilateralContact or PenaltyContact) added.
 
         Parameters
         ----------
-        redistribute_mass : bool, optional
-            Move the mass of each contact DOF to its neighbours (zero mass at the contact node,
-            total mass and centre of mass conserved; Khenous, Laborde & Renard 2008). Default
-            (``None``): on for complementarity contacts of FE models, where a massful contact
-            node makes the nonsmooth modes ill-posed under mesh refinement (Thorin & Legrand
-            2018); off for penalty contacts and discrete models.
+        contact_mass : RedistributeMass or ConsistentMass, optional
+            What happens to the mass of each new contact DOF. ``fm.RedistributeMass()`` moves it
+            to the neighbours (zero mass at the contact node, total mass and centre of mass
+            conserved; Khenous, Laborde & Renard 2008); ``fm.ConsistentMass()`` keeps it. Default:
+            ``RedistributeMass()`` for complementarity contacts of FE models, where a massful
+            contact node makes the nonsmooth modes ill-posed under mesh refinement (Thorin &
+            Legrand 2018), ``ConsistentMass()`` for penalty contacts and discrete models.
         """
-        if redistribute_mass is not None and not isinstance(redistribute_mass, bool):
-            raise TypeError(f"with_contact: redistribute_mass must be True, False or None, got {redistribute_mass!r}")
+        if contact_mass is not None and not callable(getattr(contact_mass, "apply", None)):
+            raise TypeError(f"with_contact: contact_mass must be fm.RedistributeMass() or fm.ConsistentMass(), "
+                            f"got {contact_mass!r}")
         if not laws:
             raise ValueError("with_contact: give at least one UnilateralContact or PenaltyContact")
         new = list(self.contacts)
@@ -485,14 +487,13 @@ class StructuralModel:
         M = self.M
         reports = list(self.mass_redistribution)
         for a in new[len(self.contacts):]:
-            auto = self.fe is not None and isinstance(a.item, UnilateralContact)
-            if redistribute_mass or (redistribute_mass is None and auto):
-                if self.fe is None:
-                    raise ValueError("with_contact: redistribute_mass=True needs an FE model (bar or beam), not a discrete one")
-                if M[a.dof, a.dof] > 0:
-                    M, rep = redistribute_contact_mass(self.fe, M, a.dof)
-                    rep["dof"] = a.dof
-                    reports.append(rep)
+            strategy = contact_mass
+            if strategy is None:
+                auto = self.fe is not None and isinstance(a.item, UnilateralContact)
+                strategy = RedistributeMass() if auto else ConsistentMass()
+            M, rep = strategy.apply(self.fe, M, a.dof)
+            if rep is not None:
+                reports.append(rep)
         if any(isinstance(a.item, UnilateralContact) for a in new) and any(isinstance(a.item, PenaltyContact) for a in new):
             log.info("model mixes complementarity and penalty contacts")
         return self._replace(contacts=tuple(new), M=M, mass_redistribution=tuple(reports))

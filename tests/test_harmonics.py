@@ -15,6 +15,9 @@ from scipy.fft import next_fast_len
 from scipy.optimize import brentq
 
 from femodes.hbm.harmonics import Harmonics
+from femodes.hbm import ColleagueRoots, CompanionRoots, ExactProjection, SampledProjection
+
+ROOTS = {"colleague": ColleagueRoots(), "companion": CompanionRoots()}
 
 TWO_PI = 2.0 * np.pi
 
@@ -186,7 +189,10 @@ def test_layout_indices_and_global_vector():
     assert h.cos_index(0) == 0
     assert [h.cos_index(k) for k in range(1, H + 1)] == [1, 3, 5]
     assert [h.sin_index(k) for k in range(1, H + 1)] == [2, 4, 6]
-    np.testing.assert_array_equal(h.cos_index(np.arange(1, H + 1)), [1, 3, 5])
+    np.testing.assert_array_equal(h.cos_rows(np.arange(1, H + 1)), [1, 3, 5])
+    np.testing.assert_array_equal(h.sin_rows(np.arange(1, H + 1)), [2, 4, 6])
+    with pytest.raises(TypeError, match="k must be an integer"):
+        h.cos_index(np.arange(1, H + 1))  # one harmonic, one row (several: cos_rows)
     np.testing.assert_array_equal(h.harmonic_of, [0, 1, 1, 2, 2, 3, 3])
     np.testing.assert_array_equal(h.is_sine, [0, 0, 1, 0, 1, 0, 1])
     for bad in (-1, H + 1):
@@ -352,7 +358,7 @@ def test_positive_part_and_jacobian_against_quadrature_reference(H, method):
         phi = random_phi(rng, H, offset=0.5 * trial)
         iv = reference_intervals(phi)
         G_ref = reference_gram(H, iv)
-        proj, G = h.positive_part(phi, root_method=method)
+        proj, G = h.positive_part(phi, roots=ROOTS[method])
         # 1e-13: quadrature and brentq (xtol 1e-15) of the reference; root_gram_tol: the roots'
         # conditioning and G's sums over up to 2H roots (<= 3e-14 here; measured |G - G_ref| <= 2.6e-15)
         roots = [r for ab in iv for r in ab if 0.0 < r < TWO_PI]
@@ -415,7 +421,7 @@ def test_positive_part_near_tangency(theta0, delta, method):
     h = Harmonics(5)
     phi = np.zeros(h.n_coef)
     phi[0], phi[1], phi[2] = 1.0 + delta, -np.cos(theta0), -np.sin(theta0)
-    proj, G = h.positive_part(phi, root_method=method)
+    proj, G = h.positive_part(phi, roots=ROOTS[method])
     if delta >= 0:
         np.testing.assert_array_equal(G, np.eye(h.n_coef))
         return
@@ -452,7 +458,7 @@ def test_positive_part_higher_degree_tangency():
     # the tolerance still resolves a root error of 1e-8
     assert np.abs(reference_gram(6, [(a + 1e-8, b)]) - reference_gram(6, [(a, b)])).max() > 10 * tol
     for method in ("colleague", "companion"):
-        proj, G = h.positive_part(phi, root_method=method)
+        proj, G = h.positive_part(phi, roots=ROOTS[method])
         np.testing.assert_allclose(G, G_ref, rtol=0, atol=tol)
 
 
@@ -486,18 +492,22 @@ def test_positive_part_batched_equals_loop(method):
     phi[1:, 5] = 0.0  # constant
     phi[3:, 6] = 0.0  # effective degree 1
     phi[:, 7] *= 1e-9  # small scale
-    proj, G = h.positive_part(phi, root_method=method)
+    proj, G = ExactProjection(roots=ROOTS[method])(h, phi)
     assert proj.shape == phi.shape and G.shape == (9, h.n_coef, h.n_coef)
-    intervals = h.positive_intervals(phi, root_method=method)
+    intervals = [h.positive_intervals(phi[:, i], roots=ROOTS[method]) for i in range(phi.shape[1])]
     for i in range(phi.shape[1]):
-        p_i, G_i = h.positive_part(phi[:, i], root_method=method)
+        p_i, G_i = h.positive_part(phi[:, i], roots=ROOTS[method])
         # batched and single calls sum in a different order (BLAS), so their roots differ at the
         # root conditioning and G by root_gram_tol, proj = G phi by that times sum|phi| (one-signed
         # and zero signals: no roots, tol = 0, G exactly I or 0); measured <= 9e-16 (was atol 1e-15)
         tol = root_gram_tol(phi[:, i], interval_roots(intervals[i]))
         np.testing.assert_allclose(G[i], G_i, rtol=0, atol=tol)
         np.testing.assert_allclose(proj[:, i], p_i, rtol=0, atol=tol * np.abs(phi[:, i]).sum())
-        np.testing.assert_allclose(intervals[i], h.positive_intervals(phi[:, i], root_method=method))
+    # one signal at a time is the single-signal API; a batch there is refused with the way to it
+    with pytest.raises(ValueError, match="ExactProjection"):
+        h.positive_part(phi)
+    with pytest.raises(ValueError, match="ExactProjection"):
+        h.positive_intervals(phi)
 
 
 def test_positive_part_root_methods_agree_and_trailing_zeros_embed():
@@ -506,17 +516,17 @@ def test_positive_part_root_methods_agree_and_trailing_zeros_embed():
     phi5 = random_phi(rng, 5, m=4)
     phi12 = np.zeros((h12.n_coef, 4))
     phi12[: h5.n_coef] = phi5
-    p5, G5 = h5.positive_part(phi5)
-    p12, G12 = h12.positive_part(phi12, root_method="companion")
+    p5, G5 = ExactProjection()(h5, phi5)
+    p12, G12 = ExactProjection(roots=CompanionRoots())(h12, phi12)
     np.testing.assert_allclose(p12[: h5.n_coef], p5, atol=1e-14)
     # (the higher rows of p12 are non-zero: max(0, phi) generates harmonics)
     np.testing.assert_allclose(G12[:, : h5.n_coef, : h5.n_coef], G5, atol=1e-14)
     phi = random_phi(rng, 30, m=5)
     h30 = Harmonics(30)
-    for a, b in zip(h30.positive_part(phi), h30.positive_part(phi, root_method="companion")):
+    for a, b in zip(ExactProjection()(h30, phi), ExactProjection(roots=CompanionRoots())(h30, phi)):
         np.testing.assert_allclose(a, b, atol=1e-13 * np.abs(phi).max())
-    with pytest.raises(ValueError):
-        h30.positive_part(phi, root_method="roots")
+    with pytest.raises(TypeError, match="roots must be"):
+        ExactProjection(roots="companion")
 
 
 def test_positive_part_special_signals():
@@ -538,13 +548,13 @@ def test_positive_part_special_signals():
     for phi, tol in cases:
         G_ref = reference_gram(10, reference_intervals(phi))
         for method in ("colleague", "companion"):
-            np.testing.assert_allclose(h.positive_part(phi, root_method=method)[1], G_ref, atol=tol)
+            np.testing.assert_allclose(h.positive_part(phi, roots=ROOTS[method])[1], G_ref, atol=tol)
     # sin^3: triple roots at 0 and pi are located to ~eps^(1/3)
     sin3 = np.zeros(h.n_coef)
     sin3[2], sin3[6] = 0.75, -0.25
     G_ref = reference_gram(10, [(0.0, np.pi)])
     for method in ("colleague", "companion"):
-        np.testing.assert_allclose(h.positive_part(sin3, root_method=method)[1], G_ref, atol=1e-5)
+        np.testing.assert_allclose(h.positive_part(sin3, roots=ROOTS[method])[1], G_ref, atol=1e-5)
 
 
 @pytest.mark.parametrize("top", [1e-15, 1e-12, 1e-9, 1e-6])
@@ -555,8 +565,8 @@ def test_positive_part_tiny_leading_harmonics(top):
     h = Harmonics(10)
     phi = random_phi(rng, 10, m=3)
     phi[15:] *= top
-    proj, G = h.positive_part(phi)
-    proj_c, G_c = h.positive_part(phi, root_method="companion")
+    proj, G = ExactProjection()(h, phi)
+    proj_c, G_c = ExactProjection(roots=CompanionRoots())(h, phi)
     for i in range(3):
         G_ref = reference_gram(10, reference_intervals(phi[:, i]))
         np.testing.assert_allclose(G[i], G_ref, atol=1e-13)
@@ -618,17 +628,20 @@ def test_positive_part_sampled_shapes_and_convergence():
     rng = np.random.default_rng(4)
     h = Harmonics(6)
     phi = random_phi(rng, 6, m=3)
-    proj, G = h.positive_part(phi)
+    proj, G = ExactProjection()(h, phi)
     errs = []
     for N in (64, 512, 4096):
-        ps, Gs = h.positive_part_sampled(phi, N)
+        ps, Gs = SampledProjection(N)(h, phi)
         assert ps.shape == phi.shape and Gs.shape == G.shape
         errs.append(np.abs(ps - proj).max())
     assert errs[0] > errs[1] > errs[2]
     p1, G1 = h.positive_part_sampled(phi[:, 0])
     assert p1.shape == (h.n_coef,) and G1.shape == (h.n_coef, h.n_coef)
+    # the same numbers batched or one at a time, to the rounding of the matrix products
+    np.testing.assert_allclose(p1, SampledProjection()(h, phi)[0][:, 0], rtol=0,
+                               atol=8 * np.finfo(float).eps * h.n_time * np.abs(phi[:, 0]).sum())
     with pytest.raises(ValueError):
-        h.positive_part_sampled(phi, 5)
+        h.positive_part_sampled(phi[:, 0], 5)
 
 
 def test_positive_intervals_match_reference():

@@ -122,7 +122,8 @@ def crossings(omega, w0):
 @functools.lru_cache(maxsize=None)
 def contact_branch(n, n_time=None, exact=True):
     h = fm.Harmonics(20) if n_time is None else fm.Harmonics(20, n_time=n_time)
-    return fm.frequency_response(contact_case(n), (0.5, 2.0), h, exact_contact=exact)
+    return fm.frequency_response(contact_case(n), (0.5, 2.0), h,
+                                 projection=fm.hbm.ExactProjection() if exact else fm.hbm.SampledProjection())
 
 
 # Newton tolerance of nonlinear_mode's corrector (femodes.analyses.nonlinear_mode_options): every
@@ -163,7 +164,7 @@ def case1_at_105(law, param):
 @pytest.mark.parametrize("exact", [True, False], ids=["exact", "sampled"])
 def test_system_jacobian_matches_central_differences(harmonics, exact):
     model = chain4()
-    s = HBMSystem(model, harmonics, exact_contact=exact)
+    s = HBMSystem(model, harmonics, projection=fm.hbm.ExactProjection() if exact else fm.hbm.SampledProjection())
     rng = np.random.default_rng(7)
     x = 0.4 * rng.standard_normal(s.size)
     Q, P = s.split(x)

@@ -93,3 +93,18 @@ def test_reduced_models_answer_mesh_questions(cantilever):
     q = np.random.default_rng(0).standard_normal((3, rr.n_dofs))
     np.testing.assert_allclose(rr.to_owner(q), rom.expand(rr.expand(q)))
     assert fm.StructuralModel(M=[[1.0]], K=[[1.0]]).mesh_owner is None
+
+
+def test_contact_mass_is_a_strategy(cantilever):
+    law = fm.UnilateralContact(at="tip", gap=0.01)
+    tip = cantilever.dof("tip")
+    assert cantilever.with_contact(law).M[tip, tip] == 0.0  # default on FE models: redistributed
+    kept = cantilever.with_contact(law, contact_mass=fm.ConsistentMass())
+    assert kept.M[tip, tip] == cantilever.M[tip, tip] > 0
+    moved = cantilever.with_contact(law, contact_mass=fm.RedistributeMass())
+    assert moved.M[tip, tip] == 0.0 and moved.mass_redistribution[0]["dof"] == tip
+    with pytest.raises(TypeError, match="contact_mass must be"):
+        cantilever.with_contact(law, contact_mass=True)
+    discrete = fm.StructuralModel(M=[[1.0]], K=[[1.0]])
+    with pytest.raises(ValueError, match="needs an FE model"):
+        discrete.with_contact(fm.UnilateralContact(at=0, gap=1.0), contact_mass=fm.RedistributeMass())

@@ -17,6 +17,7 @@ import scipy.sparse.linalg as spla
 import femodes as fm
 from femodes.hbm.linsolve import HarmonicBlockJacobian, _Generic
 from femodes.hbm.problems import ForcedResponseProblem, NonlinearModeProblem
+from femodes.hbm import AssembledSolver, BlockSolver
 from femodes.solvers.continuation import bordered_matrix, bordered_solver
 
 
@@ -104,7 +105,7 @@ def state(pr, seed, amp):
 def test_structured_solve_matches_superlu(name):
     model, h = CASES[name]()
     pr = ForcedResponseProblem(model, h)
-    pg = ForcedResponseProblem(model, h, structured=False)
+    pg = ForcedResponseProblem(model, h, solver=AssembledSolver())
     x = state(pr, 1, 1e-3 if "bar" in name or "beam" in name else 0.5)
     r, J, rp = pr.residual(x, 1.3)
     rg, Jg, rpg = pg.residual(x, 1.3)
@@ -134,7 +135,7 @@ def test_bordered_systems_match(name):
     x[:-2] += 1e-4 * np.random.default_rng(4).standard_normal(nn.size - 2)
     x[-1] = 0.03  # xi
     r, J, rp = nn.residual(x, -4.0)
-    ng = NonlinearModeProblem(model, h, structured=False)
+    ng = NonlinearModeProblem(model, h, solver=AssembledSolver())
     _, Jg, _ = ng.residual(x, -4.0)
     assert abs(J.toarray() - Jg.toarray()).max() == 0.0
     c = np.random.default_rng(5).standard_normal(nn.size + 1)
@@ -276,8 +277,8 @@ def test_continuation_structured_equals_assembled():
     opts = fm.ContinuationOptions(step=0.05, max_step=0.2, max_points=40,
                                   newton=fm.NewtonOptions(atol=1e-10, max_iter=20))
     out = []
-    for structured in (True, False):
-        pr = ForcedResponseProblem(model, h, structured=structured)
+    for solver in (BlockSolver(), AssembledSolver()):
+        pr = ForcedResponseProblem(model, h, solver=solver)
         out.append(fm.continuation(pr, (1.0, 2.5), options=opts))
     a, b = out
     assert a.n_points == b.n_points >= 10

@@ -13,7 +13,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-__all__ = ["redistribute_contact_mass"]
+__all__ = ["redistribute_contact_mass", "RedistributeMass", "ConsistentMass"]
 
 log = logging.getLogger(__name__)
 
@@ -95,3 +95,35 @@ def _is_positive_definite(M: sp.csr_matrix, massless: int) -> bool:
         return True
     except np.linalg.LinAlgError:
         return False
+
+
+class RedistributeMass:
+    """Contact-mass strategy: zero mass at each contact DOF, moved to its nearest translational
+    neighbours (:func:`redistribute_contact_mass`). The default for complementarity contacts of
+    FE models, whose nonsmooth modes are otherwise ill-posed under mesh refinement (Thorin &
+    Legrand 2018)."""
+
+    def apply(self, fe, M, dof: int):
+        """``(M, report)`` after moving the mass of ``dof``; ``report`` is None if there was none."""
+        if fe is None:
+            raise ValueError("with_contact: RedistributeMass() needs an FE model (bar or beam), not a discrete one")
+        if M[dof, dof] <= 0:
+            return M, None
+        M, report = redistribute_contact_mass(fe, M, dof)
+        report["dof"] = dof
+        return M, report
+
+    def __repr__(self) -> str:
+        return "RedistributeMass()"
+
+
+class ConsistentMass:
+    """Contact-mass strategy: keep the consistent mass at contact DOFs (the default for penalty
+    contacts and discrete models)."""
+
+    def apply(self, fe, M, dof: int):
+        return M, None
+
+    def __repr__(self) -> str:
+        return "ConsistentMass()"
+

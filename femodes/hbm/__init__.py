@@ -1,9 +1,12 @@
-"""Discretise layer: harmonic balance (Fourier layout, AFT, dynamic stiffness, HBM problems, block solver)."""
+"""Discretise layer: harmonic balance (Fourier layout, exact positive part, dynamic stiffness, HBM problems, block solver)."""
 
 from .harmonics import Harmonics
-from .linsolve import HarmonicBlockJacobian
+from .linsolve import AssembledSolver, BlockSolver, HarmonicBlockJacobian
+from .positive_part import ExactProjection, SampledProjection
 from .problems import ForcedResponseProblem, HBMUnknowns, NonlinearModeProblem
 from .system import HBMSystem, default_contact_parameter
+from .trigroots import ColleagueRoots, CompanionRoots
 
 __all__ = ["Harmonics", "HarmonicBlockJacobian", "ForcedResponseProblem", "NonlinearModeProblem", "HBMUnknowns",
-           "HBMSystem", "default_contact_parameter"]
+           "HBMSystem", "default_contact_parameter", "ExactProjection", "SampledProjection", "BlockSolver",
+           "AssembledSolver", "ColleagueRoots", "CompanionRoots"]

@@ -209,7 +209,7 @@ class Harmonics:
         return self.n_coef * check_int("n", n, 0)
 
     # ----------------------------------------------------------------- layout
-    def _check_harmonic(self, k, lowest):
+    def _check_harmonics(self, k, lowest) -> np.ndarray:
         k_arr = np.asarray(k)
         if k_arr.dtype.kind not in "iu":
             raise TypeError(f"harmonic number must be an integer, got {k!r}")
@@ -217,20 +217,22 @@ class Harmonics:
             raise ValueError(f"harmonic number must lie in [{lowest}, {self._H}], got {k!r}")
         return k_arr
 
-    def cos_index(self, k):
-        """Row of ``c_k`` (``k = 0`` gives the mean ``c0`` at row 0): ``max(2k - 1, 0)``.
+    def cos_index(self, k: int) -> int:
+        """Row of ``c_k`` (``k = 0`` gives the mean ``c0`` at row 0): ``max(2k - 1, 0)``; one
+        harmonic ``k`` in ``[0, H]`` (several: :meth:`cos_rows`)."""
+        return int(self.cos_rows(check_int("k", k, 0))[()])
 
-        Vectorised over integer arrays ``k`` in ``[0, H]``.
-        """
-        k_arr = self._check_harmonic(k, 0)
-        out = np.maximum(2 * k_arr - 1, 0)
-        return int(out) if out.ndim == 0 else out
+    def sin_index(self, k: int) -> int:
+        """Row ``2k`` of ``s_k``; one harmonic ``k`` in ``[1, H]`` (several: :meth:`sin_rows`)."""
+        return int(self.sin_rows(check_int("k", k, 1))[()])
 
-    def sin_index(self, k):
-        """Row ``2k`` of ``s_k``; ``k`` (integer or integer array) in ``[1, H]``."""
-        k_arr = self._check_harmonic(k, 1)
-        out = 2 * k_arr
-        return int(out) if out.ndim == 0 else out
+    def cos_rows(self, ks) -> np.ndarray:
+        """Rows of ``c_k`` for an integer array ``ks`` in ``[0, H]`` (an array of the same shape)."""
+        return np.maximum(2 * self._check_harmonics(ks, 0) - 1, 0)
+
+    def sin_rows(self, ks) -> np.ndarray:
+        """Rows of ``s_k`` for an integer array ``ks`` in ``[1, H]``."""
+        return 2 * self._check_harmonics(ks, 1)
 
     @property
     def harmonic_of(self) -> np.ndarray:
@@ -438,14 +440,15 @@ class Harmonics:
         )
 
     # ----------------------------------------------------------- positive part
-    def positive_part(self, phi, *, root_method: str = "colleague"):
-        """Exact Galerkin projection of ``max(0, phi)`` and its Jacobian
-        (:func:`femodes.hbm.positive_part.positive_part`)."""
-        return _pp.positive_part(self, phi, root_method=root_method)
+    def positive_part(self, phi, *, roots=None):
+        """Exact Galerkin projection of ``max(0, phi)`` for one signal ``phi`` of shape
+        ``(n_coef,)``, and its Jacobian (:func:`femodes.hbm.positive_part.positive_part`; many
+        signals at once: :class:`femodes.hbm.ExactProjection`)."""
+        return _pp.positive_part(self, phi, roots=roots)
 
-    def positive_intervals(self, phi, *, root_method: str = "colleague"):
-        """Phase intervals where ``phi > 0`` (:func:`femodes.hbm.positive_part.positive_intervals`)."""
-        return _pp.positive_intervals(self, phi, root_method=root_method)
+    def positive_intervals(self, phi, *, roots=None):
+        """Phase intervals ``(k, 2)`` where ``phi > 0`` (:func:`femodes.hbm.positive_part.positive_intervals`)."""
+        return _pp.positive_intervals(self, phi, roots=roots)
 
     def positive_part_sampled(self, phi, n_time: int | None = None):
         """AFT approximation of :meth:`positive_part` (:func:`femodes.hbm.positive_part.positive_part_sampled`)."""

@@ -53,6 +53,7 @@ import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 import scipy.linalg as sla
@@ -61,9 +62,30 @@ import scipy.sparse.linalg as spla
 from scipy.linalg import lapack
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-__all__ = ["HarmonicBlockJacobian", "StructureFailure"]
+__all__ = ["HarmonicBlockJacobian", "StructureFailure", "BlockSolver", "AssembledSolver", "BlockStructure"]
 
 log = logging.getLogger(__name__)
+
+
+class BlockStructure(Protocol):
+    """What the Jacobian operator and its factorisations need from the harmonic balance system
+    (:class:`~femodes.hbm.HBMSystem` provides it): sizes, the linear block operator and its
+    per-harmonic factors, and the solver strategy. Nothing else of the system is read here.
+    """
+
+    h: Any            # Harmonics: layout of the coefficient rows
+    n: int            # DOFs of the model
+    nq: int           # displacement unknowns, n_coef * n
+    np: int           # contact-force unknowns
+    size: int         # nq + np
+    solver: Any       # BlockSolver() or AssembledSolver()
+    AM: Any           # kron(D1, M), the artificial-damping operator of nonlinear modes (assembled path)
+
+    def apply_linear(self, q, omega: float, xi: float = 0.0, *, absolute: bool = False): ...
+    def abs_row_sums(self) -> tuple: ...
+    def block_pattern(self): ...
+    def linear_factors(self, omega: float, xi: float = 0.0, threads: int | None = None): ...
+    def linear_operator(self, omega: float): ...
 
 
 class StructureFailure(RuntimeError):
@@ -243,7 +265,7 @@ class _Harmonic:
 class LinearFactors:
     """Per-harmonic interior LUs and condensed stiffnesses at one ``(w, xi)`` (cached on the system)."""
 
-    def __init__(self, system, omega: float, xi: float, threads: int | None = None):
+    def __init__(self, system: BlockStructure, omega: float, xi: float, threads: int | None = None):
         self.omega, self.xi = float(omega), float(xi)
         h = system.h
         pat = system.block_pattern()
@@ -298,7 +320,7 @@ class HarmonicBlockJacobian:
     :meth:`bordered` (append rows and columns), :meth:`factorize` (the structured solve).
     """
 
-    def __init__(self, system, omega: float, xi: float, N: sp.csr_matrix, *, scale: float = 1.0,
+    def __init__(self, system: BlockStructure, omega: float, xi: float, N: sp.csr_matrix, *, scale: float = 1.0,
                  U: np.ndarray | None = None, V: np.ndarray | None = None, D: np.ndarray | None = None):
         self.system = system
         self.omega = float(omega)
@@ -402,21 +424,46 @@ class HarmonicBlockJacobian:
                 f"border={self.n_border})")
 
     # -- solve ------------------------------------------------------------------------------------
-    def factorize(self, *, threads: int | None = None) -> "_Factorization | _Generic":
-        """Factorisation with a ``solve(b)`` method (structured; generic SuperLU if that fails).
+    def factorize(self, *, threads: int | None = None):
+        """Factorisation with a ``solve(b)`` method, by the system's solver strategy
+        (:class:`BlockSolver` or :class:`AssembledSolver`).
 
         Raises ``RuntimeError`` if the matrix is singular.
         """
-        if self.shape[0] < STRUCTURED_MIN_SIZE:
-            return _Generic(self)
-        try:
-            return _Factorization(self, threads)
-        except StructureFailure as exc:
-            log.debug("structured HBM factorisation not applicable (%s); SuperLU on the assembled matrix", exc)
-            return _Generic(self)
+        return self.system.solver.factorize(self, threads=threads)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         return self.factorize().solve(b)
+
+
+class BlockSolver:
+    """Linear solver strategy of the harmonic balance (the default): per-harmonic band LU of the
+    linear DOFs and a dense Schur complement on the nonlinear DOFs and borders (module
+    docstring); systems below :data:`STRUCTURED_MIN_SIZE` unknowns, and blocks that cannot be
+    factorised (an interior resonance), go to SuperLU on the assembled matrix."""
+
+    def factorize(self, J: HarmonicBlockJacobian, *, threads: int | None = None):
+        if J.shape[0] < STRUCTURED_MIN_SIZE:
+            return _Generic(J)
+        try:
+            return _Factorization(J, threads)
+        except StructureFailure as exc:
+            log.debug("structured HBM factorisation not applicable (%s); SuperLU on the assembled matrix", exc)
+            return _Generic(J)
+
+    def __repr__(self) -> str:
+        return "BlockSolver()"
+
+
+class AssembledSolver:
+    """Linear solver strategy: SuperLU on the assembled sparse Jacobian, whatever its size (for
+    checks and comparisons with :class:`BlockSolver`)."""
+
+    def factorize(self, J: HarmonicBlockJacobian, *, threads: int | None = None):
+        return _Generic(J)
+
+    def __repr__(self) -> str:
+        return "AssembledSolver()"
 
 
 class _Generic:

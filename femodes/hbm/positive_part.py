@@ -12,21 +12,28 @@ from __future__ import annotations
 import numpy as np
 
 from ..solvers.checks import check_int
-from .trigroots import DEGREE_TOL, candidates, sign_changes
+from .trigroots import DEGREE_TOL, ColleagueRoots, candidates, sign_changes
 
-__all__ = ["positive_part", "positive_intervals", "positive_part_sampled"]
+__all__ = ["positive_part", "positive_intervals", "positive_part_sampled", "ExactProjection", "SampledProjection"]
 
 _TWO_PI = 2.0 * np.pi
 
 
-def check_phi(h, phi):
+def check_phi(h, phi, *, single: bool):
+    """``phi`` as a finite float array of shape ``(n_coef,)`` (``single``) or ``(n_coef, m)``."""
     phi = np.asarray(phi, dtype=float)
-    h.check_coef(phi, "phi")
+    want = 1 if single else 2
+    if phi.ndim != want or phi.shape[0] != h.n_coef:
+        shape = "(n_coef,)" if single else "(n_coef, m)"
+        hint = ("; for several signals at once use femodes.hbm.ExactProjection()(h, Phi)" if single
+                else "; for one signal use Harmonics.positive_part(phi)")
+        raise ValueError(f"phi must have shape {shape} with n_coef = {h.n_coef}, got {phi.shape}{hint}")
     if not np.all(np.isfinite(phi)):
         raise ValueError("phi must be finite")
     return phi
 
-def positive_part(h, phi, *, root_method: str = "colleague"):
+
+def positive_part(h, phi, *, roots=None):
     r"""Exact Galerkin projection of :math:`\max(0, \varphi(\theta))` and its Jacobian.
 
     .. math::
@@ -45,14 +52,14 @@ def positive_part(h, phi, *, root_method: str = "colleague"):
     Algorithm (no quadrature):
 
     1. Candidate sign changes: roots of a polynomial whose zeros contain
-       the real zeros of ``phi``.  ``root_method="colleague"`` (default)
+       the real zeros of ``phi``.  :class:`~femodes.hbm.trigroots.ColleagueRoots` (default)
        takes the even trigonometric polynomial
        ``g(θ) = phi(α+θ) phi(α-θ)`` of degree ``2H``, whose cosine
        coefficients are the Chebyshev coefficients of ``g`` in
        ``x = cos θ``, and computes the eigenvalues of the (real) colleague
        matrix (I. J. Good, Quart. J. Math. 12 (1961) 61-68); each root
        ``x`` near ``[-1, 1]`` gives candidates ``α ± arccos x``.
-       ``root_method="companion"`` uses the complex companion matrix of
+       :class:`~femodes.hbm.trigroots.CompanionRoots` uses the complex companion matrix of
        ``z^H phi(z)``, ``z = exp(iθ)``, with ``a_k = (c_k - i s_k)/2``
        (J. P. Boyd, J. Eng. Math. 56 (2006) 203-219), taking the
        arguments of the roots near ``|z| = 1``.  Both are batched over
@@ -81,18 +88,17 @@ def positive_part(h, phi, *, root_method: str = "colleague"):
 
     Parameters
     ----------
-    phi : array_like, shape ``(n_coef,)`` or ``(n_coef, m)``
-        Coefficients of one signal or of ``m`` independent signals.
-    root_method : {"colleague", "companion"}, optional
-        Candidate root finder (see above).
+    phi : array_like, shape ``(n_coef,)``
+        Coefficients of one signal (many signals at once: :class:`ExactProjection`).
+    roots : ColleagueRoots or CompanionRoots, optional
+        Candidate root finder (see above); default ``ColleagueRoots()``.
 
     Returns
     -------
-    proj : ndarray, same shape as ``phi``
+    proj : ndarray, shape ``(n_coef,)``
         Galerkin coefficients of ``max(0, phi)``.
-    G : ndarray, shape ``(n_coef, n_coef)`` or ``(m, n_coef, n_coef)``
-        Jacobian ``d proj / d phi`` (per signal).  ``diag(1/norms) @ G``
-        is symmetric.
+    G : ndarray, shape ``(n_coef, n_coef)``
+        Jacobian ``d proj / d phi``.  ``diag(1/norms) @ G`` is symmetric.
 
     Notes
     -----
@@ -102,53 +108,43 @@ def positive_part(h, phi, *, root_method: str = "colleague"):
     ``~ sqrt(delta)`` is resolved as long as ``delta`` exceeds the
     rounding bound above.
     """
-    phi = check_phi(h, phi)
-    single = phi.ndim == 1
-    Phi = phi[:, None] if single else phi
-    G = positive_gram(h, Phi.T, root_method)[0]
-    proj = np.einsum("sab,bs->as", G, Phi)
-    if single:
-        return proj[:, 0], G[0]
-    return proj, G
+    phi = check_phi(h, phi, single=True)
+    G = positive_gram(h, phi[None, :], roots)[0][0]
+    return G @ phi, G
 
-def positive_intervals(h, phi, *, root_method: str = "colleague"):
+
+def positive_intervals(h, phi, *, roots=None):
     """Intervals ``[start, end]`` where ``phi(theta) > 0``.
 
     Parameters
     ----------
-    phi : array_like, shape ``(n_coef,)`` or ``(n_coef, m)``
+    phi : array_like, shape ``(n_coef,)``
+    roots : ColleagueRoots or CompanionRoots, optional
+        Root finder (default :class:`~femodes.hbm.trigroots.ColleagueRoots`).
 
     Returns
     -------
-    ndarray of shape ``(k, 2)``, or a list of ``m`` such arrays
+    ndarray of shape ``(k, 2)``
         Phase intervals (radians), sorted by ``start``, with
         ``0 <= start < 2 pi`` and ``start < end < start + 2 pi`` (an
         interval crossing ``theta = 2 pi`` has ``end > 2 pi``).  ``[[0, 2 pi]]`` if ``phi > 0``
         everywhere, empty if nowhere.  The contact fraction is
         ``sum(end - start) / (2 pi)``.
     """
-    phi = check_phi(h, phi)
-    single = phi.ndim == 1
-    Phi = phi[:, None] if single else phi
-    _, info = positive_gram(h, Phi.T, root_method)
+    phi = check_phi(h, phi, single=True)
+    _, info = positive_gram(h, phi[None, :], roots)
     rows, rho, w, wrap, full = info
-    out = []
-    for s in range(Phi.shape[1]):
-        if full[s]:
-            out.append(np.array([[0.0, _TWO_PI]]))
-            continue
-        sel = rows == s
-        r, ws = rho[sel], w[sel]
-        order = np.argsort(r, kind="stable")
-        r, ws = r[order], ws[order]
-        starts = r[ws < 0]
-        ends = r[ws > 0]
-        if wrap[s]:
-            ends = np.concatenate([ends[1:], ends[:1] + _TWO_PI])
-        shift = np.floor(starts / _TWO_PI) * _TWO_PI
-        iv = np.column_stack([starts - shift, ends - shift]).reshape(-1, 2)
-        out.append(iv[np.argsort(iv[:, 0], kind="stable")])
-    return out[0] if single else out
+    if full[0]:
+        return np.array([[0.0, _TWO_PI]])
+    order = np.argsort(rho, kind="stable")
+    r, ws = rho[order], w[order]
+    starts = r[ws < 0]
+    ends = r[ws > 0]
+    if wrap[0]:
+        ends = np.concatenate([ends[1:], ends[:1] + _TWO_PI])
+    shift = np.floor(starts / _TWO_PI) * _TWO_PI
+    iv = np.column_stack([starts - shift, ends - shift]).reshape(-1, 2)
+    return iv[np.argsort(iv[:, 0], kind="stable")]
 
 def positive_part_sampled(h, phi, n_time: int | None = None):
     r"""AFT approximation of :func:`positive_part` by sampling on a grid.
@@ -162,18 +158,56 @@ def positive_part_sampled(h, phi, n_time: int | None = None):
     :attr:`n_time`).  Piecewise linear in ``phi``; its Jacobian jumps
     whenever a sample changes sign.  For comparison only.
     """
-    phi = check_phi(h, phi)
+    phi = check_phi(h, phi, single=True)
+    proj, G = _sampled(h, phi[:, None], n_time)
+    return proj[:, 0], G[0]
+
+
+def _sampled(h, Phi, n_time):
     N = h.n_time if n_time is None else check_int("n_time", n_time, 2 * h.n_harmonics + 1)
     E, P = h.memo(("grid", N), lambda: h.grid_operators(N))
-    single = phi.ndim == 1
-    Phi = phi[:, None] if single else phi
     U = E @ Phi
     ind = (U > 0.0).astype(float)
-    proj = P @ (U * ind)
-    G = (P[None, :, :] * ind.T[:, None, :]) @ E
-    if single:
-        return proj[:, 0], G[0]
-    return proj, G
+    return P @ (U * ind), (P[None, :, :] * ind.T[:, None, :]) @ E
+
+
+class ExactProjection:
+    """Strategy of the harmonic balance for ``max(0, .)``: the exact Galerkin projection
+    (:func:`positive_part`) of many signals at once. The default of :class:`~femodes.hbm.HBMSystem`.
+
+    ``ExactProjection(roots=CompanionRoots())`` picks the root finder.
+    ``projection(h, Phi)`` with ``Phi`` of shape ``(n_coef, m)`` returns ``proj`` of the same
+    shape and the Jacobians ``G`` of shape ``(m, n_coef, n_coef)``.
+    """
+
+    def __init__(self, roots=None):
+        self.roots = ColleagueRoots() if roots is None else roots
+        if not callable(getattr(self.roots, "angles", None)):
+            raise TypeError(f"ExactProjection: roots must be ColleagueRoots() or CompanionRoots(), got {roots!r}")
+
+    def __call__(self, h, Phi):
+        Phi = check_phi(h, Phi, single=False)
+        G = positive_gram(h, Phi.T, self.roots)[0]
+        return np.einsum("sab,bs->as", G, Phi), G
+
+    def __repr__(self) -> str:
+        return f"ExactProjection(roots={self.roots!r})"
+
+
+class SampledProjection:
+    """Strategy of the harmonic balance for ``max(0, .)``: alternating frequency/time sampling on
+    ``n_time`` points (:func:`positive_part_sampled`); for comparison only (its Jacobian jumps and
+    semismooth Newton cycles near contact onset). Same call as :class:`ExactProjection`."""
+
+    def __init__(self, n_time: int | None = None):
+        self.n_time = None if n_time is None else check_int("n_time", n_time, 1, owner="SampledProjection")
+
+    def __call__(self, h, Phi):
+        return _sampled(h, check_phi(h, Phi, single=False), self.n_time)
+
+    def __repr__(self) -> str:
+        return f"SampledProjection(n_time={self.n_time})"
+
 
 def gram_tables(h):
     """Index/weight tables turning antiderivative sums into basis Gram matrices.
@@ -203,7 +237,7 @@ def gram_tables(h):
 
     return h.memo("gram", build)
 
-def positive_gram(h, Phi, root_method):
+def positive_gram(h, Phi, roots=None):
     """Core of :func:`positive_part`; ``Phi`` has shape ``(m, n_coef)``.
 
     Returns ``G`` of shape ``(m, n_coef, n_coef)`` and the root data
@@ -212,10 +246,7 @@ def positive_gram(h, Phi, root_method):
     ``wrap`` marks signals positive at the start of the sweep (the last
     interval crosses the cut), ``full`` those positive everywhere.
     """
-    if root_method not in ("colleague", "companion"):
-        raise ValueError(
-            f"root_method must be 'colleague' or 'companion', got {root_method!r}"
-        )
+    roots = ColleagueRoots() if roots is None else roots
     H = h.n_harmonics
     L = 2 * H + 1
     m = Phi.shape[0]
@@ -232,7 +263,7 @@ def positive_gram(h, Phi, root_method):
         heff = np.zeros(m, dtype=int)
     heff = np.where(nonzero, heff, 0)
 
-    cand = candidates(A, heff, root_method)  # (m, R) sorted, inf padded
+    cand = candidates(A, heff, roots)  # (m, R) sorted, inf padded
     rows, rho, w, wrap, sign_const = sign_changes(A, cand)
 
     # signals without sign change: constant sign

@@ -16,7 +16,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..linear import linear_modes
 from ..model import StructuralModel
@@ -60,16 +59,14 @@ class ForcedResponseProblem:
     model : StructuralModel
         Must have forcing (:class:`~femodes.HarmonicForce`).
     harmonics : Harmonics
-    exact_contact : bool, keyword-only
-        Exact positive-part projection (default) or sampled (comparison only).
-    structured : bool, keyword-only
-        Jacobian kept in harmonic blocks and solved by per-harmonic factorisations + a Schur
-        complement on the nonlinear DOFs (default); ``False``: one assembled sparse matrix.
+    projection, solver : keyword-only
+        Strategies of the :class:`~femodes.hbm.HBMSystem`: how ``max(0, .)`` is projected
+        (default :class:`~femodes.hbm.ExactProjection`) and how the Jacobian is factorised
+        (default :class:`~femodes.hbm.BlockSolver`).
     """
 
-    def __init__(self, model: StructuralModel, harmonics: Harmonics, *, exact_contact: bool = True,
-                 structured: bool = True):
-        self.system = HBMSystem(model, harmonics, exact_contact=exact_contact, structured=structured)
+    def __init__(self, model: StructuralModel, harmonics: Harmonics, *, projection=None, solver=None):
+        self.system = HBMSystem(model, harmonics, projection=projection, solver=solver)
         if not model.forces:
             raise ValueError(
                 "ForcedResponseProblem: the model has no forcing; add model.with_forcing(HarmonicForce(at=..., amplitude=...))"
@@ -119,17 +116,23 @@ class NonlinearModeProblem:
     harmonics : Harmonics
     mode : int
         Linear mode (1-based) the branch starts from; its shape defines the phase condition.
+    reference_energy : float, keyword-only
+        Energy of the motions traced: the equations are scaled by the force level of the linear
+        mode at this energy, so that Newton tolerances are relative (``nonlinear_mode`` passes
+        the geometric mean of its span).
+    projection, solver : keyword-only
+        Strategies of the :class:`~femodes.hbm.HBMSystem` (as for :class:`ForcedResponseProblem`).
     """
 
     def __init__(self, model: StructuralModel, harmonics: Harmonics, mode: int = 1, *, reference_energy: float = 1.0,
-                 exact_contact: bool = True, structured: bool = True):
+                 projection=None, solver=None):
         if isinstance(mode, bool) or not isinstance(mode, (int, np.integer)) or mode < 1:
             raise ValueError(f"NonlinearModeProblem: mode must be a positive integer (1 = first mode), got {mode!r}")
         if mode > model.n_dofs:
             raise ValueError(f"NonlinearModeProblem: mode={mode} but the model has {model.n_dofs} DOFs")
         if harmonics.n_harmonics < 1:
             raise ValueError("NonlinearModeProblem: needs n_harmonics >= 1")
-        self.system = HBMSystem(model.without_forcing(), harmonics, exact_contact=exact_contact, structured=structured)
+        self.system = HBMSystem(model.without_forcing(), harmonics, projection=projection, solver=solver)
         modes = linear_modes(model, n=int(mode))
         self.mode = int(mode)
         self.omega0 = float(modes.omega[-1])
@@ -187,10 +190,7 @@ class NonlinearModeProblem:
         gE = dE / (E * ln10)
         cols = np.column_stack([dr_dw, dr_dxi])
         rows = np.vstack([np.append(gphase, [0.0, 0.0]), np.append(gE, [dE_dw / (E * ln10), 0.0])])
-        if sp.issparse(J0):
-            J = sp.vstack([sp.hstack([J0, sp.csr_matrix(cols)]), sp.csr_matrix(rows)], format="csr")
-        else:  # structured Jacobian: the two extra unknowns become its border
-            J = J0.bordered(cols, rows[:, : s.size], rows[:, s.size:])
+        J = J0.bordered(cols, rows[:, : s.size], rows[:, s.size:])  # the two extra unknowns: its border
         dr_dp = np.zeros(self.size)
         dr_dp[-1] = -1.0
         return r, J, dr_dp

@@ -30,7 +30,8 @@ import scipy.sparse.linalg as spla
 from ..laws import CubicSpring, PenaltyContact, UnilateralContact
 from ..model import StructuralModel
 from .harmonics import Harmonics
-from .linsolve import HarmonicBlockJacobian, LinearFactors, StructureFailure, BlockLU, build_pattern
+from .linsolve import BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure, build_pattern
+from .positive_part import ExactProjection
 
 __all__ = ["HBMSystem", "default_contact_parameter"]
 
@@ -80,27 +81,34 @@ class HBMSystem:
     ----------
     model : StructuralModel (full or reduced)
     harmonics : Harmonics
-    exact_contact : bool
-        Exact Galerkin projection of ``max(0, .)`` (default). ``False`` samples it on the
-        ``n_time`` grid (the naive AFT, kept for comparison only).
-    structured : bool
-        Return the Jacobian as a :class:`~femodes.hbm.linsolve.HarmonicBlockJacobian` (default),
-        solved by per-harmonic factorisations and a Schur complement on the nonlinear DOFs;
-        ``False`` assembles one sparse matrix (solved by SuperLU; for checks and comparisons).
+    projection : ExactProjection or SampledProjection, optional
+        How ``max(0, .)`` is projected on the harmonics: exactly (default,
+        :class:`~femodes.hbm.ExactProjection`) or by sampling on the ``n_time`` grid (the naive
+        AFT, :class:`~femodes.hbm.SampledProjection`, for comparison only).
+    solver : BlockSolver or AssembledSolver, optional
+        How the Jacobian (always a :class:`~femodes.hbm.linsolve.HarmonicBlockJacobian`) is
+        factorised: per-harmonic factorisations and a Schur complement on the nonlinear DOFs
+        (default, :class:`~femodes.hbm.BlockSolver`) or SuperLU on the assembled matrix
+        (:class:`~femodes.hbm.AssembledSolver`, for checks and comparisons).
     threads : int, optional
         Threads for the per-harmonic factorisations of large models (``0``: all CPUs; default
         one, which measured faster on 2 shared cores).
     """
 
-    def __init__(self, model: StructuralModel, harmonics: Harmonics, *, exact_contact: bool = True,
-                 structured: bool = True, threads: int | None = None):
+    def __init__(self, model: StructuralModel, harmonics: Harmonics, *, projection=None, solver=None,
+                 threads: int | None = None):
         if not isinstance(model, StructuralModel):
             raise TypeError(f"model must be a StructuralModel, got {type(model).__name__}")
         if not isinstance(harmonics, Harmonics):
             raise TypeError(f"harmonics must be a femodes.Harmonics, got {type(harmonics).__name__}")
         self.model = model
         self.h = harmonics
-        self.exact_contact = bool(exact_contact)
+        self.projection = ExactProjection() if projection is None else projection
+        if not callable(self.projection):
+            raise TypeError(f"projection must be ExactProjection() or SampledProjection(), got {projection!r}")
+        self.solver = BlockSolver() if solver is None else solver
+        if not callable(getattr(self.solver, "factorize", None)):
+            raise TypeError(f"solver must be BlockSolver() or AssembledSolver(), got {solver!r}")
         n, nc = model.n_dofs, harmonics.n_coef
         self.n = n
         self.unilateral: list[_Contact] = []
@@ -123,7 +131,6 @@ class HBMSystem:
         self.E = np.asarray(harmonics.synthesis())
         self.Pa = np.asarray(harmonics.analysis())
         self._F = None
-        self.structured = bool(structured)
         self.threads = threads
         # DOFs where the contact and nonlinear terms act: they couple the harmonics; all other
         # DOFs see the block-diagonal linear operator only (see femodes.hbm.linsolve)
@@ -276,7 +283,7 @@ class HBMSystem:
         Returns
         -------
         r : ndarray (size,)
-        J : HarmonicBlockJacobian (``structured=True``) or scipy.sparse.csr_matrix (size, size)
+        J : HarmonicBlockJacobian (size, size); ``J.tocsr()`` assembles it
         dr_domega : ndarray (size,)
         dr_dxi : ndarray (size,)
         """
@@ -321,7 +328,7 @@ class HBMSystem:
             slope, offset = law.positive_part_form()
             phi = Q[:, dof].copy()
             phi[0] -= offset
-            proj, G = self._positive(phi)
+            proj, G = self._positive_one(phi)
             idx = self.q_index(dof)
             r[idx] += slope * proj
             block(idx, idx, slope * G)
@@ -340,7 +347,7 @@ class HBMSystem:
             eye = np.eye(h.n_coef)
             for ct in self.unilateral:
                 qi, pi = self.q_index(ct.dof), self.p_index(ct.slot)
-                Gi = G[ct.slot] if G.ndim == 3 else G
+                Gi = G[ct.slot]
                 pr = proj[:, ct.slot] if proj.ndim == 2 else proj
                 # contact force acts on the structure along -w_c: +p in the residual of K q = f - p
                 r[qi] += P[:, ct.slot]
@@ -353,15 +360,15 @@ class HBMSystem:
                               shape=(self.size, self.size))
         else:
             N = sp.csr_matrix((self.size, self.size))
-        J = HarmonicBlockJacobian(self, omega, xi, N)
-        if not self.structured:
-            J = J.tocsr()
-        return r, J, dr_domega, dr_dxi
+        return r, HarmonicBlockJacobian(self, omega, xi, N), dr_domega, dr_dxi
 
-    def _positive(self, phi):
-        if self.exact_contact:
-            return self.h.positive_part(phi)
-        return self.h.positive_part_sampled(phi)
+    def _positive(self, phis):
+        """Projection of ``max(0, .)`` of the columns of ``phis`` (n_coef, m): (n_coef, m), (m, n_coef, n_coef)."""
+        return self.projection(self.h, phis)
+
+    def _positive_one(self, phi):
+        proj, G = self.projection(self.h, phi[:, None])
+        return proj[:, 0], G[0]
 
     # -- energy -----------------------------------------------------------------------------
     def energy(self, x: np.ndarray, omega: float) -> tuple[float, np.ndarray, float]:
@@ -392,7 +399,7 @@ class HBMSystem:
             slope, offset = law.positive_part_form()
             phi = Q[:, dof].copy()
             phi[0] -= offset
-            _, G = self._positive(phi)
+            _, G = self._positive_one(phi)
             WG = self.w[:, None] * G
             pe += 0.5 * slope * phi @ WG @ phi
             grad[self.q_index(dof)] += slope * (WG @ phi)
