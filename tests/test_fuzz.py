@@ -398,6 +398,15 @@ def test_damping_valid(alpha, beta, zeta):
     np.testing.assert_allclose(C, alpha * np.eye(3) + beta * np.diag([2.0, 3.0, 4.0]))
     Cm = DISCRETE.with_damping(modal=zeta).C.toarray()
     assert np.all(np.isfinite(Cm)) and np.allclose(Cm, Cm.T)
+    # modal damping: Phi^T C Phi = diag(2 zeta_j w_j) on the damped modes, 0 on the others
+    # (DISCRETE: M = I, K = diag(2, 3, 4), so Phi = I and w = sqrt(2), sqrt(3), 2)
+    w = np.sqrt([2.0, 3.0, 4.0])
+    z = np.zeros(3)
+    z[: len(zeta)] = zeta
+    if len(zeta) == 1:  # one ratio: every mode (up to 20)
+        z[:] = zeta[0]
+    modes = fm.linear_modes(DISCRETE, 3)
+    np.testing.assert_allclose(modes.shapes.T @ Cm @ modes.shapes, np.diag(2 * z * w), rtol=0, atol=1e-13 * (1 + 8 * max(zeta)))
 
 
 # ------------------------------------------------------------------------------------------------

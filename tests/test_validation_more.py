@@ -38,9 +38,9 @@ def test_cantilever_hbm_vs_time(cant):
     # time-domain frequency is uncertain to a few % (dt sensitivity, H = 20 starts)
     w = np.array([cant.omega_ts_sens[d] for d in sorted(cant.omega_ts_sens)])
     assert np.all(np.ptp(w, axis=0) / w.mean(axis=0) < 0.06)
-    # the time-domain motion is NOT periodic: O(0.1-0.5) first-return distance (documented finding)
-    assert np.all(cant.return_distance > 0.05) and np.all(cant.return_distance < 1.0)
-    assert np.all(cant.orbit_error[1:] < 0.4)
+    # Not asserted: the orbit error against the time-domain motion. That motion is not periodic
+    # (first-return distance 0.40-0.54 of the amplitude, printed by the example), so a bound on
+    # the orbit error could only be loose enough to pass whatever HBM computes.
 
 
 def test_cantilever_energy_drift(cant):
