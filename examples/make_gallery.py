@@ -53,7 +53,8 @@ def main(names=None):
 
         ex = modules.get("cantilever_tip_stop") or load(HERE / "cantilever_tip_stop.py")
         gif = fm.viz.animate(ex.backbones["CB 10 modes"][-1], ex.MODELS["CB 10 modes"],
-                             IMAGES / "cantilever_mode1.gif", n_frames=16, window_size=(480, 272))
+                             IMAGES / "cantilever_mode1.gif", n_frames=16,
+                             style=fm.viz.AnimationStyle(window_size=(480, 272)))
         print(f"{'animation':28s} {gif}  {Path(gif).stat().st_size / 1024:.0f} kB")
     except ImportError as err:
         print("GIF skipped:", err)

@@ -23,6 +23,7 @@ import logging
 import math
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,7 @@ import numpy as np
 from .fields import check_scale, mesh_fields
 from .solvers.checks import check_int
 
-__all__ = ["animate", "render_backend"]
+__all__ = ["animate", "AnimationStyle", "render_backend"]
 
 log = logging.getLogger(__name__)
 
@@ -155,34 +156,16 @@ def _contact_quality(solution: Any, f: Any, model: Any) -> _ContactQuality | Non
                            penetration=np.maximum(0.0, np.max(-fine, axis=0)), label=labels)
 
 
-def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: float | None = None,
-            window_size: tuple[int, int] = (640, 360), fps: float = 12, *, mode: int | None = None,
-            cmap: str = "plasma", radius: float | None = None, show_contact: bool = True,
-            unit: str | None = None, title: str | None = None) -> Path:
-    """Render one period of a periodic motion to an animated GIF or an MP4 video, off screen.
+@dataclass(frozen=True, kw_only=True)
+class AnimationStyle:
+    """How :func:`animate` draws (validated at construction; change with ``dataclasses.replace``).
 
     Parameters
     ----------
-    solution : PeriodicSolution or LinearModes
-        E.g. ``branch[i]``; for linear modes pass ``mode`` (1 = the first mode), motion ``phi cos(w t)``.
-    model : StructuralModel or None
-        The model the result lives on (None: ``solution.model``); reduced models are expanded
-        to the full mesh. Discrete models (no mesh) raise ValueError.
-    path : str or os.PathLike
-        Output file ending in ``.gif`` (imageio + pillow) or ``.mp4`` (needs imageio-ffmpeg;
-        the window is rounded up to multiples of 16 pixels). Parent folders are created.
-    n_frames : int
-        Frames per period (>= 2), at ``t_j = j T / n_frames``; the animation loops.
-    scale : float, optional
-        Displacement magnification. Default: the largest displacement over the period is drawn
-        as 15 % of the structure's length (the value is logged). The obstacle is drawn at
-        ``scale * gap``, so contact is shown where it happens.
     window_size : (int, int)
-        Frame size in pixels (width, height).
+        Frame size in pixels (width, height), each in [16, 8192].
     fps : float
-        Frames per second of the output.
-    mode : int, optional
-        Mode index for ``LinearModes``.
+        Frames per second of the output, in (0, 240].
     cmap : str
         Matplotlib colormap name for ``|displacement|`` (true, unscaled magnitude; the colour
         range is fixed over the period).
@@ -201,6 +184,60 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
     title : str, optional
         Extra first caption line (e.g. what is shown); the frequency and the displacement
         scale are always stated below it.
+    """
+
+    window_size: tuple[int, int] = (640, 360)
+    fps: float = 12
+    cmap: str = "plasma"
+    radius: float | None = None
+    show_contact: bool = True
+    unit: str | None = None
+    title: str | None = None
+
+    def __post_init__(self):
+        owner = "AnimationStyle"
+        object.__setattr__(self, "window_size", _check_window(self.window_size, owner))
+        fps = self.fps
+        if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)) or not 0 < fps <= 240:
+            raise ValueError(f"{owner}: fps must be a number in (0, 240], got {fps!r}")
+        r = self.radius
+        if r is not None and (isinstance(r, bool) or not isinstance(r, (int, float)) or not r > 0):
+            raise ValueError(f"{owner}: radius must be a positive number or None, got {r!r}")
+        for name in ("unit", "title"):
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, str):
+                raise TypeError(f"{owner}: {name} must be a str or None, got {type(value).__name__}")
+        if not isinstance(self.cmap, str):
+            raise TypeError(f"{owner}: cmap must be a colormap name (str), got {type(self.cmap).__name__}")
+        if not isinstance(self.show_contact, (bool, np.bool_)):
+            raise TypeError(f"{owner}: show_contact must be True or False, got {self.show_contact!r}")
+
+
+def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: float | None = None, *,
+            mode: int | None = None, style: AnimationStyle | None = None) -> Path:
+    """Render one period of a periodic motion to an animated GIF or an MP4 video, off screen.
+
+    Parameters
+    ----------
+    solution : PeriodicSolution or LinearModes
+        E.g. ``branch[i]``; for linear modes pass ``mode`` (1 = the first mode), motion ``phi cos(w t)``.
+    model : StructuralModel or None
+        The model the result lives on (None: ``solution.model``); reduced models are expanded
+        to the full mesh. Discrete models (no mesh) raise ValueError.
+    path : str or os.PathLike
+        Output file ending in ``.gif`` (imageio + pillow) or ``.mp4`` (needs imageio-ffmpeg;
+        the window is rounded up to multiples of 16 pixels). Parent folders are created.
+    n_frames : int
+        Frames per period (>= 2), at ``t_j = j T / n_frames``; the animation loops.
+    scale : float, optional
+        Displacement magnification. Default: the largest displacement over the period is drawn
+        as 15 % of the structure's length (the value is logged). The obstacle is drawn at
+        ``scale * gap``, so contact is shown where it happens.
+    mode : int, optional
+        Mode number (1 = the first mode) for ``LinearModes``.
+    style : AnimationStyle, optional
+        Window size, frame rate, colours, tube radius, contact overlay, unit and title
+        (default ``AnimationStyle()``: 640 x 360 pixels, 12 frames per second).
 
     Returns
     -------
@@ -210,7 +247,7 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
     Raises
     ------
     ValueError
-        Bad ``n_frames``, ``window_size``, ``fps``, suffix, or a discrete model.
+        Bad ``n_frames``, suffix, or a discrete model (bad style values: at ``AnimationStyle(...)``).
     RuntimeError
         No off-screen OpenGL available (the message names the packages to install), or the
         renderer produced blank frames.
@@ -220,20 +257,17 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
     owner = "animate"
     n_frames = check_int("n_frames", n_frames, 2, owner=owner)
     scale = check_scale(scale, owner)
-    width, height = _check_window(window_size, owner)
-    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)) or not 0 < fps <= 240:
-        raise ValueError(f"{owner}: fps must be a number in (0, 240], got {fps!r}")
+    style = AnimationStyle() if style is None else style
+    if not isinstance(style, AnimationStyle):
+        raise TypeError(f"{owner}: style must be a femodes.viz.AnimationStyle, got {type(style).__name__}")
+    (width, height), fps, cmap, radius = style.window_size, style.fps, style.cmap, style.radius
+    show_contact, unit, title = style.show_contact, style.unit, style.title
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"{owner}: path must be a str or os.PathLike ending in .gif or .mp4, got {type(path).__name__}")
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".gif", ".mp4"):
         raise ValueError(f"{owner}: path must end in .gif or .mp4, got {str(path)!r}")
-    if radius is not None and (isinstance(radius, bool) or not isinstance(radius, (int, float)) or not radius > 0):
-        raise ValueError(f"{owner}: radius must be a positive number or None, got {radius!r}")
-    for name, value in (("unit", unit), ("title", title)):
-        if value is not None and not isinstance(value, str):
-            raise TypeError(f"{owner}: {name} must be a str or None, got {type(value).__name__}")
     if suffix == ".mp4":
         width, height = 16 * math.ceil(width / 16), 16 * math.ceil(height / 16)
     f = mesh_fields(solution, model, n_frames=n_frames, mode=mode, owner=owner)

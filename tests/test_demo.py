@@ -5,6 +5,7 @@ every test reads what it wrote: the branches (.npz), the ParaView series, the GI
 """
 
 import contextlib
+import dataclasses
 import importlib.util
 import os
 import re
@@ -223,16 +224,17 @@ def test_animate_contact_overlay_is_optional(run, tmp_path):
     sol = backbone[int(np.argmax(backbone.omega))]
     t = sol.period * np.arange(16) / 16
     j = int(np.argmin(sol.gap(t)[:, 0]))  # the deepest frame on the 16-frame grid
-    kw = {"n_frames": 16, "window_size": (320, 180)}
-    with_overlay = iio.imread(fm.viz.animate(sol, rom, tmp_path / "on.gif", **kw), index=j).astype(int)
-    without = iio.imread(fm.viz.animate(sol, rom, tmp_path / "off.gif", show_contact=False, **kw), index=j).astype(int)
+    small = fm.viz.AnimationStyle(window_size=(320, 180))
+    with_overlay = iio.imread(fm.viz.animate(sol, rom, tmp_path / "on.gif", 16, style=small), index=j).astype(int)
+    off = dataclasses.replace(small, show_contact=False)
+    without = iio.imread(fm.viz.animate(sol, rom, tmp_path / "off.gif", 16, style=off), index=j).astype(int)
 
     def n_red(f):
         return int(((f[..., 0] > 180) & (f[..., 1] < 70) & (f[..., 2] < 70)).sum())
 
     assert n_red(with_overlay) > 20 and n_red(without) == 0
     with pytest.raises(TypeError, match="unit"):
-        fm.viz.animate(sol, rom, tmp_path / "x.gif", unit=3)
+        fm.viz.AnimationStyle(unit=3)
 
 
 def test_summary_mentions_units_and_story(run):

@@ -31,9 +31,10 @@ def nnm():
 def test_gif(nnm, tmp_path):
     import imageio.v3 as iio
 
-    from femodes.viz import animate
+    from femodes.viz import AnimationStyle, animate
 
-    path = animate(nnm[-1], None, tmp_path / "a" / "mode.gif", n_frames=6, window_size=(240, 144), fps=6)
+    path = animate(nnm[-1], None, tmp_path / "a" / "mode.gif", n_frames=6,
+                   style=AnimationStyle(window_size=(240, 144), fps=6))
     assert path.is_file() and path.stat().st_size > 1000
     frames = iio.imread(path, index=None)
     assert frames.shape[0] == 6
@@ -48,11 +49,11 @@ def test_mp4_and_linear_mode(nnm, tmp_path):
     pytest.importorskip("imageio_ffmpeg", reason="mp4 needs imageio-ffmpeg")
     import imageio.v2 as iio2
 
-    from femodes.viz import animate
+    from femodes.viz import AnimationStyle, animate
 
     red = nnm.model
     modes = fm.linear_modes(red, 2)
-    path = animate(modes, red, tmp_path / "lin.mp4", n_frames=4, window_size=(200, 120), mode=2)
+    path = animate(modes, red, tmp_path / "lin.mp4", n_frames=4, style=AnimationStyle(window_size=(200, 120)), mode=2)
     assert path.stat().st_size > 500
     with iio2.get_reader(path) as r:
         frames = [f for f in r]
@@ -63,18 +64,19 @@ def test_mp4_and_linear_mode(nnm, tmp_path):
 def test_bar(tmp_path):
     import imageio.v3 as iio
 
-    from femodes.viz import animate
+    from femodes.viz import AnimationStyle, animate
 
     mesh = fm.line_mesh(1.0, 10, boundaries={"clamp": 0.0, "tip": 1.0})
     bar = fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
     model = bar.with_contact(fm.UnilateralContact(at="tip", gap=0.02))
     modes = fm.linear_modes(model, 1)
-    path = animate(modes, model, tmp_path / "bar.gif", n_frames=3, window_size=(160, 96), mode=1, scale=0.1)
+    path = animate(modes, model, tmp_path / "bar.gif", n_frames=3, style=AnimationStyle(window_size=(160, 96)), mode=1,
+                   scale=0.1)
     assert iio.imread(path, index=None).shape[0] == 3
 
 
 def test_bad_input(nnm, tmp_path):
-    from femodes.viz import animate
+    from femodes.viz import AnimationStyle, animate
 
     sol = nnm[-1]
     with pytest.raises(ValueError, match="n_frames"):
@@ -82,9 +84,9 @@ def test_bad_input(nnm, tmp_path):
     with pytest.raises(ValueError, match=r"\.gif or \.mp4"):
         animate(sol, None, tmp_path / "x.avi")
     with pytest.raises(ValueError, match="window_size"):
-        animate(sol, None, tmp_path / "x.gif", window_size=(10, 5000000))
+        AnimationStyle(window_size=(10, 5000000))
     with pytest.raises(ValueError, match="fps"):
-        animate(sol, None, tmp_path / "x.gif", fps=0)
+        AnimationStyle(fps=0)
     model = fm.StructuralModel(M=np.eye(2), K=np.array([[2.0, -1.0], [-1.0, 2.0]]))
     with pytest.raises(ValueError, match="no mesh"):
         animate(fm.linear_modes(model, 1), model, tmp_path / "x.gif", mode=1)

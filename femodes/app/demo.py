@@ -342,8 +342,9 @@ def run_demo(out: Path) -> dict:
     lines.append(f"ParaView time series: {pvd.name} (+ {pvd.stem}_*.vtu)")
     gif = None
     try:
-        gif = fm.viz.animate(sol, rom, out / "mode1.gif", n_frames=n_frames, unit="L",
-                             title=f"nonlinear mode 1 with tip contact (stiffest orbit, E = {sol.energy / e_graze:.2f} E_g)")
+        style = fm.viz.AnimationStyle(
+            unit="L", title=f"nonlinear mode 1 with tip contact (stiffest orbit, E = {sol.energy / e_graze:.2f} E_g)")
+        gif = fm.viz.animate(sol, rom, out / "mode1.gif", n_frames=n_frames, style=style)
         lines.append(f"rendered animation: {gif.name} (the contact node turns red while it is inside the stop)")
     except (ImportError, RuntimeError) as exc:  # optional rendering stack (pyvista + EGL)
         lines.append(f"rendered animation skipped: {exc}")
