@@ -774,8 +774,8 @@ def case_time(args) -> dict:
         U = sol.displacement(tt)
         a_hbm = np.max(np.abs(U), axis=0)
         t0 = time.perf_counter()
-        ss = fm.steady_state(model, wi, dt=T / args.steps, tol=args.tol, n_periods_max=args.max_periods,
-                             u0=u0, v0=v0, theta=args.theta)
+        ss = fm.steady_state(model, wi, dt=T / args.steps, u0=u0, v0=v0,
+                             options=fm.TimeSteppingOptions(tol=args.tol, n_periods_max=args.max_periods, theta=args.theta))
         dt = time.perf_counter() - t0
         # warm start from the previous frequency (a sweep), like the continuation does
         u0, v0 = ss.u[-1], ss.v[-1]
@@ -795,7 +795,8 @@ def case_time(args) -> dict:
         wi = float(br.omega[0])
         T = 2 * np.pi / wi
         t0 = time.perf_counter()
-        ss = fm.steady_state(model, wi, dt=T / args.steps, tol=args.tol, n_periods_max=args.check_theta05, theta=0.5)
+        ss = fm.steady_state(model, wi, dt=T / args.steps,
+                             options=fm.TimeSteppingOptions(tol=args.tol, n_periods_max=args.check_theta05, theta=0.5))
         a_hbm = np.max(np.abs(br[0].displacement(np.linspace(0.0, T, 2001))), axis=0)
         rec["theta05"] = {"omega": wi, "t_ti": time.perf_counter() - t0, "periods": int(ss.n_periods),
                           "converged": bool(ss.converged), "nu": int(ss.nu), "change": float(ss.change),

@@ -117,7 +117,8 @@ def l1_model(e):
 def run(e, dt, tau, v0=V_IMPACT):
     """Errors of one run started at ``t0 = tau`` from the exact state (``v0 < GAP``: smooth case)."""
     T = t_end(1.0) if v0 <= GAP else t_end(e)
-    th = fm.simulate(model, T, dt, u0=[v0 * np.sin(tau)], v0=[v0 * np.cos(tau)], restitution=e, t0=tau)
+    th = fm.simulate(model, T, dt, u0=[v0 * np.sin(tau)], v0=[v0 * np.cos(tau)], restitution=e,
+                     options=fm.TimeSteppingOptions(t0=tau))
     h = th.dt
     u, v = th.u[:, 0], th.v[:, 0]
     ue, ve = exact_state(th.t, e, v0=v0)

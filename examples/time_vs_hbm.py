@@ -63,8 +63,8 @@ def compare(w):
     t_hbm = time.perf_counter() - t_start
     ref = sols[HS[-1]]
     t_start = time.perf_counter()
-    ss = steady_state(model, w, dt=DT, tol=1e-9, n_periods_max=400,
-                      u0=ref.displacement(0.0)[0], v0=ref.velocity(0.0)[0])
+    ss = steady_state(model, w, dt=DT, u0=ref.displacement(0.0)[0], v0=ref.velocity(0.0)[0],
+                      options=fm.TimeSteppingOptions(tol=1e-9, n_periods_max=400))
     t_ts = time.perf_counter() - t_start
     u_ts = ss.u[:, 0]
     err = np.array([np.max(np.abs(sols[H].displacement(ss.t)[:, 0] - u_ts)) / np.max(np.abs(u_ts)) for H in HS])

@@ -133,8 +133,8 @@ points = []  # one dict per (w, branch label)
 for w in OMEGAS:
     for label, sols in hbm[w].items():
         ref = sols[max(sols)]
-        ss = fm.steady_state(case1, w, dt=DT, tol=1e-9, n_periods_max=400,
-                             u0=ref.displacement(0.0)[0], v0=ref.velocity(0.0)[0])
+        ss = fm.steady_state(case1, w, dt=DT, u0=ref.displacement(0.0)[0], v0=ref.velocity(0.0)[0],
+                             options=fm.TimeSteppingOptions(tol=1e-9, n_periods_max=400))
         u_ts = ss.u[:, 0]
         amp_ts = float(np.max(np.abs(u_ts)))
         nan = float("nan")
@@ -157,7 +157,7 @@ _t = time.perf_counter()
 W_LIN = 0.8
 linear_error = {}
 for dt in (DT, DT / 2):
-    ss = fm.steady_state(case1, W_LIN, dt=dt, tol=1e-11, n_periods_max=600)
+    ss = fm.steady_state(case1, W_LIN, dt=dt, options=fm.TimeSteppingOptions(tol=1e-11, n_periods_max=600))
     linear_error[dt] = float(np.max(np.abs(ss.u[:, 0] - linear_orbit(ss.t, W_LIN))) / linear_amplitude(W_LIN))
 linear_rate = float(np.log2(linear_error[DT] / linear_error[DT / 2]))
 hbm_linear_error = float(abs(hbm[W_LIN]["single"][HS[-1]].amplitude(0) / linear_amplitude(W_LIN) - 1))

@@ -16,7 +16,7 @@ from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState
                       continuation, semismooth_newton)
 from .results import Branch, PeriodicSolution, load_branch
 from .analyses import StaticContactResult, frequency_response, nonlinear_mode, static_contact
-from .time import SteadyState, TimeHistory, simulate, steady_state
+from .time import SteadyState, TimeHistory, TimeSteppingOptions, simulate, steady_state
 from . import io, plot  # outputs; matplotlib is imported lazily inside plot functions
 
 __version__ = "0.1.0"
@@ -64,6 +64,7 @@ __all__ = [
     "TimeHistory",
     "simulate",
     "steady_state",
+    "TimeSteppingOptions",
     "io",
     "plot",
 ]

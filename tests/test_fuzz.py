@@ -653,10 +653,17 @@ def test_simulate_rejects_bad_arguments(arg, forced, data):
     kwargs = dict(t_end=1.0, dt=0.1)
     if forced:
         kwargs["omega"] = 1.0
-    kwargs[arg] = value
+    rare = arg in ("theta", "t0", "store_every")  # settings of fm.TimeSteppingOptions
+    if not rare:
+        kwargs[arg] = value
     # t0 >= t_end is reported as a bad t_end (the message quotes t0): accept either name
     name = "t_end" if arg == "t0" and isinstance(value, float) and math.isfinite(value) else arg
-    assert_rejects(lambda: fm.simulate(IMPACT_FORCED if forced else IMPACT, **kwargs), name)
+
+    def call():
+        options = fm.TimeSteppingOptions(**{arg: value}) if rare else None
+        return fm.simulate(IMPACT_FORCED if forced else IMPACT, options=options, **kwargs)
+
+    assert_rejects(call, name)
 
 
 @fuzz(20)
@@ -672,7 +679,7 @@ def test_simulate_omega_must_match_the_forcing(forced):
 def test_simulate_valid(t_end, steps, u0, v0, e, theta, forced, omega):
     kw = {"omega": omega} if forced else {}
     hist = fm.simulate(IMPACT_FORCED if forced else IMPACT, t_end, t_end / steps, u0=[u0], v0=[v0], restitution=e,
-                       theta=theta, **kw)
+                       options=fm.TimeSteppingOptions(theta=theta), **kw)
     assert hist.u.shape == hist.v.shape == (hist.t.size, 1)
     assert np.all(np.isfinite(hist.u)) and np.all(np.isfinite(hist.v))
     assert hist.t[-1] == pytest.approx(t_end)

@@ -11,7 +11,8 @@ import pytest
 
 import femodes as fm
 from femodes.time import SteadyState, TimeHistory, simulate, steady_state
-from femodes.time.moreau import _lcp
+from femodes.time.impact import solve_lcp
+from femodes.time.stepper import LOCAL_NEWTON
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 T_IMPACT = 2 * np.pi / 1.5  # free impacting oscillator, gap 1, energy 2: w = pi / (pi - arccos(1/2))
@@ -45,7 +46,7 @@ def test_linear_second_order_and_energy():
         assert np.ptp(th.energy) < 1e-12
     slope = np.polyfit(np.log(dts), np.log(err), 1)[0]
     assert abs(slope - 2.0) < 0.1  # measured 2.00
-    th1 = simulate(oscillator(), 10.0, 0.01, u0=[1.0], theta=1.0)
+    th1 = simulate(oscillator(), 10.0, 0.01, u0=[1.0], options=fm.TimeSteppingOptions(theta=1.0))
     # backward Euler: |amplification|^2 = 1 / (1 + dt^2) per step -> E = 0.5 (1 + dt^2)^-1000 = 0.45242
     assert np.all(np.diff(th1.energy) < 0)
     assert th1.energy[-1] == pytest.approx(0.5 * (1 + 0.01**2) ** -1000, rel=1e-4)
@@ -83,7 +84,7 @@ def test_forced_linear_steady_state(w):
 
 def test_steady_state_reports_non_convergence():
     model = oscillator(C=[[0.1]]).with_forcing(fm.HarmonicForce(at=0, amplitude=1.0))
-    ss = steady_state(model, 0.8, dt=0.05, n_periods_max=3, tol=1e-14)
+    ss = steady_state(model, 0.8, dt=0.05, options=fm.TimeSteppingOptions(n_periods_max=3, tol=1e-14))
     assert not ss.converged and ss.n_periods == 3
 
 
@@ -139,7 +140,10 @@ def test_two_dof_chain_contact():
     assert np.max(np.abs(th.energy - th.energy[0])) / th.energy[0] < 1e-9
     assert th.gap.min() >= -dt * np.max(np.abs(th.v[:, 1]))
     assert np.all(th.impulse >= 0)
-    np.testing.assert_allclose(th.contact_force()[1:], th.impulse[1:] / th.dt, rtol=1e-9)
+    np.testing.assert_allclose(th.mean_contact_force[1:], th.impulse[1:] / th.dt, rtol=1e-9)
+    # contact_force(t): the average force over the step containing t (mid-steps here)
+    np.testing.assert_allclose(th.contact_force(th.t[1:] - 0.5 * th.dt), th.impulse[1:] / th.dt, rtol=1e-9)
+    assert th.success and th.status == 0
 
 
 def test_lcp_against_enumeration(rng):
@@ -149,8 +153,8 @@ def test_lcp_against_enumeration(rng):
         A = rng.standard_normal((3, 3))
         W = A @ A.T + 0.1 * np.eye(3)
         q = rng.standard_normal(3)
-        x, ok = _lcp(W, q, np.zeros(3))
-        assert ok
+        x, res = solve_lcp(W, q, np.zeros(3), LOCAL_NEWTON)
+        assert res.success
         w = W @ x + q
         assert np.all(x >= -1e-12) and np.all(w >= -1e-10) and abs(x @ w) < 1e-10
         # unique solution (W is SPD): compare with enumeration of active sets
@@ -210,14 +214,28 @@ def test_craig_bampton_close_to_full():
         (dict(t_end=1.0, dt=0.1, u0=[1.0, 2.0]), ValueError, "u0"),
         (dict(t_end=1.0, dt=0.1, v0=[np.nan]), ValueError, "v0"),
         (dict(t_end=1.0, dt=0.1, restitution=1.5), ValueError, "restitution"),
-        (dict(t_end=1.0, dt=0.1, theta=0.3), ValueError, "theta"),
         (dict(t_end=1.0, dt=0.1, omega=1.0), ValueError, "omega"),
-        (dict(t_end=1.0, dt=0.1, store_every=0), ValueError, "store_every"),
+        (dict(t_end=1.0, dt=0.1, options={"theta": 0.5}), TypeError, "options must be a femodes.TimeSteppingOptions"),
     ],
 )
 def test_bad_input(kwargs, exc, word):
     with pytest.raises(exc, match=word):
         simulate(impacting(), **kwargs)
+
+
+@pytest.mark.parametrize("kwargs, exc, word", [
+    (dict(theta=0.3), ValueError, "theta"),
+    (dict(store_every=0), ValueError, "store_every"),
+    (dict(n_periods_max=0), ValueError, "n_periods_max"),
+    (dict(periods_per_check=1.5), TypeError, "periods_per_check"),
+    (dict(tol=0.0), ValueError, "tol"),
+    (dict(t0=np.inf), ValueError, "t0"),
+    (dict(newton=3), TypeError, "newton"),
+])
+def test_time_stepping_options_bad_input(kwargs, exc, word):
+    """The rare settings are validated where they are given, naming the argument."""
+    with pytest.raises(exc, match=rf"TimeSteppingOptions: {word}"):
+        fm.TimeSteppingOptions(**kwargs)
 
 
 def test_bad_input_forced():

@@ -51,7 +51,6 @@ from .checks import (
     check_int,
     check_nonnegative,
     check_positive,
-    inf_norm,
     is_operator,
     show,
     start_vector,
@@ -94,6 +93,13 @@ class NewtonOptions:
         ~1e11) cannot reach an absolute ``atol``; this test (Oettli-Prager style
         componentwise backward error, bounded by its max norm) lets them
         converge at the precision the data allow. 0 disables it.
+    rtol_x : float, default 0.0
+        Relative-to-the-iterate convergence: also converged when
+        ``norm(r, inf) <= rtol_x * norm(x, inf)``, for residuals in the units
+        of ``x`` (e.g. the impulse balance of a time step, whose unknowns are
+        the impulses: :mod:`femodes.time` uses 1e-13).  Cheaper than the
+        ``rtol`` backward-error test (no ``|J| |x|`` product), which matters
+        for thousands of tiny systems.  0 disables it.
     xtol : float, default 1e-12
         Secondary, round-off-floor convergence test: the iteration also stops
         with success when a *full* step (``alpha == 1``) was accepted with
@@ -159,6 +165,17 @@ class NewtonOptions:
         (e.g. convergence to a non-zero local minimum of ``||r||``, or
         cycling).  ``0`` disables the test (globalisation from far away on a
         very flat merit, e.g. ``arctan`` from ``x0 = 100``, may need it off).
+    accept_factor : float, default 0.0
+        Tolerance of last resort: when the iteration stops without convergence
+        (status 1, ``max_iter`` reached, or 2, no progress), the returned
+        iterate still counts as converged (status 0; the message says so and
+        why the iteration stopped) if ``norm(r, inf) <= accept_factor * tol``
+        with the convergence tolerance ``tol = max(atol, rtol_x * norm(x,
+        inf), rtol * norm(|J| |x|, inf))``.  For callers whose tight
+        tolerance sits near the round-off floor of some of their problems and
+        who accept a looser residual there rather than a failure (the local
+        problems of :mod:`femodes.time`, 1e4: converged to 1e-13, accepted at
+        1e-9).  ``0`` disables it.
     linear_solver : callable or None
         Strategy ``linear_solver(A, b) -> y`` returning the solution of
         ``A y = b`` for a dense ``ndarray`` or ``scipy.sparse`` ``A``.  Newton
@@ -174,6 +191,7 @@ class NewtonOptions:
 
     atol: float = 1e-10
     rtol: float = 1e-14
+    rtol_x: float = 0.0
     xtol: float = 1e-12
     max_iter: int = 30
     line_search: bool = True
@@ -182,12 +200,14 @@ class NewtonOptions:
     watchdog: int = 3
     max_stall: int = 3
     stagnation_window: int = 10
+    accept_factor: float = 0.0
     linear_solver: Callable[[Any, np.ndarray], np.ndarray] | None = None
     callback: Callable[[int, np.ndarray, float], Any] | None = None
 
     def __post_init__(self) -> None:
         check_positive("atol", self.atol)
         check_nonnegative("rtol", self.rtol)
+        check_nonnegative("rtol_x", self.rtol_x)
         check_positive("xtol", self.xtol)
         check_int("max_iter", self.max_iter, 1)
         check_bool("line_search", self.line_search)
@@ -198,6 +218,7 @@ class NewtonOptions:
         check_int("watchdog", self.watchdog, 0)
         check_int("max_stall", self.max_stall, 1)
         check_int("stagnation_window", self.stagnation_window, 0)
+        check_nonnegative("accept_factor", self.accept_factor)
         check_callable("linear_solver", self.linear_solver)
         check_callable("callback", self.callback)
 
@@ -214,9 +235,9 @@ class NewtonResult:
     success : bool
         ``status == 0``.
     status : int
-        0 converged; 1 ``max_iter`` reached; 2 line search stalled / no
-        progress; 3 singular or non-finite linear solve, or non-finite
-        residual / Jacobian.
+        0 converged (or accepted by ``NewtonOptions.accept_factor``); 1
+        ``max_iter`` reached; 2 line search stalled / no progress; 3 singular
+        or non-finite linear solve, or non-finite residual / Jacobian.
     message : str
         Human-readable reason.
     nit : int
@@ -272,8 +293,35 @@ def default_linear_solver(A: Any, b: np.ndarray) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
+#: Arrays up to this size are reduced in Python floats: a numpy reduction costs ~2 us whatever the
+#: size, several per iteration, and the local problems of a time step have 1 to a few unknowns.
+_SMALL = 16
+
+
+def _inf(v: np.ndarray) -> float:
+    """``max |v_i|`` of a float vector (0 if empty), the value of :func:`inf_norm`: the maximum is
+    exact, so the Python reduction of a small vector gives the same float (nan if an entry is)."""
+    if v.size > _SMALL:
+        return float(np.abs(v).max())
+    if not v.size:
+        return 0.0
+    a = v.tolist()
+    if math.isnan(sum(a)):  # a nan entry (or inf - inf): numpy's nan propagation
+        return float(np.abs(v).max())
+    return max(map(abs, a))
+
+
+def _finite(v: np.ndarray) -> bool:
+    """All entries finite, ``np.all(np.isfinite(v))`` (in Python floats for small arrays)."""
+    if v.size <= _SMALL:
+        return all(map(math.isfinite, v.ravel().tolist()))
+    return bool(np.isfinite(v).all())
+
+
 def _prepare_jacobian(J: Any, n: int) -> Any:
     """Validate shape; return dense ndarray or sparse matrix unchanged otherwise."""
+    if type(J) is np.ndarray and J.dtype == np.float64 and J.shape == (n, n):
+        return J  # what np.asarray(J, dtype=float) would return, checked
     if sp.issparse(J) or is_operator(J):
         if J.shape != (n, n):
             raise ValueError(
@@ -289,6 +337,8 @@ def _prepare_jacobian(J: Any, n: int) -> Any:
 
 
 def _jacobian_finite(J: Any) -> bool:
+    if type(J) is np.ndarray:
+        return _finite(J)
     if is_operator(J):
         return bool(J.all_finite()) if callable(getattr(J, "all_finite", None)) else True
     if sp.issparse(J):
@@ -297,8 +347,11 @@ def _jacobian_finite(J: Any) -> bool:
     return bool(np.all(np.isfinite(J)))
 
 
-def _tolerance(atol: float, rtol: float, J, x) -> float:
-    """``max(atol, rtol * || |J| |x| ||_inf)``: absolute or backward-error tolerance."""
+def _tolerance(atol: float, rtol: float, J, x, rtol_x: float = 0.0) -> float:
+    """``max(atol, rtol_x ||x||_inf, rtol || |J| |x| ||_inf)``: absolute, relative to the iterate or
+    backward-error tolerance."""
+    if rtol_x:
+        atol = max(atol, rtol_x * _inf(x))
     if not rtol:
         return atol
     try:
@@ -364,7 +417,11 @@ def semismooth_newton(
         options = NewtonOptions()
     elif not isinstance(options, NewtonOptions):
         raise TypeError(f"options must be a NewtonOptions instance or None, got {type(options).__name__}")
-    return _Iteration(fun, start_vector(x0), options).run()
+    if type(x0) is np.ndarray and x0.dtype == np.float64 and x0.ndim == 1 and x0.size and _finite(x0):
+        x = x0.copy()  # what start_vector returns, without its generic conversion
+    else:
+        x = start_vector(x0)
+    return _Iteration(fun, x, options).run()
 
 
 class _Stop(Exception):
@@ -440,8 +497,8 @@ def _backtrack(evaluate: Callable, x0: np.ndarray, dx: np.ndarray, phi0: float, 
     while True:
         x_try = x0 + alpha * dx
         r_try, J_try = evaluate(x_try)
-        phi_try = 0.5 * float(r_try @ r_try) if np.all(np.isfinite(r_try)) else math.inf
-        if np.isfinite(phi_try):
+        phi_try = 0.5 * float(r_try @ r_try) if _finite(r_try) else math.inf
+        if math.isfinite(phi_try):  # a Python float
             if trial_best is None or phi_try < trial_best[0]:
                 trial_best = (phi_try, alpha, x_try, r_try, J_try)
             if phi_try <= phi_ref + _ARMIJO_SIGMA * alpha * slope:
@@ -450,7 +507,7 @@ def _backtrack(evaluate: Callable, x0: np.ndarray, dx: np.ndarray, phi0: float, 
             break
         # plain halving: quadratic interpolation of phi(alpha) is misled by
         # the kinks of a semismooth merit; a non-finite trial is cut harder.
-        alpha = max(0.5 * alpha if np.isfinite(phi_try) else 0.1 * alpha, min_alpha)
+        alpha = max(0.5 * alpha if math.isfinite(phi_try) else 0.1 * alpha, min_alpha)
     if trial_best is None:
         return None
     return (False,) + trial_best[1:]
@@ -477,8 +534,9 @@ class _Iteration:
         self.nfev = 0
         self.x = x
         self.r, self.J = self.evaluate(x)
-        self.rnorm = inf_norm(self.r)
+        self.rnorm = _inf(self.r)
         self.history = [self.rnorm]
+        self.debug = logger.isEnabledFor(logging.DEBUG)
         # best (smallest residual) finite iterate, returned on failure
         self.best = (x.copy(), self.r, self.J, self.rnorm)
         self.best_it = 0  # iteration at which ``best`` last improved by >= 1 %
@@ -522,14 +580,22 @@ class _Iteration:
         """Report ``x0``; stop if it is non-finite or already converged; set up the watchdog."""
         if self.options.callback is not None:
             self.options.callback(0, self.x.copy(), self.rnorm)
-        logger.debug("newton it=0 |r|=%.3e", self.rnorm)
-        if not np.isfinite(self.rnorm):
+        if self.debug:
+            logger.debug("newton it=0 |r|=%.3e", self.rnorm)
+        if not math.isfinite(self.rnorm):
             raise _Stop(3, "non-finite residual at x0", 0, False)
-        if not _jacobian_finite(self.J) and self.rnorm > self.atol:
+        if self.rnorm > self.atol and not _jacobian_finite(self.J):
             raise _Stop(3, "non-finite Jacobian at x0", 0, False)
-        if self.rnorm <= _tolerance(self.atol, self.options.rtol, self.J, self.x):
+        if self.converged(self.rnorm):
             raise _Stop(0, _converged_message(self.rnorm), 0, False)
         self.watchdog = _Watchdog(self.x, self.r, self.options)
+
+    def converged(self, rnorm: float) -> bool:
+        """``rnorm <= max(atol, rtol_x |x|, rtol |J||x|)`` at the current iterate (the products only
+        when ``atol`` alone does not decide)."""
+        opt = self.options
+        return rnorm <= self.atol or (bool(opt.rtol or opt.rtol_x)
+                                      and rnorm <= _tolerance(self.atol, opt.rtol, self.J, self.x, opt.rtol_x))
 
     def direction(self, it: int) -> np.ndarray:
         """Newton direction ``dx = -J^{-1} r`` at the current iterate."""
@@ -540,7 +606,7 @@ class _Iteration:
         dx = -np.asarray(sol, dtype=float).reshape(-1)
         if dx.shape != (self.n,):
             raise ValueError(f"linear_solver returned shape {np.shape(sol)}, expected ({self.n},)")
-        if not np.all(np.isfinite(dx)):
+        if not _finite(dx):
             raise _Stop(3, f"non-finite Newton step at iteration {it} (singular Jacobian?)", it - 1, True)
         self.watchdog.new_direction(dx)
         return dx
@@ -551,7 +617,7 @@ class _Iteration:
         if not self.options.line_search:
             x_new = self.x + dx
             r_new, J_new = self.evaluate(x_new)
-            if not np.all(np.isfinite(r_new)):
+            if not _finite(r_new):
                 raise _Stop(3, f"non-finite residual after step {it}", it - 1, True)
             return _Step(1.0, dx, x_new, r_new, J_new, ok=True, kind="full")
         phi_w, phi_ref = self.watchdog.references()
@@ -568,7 +634,7 @@ class _Iteration:
         wd = self.watchdog
         x_new = self.x + dx
         r_new, J_new = self.evaluate(x_new)
-        if np.all(np.isfinite(r_new)):
+        if _finite(r_new):
             wd.relaxed += 1
             phi_new = 0.5 * float(r_new @ r_new)
             if phi_new <= phi_ref - _ARMIJO_SIGMA * 2.0 * phi_w:
@@ -595,16 +661,17 @@ class _Iteration:
 
     def accept(self, it: int, step: _Step) -> float:
         """Move to the step's point, update the best iterate; return the step length (inf-norm)."""
-        step_norm = step.alpha * inf_norm(step.dx)
+        step_norm = step.alpha * _inf(step.dx)
         self.x, self.r, self.J = step.x, step.r, step.J
-        self.rnorm = inf_norm(self.r)
+        self.rnorm = _inf(self.r)
         self.history.append(self.rnorm)
         if self.rnorm < self.best[3]:
             if self.rnorm <= _NO_PROGRESS_FACTOR * self.best[3]:
                 self.best_it = it
             self.best = (self.x, self.r, self.J, self.rnorm)
-        logger.debug("newton it=%d |r|=%.3e alpha=%.3g |dx|=%.3e (%s)",
-                     it, self.rnorm, step.alpha, step_norm, step.kind)
+        if self.debug:
+            logger.debug("newton it=%d |r|=%.3e alpha=%.3g |dx|=%.3e (%s)",
+                         it, self.rnorm, step.alpha, step_norm, step.kind)
         if self.options.callback is not None:
             self.options.callback(it, self.x.copy(), self.rnorm)
         return step_norm
@@ -613,11 +680,11 @@ class _Iteration:
         """Convergence (residual, or negligible full step on the round-off floor) and failure
         (non-finite Jacobian, stalls, stagnation) tests after step ``it``."""
         opt, rnorm = self.options, self.rnorm
-        if not _jacobian_finite(self.J) and rnorm > self.atol:
+        if rnorm > self.atol and not _jacobian_finite(self.J):
             raise _Stop(3, f"non-finite Jacobian after step {it}", it, True)
-        if rnorm <= _tolerance(self.atol, opt.rtol, self.J, self.x):
+        if self.converged(rnorm):
             raise _Stop(0, _converged_message(rnorm), it, False)
-        small_step = step_norm <= opt.xtol * (1.0 + inf_norm(self.x))
+        small_step = step_norm <= opt.xtol * (1.0 + _inf(self.x))
         if small_step and step.alpha == 1.0 and rnorm <= math.sqrt(self.atol):
             raise _Stop(0, f"converged: full step {step_norm:.3e} below xtol*(1+|x|) with residual "
                            f"{rnorm:.3e} <= sqrt(atol)", it, False)
@@ -638,15 +705,23 @@ class _Iteration:
             message += f"; returning the iterate with the smallest residual norm ({nb:.3e})"
         else:
             xb, rb, Jb, nb = self.x, self.r, self.J, self.rnorm
+        status, opt = stop.status, self.options
+        if status in (1, 2) and opt.accept_factor > 0:
+            tol = _tolerance(self.atol, opt.rtol, Jb, xb, opt.rtol_x)
+            if nb <= opt.accept_factor * tol:
+                status = 0
+                message = (f"converged (accepted): residual norm {nb:.3e} <= accept_factor * max(atol, rtol_x |x|, "
+                           f"rtol |J||x|) = {opt.accept_factor * tol:.3e}; the iteration stopped on: {message}")
         xb = np.array(xb, dtype=float)
         rb = np.array(rb, dtype=float)
         xb.flags.writeable = False
         rb.flags.writeable = False
-        logger.debug("semismooth_newton: %s (nit=%d, |r|=%.3e, nfev=%d)", message, stop.nit, nb, self.nfev)
+        if self.debug:
+            logger.debug("semismooth_newton: %s (nit=%d, |r|=%.3e, nfev=%d)", message, stop.nit, nb, self.nfev)
         return NewtonResult(
             x=xb,
-            success=stop.status == 0,
-            status=stop.status,
+            success=status == 0,
+            status=status,
             message=message,
             nit=stop.nit,
             fun=rb,

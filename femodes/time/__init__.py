@@ -7,10 +7,16 @@
 * :func:`steady_state` -- integrate a forced model period by period until the state at the
   period start repeats (period-``nu`` orbits for ``nu <= 4``), returning a :class:`SteadyState`.
 
+Modules: ``moreau`` (the scheme, described once, and the public names), ``results`` (the two
+result classes), ``stepper`` (operators of a step, its local problem, the stepping loop),
+``impact`` (the impact law and its complementarity problem), ``drivers`` (``simulate``,
+``steady_state``). The local problems are solved by :func:`femodes.solvers.semismooth_newton`.
+
 This layer imports the models, laws and solvers, never :mod:`femodes.hbm`: both are independent
 discretisations of the same model and can be compared.
 """
 
+from .drivers import TimeSteppingOptions
 from .moreau import SteadyState, TimeHistory, simulate, steady_state
 
-__all__ = ["TimeHistory", "SteadyState", "simulate", "steady_state"]
+__all__ = ["TimeHistory", "SteadyState", "simulate", "steady_state", "TimeSteppingOptions"]

@@ -1,0 +1,417 @@
+"""Drivers of the Moreau-Jean time stepping: :func:`simulate` and :func:`steady_state`.
+
+They validate the arguments (messages name the argument and quote the value), build the
+:class:`~femodes.time.stepper.Stepper` for the step actually used, run it and wrap the samples
+and the local solver's outcome in a :class:`~femodes.time.results.TimeHistory` or
+:class:`~femodes.time.results.SteadyState`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..model import StructuralModel
+from ..solvers import NewtonOptions
+from ..solvers.checks import check_int, check_positive, is_real_number, show
+from .results import SteadyState, TimeHistory
+from .stepper import Segment, Stepper, integrate
+
+__all__ = ["simulate", "steady_state", "TimeSteppingOptions"]
+
+log = logging.getLogger(__name__)
+
+#: Bounds that turn an absurd dt (or t_end) into an error naming it instead of an overflow or a
+#: failed allocation deep inside numpy: steps per run, and stored floats per history array
+#: (2**28 float64 = 2 GiB).
+_MAX_STEPS = 10**9
+_MAX_STORED = 2**28
+
+
+# --------------------------------------------------------------------------------------------
+# Validation
+# --------------------------------------------------------------------------------------------
+def _number(name: str, value: Any, owner: str) -> float:
+    """``value`` as a finite float: TypeError if it is not a real number, ValueError if not finite."""
+    if not is_real_number(value):
+        raise TypeError(f"{owner}: {name} must be a real number, got {show(value)}")
+    if not math.isfinite(value):
+        raise ValueError(f"{owner}: {name} must be finite, got {show(value)}")
+    return float(value)
+
+
+def _in_range(name: str, value: Any, lo: float, hi: float, owner: str) -> float:
+    v = _number(name, value, owner)
+    if not lo <= v <= hi:
+        raise ValueError(f"{owner}: {name} must be in [{lo:g}, {hi:g}], got {show(value)}")
+    return v
+
+
+def _state(x: Any, name: str, n: int) -> np.ndarray:
+    if x is None:
+        return np.zeros(n)
+    try:
+        arr = np.asarray(x, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name} must be a real array of shape ({n},), got {type(x).__name__}") from exc
+    if arr.ndim == 0 and n == 1:
+        arr = arr.reshape(1)
+    if arr.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},) (one value per model DOF), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or infinite values")
+    return arr.copy()
+
+
+def _check_omega(model: StructuralModel, omega: Any, owner: str) -> float | None:
+    harmonic = any(a.item.harmonic >= 1 for a in model.forces)
+    if omega is None:
+        if harmonic:
+            raise ValueError(f"{owner}: omega (forcing frequency, rad/s) is required: the model has harmonic forcing")
+        return None
+    _number("omega", omega, owner)
+    w = check_positive("omega", omega, owner=owner)
+    if not harmonic:
+        raise ValueError(
+            f"{owner}: omega={omega!r} given but the model has no harmonic forcing (add with_forcing or omit omega)"
+        )
+    return w
+
+
+def _check_common(model, dt, restitution, theta, newton, owner):
+    if not isinstance(model, StructuralModel):
+        raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
+    _number("dt", dt, owner)
+    dt = check_positive("dt", dt, owner=owner)
+    e = _in_range("restitution", restitution, 0.0, 1.0, owner)
+    th = _in_range("theta", theta, 0.5, 1.0, owner)
+    if newton is not None and not isinstance(newton, NewtonOptions):
+        raise TypeError(f"{owner}: newton must be a NewtonOptions or None, got {type(newton).__name__}")
+    return model, dt, e, th
+
+
+def _n_steps(span: float, dt: float, what: str, owner: str) -> int:
+    """``ceil(span / dt)`` steps, or a ValueError naming ``dt`` when that is not a sane count."""
+    ratio = span / dt
+    if not math.isfinite(ratio) or ratio > _MAX_STEPS:
+        raise ValueError(
+            f"{owner}: dt={dt!r} gives {ratio:.3g} steps over {what} = {span:.6g} (more than {_MAX_STEPS:.0e}); "
+            "increase dt"
+        )
+    return max(1, int(math.ceil(ratio - 1e-9)))
+
+
+# --------------------------------------------------------------------------------------------
+# Reports
+# --------------------------------------------------------------------------------------------
+def _local_report(n_failed: int, first: tuple[float, str] | None, n_steps: int, where: str = "") -> str:
+    """Words for the steps whose local problem was not solved (``""`` if none)."""
+    if not n_failed:
+        return ""
+    t, why = first
+    return (f"the local problem (contact impulses + nonlinear forces) was not solved to tolerance at {n_failed} of "
+            f"{n_steps} steps, first at t = {t:.6g}{where}: {why}")
+
+
+# --------------------------------------------------------------------------------------------
+# Drivers
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class TimeSteppingOptions:
+    """The rarely changed settings of :func:`simulate` and :func:`steady_state` (validated at
+    construction; change with ``dataclasses.replace``).
+
+    Parameters
+    ----------
+    theta : float, default 0.5
+        Theta-method parameter in ``[1/2, 1]`` (1/2: trapezoidal, energy conserving for linear
+        parts; 1: backward Euler, dissipative).
+    newton : NewtonOptions, optional
+        Options of the semismooth Newton solves of each step's local problem (contacts and
+        nonlinear DOFs); default :data:`femodes.time.stepper.LOCAL_NEWTON`.
+    t0 : float, default 0
+        Initial time (:func:`simulate`).
+    store_every : int, default 1
+        Store every ``store_every``-th step, the last one always (:func:`simulate`).
+    n_periods_max : int, default 2000
+        Bound on the forcing periods integrated (:func:`steady_state`; non-convergence is
+        reported, never a hang).
+    tol : float, default 1e-8
+        Relative tolerance of the period-start state (:func:`steady_state`).
+    periods_per_check : int, default 1
+        Check convergence every this many periods (:func:`steady_state`).
+    """
+
+    theta: float = 0.5
+    newton: NewtonOptions | None = None
+    t0: float = 0.0
+    store_every: int = 1
+    n_periods_max: int = 2000
+    tol: float = 1e-8
+    periods_per_check: int = 1
+
+    def __post_init__(self) -> None:
+        owner = "TimeSteppingOptions"
+        object.__setattr__(self, "theta", _in_range("theta", self.theta, 0.5, 1.0, owner))
+        if self.newton is not None and not isinstance(self.newton, NewtonOptions):
+            raise TypeError(f"{owner}: newton must be a NewtonOptions or None, got {type(self.newton).__name__}")
+        object.__setattr__(self, "t0", _number("t0", self.t0, owner))
+        for name in ("store_every", "n_periods_max", "periods_per_check"):
+            object.__setattr__(self, name, check_int(name, getattr(self, name), 1, owner=owner))
+        _number("tol", self.tol, owner)
+        object.__setattr__(self, "tol", check_positive("tol", self.tol, owner=owner))
+
+
+def _options(options: Any, owner: str) -> TimeSteppingOptions:
+    if options is None:
+        return TimeSteppingOptions()
+    if not isinstance(options, TimeSteppingOptions):
+        raise TypeError(f"{owner}: options must be a femodes.TimeSteppingOptions or None, got {type(options).__name__}")
+    return options
+
+
+def simulate(
+    model: StructuralModel,
+    t_end: float,
+    dt: float,
+    *,
+    u0=None,
+    v0=None,
+    omega: float | None = None,
+    restitution: float = 1.0,
+    options: TimeSteppingOptions | None = None,
+) -> TimeHistory:
+    r"""Moreau-Jean time-stepping of a model with unilateral contact (Jean 1999; Moreau 1988).
+
+    .. math::
+
+        M \Delta v = h\,\Theta F_{k+1} + h (I - \Theta) F_k - \sum_c e_c P_c, \quad
+        0 \le U_{c,k+1} + e\,U_{c,k} \perp P_c \ge 0 \ \text{(predicted gap} \le 0),
+
+    see :mod:`femodes.time.moreau` and Acary & Brogliato (2008), chapter 10.
+
+    Parameters
+    ----------
+    model : StructuralModel or ReducedModel
+        Linear structure with UnilateralContact / PenaltyContact / CubicSpring declarations and
+        optional harmonic forcing ``Re sum_k F_k e^{i k omega t}``.
+    t_end : float
+        Final time (``> t0``).
+    dt : float
+        Time step (``0 < dt < t_end - t0``); reduced so that an integer number of steps fits.
+    u0, v0 : array_like (n_dofs,), optional
+        Initial displacement and velocity (zero by default).
+    omega : float, optional
+        Forcing frequency (rad/s): required if the model has harmonic forcing, refused otherwise.
+    restitution : float
+        Newton restitution coefficient ``e`` in ``[0, 1]`` (massive contact DOFs; a contact on a
+        massless DOF is quasi-static and uses the position-level Signorini law).
+    options : TimeSteppingOptions, optional
+        ``theta`` (theta-method, default 1/2), ``newton`` (local solves), ``t0`` (initial time),
+        ``store_every`` (stored steps).
+
+    Returns
+    -------
+    TimeHistory
+        With ``success``/``status``/``message``: a step whose local problem was not solved is
+        reported there (the run goes on from the solver's best iterate), never raised.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Invalid arguments (the message names the argument).
+    FloatingPointError
+        If the state becomes non-finite.
+    """
+    owner = "simulate"
+    opts = _options(options, owner)
+    theta, newton, t0, store_every = opts.theta, opts.newton, opts.t0, opts.store_every
+    model, dt, e, th = _check_common(model, dt, restitution, theta, newton, owner)
+    t_end = _number("t_end", t_end, owner)
+    if t_end <= t0:
+        raise ValueError(f"{owner}: t_end must be > t0 = {t0}, got {t_end!r}")
+    if not math.isfinite(t_end - t0):
+        raise ValueError(f"{owner}: t_end - t0 overflows: t_end={t_end!r}, t0={t0!r}")
+    if dt >= t_end - t0:
+        raise ValueError(f"{owner}: dt must be smaller than t_end - t0 = {t_end - t0:g}, got {dt!r}")
+    w = _check_omega(model, omega, owner)
+    n = model.n_dofs
+    q = _state(u0, "u0", n)
+    v = _state(v0, "v0", n)
+    n_steps = _n_steps(t_end - t0, dt, "t_end - t0", owner)
+    n_stored = (n_steps // store_every + 2) * max(n, 1)
+    if n_stored > _MAX_STORED:
+        raise ValueError(
+            f"{owner}: storing {n_steps} steps of {n} DOFs every store_every={store_every} step(s) needs "
+            f"{n_stored:.3g} values per array (more than {_MAX_STORED:.3g}); increase store_every or dt"
+        )
+    h = (t_end - t0) / n_steps
+    st = Stepper(model, h, th, e, w, newton)
+    for j, a in enumerate(model.contacts):
+        g = float(a.item.gap_function(q[a.dof]))
+        if g < 0:
+            log.warning("simulate: initial penetration %.3g at contact %d", g, j)
+    seg = integrate(st, t0, n_steps, q, v, store_every)
+    failure = _local_report(seg.n_failed, seg.first_failure, n_steps)
+    if failure:
+        log.warning("simulate: %s", failure)
+    message = failure or f"{n_steps} steps of {h:.6g} from t = {t0:g} to {t_end:g}, every local problem solved"
+    log.info("simulate: %s", message)
+    status = 1 if failure else 0
+    return TimeHistory(t=seg.t, u=seg.u, v=seg.v, impulse=seg.impulse, energy=seg.energy, gap=seg.gap, dt=h,
+                       success=status == 0, status=status, message=message)
+
+
+def steady_state(
+    model: StructuralModel,
+    omega: float,
+    *,
+    dt: float,
+    u0=None,
+    v0=None,
+    restitution: float = 1.0,
+    options: TimeSteppingOptions | None = None,
+) -> SteadyState:
+    r"""Periodic steady state of a forced model by Moreau-Jean integration, period after period.
+
+    The step is ``h = T / N`` with ``T = 2 pi / omega`` and ``N = ceil(T / dt)``, so the discrete
+    map over one forcing period ``x_j -> x_{j+1}`` (``x = (q, v)`` at ``t = j T``) is iterated until
+    ``|x_j - x_{j-nu}| <= tol |x_j|`` (displacements and velocities measured separately) for the
+    smallest ``nu`` in 1..4. The last ``nu`` periods are returned.
+
+    Parameters
+    ----------
+    model : StructuralModel or ReducedModel
+        With harmonic forcing.
+    omega : float
+        Forcing frequency (rad/s).
+    dt : float
+        Largest time step.
+    u0, v0 : array_like, optional
+        Initial state at ``t = 0``.
+    restitution : float
+        As in :func:`simulate`.
+    options : TimeSteppingOptions, optional
+        ``n_periods_max``, ``tol``, ``periods_per_check`` (the period iteration), ``theta`` and
+        ``newton`` (as in :func:`simulate`).
+
+    Returns
+    -------
+    SteadyState
+        ``converged`` says whether the period-start state repeated; ``success``/``status``/
+        ``message`` also report steps whose local problem was not solved.
+    """
+    owner = "steady_state"
+    opts = _options(options, owner)
+    theta, newton = opts.theta, opts.newton
+    n_periods_max, tol, periods_per_check = opts.n_periods_max, opts.tol, opts.periods_per_check
+    model, dt, e, th = _check_common(model, dt, restitution, theta, newton, owner)
+    w = _check_omega(model, omega, owner)
+    if w is None:
+        raise ValueError(f"{owner}: omega is required")
+    T = 2.0 * math.pi / w
+    if dt >= T:
+        raise ValueError(f"{owner}: dt must be smaller than the forcing period {T:g}, got {dt!r}")
+    n = model.n_dofs
+    q = _state(u0, "u0", n)
+    v = _state(v0, "v0", n)
+    N = _n_steps(T, dt, "the forcing period 2 pi / omega", owner)
+    if N * max(n, 1) > _MAX_STORED:
+        raise ValueError(
+            f"{owner}: dt={dt!r} gives {N} steps per period for {n} DOFs (more than {_MAX_STORED:.3g} stored "
+            "values); increase dt"
+        )
+    st = Stepper(model, T / N, th, e, w, newton)
+    orbit = _PeriodMap(st, N, T, q, v)
+    nu, converged = orbit.iterate(n_periods_max, periods_per_check, tol)
+    j = orbit.n_periods
+    if not converged:
+        log.warning("steady_state: no periodic state after %d periods (last relative change %.3g)", j, orbit.change)
+    seg = orbit.history[-nu:]
+    tt = np.concatenate([seg[0].t] + [s.t[1:] + (i + 1) * T for i, s in enumerate(seg[1:])])
+    U, V, IMP, E, G = (np.concatenate([getattr(seg[0], k)] + [getattr(s, k)[1:] for s in seg[1:]])
+                       for k in ("u", "v", "impulse", "energy", "gap"))
+    failure = _local_report(orbit.n_failed, orbit.first_failure, j * N, f" (period {orbit.failed_period})")
+    reasons = [failure] if failure else []
+    if not converged:
+        reasons.append(f"no periodic state within n_periods_max={n_periods_max} periods (last relative change of "
+                       f"the period-start state {orbit.change:.3g} > tol={tol:g})")
+    status = 1 if failure else (2 if not converged else 0)
+    message = "; ".join(reasons) or (f"period-{nu} orbit after {j} periods of {N} steps (relative change "
+                                     f"{orbit.change:.3g} <= tol={tol:g}), every local problem solved")
+    if failure:
+        log.warning("steady_state: %s", failure)
+    log.info("steady_state: w = %.6g, nu = %d, %d periods, change %.3g, converged %s", w, nu, j, orbit.change,
+             converged)
+    return SteadyState(t=tt, u=U, v=V, impulse=IMP, gap=G, energy=E, period=nu * T, nu=nu,
+                       amplitude=np.max(np.abs(U), axis=0), converged=converged, n_periods=j, change=orbit.change,
+                       dt=st.h, success=status == 0, status=status, message=message)
+
+
+class _PeriodMap:
+    """The Moreau-Jean map over one forcing period, iterated until the period-start state repeats."""
+
+    def __init__(self, st: Stepper, N: int, T: float, q: np.ndarray, v: np.ndarray):
+        self.st, self.N, self.T, self.n = st, N, T, q.size
+        self.q, self.v = q, v
+        self.starts = [np.concatenate([q, v])]
+        self.history: list[Segment] = []  # the last 4 periods
+        self.n_periods = 0
+        self.change = math.inf
+        self.n_failed, self.first_failure, self.failed_period = 0, None, 0
+
+    def advance(self) -> None:
+        """Integrate one period (time restarts at 0 each period: the forcing is T-periodic)."""
+        out = integrate(self.st, 0.0, self.N, self.q, self.v)
+        self.n_periods += 1
+        if out.n_failed:
+            if self.first_failure is None:
+                t, why = out.first_failure
+                self.first_failure = ((self.n_periods - 1) * self.T + t, why)
+                self.failed_period = self.n_periods
+            self.n_failed += out.n_failed
+        self.q, self.v = out.u[-1].copy(), out.v[-1].copy()
+        self.history.append(out)
+        if len(self.history) > 4:
+            self.history.pop(0)
+        self.starts.append(np.concatenate([self.q, self.v]))
+        if len(self.starts) > 6:
+            self.starts.pop(0)
+
+    def _rel(self, a: np.ndarray, b: np.ndarray) -> float:
+        """Relative distance of two period-start states (displacements and velocities separately)."""
+        n, x = self.n, self.starts[-1]
+        sq = max(float(np.linalg.norm(x[:n])), 1e-300)
+        sv = max(float(np.linalg.norm(x[n:])), 1e-300)
+        return max(float(np.linalg.norm(a[:n] - b[:n])) / sq, float(np.linalg.norm(a[n:] - b[n:])) / sv)
+
+    def periodic_order(self, tol: float) -> int | None:
+        """Smallest ``nu`` in 1..4 with ``|x_j - x_{j-nu}| <= tol |x_j|`` (for ``nu > 1`` also one
+        period earlier: a genuine period-``nu`` orbit), else ``None``; updates :attr:`change`."""
+        starts = self.starts
+        for m in range(1, 5):
+            if len(starts) > m + (1 if m > 1 else 0):
+                c = self._rel(starts[-1], starts[-1 - m])
+                if m == 1:
+                    self.change = c
+                ok = c <= tol
+                if ok and m > 1:
+                    ok = self._rel(starts[-2], starts[-2 - m]) <= tol
+                if ok:
+                    return m
+        return None
+
+    def iterate(self, n_periods_max: int, periods_per_check: int, tol: float) -> tuple[int, bool]:
+        """``(nu, converged)`` after at most ``n_periods_max`` periods."""
+        while self.n_periods < n_periods_max:
+            self.advance()
+            if self.n_periods % periods_per_check:
+                continue
+            nu = self.periodic_order(tol)
+            if nu is not None:
+                return nu, True
+        return 1, False
