@@ -127,6 +127,18 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
     """
     if not isinstance(model, StructuralModel):
         raise TypeError(f"craig_bampton: model must be a StructuralModel, got {type(model).__name__}")
+    kept = _kept_dofs(model, keep)
+    n = model.n_dofs
+    interior = np.setdiff1d(np.arange(n), kept)
+    n_modes = _check_n_modes(n_modes, interior.size)
+    T, omega_i = _reduction_basis(model.K.tocsr(), model.M.tocsr(), kept, interior, n_modes)
+    reduced = _reduced_model(model, kept, T, omega_i, n_modes)
+    log.info("craig_bampton: %d DOFs -> %d kept + %d modes", n, kept.size, n_modes)
+    return reduced
+
+
+def _kept_dofs(model: StructuralModel, keep: Sequence | None) -> np.ndarray:
+    """Sorted parent DOFs kept physical: contact, forcing and nonlinear DOFs plus those of ``keep``."""
     declared = [a.dof for a in model.contacts + model.forces + model.nonlinearities]
     extra = []
     if keep is not None:
@@ -145,69 +157,87 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
         raise ValueError(
             "craig_bampton: no DOF to keep; declare contact/forcing first (with_contact, with_forcing) or pass keep=['tip']"
         )
-    n = model.n_dofs
-    interior = np.setdiff1d(np.arange(n), kept)
-    n_modes = _check_n_modes(n_modes, interior.size)
+    return kept
+
+
+def _reduction_basis(K, M, kept: np.ndarray, interior: np.ndarray, n_modes: int) -> tuple[np.ndarray, np.ndarray]:
+    """``T = [[I, 0], [Psi, Phi]]`` (rows in parent order) and the fixed-interface frequencies."""
     nB, nI = kept.size, interior.size
-    K = model.K.tocsr()
-    M = model.M.tocsr()
-    T = np.zeros((n, nB + n_modes))
+    T = np.zeros((kept.size + nI, nB + n_modes))
     T[kept, np.arange(nB)] = 1.0
     omega_i = np.zeros(0)
     if nI:
         KII = K[interior][:, interior].tocsc()
         MII = M[interior][:, interior].tocsc()
         KIB = K[interior][:, kept].toarray()
-        try:
-            lu = spla.splu(KII)
-        except RuntimeError as exc:
-            raise ValueError(
-                "craig_bampton: the interior stiffness K_II is singular: the structure is not restrained when the "
-                "kept DOFs are fixed (keep more DOFs or add supports)"
-            ) from exc
-        cond = check_conditioning(KII, lu.solve, nI, "craig_bampton", warn=False)
-        if 1e-2 < cond * np.finfo(float).eps <= 10.0:
-            warnings.warn(
-                f"craig_bampton: the interior stiffness is ill-conditioned (cond_1 ~ {cond:.1e}); low frequencies lose "
-                "digits. Euler-Bernoulli beams reach this near 1e4 DOFs; use bars for larger studies.",
-                IllConditionedWarning,
-                stacklevel=2,
-            )
-        elif cond * np.finfo(float).eps > 10.0:
-            raise ValueError(
-                f"craig_bampton: the interior stiffness K_II is numerically singular (cond_1 ~ {cond:.1e}): the "
-                "structure is not restrained when the kept DOFs are fixed (keep more DOFs or add supports), or a "
-                "beam mesh is far too fine for double precision (use bars beyond ~1e4 DOFs)"
-            )
-        psi = -lu.solve(KIB)
-        if not np.all(np.isfinite(psi)):
-            raise ValueError("craig_bampton: the interior stiffness K_II is singular (non-finite constraint modes)")
-        T[interior, :nB] = psi
+        lu = _factor_interior(KII)
+        T[interior, :nB] = _constraint_modes(lu, KIB)
         if n_modes:
-            # K_II is definite here (factorised above): shift-invert at 0 reuses its factor
-            lam, phi = generalized_eigh(KII, MII, n_modes, "craig_bampton", sigma=0.0, factor=lu, check=False)
-            phi = mass_normalize(phi, MII)
-            T[interior, nB:] = phi
-            omega_i = np.sqrt(np.maximum(lam, 0.0))
+            T[interior, nB:], omega_i = _fixed_interface_modes(KII, MII, lu, n_modes)
+    return T, omega_i
 
-    def project(A):
-        AT = A @ T
-        R = T.T @ AT
-        return 0.5 * (R + R.T)
 
-    Kr, Mr = project(K), project(M)
-    Cr = project(model.C.tocsr()) if model.C.nnz else None
+def _factor_interior(KII) -> Any:
+    """Sparse LU of the interior stiffness; ValueError if singular, warning if ill-conditioned."""
+    try:
+        lu = spla.splu(KII)
+    except RuntimeError as exc:
+        raise ValueError(
+            "craig_bampton: the interior stiffness K_II is singular: the structure is not restrained when the "
+            "kept DOFs are fixed (keep more DOFs or add supports)"
+        ) from exc
+    cond = check_conditioning(KII, lu.solve, KII.shape[0], "craig_bampton", warn=False)
+    if 1e-2 < cond * np.finfo(float).eps <= 10.0:
+        warnings.warn(
+            f"craig_bampton: the interior stiffness is ill-conditioned (cond_1 ~ {cond:.1e}); low frequencies lose "
+            "digits. Euler-Bernoulli beams reach this near 1e4 DOFs; use bars for larger studies.",
+            IllConditionedWarning,
+            stacklevel=4,  # the caller of craig_bampton (via _reduction_basis)
+        )
+    elif cond * np.finfo(float).eps > 10.0:
+        raise ValueError(
+            f"craig_bampton: the interior stiffness K_II is numerically singular (cond_1 ~ {cond:.1e}): the "
+            "structure is not restrained when the kept DOFs are fixed (keep more DOFs or add supports), or a "
+            "beam mesh is far too fine for double precision (use bars beyond ~1e4 DOFs)"
+        )
+    return lu
+
+
+def _constraint_modes(lu: Any, KIB: np.ndarray) -> np.ndarray:
+    """Static constraint modes ``Psi = -K_II^-1 K_IB``."""
+    psi = -lu.solve(KIB)
+    if not np.all(np.isfinite(psi)):
+        raise ValueError("craig_bampton: the interior stiffness K_II is singular (non-finite constraint modes)")
+    return psi
+
+
+def _fixed_interface_modes(KII, MII, lu: Any, n_modes: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first ``n_modes`` mass-normalized modes of ``(K_II, M_II)`` and their frequencies."""
+    # K_II is definite here (factorised above): shift-invert at 0 reuses its factor
+    lam, phi = generalized_eigh(KII, MII, n_modes, "craig_bampton", sigma=0.0, factor=lu, check=False)
+    phi = mass_normalize(phi, MII)
+    return phi, np.sqrt(np.maximum(lam, 0.0))
+
+
+def _project(A, T: np.ndarray) -> np.ndarray:
+    """``T^T A T``, symmetrized to round-off."""
+    AT = A @ T
+    R = T.T @ AT
+    return 0.5 * (R + R.T)
+
+
+def _reduced_model(model: StructuralModel, kept: np.ndarray, T: np.ndarray, omega_i: np.ndarray, n_modes: int) -> ReducedModel:
+    """The projected model, its declarations re-indexed to the reduced DOFs."""
     pos = {int(d): i for i, d in enumerate(kept)}
 
     def reindex(items):
         return tuple(Attached(a.item, pos[a.dof]) for a in items)
 
     dofmap = model.dofmap.restrict(kept).extended([f"cb mode {j + 1}" for j in range(n_modes)])
-    log.info("craig_bampton: %d DOFs -> %d kept + %d modes", n, nB, n_modes)
     return ReducedModel(
-        M=Mr,
-        K=Kr,
-        C=Cr,
+        M=_project(model.M.tocsr(), T),
+        K=_project(model.K.tocsr(), T),
+        C=_project(model.C.tocsr(), T) if model.C.nnz else None,
         dofmap=dofmap,
         forces=reindex(model.forces),
         contacts=reindex(model.contacts),

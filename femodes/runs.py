@@ -164,30 +164,28 @@ def _merge(records: list[dict], res: ContinuationResult) -> ContinuationResult:
 
 
 def run_continuation(problem, span, options: ContinuationOptions, label: str, progress, *, x0: Callable,
-                  wrap: Callable, model: StructuralModel, checkpoint, resume: bool, description: dict) -> Branch:
+                     wrap: Callable, model: StructuralModel, checkpoint, resume: bool, description: dict) -> Branch:
     """Run (or resume, or return the finished) continuation of ``problem``; ``wrap(res, meta)`` -> Branch.
 
     ``x0(options)`` gives a new run's start point and its options (which may depend on the start,
-    e.g. the arclength scale); a resumed run keeps the scales saved with its state.
-
-    Warns (in the analysis' terms, from ``wrap``) when a run does not finish its span."""
-    wrap_result = wrap
-
-    def wrap(res, meta) -> Branch:
-        branch = wrap_result(res, meta)
-        if not branch.success:
-            log.warning("%s: %s", label, branch.message)
-        return branch
-
+    e.g. the arclength scale); a resumed run keeps the scales saved with its state. Warns (in the
+    analysis' terms, from ``wrap``) when a run does not finish its span."""
     if not isinstance(resume, bool):
         raise TypeError(f"{label}: resume must be True or False, got {resume!r}")
     if not isinstance(progress, bool) and not callable(progress):
         raise TypeError(f"{label}: progress must be True, False or a callable(point), got {progress!r}")
+
+    def finish(res, meta) -> Branch:
+        branch = wrap(res, meta)
+        if not branch.success:
+            log.warning("%s: %s", label, branch.message)
+        return branch
+
     if checkpoint is None:
         if resume:
             raise ValueError(f"{label}: resume=True needs checkpoint=<file> (the checkpoint of the run to resume)")
         start_x, start_options = x0(options)
-        return wrap(_run(problem, span, start_x, start_options, label, progress), {})
+        return finish(_run(problem, span, start_x, start_options, label, progress), {})
     if not isinstance(checkpoint, (str, os.PathLike)):
         raise TypeError(f"{label}: checkpoint must be a file name (.npz or .h5), got {checkpoint!r}")
     ck = Checkpoint(checkpoint)
@@ -196,33 +194,8 @@ def run_continuation(problem, span, options: ContinuationOptions, label: str, pr
         raise FileExistsError(f"{label}: checkpoint {str(ck.path)!r} (or its journal {ck.journal.name}/) exists; "
                               "pass resume=True to continue (or return) that run, or delete it to start over")
     if ck.path.exists():
-        branch = load_branch(ck.path)
-        saved = branch.meta.get("checkpoint")
-        if not isinstance(saved, dict):
-            raise ValueError(f"{label}: {str(ck.path)!r} is a branch file but not the result of a checkpointed run; "
-                             "choose another checkpoint file name")
-        _check_same_run(saved, desc, ck.path, label)
-        branch.attach(model)
-        ck.remove_journal()  # left over if the run was killed while removing it
-        log.info("%s: the checkpointed run %s is finished; returning its branch", label, ck.path)
-        return branch
-
-    records: list[dict] = []
-    if ck.journal.exists() and (ck.header_path.exists() or ck.indices()):
-        _check_same_run(ck.read_header(), desc, ck.journal, label)
-        records = ck.read_points(required=_POINT_KEYS)
-        n = problem.size
-        for i, r in enumerate(records):
-            if r["x"].shape != (n,) or (("tangent" in r) and r["tangent"].shape != (n + 1,)):
-                raise ValueError(f"checkpoint: point file {str(ck.point_path(i))!r} holds {r['x'].shape} unknowns, "
-                                 f"this problem has {n}")
-        # continue from the last point the run can continue from exactly; the points after it
-        # (an inserted fold point, an end point) are computed again
-        while records and "tangent" not in records[-1]:
-            records.pop()
-        ck.discard(after=len(records) - 1)
-    else:
-        ck.create(desc)
+        return _finished_branch(ck, desc, label, model)
+    records = _journal_records(ck, desc, label, problem.size)
 
     def journal(point):
         ck.write_point(point.index, _point_record(point))
@@ -234,9 +207,42 @@ def run_continuation(problem, span, options: ContinuationOptions, label: str, pr
     else:
         start_x, start_options = x0(options)
         res = _run(problem, span, start_x, start_options, label, progress, journal=journal)
-    branch = wrap(res, {"checkpoint": desc})
+    branch = finish(res, {"checkpoint": desc})
     ck.finish(branch)
     return branch
+
+
+def _finished_branch(ck: Checkpoint, desc: dict, label: str, model: StructuralModel) -> Branch:
+    """The branch of a checkpointed run that finished (refused if it came from another run)."""
+    branch = load_branch(ck.path)
+    saved = branch.meta.get("checkpoint")
+    if not isinstance(saved, dict):
+        raise ValueError(f"{label}: {str(ck.path)!r} is a branch file but not the result of a checkpointed run; "
+                         "choose another checkpoint file name")
+    _check_same_run(saved, desc, ck.path, label)
+    branch.attach(model)
+    ck.remove_journal()  # left over if the run was killed while removing it
+    log.info("%s: the checkpointed run %s is finished; returning its branch", label, ck.path)
+    return branch
+
+
+def _journal_records(ck: Checkpoint, desc: dict, label: str, n: int) -> list[dict]:
+    """The saved points of an interrupted run to continue from (a new journal if none)."""
+    if not (ck.journal.exists() and (ck.header_path.exists() or ck.indices())):
+        ck.create(desc)
+        return []
+    _check_same_run(ck.read_header(), desc, ck.journal, label)
+    records = ck.read_points(required=_POINT_KEYS)
+    for i, r in enumerate(records):
+        if r["x"].shape != (n,) or (("tangent" in r) and r["tangent"].shape != (n + 1,)):
+            raise ValueError(f"checkpoint: point file {str(ck.point_path(i))!r} holds {r['x'].shape} unknowns, "
+                             f"this problem has {n}")
+    # continue from the last point the run can continue from exactly; the points after it
+    # (an inserted fold point, an end point) are computed again
+    while records and "tangent" not in records[-1]:
+        records.pop()
+    ck.discard(after=len(records) - 1)
+    return records
 
 
 def _progress_callback(user_cb: Callable | None, span, label: str, progress: bool | Callable):

@@ -1,4 +1,5 @@
-"""README.md: every Python block runs as written, on its own, from the repository root.
+"""README.md: every Python block runs as written, on its own, from the repository root (a fresh
+copy of its layout, so that earlier outputs do not interfere).
 
 Each block is written to a script of its own and run in a fresh interpreter (as a user who pastes
 it into a file would), so a block that depends on an earlier one, lacks an import, or needs an
@@ -26,12 +27,18 @@ def test_readme_has_python_blocks():
 
 @pytest.mark.parametrize("index", range(len(BLOCKS)), ids=[f"block{i}" for i in range(len(BLOCKS))])
 def test_readme_python_block_runs_on_its_own(index, tmp_path):
+    # the repository's layout (meshes/, examples/, femodes/) in a fresh folder, so that the
+    # blocks' outputs (out/...) start empty whatever earlier runs left in the working tree
+    root = tmp_path / "repo"
+    root.mkdir()
+    for name in ("meshes", "examples", "femodes"):
+        (root / name).symlink_to(ROOT / name)
     script = tmp_path / f"readme_block_{index}.py"
     script.write_text(BLOCKS[index], encoding="utf-8")
     env = {k: v for k, v in __import__("os").environ.items() if k != "PYTHONPATH"}
     env["MPLBACKEND"] = "Agg"
     for attempt in range(2):  # twice: blocks that write outputs must also run again over them
-        r = subprocess.run([sys.executable, str(script)], cwd=ROOT, capture_output=True, text=True, timeout=300,
+        r = subprocess.run([sys.executable, str(script)], cwd=root, capture_output=True, text=True, timeout=300,
                            env=env)
         assert r.returncode == 0, f"README block {index} failed (run {attempt + 1}):\n{BLOCKS[index]}\n{r.stderr[-3000:]}"
 

@@ -286,13 +286,27 @@ def parse_case(text: str, path: str | Path = "case.toml") -> Case:
 
 
 def _check_values(case: Case) -> None:
-    d = case.data
-    if "model" not in d:
+    """Checks across keys and tables, in the order the first mistake is reported."""
+    _check_required_tables(case)
+    kind = _check_model(case)
+    _check_contacts(case)
+    _check_forces_and_springs(case)
+    _check_analysis(case)
+    _check_outputs(case)
+    _check_reduction(case, kind)
+
+
+def _check_required_tables(case: Case) -> None:
+    if "model" not in case.data:
         raise CaseError("missing table [model] (kind = \"beam\" | \"bar\" | \"discrete\", ...)", case.name, 1)
-    if "analysis" not in d:
+    if "analysis" not in case.data:
         raise CaseError("missing table [analysis] (type = \"nonlinear_mode\" or \"frequency_response\", ...)",
                         case.name, 1)
-    model = d["model"]
+
+
+def _check_model(case: Case) -> str:
+    """Check [model] (and [mesh] for FE models); returns the model kind."""
+    model = case.data["model"]
     kind = model.get("kind")
     if kind is None:
         raise case.error("model", None, "missing key kind (\"beam\", \"bar\" or \"discrete\")")
@@ -300,30 +314,46 @@ def _check_values(case: Case) -> None:
         raise case.error("model", "kind", f"kind must be one of {', '.join(map(repr, MODEL_KINDS))}, got {kind!r}"
                          f"{_suggest(kind, MODEL_KINDS)}")
     if kind == "discrete":
-        for k in ("M", "K"):
-            if k not in model:
-                raise case.error("model", None, f"a discrete model needs {k} = [[...]]")
-        for k in ("E", "rho", "area", "inertia", "clamped", "pinned"):
-            if k in model:
-                raise case.error("model", k, f"{k} is not used by a discrete model (give M, K, C)")
-        if "mesh" in d:
-            raise case.error("mesh", None, "a discrete model has no mesh; remove [mesh]")
+        _check_discrete_model(case, model)
     else:
-        for k in ("E", "rho", "area") + (("inertia",) if kind == "beam" else ()):
-            if k not in model:
-                raise case.error("model", None, f"a {kind} model needs {k} = ...")
-        for k in ("M", "K", "C", "dof_names") + (("pinned", "inertia") if kind == "bar" else ()):
-            if k in model:
-                raise case.error("model", k, f"{k} is not used by a {kind} model")
-        mesh = d.get("mesh")
-        if mesh is None:
-            raise CaseError(f"a {kind} model needs a [mesh] table (file = ... or length/n_elements)", case.name,
-                            key_line(case.text, "model", "kind"))
-        if "file" in mesh and any(k in mesh for k in ("length", "n_elements", "boundaries", "grading")):
-            k = next(k for k in ("length", "n_elements", "boundaries", "grading") if k in mesh)
-            raise case.error("mesh", k, f"give either file = ... or length/n_elements/boundaries, not both ({k})")
-        if "file" not in mesh and "n_elements" not in mesh:
-            raise case.error("mesh", None, "needs file = \"...\" or n_elements = ... (with length, boundaries)")
+        _check_fe_model(case, kind, model)
+        _check_mesh(case, kind)
+    return kind
+
+
+def _check_discrete_model(case: Case, model: dict) -> None:
+    for k in ("M", "K"):
+        if k not in model:
+            raise case.error("model", None, f"a discrete model needs {k} = [[...]]")
+    for k in ("E", "rho", "area", "inertia", "clamped", "pinned"):
+        if k in model:
+            raise case.error("model", k, f"{k} is not used by a discrete model (give M, K, C)")
+    if "mesh" in case.data:
+        raise case.error("mesh", None, "a discrete model has no mesh; remove [mesh]")
+
+
+def _check_fe_model(case: Case, kind: str, model: dict) -> None:
+    for k in ("E", "rho", "area") + (("inertia",) if kind == "beam" else ()):
+        if k not in model:
+            raise case.error("model", None, f"a {kind} model needs {k} = ...")
+    for k in ("M", "K", "C", "dof_names") + (("pinned", "inertia") if kind == "bar" else ()):
+        if k in model:
+            raise case.error("model", k, f"{k} is not used by a {kind} model")
+
+
+def _check_mesh(case: Case, kind: str) -> None:
+    mesh = case.data.get("mesh")
+    if mesh is None:
+        raise CaseError(f"a {kind} model needs a [mesh] table (file = ... or length/n_elements)", case.name,
+                        key_line(case.text, "model", "kind"))
+    if "file" in mesh and any(k in mesh for k in ("length", "n_elements", "boundaries", "grading")):
+        k = next(k for k in ("length", "n_elements", "boundaries", "grading") if k in mesh)
+        raise case.error("mesh", k, f"give either file = ... or length/n_elements/boundaries, not both ({k})")
+    if "file" not in mesh and "n_elements" not in mesh:
+        raise case.error("mesh", None, "needs file = \"...\" or n_elements = ... (with length, boundaries)")
+
+
+def _check_contacts(case: Case) -> None:
     for i, c in enumerate(case.tables("contact")):
         for k in ("at", "gap"):
             if k not in c:
@@ -340,12 +370,18 @@ def _check_values(case: Case) -> None:
             raise case.error("contact", "c", "c is the complementarity parameter; a penalty contact uses stiffness", i)
         if law == "complementarity" and "stiffness" in c:
             raise case.error("contact", "stiffness", "stiffness is for law = \"penalty\"", i)
+
+
+def _check_forces_and_springs(case: Case) -> None:
     for tname, required in (("force", ("at",)), ("cubic", ("at", "k3"))):
         for i, t in enumerate(case.tables(tname)):
             for k in required:
                 if k not in t:
                     raise case.error(tname, None, f"missing key {k}", i)
-    an = d["analysis"]
+
+
+def _check_analysis(case: Case) -> None:
+    an = case.data["analysis"]
     typ = an.get("type")
     if typ is None:
         raise case.error("analysis", None, "missing key type (\"nonlinear_mode\" or \"frequency_response\")")
@@ -366,6 +402,11 @@ def _check_values(case: Case) -> None:
         a, b = an[k]
         if not (a > 0 and b > 0 and a != b):
             raise case.error("analysis", k, f"{k} must be two distinct positive numbers [start, end], got {an[k]}")
+    _check_analysis_settings(case, an, typ)
+
+
+def _check_analysis_settings(case: Case, an: dict, typ: str) -> None:
+    """The optional [analysis] keys: max_points, harmonics, mode."""
     if typ == "nonlinear_mode" and "max_points" in an:
         raise case.error("analysis", "max_points", "max_points is only supported for frequency_response")
     for k in ("harmonics", "mode", "max_points"):
@@ -378,13 +419,19 @@ def _check_values(case: Case) -> None:
             Harmonics(an["harmonics"])
         except (TypeError, ValueError) as exc:
             raise case.error("analysis", "harmonics", f"harmonics = {an['harmonics']}: {exc}") from None
-    outs = d.get("outputs", {})
+
+
+def _check_outputs(case: Case) -> None:
+    outs = case.data.get("outputs", {})
     if isinstance(outs.get("branch"), str) and not outs["branch"].strip():
         raise case.error("outputs", "branch", "branch must be a file name like \"branch.npz\" (or false), got ''")
-    red = d.get("reduction", {})
+
+
+def _check_reduction(case: Case, kind: str) -> None:
+    red = case.data.get("reduction", {})
     if "craig_bampton" in red and red["craig_bampton"] < 0:
         raise case.error("reduction", "craig_bampton", f"craig_bampton must be >= 0, got {red['craig_bampton']}")
-    if "reduction" in d and kind == "discrete":
+    if "reduction" in case.data and kind == "discrete":
         raise case.error("reduction", None, "Craig-Bampton reduction needs an FE model (beam or bar)")
 
 
@@ -444,54 +491,87 @@ def build_model(case: Case):
 
     Returns ``(model, full)``: the model to analyse (reduced if [reduction]) and the full model.
     """
+    api = _Api(case)
+    d = case.data
+    model = _discrete_model(case, api) if d["model"]["kind"] == "discrete" else _fe_model(case, api)
+    model = _add_damping(case, api, model)
+    model = _add_contacts(case, api, model)
+    model = _add_cubic_springs(case, api, model)
+    model = _add_forces(case, api, model)
+    full = model
+    if "reduction" in d and "craig_bampton" in d["reduction"]:
+        import femodes as fm
+
+        model = api("reduction", "craig_bampton", fm.craig_bampton, model, d["reduction"]["craig_bampton"])
+    if "outputs" in d and "response_dof" in d["outputs"]:
+        api("outputs", "response_dof", model.dof, _location(d["outputs"]["response_dof"]), "response_dof")
+    return model, full
+
+
+def _discrete_model(case: Case, api: _Api):
+    """[model] kind = "discrete": a StructuralModel from M, K (and C, dof_names)."""
     import numpy as np
 
     import femodes as fm
 
-    api = _Api(case)
-    d = case.data
-    m = d["model"]
-    kind = m["kind"]
-    if kind == "discrete":
+    m = case.data["model"]
 
-        def matrix(k):
-            v = m[k]
-            if isinstance(v, list) and (not v or len({len(r) for r in v}) != 1 or len(v) != len(v[0])):
-                raise case.error("model", k, f"{k} must be a square matrix like [[1.0, 0.0], [0.0, 1.0]] (n rows of "
-                                 f"n numbers), got {_fmt(v)}")
-            return np.atleast_2d(np.asarray(v, dtype=float))
+    def matrix(k):
+        v = m[k]
+        if isinstance(v, list) and (not v or len({len(r) for r in v}) != 1 or len(v) != len(v[0])):
+            raise case.error("model", k, f"{k} must be a square matrix like [[1.0, 0.0], [0.0, 1.0]] (n rows of "
+                             f"n numbers), got {_fmt(v)}")
+        return np.atleast_2d(np.asarray(v, dtype=float))
 
-        args = dict(M=matrix("M"), K=matrix("K"), C=matrix("C") if "C" in m else None, dof_names=m.get("dof_names"))
-        model = api("model", ["M", "K", "C", "dof_names"], fm.StructuralModel, **args)
-    else:
-        mesh_t = d["mesh"]
-        if "file" in mesh_t:
-            f = Path(mesh_t["file"])
-            if not f.is_absolute():
-                f = case.path.parent / f
-            if not f.is_file():
-                raise case.error("mesh", "file", f"mesh file {str(f)!r} does not exist")
-            mesh = api("mesh", "file", fm.load_mesh, str(f))
-        else:
-            mesh = api("mesh", ["boundaries", "n_elements", "length", "grading"], fm.line_mesh,
-                       mesh_t.get("length", 1.0), mesh_t["n_elements"], boundaries=mesh_t.get("boundaries"),
-                       grading=mesh_t.get("grading", 1.0))
-        mat = api("model", ["E", "rho"], fm.Material, E=m["E"], rho=m["rho"])
-        sec = api("model", ["area", "inertia"], fm.Section, area=m["area"], inertia=m.get("inertia"))
-        if kind == "beam":
-            model = api("model", ["clamped", "pinned"], fm.beam, mesh, mat, sec, clamped=m.get("clamped"),
-                        pinned=m.get("pinned"))
-        else:
-            model = api("model", ["clamped"], fm.bar, mesh, mat, sec, clamped=m.get("clamped"))
-    if "damping" in d:
-        dm = d["damping"]
-        keys = list(dm)
-        if "modal" in dm:
-            if "alpha" in dm or "beta" in dm:
-                raise case.error("damping", "modal", "give either Rayleigh alpha/beta or modal, not both")
-            model = api("damping", "modal", model.with_damping, modal=dm["modal"])
-        else:
-            model = api("damping", keys, model.with_damping, alpha=dm.get("alpha", 0.0), beta=dm.get("beta", 0.0))
+    args = dict(M=matrix("M"), K=matrix("K"), C=matrix("C") if "C" in m else None, dof_names=m.get("dof_names"))
+    return api("model", ["M", "K", "C", "dof_names"], fm.StructuralModel, **args)
+
+
+def _mesh(case: Case, api: _Api):
+    """The mesh of [mesh]: read from ``file`` or a straight line mesh."""
+    import femodes as fm
+
+    mesh_t = case.data["mesh"]
+    if "file" in mesh_t:
+        f = Path(mesh_t["file"])
+        if not f.is_absolute():
+            f = case.path.parent / f
+        if not f.is_file():
+            raise case.error("mesh", "file", f"mesh file {str(f)!r} does not exist")
+        return api("mesh", "file", fm.load_mesh, str(f))
+    return api("mesh", ["boundaries", "n_elements", "length", "grading"], fm.line_mesh,
+               mesh_t.get("length", 1.0), mesh_t["n_elements"], boundaries=mesh_t.get("boundaries"),
+               grading=mesh_t.get("grading", 1.0))
+
+
+def _fe_model(case: Case, api: _Api):
+    """[model] kind = "beam" | "bar" on the mesh of [mesh]."""
+    import femodes as fm
+
+    m = case.data["model"]
+    mesh = _mesh(case, api)
+    mat = api("model", ["E", "rho"], fm.Material, E=m["E"], rho=m["rho"])
+    sec = api("model", ["area", "inertia"], fm.Section, area=m["area"], inertia=m.get("inertia"))
+    if m["kind"] == "beam":
+        return api("model", ["clamped", "pinned"], fm.beam, mesh, mat, sec, clamped=m.get("clamped"),
+                   pinned=m.get("pinned"))
+    return api("model", ["clamped"], fm.bar, mesh, mat, sec, clamped=m.get("clamped"))
+
+
+def _add_damping(case: Case, api: _Api, model):
+    if "damping" not in case.data:
+        return model
+    dm = case.data["damping"]
+    if "modal" in dm:
+        if "alpha" in dm or "beta" in dm:
+            raise case.error("damping", "modal", "give either Rayleigh alpha/beta or modal, not both")
+        return api("damping", "modal", model.with_damping, modal=dm["modal"])
+    return api("damping", list(dm), model.with_damping, alpha=dm.get("alpha", 0.0), beta=dm.get("beta", 0.0))
+
+
+def _add_contacts(case: Case, api: _Api, model):
+    import femodes as fm
+
     for i, c in enumerate(case.tables("contact")):
         at = _location(c["at"])
         if c.get("law", "complementarity") == "penalty":
@@ -500,21 +580,26 @@ def build_model(case: Case):
         else:
             law = api("contact", ["at", "gap", "c"], fm.UnilateralContact, at=at, gap=c["gap"], c=c.get("c"), index=i)
         model = api("contact", ["at", "gap"], model.with_contact, law, index=i)
+    return model
+
+
+def _add_cubic_springs(case: Case, api: _Api, model):
+    import femodes as fm
+
     for i, s in enumerate(case.tables("cubic")):
         law = api("cubic", ["at", "k3"], fm.CubicSpring, at=_location(s["at"]), k3=s["k3"], index=i)
         model = api("cubic", ["at", "k3"], model.with_nonlinearity, law, index=i)
-    forces = []
+    return model
+
+
+def _add_forces(case: Case, api: _Api, model):
+    import femodes as fm
+
     for i, f in enumerate(case.tables("force")):
         hf = api("force", ["at", "amplitude", "harmonic", "phase"], fm.HarmonicForce, at=_location(f["at"]),
                  amplitude=f.get("amplitude", 1.0), harmonic=f.get("harmonic", 1), phase=f.get("phase", 0.0), index=i)
-        forces.append(hf)
         model = api("force", ["at"], model.with_forcing, hf, index=i)
-    full = model
-    if "reduction" in d and "craig_bampton" in d["reduction"]:
-        model = api("reduction", "craig_bampton", fm.craig_bampton, model, d["reduction"]["craig_bampton"])
-    if "outputs" in d and "response_dof" in d["outputs"]:
-        api("outputs", "response_dof", model.dof, _location(d["outputs"]["response_dof"]), "response_dof")
-    return model, full
+    return model
 
 
 class OutputFolderError(ValueError):
@@ -566,10 +651,28 @@ def run_case(case: Case, out: Path, *, progress: bool | Callable = False) -> Cas
     ``progress`` goes to the analysis: ``True`` logs points at INFO, a callable receives every
     accepted continuation point (the command line's :class:`~femodes.app.progress.BranchProgress`).
     """
+    model, _full = build_model(case)
+    branch = _run_analysis(case, model, progress)
+    outs = {"plot": True, "branch": "branch.npz", "animation": True, "gif": False}
+    outs.update(case.data.get("outputs", {}))
+    out.mkdir(parents=True, exist_ok=True)
+    files, lines = [], _summary_lines(case, model, branch)
+    if outs["branch"]:
+        files.append(branch.save(out / outs["branch"]))
+    if outs["plot"]:
+        files.append(_write_plot(case, model, branch, out))
+    _write_animations(model, branch, out, outs, files, lines)
+    summary = out / "summary.txt"
+    files.append(summary)
+    summary.write_text("\n".join(lines) + "\n")
+    return CaseResult(branch=branch, model=model, files=files, lines=lines)
+
+
+def _run_analysis(case: Case, model, progress):
+    """The [analysis] of the case on ``model``: its branch."""
     import femodes as fm
     from ..analyses import frequency_response_options
 
-    model, full = build_model(case)
     api = _Api(case)
     an = case.data["analysis"]
     H = api("analysis", "harmonics", fm.Harmonics, an.get("harmonics", 10))
@@ -577,18 +680,16 @@ def run_case(case: Case, out: Path, *, progress: bool | Callable = False) -> Cas
     if "max_points" in an:
         opts["max_points"] = an["max_points"]
     if an["type"] == "nonlinear_mode":
-        branch = api("analysis", ["mode", "energy", "harmonics"], fm.nonlinear_mode, model, an.get("mode", 1),
-                     energy=tuple(an["energy"]), harmonics=H, progress=progress)
-    else:
-        options = frequency_response_options(**opts) if opts else None
-        branch = api("analysis", ["omega", "harmonics"], fm.frequency_response, model, tuple(an["omega"]), H,
-                     options=options, progress=progress)
-    outs = {"plot": True, "branch": "branch.npz", "animation": True, "gif": False}
-    outs.update(case.data.get("outputs", {}))
-    out.mkdir(parents=True, exist_ok=True)
-    files, lines = [], []
-    lines.append(f"case: {case.name}")
-    lines.append(f"model: {model!r}")
+        return api("analysis", ["mode", "energy", "harmonics"], fm.nonlinear_mode, model, an.get("mode", 1),
+                   energy=tuple(an["energy"]), harmonics=H, progress=progress)
+    options = frequency_response_options(**opts) if opts else None
+    return api("analysis", ["omega", "harmonics"], fm.frequency_response, model, tuple(an["omega"]), H,
+               options=options, progress=progress)
+
+
+def _summary_lines(case: Case, model, branch) -> list[str]:
+    """The first lines of summary.txt: case, model and what the branch found."""
+    lines = [f"case: {case.name}", f"model: {model!r}"]
     lines.append(f"{branch.kind}: {len(branch)} points, success={branch.success} ({branch.message}), "
                  f"w from {branch.omega[0]:.6g} to {branch.omega[-1]:.6g} rad/s (min {branch.omega.min():.6g}, "
                  f"max {branch.omega.max():.6g}), energy {branch.energy.min():.4g}..{branch.energy.max():.4g}")
@@ -596,41 +697,48 @@ def run_case(case: Case, out: Path, *, progress: bool | Callable = False) -> Cas
         lines.append(f"max |xi| (artificial damping) = {abs(branch.xi).max():.2e}")
     if len(branch.folds):
         lines.append(f"folds at w = {', '.join(f'{w:.6g}' for w in branch.omega[list(branch.folds)])}")
-    if outs["branch"]:
-        files.append(branch.save(out / outs["branch"]))
-    if outs["plot"]:
-        import matplotlib
+    return lines
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
 
-        fig, ax = plt.subplots(figsize=(7, 4))
-        if an["type"] == "nonlinear_mode":
-            fm.plot.frequency_energy(branch, ax=ax)
-            png = out / "frequency_energy.png"
-        else:
-            rd = case.data.get("outputs", {}).get("response_dof")
-            dof = model.dof(_location(rd)) if rd is not None else model.forces[0].dof
-            fm.plot.frequency_response(branch, dof, ax=ax)
-            png = out / "response.png"
-        ax.set_title(f"{case.path.name}: {branch.kind}")
-        fig.tight_layout()
-        fig.savefig(png, dpi=120)
-        plt.close(fig)
-        files.append(png)
+def _write_plot(case: Case, model, branch, out: Path) -> Path:
+    """frequency_energy.png (nonlinear mode) or response.png (frequency response) in ``out``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    import femodes as fm
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    if case.data["analysis"]["type"] == "nonlinear_mode":
+        fm.plot.frequency_energy(branch, ax=ax)
+        png = out / "frequency_energy.png"
+    else:
+        rd = case.data.get("outputs", {}).get("response_dof")
+        dof = model.dof(_location(rd)) if rd is not None else model.forces[0].dof
+        fm.plot.frequency_response(branch, dof, ax=ax)
+        png = out / "response.png"
+    ax.set_title(f"{case.path.name}: {branch.kind}")
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+    return png
+
+
+def _write_animations(model, branch, out: Path, outs: dict, files: list, lines: list) -> None:
+    """Animation of the last point (VTK series and/or gif); appends to ``files`` and ``lines``."""
+    import femodes as fm
+
     last = branch[len(branch) - 1]
-    if outs["animation"] or outs["gif"]:
-        if model.fe is None and not getattr(model, "is_reduced", False):
-            lines.append("animation skipped: a discrete model has no mesh")
-        else:
-            if outs["animation"]:
-                files.append(fm.io.write_animation(last, model, out / "animation", n_frames=24))
-            if outs["gif"]:
-                try:
-                    files.append(fm.viz.animate(last, model, out / "animation.gif", n_frames=24))
-                except (ImportError, RuntimeError) as exc:
-                    lines.append(f"gif skipped: {exc}")
-    summary = out / "summary.txt"
-    files.append(summary)
-    summary.write_text("\n".join(lines) + "\n")
-    return CaseResult(branch=branch, model=model, files=files, lines=lines)
+    if not (outs["animation"] or outs["gif"]):
+        return
+    if model.fe is None and not getattr(model, "is_reduced", False):
+        lines.append("animation skipped: a discrete model has no mesh")
+        return
+    if outs["animation"]:
+        files.append(fm.io.write_animation(last, model, out / "animation", n_frames=24))
+    if outs["gif"]:
+        try:
+            files.append(fm.viz.animate(last, model, out / "animation.gif", n_frames=24))
+        except (ImportError, RuntimeError) as exc:
+            lines.append(f"gif skipped: {exc}")

@@ -146,12 +146,8 @@ def _band(ax, branch, indices, color, label):
     ax.plot(branch.omega, y, "-", lw=7, alpha=0.3, color=color, solid_capstyle="round", zorder=1, label=label)
 
 
-def _frequency_energy_figure(plt, fm, backbone, forced, *, e_graze, w1, irs, forced_irs, tip, shown, png: Path):
-    """The headline picture: backbone and forced curve (zoomed on the backbone), with the grazing
-    energy, folds, internal resonances and the animated orbit; the tip spectrum on the right."""
-    from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullLocator
-
-    fig, (ax, axh) = plt.subplots(1, 2, figsize=(11, 6.2), sharey=True, gridspec_kw={"width_ratios": [3, 1.1]})
+def _plot_branches(fm, ax, backbone, forced) -> None:
+    """Backbone and forced curve with points; the backbone on top, the folds as black markers."""
     fm.plot.frequency_energy([backbone, forced], ax=ax, show_points=True,
                              labels=[f"backbone: nonlinear mode 1 (free, undamped; CB model, H = "
                                      f"{backbone.harmonics.n_harmonics})",
@@ -164,22 +160,32 @@ def _frequency_energy_figure(plt, fm, backbone, forced, *, e_graze, w1, irs, for
         ln.set_markersize(10)
         ln.set_zorder(6)
         ln.set_label("fold of the forced response (turning point: jump, hysteresis)")
-    ax.axhline(e_graze, color="grey", ls="-.", lw=0.9,
-               label=f"grazing energy E_g = {e_graze:.3e} EI/L (tip reaches the stop)")
-    ax.axvline(w1, color="grey", ls="--", lw=0.8, label=f"linear w1 = {w1:.4f} rad/s")
+
+
+def _resonance_bands(ax, key, color, ir, backbone, irs, forced, forced_irs) -> None:
+    """Bands under the points of both branches flagged with the internal resonance ``key = (k, mode)``."""
+    first = True
+    for br, found in ((backbone, irs), (forced, forced_irs)):
+        for r in found:
+            if (r.k, r.mode) == key:
+                _band(ax, br, r.indices, color, f"harmonic {ir.k} of the tip > {IR_SHARE:.0%} of the fundamental"
+                      if first else "_")
+                first = False
+
+
+def _mark_internal_resonances(ax, backbone, forced, irs, forced_irs) -> None:
+    """One colour per internal resonance: a line at ``w_j / k`` and bands on the flagged points."""
     colors = ["tab:red", "tab:purple", "tab:brown", "tab:pink"]
     keys = list(dict.fromkeys([(r.k, r.mode) for r in irs + forced_irs]))
     for n, key in enumerate(keys):
         c = colors[n % len(colors)]
         ir = next(r for r in irs + forced_irs if (r.k, r.mode) == key)
         ax.axvline(ir.omega_line, color=c, ls=":", lw=1.5, label=ir.label)
-        first = True
-        for br, found in ((backbone, irs), (forced, forced_irs)):
-            for r in found:
-                if (r.k, r.mode) == key:
-                    _band(ax, br, r.indices, c, f"harmonic {ir.k} of the tip > {IR_SHARE:.0%} of the fundamental"
-                          if first else "_")
-                    first = False
+        _resonance_bands(ax, key, c, ir, backbone, irs, forced, forced_irs)
+
+
+def _annotate_backbone(ax, backbone, *, e_graze, w1, shown) -> None:
+    """Contact stiffening and linear part in words, and the animated orbit as a star."""
     i_top = int(np.argmax(backbone.omega))
     gain = 100 * (backbone.omega[i_top] / w1 - 1)
     ax.annotate(f"contact stiffening\n{w1:.3f} -> {backbone.omega[i_top]:.3f} rad/s (+{gain:.1f} %)",
@@ -190,14 +196,20 @@ def _frequency_energy_figure(plt, fm, backbone, forced, *, e_graze, w1, irs, for
                 arrowprops={"arrowstyle": "->", "color": "0.4"})
     ax.plot([shown.omega], [shown.energy], "*", ms=15, color="gold", mec="k", zorder=7,
             label="orbit animated in mode1.gif / mode1.pvd")
-    # zoom on the backbone; the forced curve continues to both sides (computed on 3.0 .. 4.2)
+
+
+def _frame_branch_axes(ax, backbone, forced, *, e_graze, w1) -> None:
+    """Zoom on the backbone (the forced curve continues to both sides), labels, no own legend."""
     ax.set_xlim(w1 - 0.12, max([backbone.omega.max(), *forced.omega[list(forced.folds)]]) + 0.1)
     ax.set_ylim(0.3 * e_graze, 1.5 * max(backbone.energy.max(), forced.energy.max()))
     ax.set_xlabel(f"w [rad/s]   (dimensionless: {UNITS})")
     ax.set_ylabel("energy [EI/L]   (period average of kinetic + strain energy)")
     ax.set_title("cantilever with a tip stop (gap 0.01 L): contact stiffens mode 1", fontsize=11)
     ax.get_legend().remove()
-    # right panel: the spectrum of the tip motion along the backbone explains the labels
+
+
+def _spectrum_panel(axh, backbone, *, tip, irs, e_graze) -> None:
+    """Right panel: the spectrum of the tip motion along the backbone (explains the resonance labels)."""
     amps = np.array([harmonic_amplitudes(s, tip) for s in backbone])
     shares = amps[:, 2:] / amps[:, [1]]
     top = sorted(np.argsort(shares.max(axis=0))[::-1][:3] + 2)
@@ -214,11 +226,32 @@ def _frequency_energy_figure(plt, fm, backbone, forced, *, e_graze, w1, irs, for
     axh.set_title("backbone: spectrum of the tip motion", fontsize=10)
     axh.grid(True, which="both", alpha=0.3)
     axh.legend(fontsize=7, loc="upper left")
+
+
+def _energy_ratio_axis(axh, e_graze) -> None:
+    """Secondary axis on the right: energy in units of the grazing energy."""
+    from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullLocator
+
     sec = axh.secondary_yaxis("right", functions=(lambda e: e / e_graze, lambda r: r * e_graze))
     sec.set_ylabel("E / E_g  (energy / grazing energy)")
     sec.yaxis.set_major_locator(FixedLocator([0.5, 1, 1.5, 2, 3, 5, 10, 20]))
     sec.yaxis.set_minor_locator(NullLocator())
     sec.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+
+
+def _frequency_energy_figure(plt, fm, backbone, forced, *, e_graze, w1, irs, forced_irs, tip, shown, png: Path):
+    """The headline picture: backbone and forced curve (zoomed on the backbone), with the grazing
+    energy, folds, internal resonances and the animated orbit; the tip spectrum on the right."""
+    fig, (ax, axh) = plt.subplots(1, 2, figsize=(11, 6.2), sharey=True, gridspec_kw={"width_ratios": [3, 1.1]})
+    _plot_branches(fm, ax, backbone, forced)
+    ax.axhline(e_graze, color="grey", ls="-.", lw=0.9,
+               label=f"grazing energy E_g = {e_graze:.3e} EI/L (tip reaches the stop)")
+    ax.axvline(w1, color="grey", ls="--", lw=0.8, label=f"linear w1 = {w1:.4f} rad/s")
+    _mark_internal_resonances(ax, backbone, forced, irs, forced_irs)
+    _annotate_backbone(ax, backbone, e_graze=e_graze, w1=w1, shown=shown)
+    _frame_branch_axes(ax, backbone, forced, e_graze=e_graze, w1=w1)
+    _spectrum_panel(axh, backbone, tip=tip, irs=irs, e_graze=e_graze)
+    _energy_ratio_axis(axh, e_graze)
     handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=7.5, frameon=False)
     fig.tight_layout(rect=(0, 0.13, 1, 1))
@@ -226,21 +259,56 @@ def _frequency_energy_figure(plt, fm, backbone, forced, *, e_graze, w1, irs, for
     plt.close(fig)
 
 
-def run_demo(out: Path) -> dict:
-    """The demo: cantilever, tip contact node, linear modes, Craig-Bampton, backbone and forced
-    response; returns ``{"lines", "plot", "out", "files"}`` (printed lines, the mode plot, the
-    folder and the files actually written)."""
-    import femodes as fm
+@dataclasses.dataclass(frozen=True)
+class _LinearPart:
+    """The cantilever, its contact model, the Craig-Bampton reduction and their linear modes."""
 
-    t_start = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
+    mesh: object
+    source: str
+    bare_omega: np.ndarray  # the beam without the contact node
+    gap: float
+    model: object
+    full: object            # linear modes of the full model with the contact node
+    rom: object
+    red: object             # linear modes of the reduced model
+
+
+@dataclasses.dataclass(frozen=True)
+class _NonlinearPart:
+    """Backbone of mode 1 and forced response of the reduced model, and what the demo reads off them."""
+
+    H: object
+    tip: int                # contact DOF of the reduced model
+    e_graze: float
+    backbone: object
+    forced: object
+    forced_rom: object
+    w1: float
+    irs: list
+    forced_irs: list
+    i_top: int              # the stiffest backbone point: the animated orbit
+    n_frames: int
+    k_max: int
+
+    @property
+    def shown(self):
+        return self.backbone[self.i_top]
+
+    @property
+    def flagged(self) -> list[int]:
+        return sorted({i for r in self.irs for i in r.indices})
+
+
+def _cantilever_mesh(fm):
     path = _find_mesh("cantilever.msh")
     if path is not None:
-        mesh = fm.load_mesh(path)
-        source = str(path)
-    else:  # installed without the repository's meshes/: the same mesh built in code
-        mesh = fm.line_mesh(1.0, 40, boundaries={"clamp": 0.0, "tip": 1.0})
-        source = "line_mesh(1.0, 40)"
+        return fm.load_mesh(path), str(path)
+    # installed without the repository's meshes/: the same mesh built in code
+    return fm.line_mesh(1.0, 40, boundaries={"clamp": 0.0, "tip": 1.0}), "line_mesh(1.0, 40)"
+
+
+def _linear_part(fm) -> _LinearPart:
+    mesh, source = _cantilever_mesh(fm)
     bare = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
     bare_omega = fm.linear_modes(bare, n=4).omega
     gap = 0.01
@@ -248,18 +316,26 @@ def run_demo(out: Path) -> dict:
     full = fm.linear_modes(model, n=4)
     rom = fm.craig_bampton(model, n_modes=10)
     red = fm.linear_modes(rom, n=6)
-    exact = np.array([1.8751040687, 4.6940911330, 7.8547574382, 10.9955407349]) ** 2
+    return _LinearPart(mesh=mesh, source=source, bare_omega=bare_omega, gap=gap, model=model, full=full, rom=rom,
+                       red=red)
 
+
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    png = out / "cantilever_modes.png"
-    _modes_figure(plt, model, rom, full, red, png)
+    return plt
+
+
+def _linear_lines(lin: _LinearPart) -> list[str]:
+    """The mesh and model sizes, and the table of linear frequencies (analytic, full, Craig-Bampton)."""
+    exact = np.array([1.8751040687, 4.6940911330, 7.8547574382, 10.9955407349]) ** 2
+    bare_omega, full, red = lin.bare_omega, lin.full, lin.red
     lines = [
-        f"mesh: {source} ({mesh.t.shape[1]} elements), model: {model.n_dofs} DOFs, reduced: {rom.n_dofs} DOFs; "
-        f"units: {UNITS} (w in rad/s, lengths in L, energy in EI/L)",
+        f"mesh: {lin.source} ({lin.mesh.t.shape[1]} elements), model: {lin.model.n_dofs} DOFs, reduced: "
+        f"{lin.rom.n_dofs} DOFs; units: {UNITS} (w in rad/s, lengths in L, energy in EI/L)",
         "mode  beam w [rad/s]   analytic err   with contact node w   CB w [rad/s]   CB err",
     ]
     for j in range(4):
@@ -267,11 +343,15 @@ def run_demo(out: Path) -> dict:
             f"{j + 1:4d}  {bare_omega[j]:14.8f}   {bare_omega[j] / exact[j] - 1:12.2e}   {full.omega[j]:19.8f}   "
             f"{red.omega[j]:12.8f}   {red.omega[j] / full.omega[j] - 1:8.2e}"
         )
+    return lines
 
-    # Nonlinear: backbone of mode 1 of the reduced model (H = 10) and a forced response, both with
-    # small continuation steps so that the drawn curves are the solution, not straight chords.
+
+def _nonlinear_part(fm, lin: _LinearPart, out: Path) -> _NonlinearPart:
+    """Backbone of mode 1 of the reduced model (H = 10) and a forced response (saved to ``out``), both
+    with small continuation steps so that the drawn curves are the solution, not straight chords."""
+    model, rom, full, red = lin.model, lin.rom, lin.full, lin.red
     tip = rom.dof("tip")
-    e_graze = (gap / full.shapes[model.dof("tip"), 0]) ** 2 * full.omega[0] ** 2 / 2
+    e_graze = (lin.gap / full.shapes[model.dof("tip"), 0]) ** 2 * full.omega[0] ** 2 / 2
     H = fm.Harmonics(10)
     newton = fm.NewtonOptions(atol=1e-9, max_iter=20)
     backbone = fm.nonlinear_mode(rom, 1, energy=(ENERGY_SPAN[0] * e_graze, ENERGY_SPAN[1] * e_graze), harmonics=H,
@@ -282,61 +362,64 @@ def run_demo(out: Path) -> dict:
                                    options=fm.ContinuationOptions(step=0.05, max_step=FORCED_MAX_STEP, newton=newton))
     backbone.save(out / "backbone.npz")
     forced.save(out / "forced.npz")
-
-    w1 = float(red.omega[0])
-    irs = internal_resonances(backbone, tip, red.omega)
-    forced_irs = internal_resonances(forced, forced_rom.dof("tip"), red.omega)
-    flagged = sorted({i for r in irs for i in r.indices})
     # The animated orbit: the stiffest one (top of the stiffening, mode 1 still dominates).
     i_top = int(np.argmax(backbone.omega))
-    sol = backbone[i_top]
-    n_frames, k_max = frames_for(sol, tip)
+    n_frames, k_max = frames_for(backbone[i_top], tip)
+    return _NonlinearPart(H=H, tip=tip, e_graze=e_graze, backbone=backbone, forced=forced, forced_rom=forced_rom,
+                          w1=float(red.omega[0]), irs=internal_resonances(backbone, tip, red.omega),
+                          forced_irs=internal_resonances(forced, forced_rom.dof("tip"), red.omega), i_top=i_top,
+                          n_frames=n_frames, k_max=k_max)
 
-    png2 = out / "frequency_energy.png"
-    _frequency_energy_figure(plt, fm, backbone, forced, e_graze=e_graze, w1=w1, irs=irs, forced_irs=forced_irs,
-                             tip=tip, shown=sol, png=png2)
 
-    # What the pictures show, in plain words.
-    pen_bb = backbone.penetration
-    lines.append(
-        f"backbone (nonlinear mode 1, H = {H.n_harmonics}): {len(backbone)} points from {ENERGY_SPAN[0]:g} to "
+def _backbone_lines(nl: _NonlinearPart, gap: float) -> list[str]:
+    """The backbone in plain words: linear part, contact stiffening, internal resonances."""
+    backbone, e_graze, w1, i_top = nl.backbone, nl.e_graze, nl.w1, nl.i_top
+    lines = [
+        f"backbone (nonlinear mode 1, H = {nl.H.n_harmonics}): {len(backbone)} points from {ENERGY_SPAN[0]:g} to "
         f"{ENERGY_SPAN[1]:g} E_g; E_g = {e_graze:.4g} EI/L is the grazing energy (the tip just reaches the stop, "
-        f"gap {gap:g} L)"
-    )
-    lines.append(f"  below E_g: linear, w = w1 = {w1:.4f} rad/s")
-    lines.append(
+        f"gap {gap:g} L)",
+        f"  below E_g: linear, w = w1 = {w1:.4f} rad/s",
         f"  above E_g: contact stiffens mode 1, w rises to {backbone.omega[i_top]:.4f} rad/s "
-        f"(+{100 * (backbone.omega[i_top] / w1 - 1):.1f} %) at E = {backbone.energy[i_top] / e_graze:.2f} E_g"
-    )
-    for r in irs:
+        f"(+{100 * (backbone.omega[i_top] / w1 - 1):.1f} %) at E = {backbone.energy[i_top] / e_graze:.2f} E_g",
+    ]
+    for r in nl.irs:
         lines.append(
             f"  {r.label} from E = {backbone.energy[r.indices[0]] / e_graze:.2f} E_g: harmonic {r.k} of the tip "
             f"motion reaches {r.max_share:.0%} of the fundamental, energy flows into mode {r.mode} and the backbone "
             f"bends back towards w{r.mode}/{r.k}"
         )
-    if not irs:
+    if not nl.irs:
         lines.append(f"  no internal resonance (no harmonic k >= 2 above {IR_SHARE:.0%} of the fundamental "
                      f"with k w within {IR_TOLERANCE:.0%} of a linear frequency)")
+    return lines
+
+
+def _forced_lines(nl: _NonlinearPart, gap: float) -> list[str]:
+    """The forced response (folds, internal resonance) and the contact quality of both branches."""
+    backbone, forced, e_graze, flagged = nl.backbone, nl.forced, nl.e_graze, nl.flagged
+    pen_bb = backbone.penetration
     fold_w = " and ".join(f"{w:.4f}" for w in forced.omega[list(forced.folds)])
-    lines.append(
+    before = f" ({100 * pen_bb[:flagged[0]].max() / gap:.1f} % before the internal resonance)" if flagged else ""
+    return [
         f"forced response (tip force 0.004 cos wt, mass-proportional damping 0.02): {len(forced)} points; "
         + (f"folds at w = {fold_w} rad/s (it jumps between them: hysteresis)" if forced.folds else "no folds")
         + "".join(f"; it climbs the {r.k}:1 internal resonance up to {forced.energy[list(r.indices)].max() / e_graze:.1f} E_g"
-                  for r in forced_irs[:1])
-    )
-    before = f" ({100 * pen_bb[:flagged[0]].max() / gap:.1f} % before the internal resonance)" if flagged else ""
-    lines.append(
-        f"contact quality (Fourier series truncated at H = {H.n_harmonics}): max penetration "
+                  for r in nl.forced_irs[:1]),
+        f"contact quality (Fourier series truncated at H = {nl.H.n_harmonics}): max penetration "
         f"{pen_bb.max():.1e} = {100 * pen_bb.max() / gap:.1f} % of the gap on the backbone{before}, "
-        f"{forced.penetration.max():.1e} = {100 * forced.penetration.max() / gap:.0f} % on the forced response"
-    )
+        f"{forced.penetration.max():.1e} = {100 * forced.penetration.max() / gap:.0f} % on the forced response",
+    ]
 
-    # Animations of the stiffest backbone orbit: ParaView series and a rendered GIF.
+
+def _animations(fm, nl: _NonlinearPart, rom, gap: float, out: Path, lines: list[str]):
+    """ParaView series and rendered GIF of the stiffest backbone orbit; appends their lines, returns ``(pvd, gif)``
+    (``gif`` None when the optional rendering stack is missing)."""
+    sol, e_graze, n_frames = nl.shown, nl.e_graze, nl.n_frames
     pvd = fm.io.write_animation(sol, rom, out / "mode1", n_frames=n_frames)
     lines.append(
         f"animated orbit (the stiffest, star on the plot): w = {sol.omega:.4f} rad/s, E = {sol.energy / e_graze:.2f} E_g, "
         f"max penetration {sol.penetration:.1e} = {100 * sol.penetration / gap:.1f} % of the gap; {n_frames} frames "
-        f"per period (>= {FRAMES_PER_PERIOD} per period of harmonic {k_max}, the highest above {FRAME_SHARE:.0%} of the "
+        f"per period (>= {FRAMES_PER_PERIOD} per period of harmonic {nl.k_max}, the highest above {FRAME_SHARE:.0%} of the "
         f"tip amplitude)"
     )
     lines.append(f"ParaView time series: {pvd.name} (+ {pvd.stem}_*.vtu)")
@@ -348,6 +431,32 @@ def run_demo(out: Path) -> dict:
         lines.append(f"rendered animation: {gif.name} (the contact node turns red while it is inside the stop)")
     except (ImportError, RuntimeError) as exc:  # optional rendering stack (pyvista + EGL)
         lines.append(f"rendered animation skipped: {exc}")
+    return pvd, gif
+
+
+def run_demo(out: Path) -> dict:
+    """The demo: cantilever, tip contact node, linear modes, Craig-Bampton, backbone and forced
+    response; returns ``{"lines", "plot", "out", "files"}`` (printed lines, the mode plot, the
+    folder and the files actually written)."""
+    import femodes as fm
+
+    t_start = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    lin = _linear_part(fm)
+    plt = _pyplot()
+    png = out / "cantilever_modes.png"
+    _modes_figure(plt, lin.model, lin.rom, lin.full, lin.red, png)
+    lines = _linear_lines(lin)
+
+    nl = _nonlinear_part(fm, lin, out)
+    png2 = out / "frequency_energy.png"
+    _frequency_energy_figure(plt, fm, nl.backbone, nl.forced, e_graze=nl.e_graze, w1=nl.w1, irs=nl.irs,
+                             forced_irs=nl.forced_irs, tip=nl.tip, shown=nl.shown, png=png2)
+    # What the pictures show, in plain words.
+    lines += _backbone_lines(nl, lin.gap)
+    lines += _forced_lines(nl, lin.gap)
+    pvd, gif = _animations(fm, nl, lin.rom, lin.gap, out, lines)
+
     lines.append(f"run time {time.perf_counter() - t_start:.1f} s")
     (out / "summary.txt").write_text("\n".join(lines) + "\n")
     files = [png, png2, pvd, *([gif] if gif is not None else []), out / "summary.txt", out / "backbone.npz",

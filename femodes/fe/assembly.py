@@ -161,51 +161,97 @@ def build_fe_model(
     M = sp.csr_matrix(M)
     K = sp.csr_matrix(K)
     _check_assembled(owner, mesh, M, K)
-    added = {"point_masses": ([], []), "springs": ([], [])}
     locations = {name: _location_node(mesh, name, owner, "mesh boundaries") for name in (mesh.boundaries or {})}
+    dofs = _NodalDofs(owner=owner, mesh=mesh, nodal=nodal, components=tuple(components), aliases=aliases)
+    constrained = _constrained_dofs(dofs, constraints)
+    added_mass = _lumped_values(dofs, "point_masses", point_masses)
+    added_stiffness = _lumped_values(dofs, "springs", springs)
+    M = _add_diagonal(M, added_mass, n_full)
+    K = _add_diagonal(K, added_stiffness, n_full)
+    free, node_dof = _free_dofs(owner, nodal, n_full, constrained, constraints)
+    dofmap = DofMap(
+        n_dofs=free.size,
+        components=tuple(components),
+        node_dof=node_dof,
+        locations=locations,
+        constrained_by=constrained,
+        aliases=dict(aliases),
+        labels=tuple(_dof_labels(mesh, components, free, node_dof, locations)),
+    )
+    fe = FEInfo(kind=kind, mesh=mesh, basis=basis, free=free, n_full=n_full, nodal=nodal, components=tuple(components))
+    return StructuralModel(M=_on_free_dofs(M, free), K=_on_free_dofs(K, free), dofmap=dofmap, fe=fe)
 
-    def comp_index(comp: str, arg: str) -> int:
-        c = aliases.get(comp, comp)
-        if c not in components:
-            raise ValueError(f"{owner}: {arg} uses unknown component {comp!r}; components are {list(components)}")
-        return components.index(c)
 
-    def resolve(at: Any, arg: str) -> tuple[int, int]:
+@dataclass(frozen=True, eq=False)
+class _NodalDofs:
+    """Resolves locations and component names of one FE model to nodes and component indices."""
+
+    owner: str
+    mesh: Any
+    nodal: np.ndarray
+    components: tuple
+    aliases: Mapping[str, str]
+
+    def component(self, comp: str, arg: str) -> int:
+        """Index of component ``comp`` (or its alias), else ValueError naming ``arg``."""
+        c = self.aliases.get(comp, comp)
+        if c not in self.components:
+            raise ValueError(f"{self.owner}: {arg} uses unknown component {comp!r}; components are {list(self.components)}")
+        return self.components.index(c)
+
+    def node(self, name: str, arg: str) -> int:
+        """Node of the named point ``name``."""
+        return _location_node(self.mesh, name, self.owner, arg)
+
+    def resolve(self, at: Any, arg: str) -> tuple[int, int]:
+        """``(node, component index)`` of a location name or a ``(name, component)`` pair."""
         if isinstance(at, str):
             loc, c = at, 0
         elif isinstance(at, tuple) and len(at) == 2 and all(isinstance(a, str) for a in at):
-            loc, c = at[0], comp_index(at[1], arg)
+            loc, c = at[0], self.component(at[1], arg)
         else:
-            raise TypeError(f"{owner}: {arg} keys must be location names or (name, component) pairs, got {at!r}")
-        return _location_node(mesh, loc, owner, arg), c
+            raise TypeError(f"{self.owner}: {arg} keys must be location names or (name, component) pairs, got {at!r}")
+        return self.node(loc, arg), c
 
+
+def _constrained_dofs(dofs: _NodalDofs, constraints: Sequence[tuple[str, Sequence[str], str]]) -> dict:
+    """``{(node, component index): "arg='name'"}`` of every support."""
     constrained: dict = {}
     for arg, names, comps in constraints:
         for name in names:
-            node = _location_node(mesh, name, owner, arg)
+            node = dofs.node(name, arg)
             for comp in comps:
-                constrained[(node, comp_index(comp, arg))] = f"{arg}={name!r}"
+                constrained[(node, dofs.component(comp, arg))] = f"{arg}={name!r}"
+    return constrained
 
-    for arg, table in (("point_masses", point_masses), ("springs", springs)):
-        if table is None:
-            continue
-        if not isinstance(table, Mapping):
-            raise TypeError(f"{owner}: {arg} must be a mapping {{location: value}}, got {type(table).__name__}")
-        for at, value in table.items():
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not math.isfinite(value) or value < 0:
-                raise ValueError(f"{owner}: {arg}[{at!r}] must be a finite non-negative number, got {value!r}")
-            node, c = resolve(at, arg)
-            added[arg][0].append(int(nodal[c, node]))
-            added[arg][1].append(float(value))
-    for arg in added:
-        idx, vals = added[arg]
-        if idx:
-            D = sp.csr_matrix((vals, (idx, idx)), shape=(n_full, n_full))
-            if arg == "point_masses":
-                M = M + D
-            else:
-                K = K + D
 
+def _lumped_values(dofs: _NodalDofs, arg: str, table: Mapping | None) -> tuple[list, list]:
+    """Full FE DOF indices and values of a point-mass or spring table (checked)."""
+    idx: list = []
+    vals: list = []
+    if table is None:
+        return idx, vals
+    if not isinstance(table, Mapping):
+        raise TypeError(f"{dofs.owner}: {arg} must be a mapping {{location: value}}, got {type(table).__name__}")
+    for at, value in table.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not math.isfinite(value) or value < 0:
+            raise ValueError(f"{dofs.owner}: {arg}[{at!r}] must be a finite non-negative number, got {value!r}")
+        node, c = dofs.resolve(at, arg)
+        idx.append(int(dofs.nodal[c, node]))
+        vals.append(float(value))
+    return idx, vals
+
+
+def _add_diagonal(A: sp.spmatrix, added: tuple[list, list], n_full: int) -> sp.spmatrix:
+    """``A`` plus the diagonal entries ``added = (indices, values)`` (none: ``A`` itself)."""
+    idx, vals = added
+    if not idx:
+        return A
+    return A + sp.csr_matrix((vals, (idx, idx)), shape=(n_full, n_full))
+
+
+def _free_dofs(owner: str, nodal: np.ndarray, n_full: int, constrained: dict, constraints: Sequence) -> tuple[np.ndarray, np.ndarray]:
+    """Full FE index of each model DOF, and the model DOF of each (node, component) (-1: fixed)."""
     fixed_full = np.array(sorted(nodal[c, node] for node, c in constrained), dtype=int)
     free = np.setdiff1d(np.arange(n_full), fixed_full)
     if free.size == 0:
@@ -213,17 +259,20 @@ def build_fe_model(
         raise ValueError(f"{owner}: the supports ({given}) fix every DOF of the mesh; leave at least one DOF free")
     free_of_full = np.full(n_full, -1, dtype=int)
     free_of_full[free] = np.arange(free.size)
-    node_dof = free_of_full[nodal.T]  # (n_nodes, n_components)
+    return free, free_of_full[nodal.T]  # node_dof: (n_nodes, n_components)
 
-    M = M.tocsr()[free][:, free]
-    K = K.tocsr()[free][:, free]
-    # Symmetrize to round-off: assembly sums in different orders.
-    M = (0.5 * (M + M.T)).tocsr()
-    K = (0.5 * (K + K.T)).tocsr()
 
+def _on_free_dofs(A: sp.spmatrix, free: np.ndarray) -> sp.csr_matrix:
+    """``A`` restricted to the free DOFs and symmetrized to round-off (assembly sums in different orders)."""
+    A = A.tocsr()[free][:, free]
+    return (0.5 * (A + A.T)).tocsr()
+
+
+def _dof_labels(mesh: Any, components: tuple, free: np.ndarray, node_dof: np.ndarray, locations: dict) -> list:
+    """``"name.comp"`` at named points, ``"comp@x=..."`` at other nodes, ``"interior dof i"`` elsewhere."""
     x = np.asarray(mesh.p[0])
     labels = [""] * free.size
-    for node in range(nodal.shape[1]):
+    for node in range(node_dof.shape[0]):
         for c, comp in enumerate(components):
             i = node_dof[node, c]
             if i >= 0:
@@ -240,15 +289,4 @@ def build_fe_model(
             i = node_dof[node, c]
             if i >= 0:
                 labels[i] = f"{name}.{comp}"
-
-    dofmap = DofMap(
-        n_dofs=free.size,
-        components=tuple(components),
-        node_dof=node_dof,
-        locations=locations,
-        constrained_by=constrained,
-        aliases=dict(aliases),
-        labels=tuple(labels),
-    )
-    fe = FEInfo(kind=kind, mesh=mesh, basis=basis, free=free, n_full=n_full, nodal=nodal, components=tuple(components))
-    return StructuralModel(M=M, K=K, dofmap=dofmap, fe=fe)
+    return labels

@@ -219,6 +219,15 @@ def line_mesh(
     >>> m.p[0, m.boundaries["contact"]]
     array([1.5])
     """
+    length, start, grading, n = _line_arguments(length, n_elements, grading, start)
+    x = _line_coordinates(start, length, n, grading, n_elements)
+    points = _vertex_points(boundaries, x, length)
+    regions = _interval_subdomains(subdomains, x)
+    return _build(x, points, regions)
+
+
+def _line_arguments(length, n_elements, grading, start) -> tuple[float, float, float, int]:
+    """Checked ``(length, start, grading, n)`` of :func:`line_mesh`."""
     f = "line_mesh"
     length = _real(f, "argument 'length'", length, positive=True)
     start = _real(f, "argument 'start'", start)
@@ -241,65 +250,80 @@ def line_mesh(
         raise ValueError(
             f"{f}: arguments 'start' + 'length' overflow: start={start!r}, length={length!r}"
         )
+    return length, start, grading, n
 
+
+def _line_coordinates(start: float, length: float, n: int, grading: float, n_elements) -> np.ndarray:
+    """Vertex coordinates of :func:`line_mesh`, checked for element lengths that underflow."""
     x = _coordinates(start, length, n, grading)
     if not np.all(np.diff(x) > 0.0):
         raise ValueError(
-            f"{f}: element lengths underflow for length={length!r}, "
+            f"line_mesh: element lengths underflow for length={length!r}, "
             f"n_elements={n_elements!r}, grading={grading!r}, start={start!r}"
         )
+    return x
 
-    # named points
-    points: dict[str, np.ndarray] = {"left": np.array([0]), "right": np.array([n])}
-    if boundaries is not None:
-        _mapping(f, "boundaries", boundaries)
-        tol = POINT_RTOL * length
-        for key, value in boundaries.items():
-            name = _name(f, "boundaries", key)
-            c = _real(f, f"boundaries[{name!r}]", value)
-            k = int(np.argmin(np.abs(x - c)))
-            dist = abs(x[k] - c)
-            if dist > tol:
-                raise ValueError(
-                    f"{f}: boundaries[{name!r}] = {value!r} is not at a mesh vertex: "
-                    f"nearest vertex is x = {float(x[k])!r} (distance {dist:.3g} > tolerance "
-                    f"{tol:.3g}); move the point or choose n_elements/grading so that "
-                    f"a vertex falls on it"
-                )
-            if name in _RESERVED and k != points[name][0]:
-                end = "start" if name == "left" else "start + length"
-                raise ValueError(
-                    f"{f}: boundaries[{name!r}] = {value!r}: the name {name!r} is "
-                    f"reserved for the end x = {float(x[points[name][0]])!r} ({end}); use "
-                    f"another name for this point"
-                )
-            points[name] = np.array([k])
 
-    # named subdomains
+def _vertex_points(boundaries, x: np.ndarray, length: float) -> dict[str, np.ndarray]:
+    """Named points of :func:`line_mesh`: ``"left"``, ``"right"`` and ``boundaries`` snapped to vertices."""
+    f = "line_mesh"
+    points: dict[str, np.ndarray] = {"left": np.array([0]), "right": np.array([x.size - 1])}
+    if boundaries is None:
+        return points
+    _mapping(f, "boundaries", boundaries)
+    tol = POINT_RTOL * length
+    for key, value in boundaries.items():
+        name = _name(f, "boundaries", key)
+        c = _real(f, f"boundaries[{name!r}]", value)
+        k = int(np.argmin(np.abs(x - c)))
+        dist = abs(x[k] - c)
+        if dist > tol:
+            raise ValueError(
+                f"{f}: boundaries[{name!r}] = {value!r} is not at a mesh vertex: "
+                f"nearest vertex is x = {float(x[k])!r} (distance {dist:.3g} > tolerance "
+                f"{tol:.3g}); move the point or choose n_elements/grading so that "
+                f"a vertex falls on it"
+            )
+        if name in _RESERVED and k != points[name][0]:
+            end = "start" if name == "left" else "start + length"
+            raise ValueError(
+                f"{f}: boundaries[{name!r}] = {value!r}: the name {name!r} is "
+                f"reserved for the end x = {float(x[points[name][0]])!r} ({end}); use "
+                f"another name for this point"
+            )
+        points[name] = np.array([k])
+    return points
+
+
+def _interval_subdomains(subdomains, x: np.ndarray) -> dict[str, np.ndarray]:
+    """Named subdomains of :func:`line_mesh`: the elements whose midpoint lies in each interval."""
+    f = "line_mesh"
     regions: dict[str, np.ndarray] = {}
-    if subdomains is not None:
-        _mapping(f, "subdomains", subdomains)
-        mid = 0.5 * (x[:-1] + x[1:])
-        for key, value in subdomains.items():
-            name = _name(f, "subdomains", key)
-            what = f"subdomains[{name!r}]"
-            if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__") \
-                    or len(value) != 2:
-                raise TypeError(
-                    f"{f}: {what} must be an interval (x0, x1), got {value!r}"
-                )
-            x0 = _real(f, f"{what}[0]", value[0])
-            x1 = _real(f, f"{what}[1]", value[1])
-            if not x0 < x1:
-                raise ValueError(f"{f}: {what} = {value!r} must satisfy x0 < x1")
-            elems = np.nonzero((mid >= x0) & (mid <= x1))[0]
-            if elems.size == 0:
-                raise ValueError(
-                    f"{f}: {what} = {value!r} contains no element midpoint "
-                    f"(mesh spans [{float(x[0])!r}, {float(x[-1])!r}] with {n} elements)"
-                )
-            regions[name] = elems
-    return _build(x, points, regions)
+    if subdomains is None:
+        return regions
+    _mapping(f, "subdomains", subdomains)
+    n = x.size - 1
+    mid = 0.5 * (x[:-1] + x[1:])
+    for key, value in subdomains.items():
+        name = _name(f, "subdomains", key)
+        what = f"subdomains[{name!r}]"
+        if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__") \
+                or len(value) != 2:
+            raise TypeError(
+                f"{f}: {what} must be an interval (x0, x1), got {value!r}"
+            )
+        x0 = _real(f, f"{what}[0]", value[0])
+        x1 = _real(f, f"{what}[1]", value[1])
+        if not x0 < x1:
+            raise ValueError(f"{f}: {what} = {value!r} must satisfy x0 < x1")
+        elems = np.nonzero((mid >= x0) & (mid <= x1))[0]
+        if elems.size == 0:
+            raise ValueError(
+                f"{f}: {what} = {value!r} contains no element midpoint "
+                f"(mesh spans [{float(x[0])!r}, {float(x[-1])!r}] with {n} elements)"
+            )
+        regions[name] = elems
+    return regions
 
 
 # ---------------------------------------------------------------------------

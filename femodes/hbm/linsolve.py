@@ -491,19 +491,40 @@ class _Factorization:
         self.gB = np.concatenate([self.gq, s.nq + np.arange(npv)])
         nB = self.gB.size + m
         self.nB = nB
-        sc = J.scale
+        T = self._boundary_block()
+        self._add_condensed_stiffness(T)
+        if m and pat.perm.size:
+            self._add_border_coupling(T)
+        if not np.all(np.isfinite(T)):
+            raise StructureFailure("non-finite Schur complement")
+        self.norm_bound = self._norm_bound()
+        self.T = T
+        if nB:
+            self._factor_schur(T)
+
+    # -- Schur complement assembly ------------------------------------------------------------
+    def _qpos(self, row: int) -> np.ndarray:
+        """Positions in the Schur complement of the nonlinear DOFs at coefficient row ``row``."""
+        return row * self.nb + np.arange(self.nb)
+
+    def _boundary_block(self) -> np.ndarray:
+        """``J[B, B]`` without its linear part: the nonlinear part and the border entries."""
+        J, nB, nG = self.J, self.nB, self.gB.size
         T = np.zeros((nB, nB))
         # nonlinear part on the boundary (N is zero elsewhere by construction)
         NB = J.N[self.gB][:, self.gB]
-        T[: self.gB.size, : self.gB.size] = sc * NB.toarray()
+        T[:nG, :nG] = J.scale * NB.toarray()
         # border entries on the boundary
-        if m:
-            T[: self.gB.size, self.gB.size:] = J.U[self.gB]
-            T[self.gB.size:, : self.gB.size] = J.V[:, self.gB]
-            T[self.gB.size:, self.gB.size:] = J.D
-        # linear condensed stiffness per harmonic, real form [[X, Y], [-Y, X]] on (a, b)
-        qpos = lambda row: row * nb + np.arange(nb)  # noqa: E731 - positions in T of coefficient row
-        for blk in F.blocks:
+        if self.m:
+            T[:nG, nG:] = J.U[self.gB]
+            T[nG:, :nG] = J.V[:, self.gB]
+            T[nG:, nG:] = J.D
+        return T
+
+    def _add_condensed_stiffness(self, T: np.ndarray) -> None:
+        """Linear condensed stiffness per harmonic, real form ``[[X, Y], [-Y, X]]`` on ``(a, b)``."""
+        sc, qpos = self.J.scale, self._qpos
+        for blk in self.F.blocks:
             Zc = sc * blk.Zc
             ic = qpos(blk.k)
             T[np.ix_(ic, ic)] += Zc.real
@@ -512,63 +533,71 @@ class _Factorization:
                 T[np.ix_(ic, is_)] += Zc.imag
                 T[np.ix_(is_, ic)] -= Zc.imag
                 T[np.ix_(is_, is_)] += Zc.real
-        # border coupling through the interior: -J_BI J_II^-1 J_IB for the border rows/columns
-        if m and pat.perm.size:
-            I = pat.interior
-            Ui = J.U[: s.nq].reshape(nc, n, m)[:, I, :]       # (nc, nI, m)
-            Vi = J.V[:, : s.nq].reshape(m, nc, n)[:, :, I]    # (m, nc, nI)
-            off = self.gB.size
 
-            def border(blk: _Harmonic):
-                # columns: z = Z^-1 (u_c - i u_s); interior solution (Re z, -Im z)
-                rho = Ui[blk.k] - (1j * Ui[blk.s] if blk.s is not None else 0.0)
-                z = blk.lu.solve(rho)
-                # rows: y = Z^-T (v_c + i v_s); v^T R^-1 = (Re, Im) of y^T
-                mu = Vi[:, blk.k, :].T + (1j * Vi[:, blk.s, :].T if blk.s is not None else 0.0)
-                y = blk.lu.solve(mu, trans=True)
-                out = {}
-                # T[q_b rows, border cols] -= real form of Z_bI z  (scale: s * (1/s))
-                Wz = blk.Zbi @ z[pat.R]
-                out["qb_m"] = Wz
-                # T[border rows, q_b cols] -= (Re, Im) of y^T Z_Ib
-                yZ = (blk.Zib.T @ y[pat.R]).T  # (m, nb)
-                out["m_qb"] = yZ
-                # T[border, border] -= v_I . (interior solution) / s
-                vu = Vi[:, blk.k, :] @ z.real
-                if blk.s is not None:
-                    vu = vu + Vi[:, blk.s, :] @ (-z.imag)
-                out["m_m"] = vu
-                return blk, out
+    def _border_solves(self, blk: _Harmonic, Ui: np.ndarray, Vi: np.ndarray):
+        """Interior solves of one harmonic against the border columns ``Ui`` and rows ``Vi``."""
+        R = self.F.pat.R
+        # columns: z = Z^-1 (u_c - i u_s); interior solution (Re z, -Im z)
+        rho = Ui[blk.k] - (1j * Ui[blk.s] if blk.s is not None else 0.0)
+        z = blk.lu.solve(rho)
+        # rows: y = Z^-T (v_c + i v_s); v^T R^-1 = (Re, Im) of y^T
+        mu = Vi[:, blk.k, :].T + (1j * Vi[:, blk.s, :].T if blk.s is not None else 0.0)
+        y = blk.lu.solve(mu, trans=True)
+        out = {}
+        # T[q_b rows, border cols] -= real form of Z_bI z  (scale: s * (1/s))
+        Wz = blk.Zbi @ z[R]
+        out["qb_m"] = Wz
+        # T[border rows, q_b cols] -= (Re, Im) of y^T Z_Ib
+        yZ = (blk.Zib.T @ y[R]).T  # (m, nb)
+        out["m_qb"] = yZ
+        # T[border, border] -= v_I . (interior solution) / s
+        vu = Vi[:, blk.k, :] @ z.real
+        if blk.s is not None:
+            vu = vu + Vi[:, blk.s, :] @ (-z.imag)
+        out["m_m"] = vu
+        return blk, out
 
-            for blk, out in F.map(border):
-                Wz = out["qb_m"]
-                T[np.ix_(qpos(blk.k), off + np.arange(m))] -= Wz.real
-                if blk.s is not None:
-                    T[np.ix_(qpos(blk.s), off + np.arange(m))] -= -Wz.imag
-                yZ = out["m_qb"]
-                T[np.ix_(off + np.arange(m), qpos(blk.k))] -= yZ.real
-                if blk.s is not None:
-                    T[np.ix_(off + np.arange(m), qpos(blk.s))] -= yZ.imag
-                T[off:, off:] -= out["m_m"] / sc
-        if not np.all(np.isfinite(T)):
-            raise StructureFailure("non-finite Schur complement")
-        # ||J||_inf bound for the refinement test (row sums of |K|, |M|, |C - xi M| at the top harmonic)
+    def _add_border_coupling(self, T: np.ndarray) -> None:
+        """Border coupling through the interior: ``-J_BI J_II^-1 J_IB`` for the border rows/columns."""
+        J, s, qpos = self.J, self.s, self._qpos
+        nc, n, m = self.nc, s.n, self.m
+        I = self.F.pat.interior
+        Ui = J.U[: s.nq].reshape(nc, n, m)[:, I, :]       # (nc, nI, m)
+        Vi = J.V[:, : s.nq].reshape(m, nc, n)[:, :, I]    # (m, nc, nI)
+        off = self.gB.size
+        for blk, out in self.F.map(lambda blk: self._border_solves(blk, Ui, Vi)):
+            Wz = out["qb_m"]
+            T[np.ix_(qpos(blk.k), off + np.arange(m))] -= Wz.real
+            if blk.s is not None:
+                T[np.ix_(qpos(blk.s), off + np.arange(m))] -= -Wz.imag
+            yZ = out["m_qb"]
+            T[np.ix_(off + np.arange(m), qpos(blk.k))] -= yZ.real
+            if blk.s is not None:
+                T[np.ix_(off + np.arange(m), qpos(blk.s))] -= yZ.imag
+            T[off:, off:] -= out["m_m"] / J.scale
+
+    def _norm_bound(self) -> float:
+        """``||J||_inf`` bound for the refinement test (row sums of ``|K|, |M|, |C - xi M|`` at the
+        top harmonic)."""
+        J, s = self.J, self.s
+        h = s.h
         s_max = h.n_harmonics * J.omega / h.subharmonic
         rK, rM, rC = s.abs_row_sums()
         lin = rK + s_max ** 2 * rM + s_max * (rC + abs(J.xi) * rM)
         rN = float(abs(J.N).sum(axis=1).max()) if J.N.nnz else 0.0
-        self.norm_bound = (abs(sc) * (lin + rN) + float(np.abs(J.U).sum(axis=1).max(initial=0.0))
-                           + float(np.abs(np.hstack([J.V, J.D])).sum(axis=1).max(initial=0.0)))
-        self.T = T
-        if nB:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", sla.LinAlgWarning)  # zero pivots are checked below
-                lu, piv = sla.lu_factor(T, check_finite=False)
-            d = np.abs(np.diag(lu))
-            if np.any(d == 0.0):
-                raise RuntimeError("singular Jacobian (zero pivot in the condensed system)")
-            self.lu = (lu, piv)
-            self.rcond_est = float(d.min() / max(d.max(), 1e-300))
+        return (abs(J.scale) * (lin + rN) + float(np.abs(J.U).sum(axis=1).max(initial=0.0))
+                + float(np.abs(np.hstack([J.V, J.D])).sum(axis=1).max(initial=0.0)))
+
+    def _factor_schur(self, T: np.ndarray) -> None:
+        """Dense LU with partial pivoting of the Schur complement ``T``."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", sla.LinAlgWarning)  # zero pivots are checked below
+            lu, piv = sla.lu_factor(T, check_finite=False)
+        d = np.abs(np.diag(lu))
+        if np.any(d == 0.0):
+            raise RuntimeError("singular Jacobian (zero pivot in the condensed system)")
+        self.lu = (lu, piv)
+        self.rcond_est = float(d.min() / max(d.max(), 1e-300))
 
     # -- helpers on interior vectors -----------------------------------------------------------
     def _interior_solve(self, X: np.ndarray) -> np.ndarray:

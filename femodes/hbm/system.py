@@ -74,6 +74,28 @@ class _Contact:
     slot: int  # position among complementarity contacts
 
 
+class _Triplets:
+    """Dense blocks of the nonlinear Jacobian ``N``, gathered as COO triplets."""
+
+    def __init__(self):
+        self.rows: list = []
+        self.cols: list = []
+        self.vals: list = []
+
+    def block(self, ri, ci, B) -> None:
+        rr, cc = np.meshgrid(ri, ci, indexing="ij")
+        self.rows.append(rr.ravel())
+        self.cols.append(cc.ravel())
+        self.vals.append(np.asarray(B).ravel())
+
+    def matrix(self, size: int) -> sp.csr_matrix:
+        """The sparse ``size x size`` matrix (duplicates summed)."""
+        if self.rows:
+            return sp.csr_matrix((np.concatenate(self.vals), (np.concatenate(self.rows), np.concatenate(self.cols))),
+                                 shape=(size, size))
+        return sp.csr_matrix((size, size))
+
+
 class HBMSystem:
     """Harmonic balance residual and sparse Jacobian of a model (shared by all HBM problems).
 
@@ -287,9 +309,20 @@ class HBMSystem:
         dr_domega : ndarray (size,)
         dr_dxi : ndarray (size,)
         """
-        h, n, nq = self.h, self.n, self.nq
-        q = x[:nq]
-        Q = q.reshape(h.n_coef, n)
+        Q = x[: self.nq].reshape(self.h.n_coef, self.n)
+        r, dr_domega, dr_dxi = self._linear_residual(Q, omega, xi, forced)
+        jac = _Triplets()
+        self._cubic_springs(Q, r, jac)
+        self._penalty_contacts(Q, r, jac)
+        if self.n_uc:
+            self._complementarity_contacts(x, Q, r, jac)
+        N = jac.matrix(self.size)
+        return r, HarmonicBlockJacobian(self, omega, xi, N), dr_domega, dr_dxi
+
+    def _linear_residual(self, Q: np.ndarray, omega: float, xi: float, forced: bool):
+        """Linear part ``S(w) q - xi w (D1 x M) q (- f)`` of the residual and its derivatives in
+        ``w`` and ``xi`` (zero on the contact-force rows)."""
+        nq = self.nq
         MQ = _mul(self.M, Q)
         D1MQ = self.D1 @ MQ
         CQ = _mul(self.C, Q) if self.C.nnz else np.zeros_like(Q)
@@ -307,22 +340,20 @@ class HBMSystem:
         dr_domega[:nq] = dS.ravel()
         dr_dxi = np.zeros(self.size)
         dr_dxi[:nq] = -omega * D1MQ.ravel()
-        rows, cols, vals = [], [], []
+        return r, dr_domega, dr_dxi
 
-        def block(ri, ci, B):
-            rr, cc = np.meshgrid(ri, ci, indexing="ij")
-            rows.append(rr.ravel())
-            cols.append(cc.ravel())
-            vals.append(np.asarray(B).ravel())
-
-        Q = q.reshape(h.n_coef, n)
+    def _cubic_springs(self, Q: np.ndarray, r: np.ndarray, jac: "_Triplets") -> None:
+        """Cubic springs by alias-free sampling: add their forces to ``r`` and Jacobians to ``jac``."""
         for law, dof in self.cubic:
             U = Q[:, dof]
             ut = self.E @ U
             f, df = law.force(ut)
             idx = self.q_index(dof)
             r[idx] += self.Pa @ f
-            block(idx, idx, self.Pa @ (df[:, None] * self.E))
+            jac.block(idx, idx, self.Pa @ (df[:, None] * self.E))
+
+    def _penalty_contacts(self, Q: np.ndarray, r: np.ndarray, jac: "_Triplets") -> None:
+        """Penalty contacts by the projected positive part: forces into ``r``, Jacobians into ``jac``."""
         for law, dof in self.penalty:
             # the law is slope * max(0, u - offset): project the positive part of u - offset
             slope, offset = law.positive_part_form()
@@ -331,36 +362,34 @@ class HBMSystem:
             proj, G = self._positive_one(phi)
             idx = self.q_index(dof)
             r[idx] += slope * proj
-            block(idx, idx, slope * G)
-        if self.n_uc:
-            P = x[nq : self.size].reshape(h.n_coef, self.n_uc)
-            phis = np.empty((h.n_coef, self.n_uc))
-            slopes = np.empty(self.n_uc)
-            for ct in self.unilateral:
-                # the law is p - max(0, p + slope (u - offset)), slope = c
-                slope, offset = ct.law.positive_part_form(ct.c)
-                phi = P[:, ct.slot] + slope * Q[:, ct.dof]
-                phi[0] -= slope * offset
-                phis[:, ct.slot] = phi
-                slopes[ct.slot] = slope
-            proj, G = self._positive(phis)
-            eye = np.eye(h.n_coef)
-            for ct in self.unilateral:
-                qi, pi = self.q_index(ct.dof), self.p_index(ct.slot)
-                Gi = G[ct.slot]
-                pr = proj[:, ct.slot] if proj.ndim == 2 else proj
-                # contact force acts on the structure along -w_c: +p in the residual of K q = f - p
-                r[qi] += P[:, ct.slot]
-                block(qi, pi, eye)
-                r[pi] = P[:, ct.slot] - pr
-                block(pi, pi, eye - Gi)
-                block(pi, qi, -slopes[ct.slot] * Gi)
-        if rows:
-            N = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                              shape=(self.size, self.size))
-        else:
-            N = sp.csr_matrix((self.size, self.size))
-        return r, HarmonicBlockJacobian(self, omega, xi, N), dr_domega, dr_dxi
+            jac.block(idx, idx, slope * G)
+
+    def _complementarity_contacts(self, x: np.ndarray, Q: np.ndarray, r: np.ndarray, jac: "_Triplets") -> None:
+        """Signorini contacts by complementarity: contact forces on the structure rows and the
+        equations ``P - proj[max(0, P + c U_c - c g0)] = 0`` on the contact-force rows."""
+        h, nq = self.h, self.nq
+        P = x[nq : self.size].reshape(h.n_coef, self.n_uc)
+        phis = np.empty((h.n_coef, self.n_uc))
+        slopes = np.empty(self.n_uc)
+        for ct in self.unilateral:
+            # the law is p - max(0, p + slope (u - offset)), slope = c
+            slope, offset = ct.law.positive_part_form(ct.c)
+            phi = P[:, ct.slot] + slope * Q[:, ct.dof]
+            phi[0] -= slope * offset
+            phis[:, ct.slot] = phi
+            slopes[ct.slot] = slope
+        proj, G = self._positive(phis)
+        eye = np.eye(h.n_coef)
+        for ct in self.unilateral:
+            qi, pi = self.q_index(ct.dof), self.p_index(ct.slot)
+            Gi = G[ct.slot]
+            pr = proj[:, ct.slot] if proj.ndim == 2 else proj
+            # contact force acts on the structure along -w_c: +p in the residual of K q = f - p
+            r[qi] += P[:, ct.slot]
+            jac.block(qi, pi, eye)
+            r[pi] = P[:, ct.slot] - pr
+            jac.block(pi, pi, eye - Gi)
+            jac.block(pi, qi, -slopes[ct.slot] * Gi)
 
     def _positive(self, phis):
         """Projection of ``max(0, .)`` of the columns of ``phis`` (n_coef, m): (n_coef, m), (m, n_coef, n_coef)."""

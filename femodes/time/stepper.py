@@ -445,87 +445,121 @@ class _Recorder:
 
 def integrate(st: Stepper, t0: float, n_steps: int, q, v, store_every: int = 1) -> Segment:
     """Run ``n_steps`` steps from ``(q, v)`` at ``t0``; store every ``store_every`` step (and the last)."""
-    h, n, nc = st.h, st.n, st.n_contacts
     rec = _Recorder(st, n_steps, store_every, q, v)
-    store = rec.store
-    tk = t0 + h * np.arange(n_steps + 1)
-    forced = st.fidx.size > 0
-    if forced:
-        if st.fk.size:
-            fall = np.real(np.exp(1j * st.omega * np.outer(tk, st.fk)) @ st.Fk) + st.f0
-        else:
-            fall = np.tile(st.f0, (n_steps + 1, 1))
-    acc = np.zeros(nc)
+    tk = t0 + st.h * np.arange(n_steps + 1)
+    fall = _forcing_samples(st, tk, n_steps) if st.fidx.size > 0 else None
     if st.dense:
-        fx = (st.thf * fall[1:] + (1.0 - st.thf) * fall[:-1]) @ st.Gam.T if forced else None
+        q, v = _DenseRun(st, rec, tk, fall).run(q, v, n_steps)
+    else:
+        q, v = _run_sparse(st, rec, tk, fall, q, v, n_steps)
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
+        raise FloatingPointError("Moreau-Jean integration diverged (non-finite state); reduce dt")
+    return _segment(st, rec, tk)
+
+
+def _forcing_samples(st: Stepper, tk: np.ndarray, n_steps: int) -> np.ndarray:
+    """Forces on the forced DOFs at the step times ``tk`` (rows)."""
+    if st.fk.size:
+        return np.real(np.exp(1j * st.omega * np.outer(tk, st.fk)) @ st.Fk) + st.f0
+    return np.tile(st.f0, (n_steps + 1, 1))
+
+
+class _DenseRun:
+    """The loop of small models: the state ``x = [q; v]`` stepped by the dense propagators, the
+    contact impulses accumulated between stored samples."""
+
+    def __init__(self, st: Stepper, rec: _Recorder, tk: np.ndarray, fall: np.ndarray | None):
+        self.st, self.rec, self.tk = st, rec, tk
+        n = st.n
+        self.fx = (st.thf * fall[1:] + (1.0 - st.thf) * fall[:-1]) @ st.Gam.T if fall is not None else None
+        self.S, self.vS_idx = st.S, n + st.S
+        if st.uc:
+            self.ucd, self.ucv = st.uc_dof, n + st.uc_dof
+            self.inline_impact, self.minus_e = not st.impact.any_massless, -st.e  # massive contacts only: written out
+        self.acc = np.zeros(st.n_contacts)
+
+    def run(self, q, v, n_steps: int):
+        """Step ``n_steps`` times from ``(q, v)``; the final ``(q, v)``."""
+        st, rec = self.st, self.rec
+        n, nc, store = st.n, st.n_contacts, rec.store
+        Phi, fx = st.Phi, self.fx
+        forced, has_local = fx is not None, st.S.size > 0
         x = np.concatenate([q, v])
-        Phi, Psi, S = st.Phi, st.Psi, st.S
-        has_local, uc, impact = S.size > 0, st.uc, st.impact
-        vS_idx = n + S
-        if uc:
-            ucd, ucv = st.uc_dof, n + st.uc_dof
-            inline_impact, minus_e = not impact.any_massless, -st.e  # massive contacts only: written out
         for k in range(n_steps):
             xf = Phi @ x
             if forced:
                 xf += fx[k]
-            if has_local:
-                q0S, v0S = x[S], x[vS_idx]
-                if st.has_smooth:
-                    fs0, _ = st.smooth_force(q0S)
-                    xf += Psi @ (st.free_fs * fs0)
-                if uc:
-                    qc, vc = x[ucd], x[ucv]
-                    if inline_impact:  # ImpactLaw.rhs without massless contacts
-                        active = impact.predicted_active(qc, vc)
-                        if not st.has_smooth and not active.any():  # free flight: x = x_f
-                            x = xf
-                            st.P_prev = np.zeros(len(uc))
-                            if store[k + 1]:
-                                rec.sample(x[:n], x[n:], acc)
-                                acc = np.zeros(nc)
-                            continue
-                        b = minus_e * vc
-                    else:
-                        active, b = impact.rhs(qc, vc)
-                else:
-                    active = np.zeros(0, dtype=bool)
-                    b = active
-                lam, P, failure = st.local(q0S, v0S, xf[vS_idx] - v0S, active, b)
-                if failure is not None:
-                    rec.failed(tk[k], failure)
-                st.P_prev = P
-                x_new = xf + Psi @ lam
-                if nc:
-                    if uc:
-                        acc[uc] += P
-                    if st.pc:
-                        acc += st.penalty_impulse(x[:n], x_new[:n])
-                x = x_new
-            else:
-                x = xf
+            x = self._local_step(k, x, xf) if has_local else xf
             if store[k + 1]:
-                rec.sample(x[:n], x[n:], acc)
-                acc = np.zeros(nc)
-        q, v = x[:n], x[n:]
-    else:
-        Kq = st.K @ q
-        f0 = f1 = None
-        for k in range(n_steps):
-            if forced:
-                f0, f1 = fall[k], fall[k + 1]
-            q, v, Kq, imp, failure = st.step(q, v, Kq, f0, f1)
-            if failure is not None:
-                rec.failed(tk[k], failure)
-            if nc:
-                acc += imp
-            if store[k + 1]:
-                rec.sample(q, v, acc)
-                acc = np.zeros(nc)
-    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
-        raise FloatingPointError("Moreau-Jean integration diverged (non-finite state); reduce dt")
+                rec.sample(x[:n], x[n:], self.acc)
+                self.acc = np.zeros(nc)
+        return x[:n], x[n:]
+
+    def _local_step(self, k: int, x: np.ndarray, xf: np.ndarray) -> np.ndarray:
+        """State after step ``k`` from ``x``, its free state ``xf`` corrected by the local problem."""
+        st = self.st
+        S, vS_idx = self.S, self.vS_idx
+        q0S, v0S = x[S], x[vS_idx]
+        if st.has_smooth:
+            fs0, _ = st.smooth_force(q0S)
+            xf += st.Psi @ (st.free_fs * fs0)
+        active, b = self._impact_rhs(x)
+        if active is None:  # free flight: x = x_f
+            st.P_prev = np.zeros(len(st.uc))
+            return xf
+        lam, P, failure = st.local(q0S, v0S, xf[vS_idx] - v0S, active, b)
+        if failure is not None:
+            self.rec.failed(self.tk[k], failure)
+        st.P_prev = P
+        x_new = xf + st.Psi @ lam
+        if st.n_contacts:
+            if st.uc:
+                self.acc[st.uc] += P
+            if st.pc:
+                self.acc += st.penalty_impulse(x[: st.n], x_new[: st.n])
+        return x_new
+
+    def _impact_rhs(self, x: np.ndarray):
+        """Active unilateral contacts and their impact-law right-hand sides at the state ``x``;
+        ``(None, None)`` for a free flight without smooth laws (the step is the free one)."""
+        st = self.st
+        if not st.uc:
+            active = np.zeros(0, dtype=bool)
+            return active, active
+        qc, vc = x[self.ucd], x[self.ucv]
+        if not self.inline_impact:
+            return st.impact.rhs(qc, vc)
+        active = st.impact.predicted_active(qc, vc)  # ImpactLaw.rhs without massless contacts
+        if not st.has_smooth and not active.any():
+            return None, None
+        return active, self.minus_e * vc
+
+
+def _run_sparse(st: Stepper, rec: _Recorder, tk: np.ndarray, fall: np.ndarray | None, q, v, n_steps: int):
+    """The loop of large models (:meth:`Stepper.step`, sparse LU); the final ``(q, v)``."""
+    nc, store = st.n_contacts, rec.store
+    forced = fall is not None
+    acc = np.zeros(nc)
+    Kq = st.K @ q
+    f0 = f1 = None
+    for k in range(n_steps):
+        if forced:
+            f0, f1 = fall[k], fall[k + 1]
+        q, v, Kq, imp, failure = st.step(q, v, Kq, f0, f1)
+        if failure is not None:
+            rec.failed(tk[k], failure)
+        if nc:
+            acc += imp
+        if store[k + 1]:
+            rec.sample(q, v, acc)
+            acc = np.zeros(nc)
+    return q, v
+
+
+def _segment(st: Stepper, rec: _Recorder, tk: np.ndarray) -> Segment:
+    """The stored samples as a :class:`Segment` (energies and gaps of the stored states)."""
     U, V = rec.U, rec.V
-    G = (np.column_stack([law.gap_function(U[:, d]) for law, d in zip(st.c_law, st.c_dof)]) if nc
+    G = (np.column_stack([law.gap_function(U[:, d]) for law, d in zip(st.c_law, st.c_dof)]) if st.n_contacts
          else np.zeros((U.shape[0], 0)))
     return Segment(t=tk[rec.idx], u=U, v=V, impulse=rec.IMP, energy=st.energies(U, V), gap=G,
                    n_failed=rec.n_failed, first_failure=rec.first_failure)
