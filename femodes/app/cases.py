@@ -69,6 +69,7 @@ from __future__ import annotations
 import difflib
 import math
 import re
+import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -623,6 +624,16 @@ def usable_folder(folder: Path, option: str) -> Path:
         raise OutputFolderError(f"{option} {str(folder)!r} is not writable ({exc.strerror or exc}); "
                                 f"choose another {option}") from None
     return folder
+
+
+def command_out_folder(out: Path | None, default: Path, command: str) -> Path | None:
+    """The ``--out`` folder of ``femodes COMMAND`` (``default`` if not given), created and
+    writable; else None after printing the one-line error (the command then exits with 2)."""
+    try:
+        return usable_folder(out if out is not None else default, "--out")
+    except OutputFolderError as exc:
+        print(f"femodes {command}: {exc}", file=sys.stderr)
+        return None
 
 
 @dataclass

@@ -63,13 +63,15 @@ RUN_HELP = """Run a TOML case file. Tables (see examples/cases/*.toml for commen
 
 def run_case_cli(path: Path, out: Path | None, progress: bool | None) -> int:
     """``femodes run``: returns the exit code (2 for mistakes in the case file or the output folder)."""
-    from .cases import CaseError, OutputFolderError, analysis_span, load_case, run_case, usable_folder
+    from .cases import CaseError, analysis_span, command_out_folder, load_case, run_case
 
     try:
         case = load_case(path)
-        out = usable_folder(out if out is not None else Path("out") / path.stem, "--out")
-    except (CaseError, OutputFolderError) as exc:
+    except CaseError as exc:
         print(f"femodes run: {exc}", file=sys.stderr)
+        return 2
+    out = command_out_folder(out, Path("out") / path.stem, "run")
+    if out is None:
         return 2
     show = sys.stderr.isatty() if progress is None else progress
     bar = None
@@ -114,7 +116,7 @@ finish, 2 for mistakes in the case file or in --set.
 
 def run_sweep_cli(args) -> int:
     """``femodes sweep``: returns the exit code (2 for mistakes in the case file or in ``--set``)."""
-    from .cases import CaseError, OutputFolderError, load_case, usable_folder
+    from .cases import CaseError, command_out_folder, load_case
     from .sweep import parse_set, run_sweep
 
     params: dict = {}
@@ -130,10 +132,8 @@ def run_sweep_cli(args) -> int:
     except (ValueError, TypeError, CaseError) as exc:
         print(f"femodes sweep: {exc}", file=sys.stderr)
         return 2
-    try:
-        out = usable_folder(args.out if args.out is not None else Path("out") / f"{args.case.stem}_sweep", "--out")
-    except OutputFolderError as exc:
-        print(f"femodes sweep: {exc}", file=sys.stderr)
+    out = command_out_folder(args.out, Path("out") / f"{args.case.stem}_sweep", "sweep")
+    if out is None:
         return 2
     show = sys.stderr.isatty() if args.progress is None else args.progress
     if not args.verbose:
@@ -199,13 +199,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     if args.command == "demo":
-        from .cases import OutputFolderError, usable_folder
+        from .cases import command_out_folder
         from .demo import run_demo
 
-        try:
-            out = usable_folder(args.out, "--out")
-        except OutputFolderError as exc:
-            print(f"femodes demo: {exc}", file=sys.stderr)
+        out = command_out_folder(args.out, Path("out") / "demo", "demo")
+        if out is None:
             return 2
         res = run_demo(out)
         print("\n".join(res["lines"]))

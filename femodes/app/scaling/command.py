@@ -12,7 +12,7 @@ import math
 import sys
 from pathlib import Path
 
-from ..cases import CaseError, OutputFolderError, usable_folder
+from ..cases import CaseError, command_out_folder
 from .records import ScalingResult
 from .study import positive_int_list, scaling_study
 
@@ -79,10 +79,8 @@ def _positive_float(text: str) -> float:
 def scaling_cli(args) -> int:
     """``femodes scaling``: 0 if every case was measured, 1 if some failed, 2 for bad input, 130 on Ctrl-C."""
     path = Path(args.case)
-    try:
-        out = usable_folder(args.out if args.out is not None else Path("out") / f"{path.stem}_scaling", "--out")
-    except OutputFolderError as exc:
-        print(f"femodes scaling: {exc}", file=sys.stderr)
+    out = command_out_folder(args.out, Path("out") / f"{path.stem}_scaling", "scaling")
+    if out is None:
         return 2
     show = sys.stderr.isatty() if args.progress is None else args.progress
     try:
