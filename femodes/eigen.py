@@ -14,7 +14,8 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["DENSE_LIMIT", "IllConditionedWarning", "check_conditioning", "mass_normalize", "generalized_eigh"]
+__all__ = ["DENSE_LIMIT", "IllConditionedWarning", "check_conditioning", "mass_normalize", "generalized_eigh",
+           "normal_modes"]
 
 log = logging.getLogger(__name__)
 
@@ -122,3 +123,19 @@ def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigm
         ) from exc
     order = np.argsort(lam)
     return lam[order], vec[:, order]
+
+
+def normal_modes(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigma: float | None = None, factor=None,
+                 check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Lowest ``n`` angular frequencies (rad/s) and mass-normalised shapes of ``(K, M)``
+    (:func:`generalized_eigh`, whose arguments these are).
+
+    Rigid-body eigenvalues come out as +-(round-off): negative ones are clipped to zero frequency,
+    small positive ones are kept (a scale-based threshold would also zero genuine low
+    frequencies of fine meshes, whose lambda_max grows like h^-4).
+    """
+    lam, vec = generalized_eigh(K, M, n, owner, sigma=sigma, factor=factor, check=check)
+    if np.any(lam < 0):
+        log.info("%s: eigenvalues %s < 0 (round-off of rigid-body modes) set to zero frequency", owner, lam[lam < 0])
+    return np.sqrt(np.maximum(lam, 0.0)), mass_normalize(vec, M)
+

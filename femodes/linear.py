@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from .eigen import IllConditionedWarning, generalized_eigh, mass_normalize
+from .eigen import IllConditionedWarning, normal_modes
 from .model import StructuralModel
 from .solvers.checks import check_int
 
@@ -80,14 +80,8 @@ def linear_modes(model: StructuralModel, n: int = 6, *, sigma: float | None = No
         if not np.isfinite(sigma):
             raise ValueError(f"linear_modes: sigma must be finite, got {sigma!r}")
         sigma = float(sigma)
-    lam, vec = generalized_eigh(model.K, model.M, n, "linear_modes", sigma=sigma)
-    # Rigid-body eigenvalues come out as +-(round-off); negative ones are clipped to zero, small
-    # positive ones are kept (a scale-based threshold would also zero genuine low frequencies of
-    # fine meshes, whose lambda_max grows like h^-4).
-    if np.any(lam < 0):
-        log.info("linear_modes: eigenvalues %s < 0 (round-off of rigid-body modes) set to zero frequency", lam[lam < 0])
-    omega = np.sqrt(np.maximum(lam, 0.0))
-    return LinearModes(omega=omega, shapes=mass_normalize(vec, model.M))
+    omega, shapes = normal_modes(model.K, model.M, n, "linear_modes", sigma=sigma)
+    return LinearModes(omega=omega, shapes=shapes)
 
 
 @dataclass(frozen=True, eq=False)

@@ -17,7 +17,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import scipy.sparse as sp
 
-from .eigen import generalized_eigh, mass_normalize
+from .eigen import normal_modes
 from .fe.redistribution import ConsistentMass, RedistributeMass
 from .laws import CubicSpring, Location, PenaltyContact, UnilateralContact, check_location
 
@@ -427,9 +427,8 @@ class StructuralModel:
             zeta = np.full(nm, zeta[0])
         if zeta.size != nm:
             raise ValueError(f"with_damping: modal gives {zeta.size} ratios but n_modes={nm}")
-        lam, phi = generalized_eigh(self.K, self.M, nm, "with_damping")
-        omega = np.sqrt(np.maximum(lam, 0.0))
-        MPhi = self.M @ mass_normalize(phi, self.M)
+        omega, phi = normal_modes(self.K, self.M, nm, "with_damping")
+        MPhi = self.M @ phi
         C = MPhi @ np.diag(2.0 * zeta * omega) @ MPhi.T
         C = 0.5 * (C + C.T)
         ratios = f"{zeta[0]:g}" if np.all(zeta == zeta[0]) else f"{zeta.min():g}..{zeta.max():g}"

@@ -17,7 +17,7 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from .eigen import IllConditionedWarning, check_conditioning, generalized_eigh, mass_normalize
+from .eigen import IllConditionedWarning, check_conditioning, normal_modes
 from .model import Attached, StructuralModel
 from .solvers.checks import check_int
 
@@ -214,9 +214,8 @@ def _constraint_modes(lu: Any, KIB: np.ndarray) -> np.ndarray:
 def _fixed_interface_modes(KII, MII, lu: Any, n_modes: int) -> tuple[np.ndarray, np.ndarray]:
     """The first ``n_modes`` mass-normalized modes of ``(K_II, M_II)`` and their frequencies."""
     # K_II is definite here (factorised above): shift-invert at 0 reuses its factor
-    lam, phi = generalized_eigh(KII, MII, n_modes, "craig_bampton", sigma=0.0, factor=lu, check=False)
-    phi = mass_normalize(phi, MII)
-    return phi, np.sqrt(np.maximum(lam, 0.0))
+    omega, phi = normal_modes(KII, MII, n_modes, "craig_bampton", sigma=0.0, factor=lu, check=False)
+    return phi, omega
 
 
 def _project(A, T: np.ndarray) -> np.ndarray:
