@@ -37,8 +37,13 @@ def _file_mode() -> int:
     ``tempfile.mkstemp`` creates its file with mode 0600; without this the saved results would be
     private while every other output (plots, VTK frames) is readable under the usual umask.
     """
-    mask = os.umask(0o022)
-    os.umask(mask)
+    try:  # Linux: read the umask without changing it (os.umask flips it process-wide, a race for
+        # other threads creating files meanwhile, e.g. a sweep on a thread pool)
+        with open("/proc/self/status", encoding="ascii") as f:
+            mask = next(int(line.split()[1], 8) for line in f if line.startswith("Umask:"))
+    except (OSError, StopIteration, ValueError, IndexError):
+        mask = os.umask(0o022)
+        os.umask(mask)
     return 0o666 & ~mask
 
 
