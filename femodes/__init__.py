@@ -16,6 +16,7 @@ from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState
                       continuation, semismooth_newton)
 from .results import Branch, PeriodicSolution, load_branch
 from .analyses import StaticContactResult, frequency_response, nonlinear_mode, static_contact
+from .store import Checkpoint
 from .time import SteadyState, TimeHistory, TimeSteppingOptions, simulate, steady_state
 from . import io, plot  # outputs; matplotlib is imported lazily inside plot functions
 
@@ -56,6 +57,7 @@ __all__ = [
     "Branch",
     "PeriodicSolution",
     "load_branch",
+    "Checkpoint",
     "frequency_response",
     "nonlinear_mode",
     "static_contact",

@@ -1,8 +1,8 @@
 """Analyses layer: wire a model into an HBM problem, run the continuation, wrap the result.
 
 The one module that sees both the problems (``femodes.hbm``) and the generic solvers
-(``femodes.solvers``). Running the continuation with progress, checkpoints and resume is
-:func:`femodes.runs.run_continuation`.
+(``femodes.solvers``). Running the continuation with progress, checkpoints and resume
+(``checkpoint=femodes.Checkpoint(path, resume=True)``) is :func:`femodes.runs.run_continuation`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,8 @@ from .hbm.system import default_contact_parameter
 from .laws import PenaltyContact, UnilateralContact
 from .model import StructuralModel
 from .results import Branch, ContactInfo
-from .runs import model_fingerprint, run_continuation
+from .runs import checkpoint_spec, model_fingerprint, run_continuation
+from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
@@ -95,8 +96,7 @@ def frequency_response(
     x0: np.ndarray | None = None,
     projection=None,
     progress: bool | Callable = False,
-    checkpoint: str | os.PathLike | None = None,
-    resume: bool = False,
+    checkpoint: str | os.PathLike | Checkpoint | None = None,
 ) -> Branch:
     """Forced frequency-response curve by HBM and pseudo-arclength continuation.
 
@@ -122,19 +122,19 @@ def frequency_response(
         ``True`` logs one INFO line per point; a callable is called with every accepted
         :class:`~femodes.solvers.ContinuationPoint` (the command line passes its progress display,
         :class:`femodes.app.progress.BranchProgress`).
-    checkpoint : str or PathLike, optional
-        Final branch file (``.npz`` or ``.h5``).  Every converged point is written to the journal
-        ``<checkpoint>.points/`` as it is found (one file per point, atomic, O(1) I/O per point);
-        at the end the branch is saved to ``checkpoint`` and the journal removed.  Without
-        ``resume`` an existing checkpoint is an error (``FileExistsError``), never overwritten.
-    resume : bool
-        With ``checkpoint``: continue the run from its last saved point, or return its branch if
-        it finished (any status); start a new run if there is no checkpoint yet.  The final
-        branch holds every point exactly once and equals that of an uninterrupted run.  The
-        checkpoint must come from the same model, harmonics, span and ``projection``
-        (``ValueError`` saying what differs otherwise); ``options`` may change (step bounds,
-        ``max_points``...), the arclength scaling of the run is kept.  Damaged files or another
-        format version give a ``ValueError`` naming the file.
+    checkpoint : str, PathLike or femodes.Checkpoint, optional
+        Final branch file (``.npz`` or ``.h5``), or :class:`femodes.Checkpoint` ``(path,
+        resume=...)``.  Every converged point is written to the journal ``<path>.points/`` as it
+        is found (one file per point, atomic, O(1) I/O per point); at the end the branch is saved
+        to ``path`` and the journal removed.  A plain path (or ``resume=False``) starts a new
+        run: an existing checkpoint is an error (``FileExistsError``), never overwritten.
+        ``femodes.Checkpoint(path, resume=True)`` continues the run from its last saved point,
+        or returns its branch if it finished (any status), or starts a new run if there is no
+        checkpoint yet.  The final branch holds every point exactly once and equals that of an
+        uninterrupted run.  The checkpoint must come from the same model, harmonics, span and
+        ``projection`` (``ValueError`` saying what differs otherwise); ``options`` may change
+        (step bounds, ``max_points``...), the arclength scaling of the run is kept.  Damaged
+        files or another format version give a ``ValueError`` naming the file.
 
     Returns
     -------
@@ -142,6 +142,7 @@ def frequency_response(
         ``success`` False (with ``message``) if the continuation could not finish the span.
     """
     model = _check_model(model, "frequency_response")
+    checkpoint = checkpoint_spec(checkpoint, "frequency_response")
     h = _harmonics(harmonics, "frequency_response")
     _options(options, "frequency_response")
     span = _span(omega, "omega", "frequency_response", positive=True)
@@ -169,7 +170,7 @@ def frequency_response(
                    "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
     return run_continuation(problem, span, opts, "frequency_response", progress, x0=start, wrap=wrap, model=model,
-                         checkpoint=checkpoint, resume=resume, description=description)
+                            checkpoint=checkpoint, description=description)
 
 
 def frequency_response_options(**changes) -> ContinuationOptions:
@@ -265,8 +266,7 @@ def nonlinear_mode(
     options: ContinuationOptions | None = None,
     projection=None,
     progress: bool | Callable = False,
-    checkpoint: str | os.PathLike | None = None,
-    resume: bool = False,
+    checkpoint: str | os.PathLike | Checkpoint | None = None,
 ) -> Branch:
     """Nonlinear mode (frequency-energy backbone) by the extended periodic motion concept.
 
@@ -275,10 +275,10 @@ def nonlinear_mode(
     ``log10`` of the period-averaged mechanical energy). ``branch.xi`` holds the artificial
     damping, which is ~0 for a conservative model (a check of the solution).
 
-    ``progress`` (bool or callable), ``checkpoint`` and ``resume`` are as for
-    :func:`frequency_response`: ``checkpoint`` and ``resume`` write every converged point to a journal as it is found and
-    continue a killed run from it, as for :func:`frequency_response`; the checkpoint must come
-    from the same model, ``mode``, energy span, harmonics and ``projection``.
+    ``progress`` (bool or callable) and ``checkpoint`` (a path, or
+    ``femodes.Checkpoint(path, resume=True)`` to continue a killed run) are as for
+    :func:`frequency_response`: every converged point is written to a journal as it is found; the
+    checkpoint must come from the same model, ``mode``, energy span, harmonics and ``projection``.
 
     Returns
     -------
@@ -286,6 +286,7 @@ def nonlinear_mode(
         ``omega`` (rad/s) against ``energy``.
     """
     model = _check_model(model, "nonlinear_mode")
+    checkpoint = checkpoint_spec(checkpoint, "nonlinear_mode")
     h = _harmonics(harmonics, "nonlinear_mode")
     _options(options, "nonlinear_mode")
     e0, e1 = _span(energy, "energy", "nonlinear_mode", positive=True)
@@ -312,7 +313,7 @@ def nonlinear_mode(
                    "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
     return run_continuation(problem, span, options, "nonlinear_mode", progress, x0=lambda o: (x0, o), wrap=wrap, model=model,
-                         checkpoint=checkpoint, resume=resume, description=description)
+                            checkpoint=checkpoint, description=description)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -2,9 +2,10 @@
 
 :func:`run_continuation` is what :func:`~femodes.frequency_response` and
 :func:`~femodes.nonlinear_mode` call: it chains the progress callback and the checkpoint journal in
-front of the user's callback, and with ``checkpoint=path`` writes every converged point to a
-journal ``<path>.points/`` as it is found (one small file per point, written atomically, see
-:class:`~femodes.store.Checkpoint`) and the finished branch to ``path``; ``resume=True``
+front of the user's callback. With ``checkpoint=path`` (or ``checkpoint=femodes.Checkpoint(path)``,
+:func:`checkpoint_spec`) it writes every converged point to a journal ``<path>.points/`` as it is
+found (one small file per point, written atomically, see :class:`~femodes.store.CheckpointStore`)
+and the finished branch to ``path``; ``checkpoint=femodes.Checkpoint(path, resume=True)``
 continues a killed run from its last saved point (``continuation(start=...)``), so that the final
 branch holds every point exactly once and equals the branch of an uninterrupted run.
 """
@@ -24,11 +25,11 @@ import scipy.sparse as sp
 
 from .model import StructuralModel
 from .results import Branch, load_branch
-from .store import Checkpoint
+from .store import Checkpoint, CheckpointStore
 from .solvers import ContinuationOptions, continuation
 from .solvers.continuation import ContinuationResult, ContinuationState
 
-__all__ = ["run_continuation", "model_fingerprint"]
+__all__ = ["run_continuation", "checkpoint_spec", "model_fingerprint"]
 
 log = logging.getLogger(__name__)
 
@@ -133,7 +134,7 @@ def _point_record(point) -> dict:
     return rec
 
 
-def _state_from_records(records: list[dict], ck: Checkpoint) -> ContinuationState:
+def _state_from_records(records: list[dict], ck: CheckpointStore) -> ContinuationState:
     k = len(records) - 1
     r = records[k]
     try:
@@ -163,17 +164,53 @@ def _merge(records: list[dict], res: ContinuationResult) -> ContinuationResult:
     )
 
 
+def checkpoint_spec(checkpoint, label: str) -> Checkpoint | None:
+    """The :class:`~femodes.store.Checkpoint` of an analysis' ``checkpoint=`` argument: ``None``,
+    a path (a new run, ``Checkpoint(path)``) or a ``Checkpoint``; errors name ``label``."""
+    if checkpoint is None or isinstance(checkpoint, Checkpoint):
+        return checkpoint
+    if not isinstance(checkpoint, (str, os.PathLike)):
+        raise TypeError(f"{label}: checkpoint must be a file name (.npz or .h5) or a femodes.Checkpoint(path, "
+                        f"resume=...), got {checkpoint!r}")
+    try:
+        return Checkpoint(checkpoint)
+    except ValueError as exc:
+        raise ValueError(f"{label}: checkpoint {str(checkpoint)!r}: use a .npz or .h5 file name for the final "
+                         "branch") from exc
+
+
 def run_continuation(problem, span, options: ContinuationOptions, label: str, progress, *, x0: Callable,
-                     wrap: Callable, model: StructuralModel, checkpoint, resume: bool, description: dict) -> Branch:
+                     wrap: Callable, model: StructuralModel, checkpoint: Checkpoint | None,
+                     description: dict) -> Branch:
     """Run (or resume, or return the finished) continuation of ``problem``; ``wrap(res, meta)`` -> Branch.
 
-    ``x0(options)`` gives a new run's start point and its options (which may depend on the start,
-    e.g. the arclength scale); a resumed run keeps the scales saved with its state. Warns (in the
-    analysis' terms, from ``wrap``) when a run does not finish its span."""
-    if not isinstance(resume, bool):
-        raise TypeError(f"{label}: resume must be True or False, got {resume!r}")
+    Parameters
+    ----------
+    problem, span, options
+        What :func:`~femodes.solvers.continuation` runs.
+    label : str
+        The analysis' name, for messages and log lines.
+    progress : bool or callable
+        ``True`` logs one INFO line per point; a callable receives every accepted point.
+    x0 : callable
+        ``x0(options)`` gives a new run's start point and its options (which may depend on the
+        start, e.g. the arclength scale); a resumed run keeps the scales saved with its state.
+    wrap : callable
+        ``wrap(res, meta)`` makes the :class:`~femodes.results.Branch`; it warns (in the
+        analysis' terms) when a run does not finish its span.
+    model : StructuralModel
+        Attached to a finished branch read back from its checkpoint.
+    checkpoint : femodes.Checkpoint or None
+        Where to journal the points (:func:`checkpoint_spec` turns an analysis' argument into
+        one). ``resume=False``: a new run, an existing checkpoint is a ``FileExistsError``;
+        ``resume=True``: continue the saved run, return its finished branch, or start a new one.
+    description : dict
+        JSON description of the run, saved in the journal and compared on resume.
+    """
     if not isinstance(progress, bool) and not callable(progress):
         raise TypeError(f"{label}: progress must be True, False or a callable(point), got {progress!r}")
+    if checkpoint is not None and not isinstance(checkpoint, Checkpoint):
+        raise TypeError(f"{label}: checkpoint must be a femodes.Checkpoint or None, got {checkpoint!r}")
 
     def finish(res, meta) -> Branch:
         branch = wrap(res, meta)
@@ -182,17 +219,14 @@ def run_continuation(problem, span, options: ContinuationOptions, label: str, pr
         return branch
 
     if checkpoint is None:
-        if resume:
-            raise ValueError(f"{label}: resume=True needs checkpoint=<file> (the checkpoint of the run to resume)")
         start_x, start_options = x0(options)
         return finish(_run(problem, span, start_x, start_options, label, progress), {})
-    if not isinstance(checkpoint, (str, os.PathLike)):
-        raise TypeError(f"{label}: checkpoint must be a file name (.npz or .h5), got {checkpoint!r}")
-    ck = Checkpoint(checkpoint)
+    ck = CheckpointStore(checkpoint.path)
     desc = json.loads(json.dumps(description))  # as it reads back from the JSON header
-    if not resume and (ck.path.exists() or ck.journal.exists()):
+    if not checkpoint.resume and (ck.path.exists() or ck.journal.exists()):
         raise FileExistsError(f"{label}: checkpoint {str(ck.path)!r} (or its journal {ck.journal.name}/) exists; "
-                              "pass resume=True to continue (or return) that run, or delete it to start over")
+                              "pass checkpoint=femodes.Checkpoint(path, resume=True) to continue (or return) that "
+                              "run, or delete it to start over")
     if ck.path.exists():
         return _finished_branch(ck, desc, label, model)
     records = _journal_records(ck, desc, label, problem.size)
@@ -212,7 +246,7 @@ def run_continuation(problem, span, options: ContinuationOptions, label: str, pr
     return branch
 
 
-def _finished_branch(ck: Checkpoint, desc: dict, label: str, model: StructuralModel) -> Branch:
+def _finished_branch(ck: CheckpointStore, desc: dict, label: str, model: StructuralModel) -> Branch:
     """The branch of a checkpointed run that finished (refused if it came from another run)."""
     branch = load_branch(ck.path)
     saved = branch.meta.get("checkpoint")
@@ -226,7 +260,7 @@ def _finished_branch(ck: Checkpoint, desc: dict, label: str, model: StructuralMo
     return branch
 
 
-def _journal_records(ck: Checkpoint, desc: dict, label: str, n: int) -> list[dict]:
+def _journal_records(ck: CheckpointStore, desc: dict, label: str, n: int) -> list[dict]:
     """The saved points of an interrupted run to continue from (a new journal if none)."""
     if not (ck.journal.exists() and (ck.header_path.exists() or ck.indices())):
         ck.create(desc)

@@ -4,12 +4,14 @@ Every file femodes saves (branches, checkpoint journals, sweep studies, ParaView
 goes through :func:`atomic_write`: the data is written to a temporary file in the target's folder
 and renamed over the target, so a crash or a full disk never leaves a half-written file under the
 target's name, and readers see either the old or the new file. :func:`write_record` and
-:func:`read_record` store a JSON header with named arrays (``.npz`` or ``.h5``); :class:`Checkpoint`
-is the journal of a running continuation.
+:func:`read_record` store a JSON header with named arrays (``.npz`` or ``.h5``). :class:`Checkpoint`
+is what a user passes to ``checkpoint=`` of the long analyses (a file name, and whether to resume);
+:class:`CheckpointStore` is the journal of a running continuation next to that file.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import tempfile
@@ -20,7 +22,8 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["atomic_write", "write_record", "read_record", "Checkpoint", "CHECKPOINT_VERSION", "RECORD_SUFFIXES"]
+__all__ = ["atomic_write", "write_record", "read_record", "Checkpoint", "CheckpointStore", "CHECKPOINT_VERSION",
+           "RECORD_SUFFIXES"]
 
 #: Version of the checkpoint journal layout (header.json + one .npz per point).
 CHECKPOINT_VERSION = 1
@@ -112,7 +115,46 @@ def read_record(path) -> tuple[dict, dict]:
         raise ValueError(str(exc)) from exc
 
 
+@dataclasses.dataclass(frozen=True)
 class Checkpoint:
+    """Where a long continuation saves its points, and whether to continue an earlier run.
+
+    Pass it as ``checkpoint=`` to :func:`~femodes.frequency_response` or
+    :func:`~femodes.nonlinear_mode`; a plain path there means ``Checkpoint(path)``. Checked at
+    construction: a bad value raises here, before anything runs.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Final branch file, ``.npz`` or ``.h5`` (``.hdf5``); the points go to the journal
+        ``<path>.points/`` while the run goes on. Stored as a :class:`pathlib.Path`.
+    resume : bool, keyword-only
+        ``False`` (default): a new run; an existing checkpoint (final file or journal) is a
+        ``FileExistsError``, never overwritten. ``True``: continue the run from its last saved
+        point, or return its branch if it finished; start a new run if nothing is saved yet.
+
+    Examples
+    --------
+    >>> ck = Checkpoint("out/frc.npz", resume=True)
+    >>> ck.path.name, ck.resume
+    ('frc.npz', True)
+    """
+
+    path: str | os.PathLike  # stored as a pathlib.Path
+    resume: bool = dataclasses.field(default=False, kw_only=True)
+
+    def __post_init__(self):
+        if not isinstance(self.path, (str, os.PathLike)):
+            raise TypeError(f"Checkpoint: path must be a file name (.npz or .h5), got {self.path!r}")
+        path = Path(self.path)
+        if path.suffix.lower() not in RECORD_SUFFIXES:
+            raise ValueError(f"Checkpoint: path must be a .npz or .h5 file name (the final branch), got {str(path)!r}")
+        if not isinstance(self.resume, bool):
+            raise TypeError(f"Checkpoint: resume must be True or False, got {self.resume!r}")
+        object.__setattr__(self, "path", path)
+
+
+class CheckpointStore:
     """Journal of a running continuation next to its final branch file ``path``.
 
     Layout: ``<path>.points/header.json`` (format, version and a JSON description of the run)
@@ -125,7 +167,8 @@ class Checkpoint:
     (:meth:`Branch.save`, itself atomic) and only then removes the journal.
 
     The journal knows nothing about continuation: the caller decides what a point holds
-    (:mod:`femodes.analyses` stores the unknowns and the continuation state).
+    (:mod:`femodes.runs` stores the unknowns and the continuation state). Users do not make one:
+    they pass a :class:`Checkpoint` (or a path) to the analyses.
 
     Parameters
     ----------
@@ -141,7 +184,7 @@ class Checkpoint:
         self.journal = path.with_name(path.name + ".points")
 
     def __repr__(self) -> str:
-        return f"Checkpoint({str(self.path)!r})"
+        return f"CheckpointStore({str(self.path)!r})"
 
     @property
     def header_path(self) -> Path:

@@ -7,6 +7,7 @@ import dataclasses
 import math
 import multiprocessing
 import os
+import re
 import tomllib
 from pathlib import Path
 
@@ -100,13 +101,24 @@ def test_parse_set():
 
 
 def test_bad_arguments_name_the_argument(tmp_path):
-    with pytest.raises(TypeError, match="executor must be a concurrent.futures.Executor"):
-        run_sweep(FRC, _cases(1.0), out=tmp_path, executor="threads")
-    with pytest.raises(ValueError, match="either executor or scheduler"):
-        with cf.ThreadPoolExecutor(1) as ex:
-            run_sweep(FRC, _cases(1.0), out=tmp_path, executor=ex, scheduler="tcp://127.0.0.1:1")
-    with pytest.raises(TypeError, match="scheduler must be an address"):
-        run_sweep(FRC, _cases(1.0), out=tmp_path, scheduler=8786)
+    with pytest.raises(TypeError, match=r"executor must be a concurrent.futures.Executor, a distributed.Client or a "
+                                        r"scheduler address like 'tcp://host:8786', got 8786"):
+        run_sweep(FRC, _cases(1.0), out=tmp_path, executor=8786)
+    with pytest.raises(TypeError, match="executor must be .* got <class .*ThreadPoolExecutor'>"):
+        run_sweep(FRC, _cases(1.0), out=tmp_path, executor=cf.ThreadPoolExecutor)  # the class, not an instance
+    for bad in ("threads", "", "tcp://", "host 8786", "tcp://host:8786 "):
+        with pytest.raises(ValueError, match=re.escape(f"executor={bad!r} is not a Dask scheduler address; an address "
+                                                       "looks like 'tcp://host:8786'")):
+            run_sweep(FRC, _cases(1.0), out=tmp_path, executor=bad)
+    for bad in ("yes", 1, None, [print]):
+        with pytest.raises(TypeError, match=r"progress must be True, False or a callable\(record, n_done, n_total\), "
+                                            f"got {re.escape(repr(bad))}"):
+            with cf.ThreadPoolExecutor(1) as ex:
+                run_sweep(FRC, _cases(1.0), out=tmp_path, executor=ex, progress=bad)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'scheduler'"):  # merged into executor
+        run_sweep(FRC, _cases(1.0), out=tmp_path, scheduler="tcp://127.0.0.1:1")
+    with pytest.raises(TypeError, match="unexpected keyword argument 'callback'"):  # merged into progress
+        run_sweep(FRC, _cases(1.0), out=tmp_path, callback=print)
     with pytest.raises(ValueError, match="n_workers must be an integer >= 1, got 0"):
         run_sweep(FRC, _cases(1.0), out=tmp_path, n_workers=0)
     with pytest.raises(ValueError, match="study must be a file name"):
@@ -125,14 +137,17 @@ def thread_sweep(tmp_path_factory):
     seen = []
     params = _cases(*GAPS, -1.0) + [{"force.0.at": "nope", **SMALL}]
     with cf.ThreadPoolExecutor(2) as ex:
-        res = run_sweep(FRC, params, out=out, executor=ex, callback=lambda r, k, n: seen.append((r.id, k, n)))
+        res = run_sweep(FRC, params, out=out, executor=ex, progress=lambda r, k, n: seen.append((r, k, n)))
     return res, seen
 
 
 def test_thread_pool_sweep_with_failures(thread_sweep, tmp_path):
     res, seen = thread_sweep
     assert [r.id for r in res] == ["c000", "c001", "c002", "c003", "c004"]
+    # progress(record, n_done, n_total) once per finished case, with the records of the result
     assert sorted(k for _, k, _ in seen) == [1, 2, 3, 4, 5] and {n for *_, n in seen} == {5}
+    assert sorted(r.id for r, _, _ in seen) == [r.id for r in res] and all(r is res[r.id] for r, _, _ in seen)
+    assert seen[0][0].id == "c003" and seen[0][1] == 1  # rejected by the case-file checks: recorded first
     assert [r.status for r in res] == ["ok", "ok", "ok", "failed", "failed"] and not res.success
     assert res["c003"].message == "[contact] gap must be >= 0, got -1.0"  # rejected by the case-file checks
     assert "unknown location 'nope'" in res["c004"].message  # raised inside the task
@@ -211,7 +226,7 @@ def test_dask_cluster_of_two_workers(tmp_path, thread_sweep):
             assert e == WORKER_ENVIRON  # no MALLOC_TRIM_THRESHOLD_, one BLAS thread
         params = _cases(*GAPS, -1.0) + [{"force.0.at": "nope", **SMALL}]
         res = run_sweep(FRC, params, out=tmp_path / "client", executor=client)
-        res2 = run_sweep(FRC, _cases(GAPS[1]), out=tmp_path / "address", scheduler=cluster.scheduler_address)
+        res2 = run_sweep(FRC, _cases(GAPS[1]), out=tmp_path / "address", executor=cluster.scheduler_address)
     ref = thread_sweep[0]
     assert [r.status for r in res] == [r.status for r in ref]
     assert res["c004"].message == ref["c004"].message
@@ -243,12 +258,23 @@ def test_cli_sweep_on_embedded_cluster(tmp_path, capsys, thread_sweep):
     (["--set", "contact.0.gap=1", "--set", "contact.0.gap=2"], "given twice"),
     ([], "at least one --set"),
     (["--set", "contact.0.gap=1", "--workers", "0"], "n_workers must be an integer >= 1"),
+    (["--set", "contact.0.gap=1", "--scheduler", "nowhere"], "executor='nowhere' is not a Dask scheduler address"),
 ])
 def test_cli_bad_set_exits_2(tmp_path, capsys, args, message):
     assert main(["sweep", str(FRC), "--out", str(tmp_path), *args]) == 2
     err = capsys.readouterr().err
     assert err.startswith("femodes sweep: ") and message in err and "Traceback" not in err
     assert not (tmp_path / "study.npz").exists()
+
+
+def test_progress_true_logs_one_line_per_case(tmp_path, caplog):
+    with caplog.at_level("INFO", logger="femodes.app.sweep.run"), cf.ThreadPoolExecutor(1) as ex:
+        res = run_sweep(FRC, _cases(1.0, -1.0), out=tmp_path, executor=ex, progress=True)
+    lines = [m for r in caplog.records
+             if r.name == "femodes.app.sweep.run" and (m := r.getMessage()).startswith("case ")]
+    assert res[0].ok and len(lines) == 2
+    assert any(line.startswith("case c000 (") and " ok in " in line for line in lines)
+    assert any(line.startswith("case c001 (1/2) failed") and "gap must be >= 0" in line for line in lines)
 
 
 def test_interrupted_sweep_keeps_a_study_file(tmp_path):
@@ -260,7 +286,7 @@ def test_interrupted_sweep_keeps_a_study_file(tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         with cf.ThreadPoolExecutor(1) as ex:
-            run_sweep(FRC, _cases(*GAPS), out=tmp_path, executor=ex, callback=stop)
+            run_sweep(FRC, _cases(*GAPS), out=tmp_path, executor=ex, progress=stop)
     st = load_study(tmp_path / "study.npz")
     statuses = [r.status for r in st]
     assert statuses.count("ok") == 1 and statuses.count("pending") == 2

@@ -151,8 +151,8 @@ def run_sweep_cli(args) -> int:
               flush=True)
 
     try:
-        res = run_sweep(case, params, out=out, scheduler=args.scheduler, n_workers=args.workers,
-                        callback=report if show else None)
+        res = run_sweep(case, params, out=out, executor=args.scheduler, n_workers=args.workers,
+                        progress=report if show else False)
     except (ValueError, TypeError) as exc:
         print(f"femodes sweep: {exc}", file=sys.stderr)
         return 2

@@ -15,8 +15,9 @@ reported with its error; the other cases complete. The summaries are gathered in
 file, ``out/study.npz`` (or ``.h5``), written atomically and read back by :func:`load_study`.
 
 Where the tasks run: an embedded :class:`distributed.LocalCluster` (``n_workers`` single-threaded
-worker processes) by default, an existing Dask cluster (``scheduler="tcp://host:8786"``), a
-:class:`distributed.Client`, or any :class:`concurrent.futures.Executor` (thread or process pool).
+worker processes) by default, an existing Dask cluster (``executor="tcp://host:8786"``, the
+scheduler's address), a :class:`distributed.Client`, or any :class:`concurrent.futures.Executor`
+(thread or process pool).
 With a remote cluster, ``out`` must be on a file system the workers share.
 
 Modules: :mod:`.records` (:class:`CaseRecord`, :class:`SweepResult`), :mod:`.overrides`

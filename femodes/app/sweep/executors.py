@@ -1,9 +1,9 @@
 """Application layer: where the tasks of a sweep run, and the guard of the embedded cluster.
 
 An embedded :class:`distributed.LocalCluster` (``n_workers`` single-threaded worker processes,
-:func:`local_cluster`) by default, an existing Dask cluster (``scheduler="tcp://host:8786"``), a
-:class:`distributed.Client`, or any :class:`concurrent.futures.Executor` (thread or process pool):
-:func:`open_executor` turns each into a ``concurrent.futures.Executor``.
+:func:`local_cluster`) by default, an existing Dask cluster (``executor="tcp://host:8786"``, the
+scheduler's address), a :class:`distributed.Client`, or any :class:`concurrent.futures.Executor`
+(thread or process pool): :func:`open_executor` turns each into a ``concurrent.futures.Executor``.
 
 Worker environment of the embedded cluster (:func:`local_cluster`), measured in
 ``benchmarks/README_sweep.md``:
@@ -32,6 +32,7 @@ import concurrent.futures as cf
 import contextlib
 import logging
 import os
+import re
 from pathlib import Path
 
 __all__ = ["WORKER_ENVIRON", "local_cluster", "restored_environ", "check_where", "open_executor",
@@ -107,25 +108,31 @@ def _is_client(obj) -> bool:
     return isinstance(obj, Client)
 
 
-def check_where(executor, scheduler, n_workers) -> None:
-    """Check ``run_sweep``'s ``executor``, ``scheduler`` and ``n_workers``; errors quote the value."""
-    if executor is not None and scheduler is not None:
-        raise ValueError("run_sweep: give either executor or scheduler, not both")
-    if executor is not None and not (_is_client(executor) or isinstance(executor, cf.Executor)):
-        raise TypeError(f"run_sweep: executor must be a concurrent.futures.Executor or a distributed.Client, "
-                        f"got {type(executor).__name__}")
-    if scheduler is not None and (not isinstance(scheduler, str) or not scheduler):
-        raise TypeError(f"run_sweep: scheduler must be an address string like 'tcp://host:8786', got {scheduler!r}")
+#: A Dask scheduler address: ``protocol://rest`` (``tcp://host:8786``, ``tls://...``) or ``host:port``.
+_ADDRESS = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*://\S+|(\[[0-9A-Fa-f:.]+\]|[^\s:/\[\]]+):\d+")
+
+
+def check_where(executor, n_workers) -> None:
+    """Check ``run_sweep``'s ``executor`` (None, an executor, a client or a scheduler address) and
+    ``n_workers``; errors name the argument and quote the value."""
+    if isinstance(executor, str):
+        if not _ADDRESS.fullmatch(executor):
+            raise ValueError(f"run_sweep: executor={executor!r} is not a Dask scheduler address; an address looks "
+                             "like 'tcp://host:8786'")
+    elif executor is not None and not (_is_client(executor) or isinstance(executor, cf.Executor)):
+        raise TypeError(f"run_sweep: executor must be a concurrent.futures.Executor, a distributed.Client or a "
+                        f"scheduler address like 'tcp://host:8786', got {executor!r}")
     if isinstance(n_workers, bool) or not isinstance(n_workers, int) or n_workers < 1:
         raise ValueError(f"run_sweep: n_workers must be an integer >= 1, got {n_workers!r}")
 
 
 @contextlib.contextmanager
-def open_executor(executor, scheduler, n_workers):
+def open_executor(executor, n_workers):
     """``(executor, description)``: the concurrent.futures.Executor to submit to and where it runs;
-    creates and closes what the sweep owns (a client of ``scheduler``, or the embedded cluster)."""
-    check_where(executor, scheduler, n_workers)
-    if executor is not None:
+    creates and closes what the sweep owns (a client of a scheduler address, or the embedded
+    cluster of ``n_workers`` when ``executor`` is None)."""
+    check_where(executor, n_workers)
+    if executor is not None and not isinstance(executor, str):
         if _is_client(executor):
             from distributed.cfexecutor import ClientExecutor
 
@@ -137,11 +144,12 @@ def open_executor(executor, scheduler, n_workers):
         from distributed import Client
         from distributed.cfexecutor import ClientExecutor
     except ImportError as exc:
-        raise ImportError("run_sweep needs dask.distributed for its default cluster (pip install 'femodes[sweep]'), "
+        raise ImportError("run_sweep needs dask.distributed for its default cluster and for scheduler addresses "
+                          "(pip install 'femodes[sweep]'), "
                           "or pass executor=concurrent.futures.ProcessPoolExecutor()") from exc
-    if scheduler is not None:
-        with Client(scheduler) as client:
-            yield ClientExecutor(client, pure=False), f"Dask scheduler {scheduler}"
+    if executor is not None:  # a scheduler address
+        with Client(executor) as client:
+            yield ClientExecutor(client, pure=False), f"Dask scheduler {executor}"
         return
     with local_cluster(n_workers) as cluster, Client(cluster) as client:
         yield ClientExecutor(client, pure=False), f"local Dask cluster, {n_workers} workers"
@@ -190,4 +198,5 @@ def check_main_guarded(owner: str) -> None:
     script = _unguarded_main_call()
     if script is not None:
         raise RuntimeError(f"{owner} starts worker processes that import {script} again: put the code that runs the "
-                           "sweep under `if __name__ == \"__main__\":` (or pass executor=... / scheduler=...)")
+                           "sweep under `if __name__ == \"__main__\":` (or pass executor=..., e.g. a scheduler "
+                           "address)")

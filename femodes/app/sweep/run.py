@@ -31,17 +31,18 @@ log = logging.getLogger(__name__)
 # ---------------------------------------------------------------------------------------------
 # Arguments
 # ---------------------------------------------------------------------------------------------
-def _check_arguments(*, out, study, callback, executor, scheduler, n_workers) -> None:
+def _check_arguments(*, out, study, progress, executor, n_workers) -> None:
     """TypeError/ValueError quoting the first bad argument of :func:`run_sweep`."""
     if out is None or not isinstance(out, (str, os.PathLike)):
         raise TypeError(f"run_sweep: out must be a folder path, got {out!r}")
     if (not isinstance(study, str) or Path(study).suffix.lower() not in (".npz", ".h5", ".hdf5")
             or Path(study).name != study):
         raise ValueError(f"run_sweep: study must be a file name ending in .npz or .h5, got {study!r}")
-    if callback is not None and not callable(callback):
-        raise TypeError(f"run_sweep: callback must be callable(record, n_done, n_total), got {callback!r}")
-    check_where(executor, scheduler, n_workers)
-    if executor is None and scheduler is None:
+    if not isinstance(progress, bool) and not callable(progress):
+        raise TypeError(f"run_sweep: progress must be True, False or a callable(record, n_done, n_total), "
+                        f"got {progress!r}")
+    check_where(executor, n_workers)
+    if executor is None:
         check_main_guarded("run_sweep")
 
 
@@ -82,10 +83,10 @@ class _Ledger:
     """The records of a running sweep: every finished case rewrites the study file (small,
     atomic), so an interrupted sweep keeps its finished cases and marks the others "pending"."""
 
-    def __init__(self, plan: _Plan, study: Path, *, t_start: float, progress: bool,
-                 callback: Callable[[CaseRecord, int, int], None] | None):
+    def __init__(self, plan: _Plan, study: Path, *, t_start: float,
+                 progress: bool | Callable[[CaseRecord, int, int], None]):
         self.plan, self.study, self.t_start = plan, study, t_start
-        self.progress, self.callback = progress, callback
+        self.progress = progress
         self.records: dict[str, CaseRecord] = {}
         self.pending = {cid: CaseRecord(id=cid, parameters=ov, status="pending", message="not finished")
                         for cid, ov in zip(plan.ids, plan.overrides)}
@@ -104,11 +105,11 @@ class _Ledger:
         self.records[rec.id] = rec
         self.save()
         n, k = len(self.plan.ids), len(self.records)
-        if self.progress:
+        if callable(self.progress):
+            self.progress(rec, k, n)
+        elif self.progress:
             log.info("case %s (%d/%d) %s in %.2f s: %s %s", rec.id, k, n, rec.status, rec.wall_time,
                      ", ".join(f"{p}={fmt_value(v)}" for p, v in rec.parameters.items()), rec.message)
-        if self.callback is not None:
-            self.callback(rec, k, n)
 
 
 def _checked_jobs(plan: _Plan, out: Path, ledger: _Ledger) -> list[tuple[str, dict, str]]:
@@ -135,10 +136,9 @@ def _task_answer(fut: cf.Future, case_id: str) -> Mapping[str, Any]:
         return {"id": case_id, "status": "failed", "message": f"{type(exc).__name__}: {exc}"}
 
 
-def _execute(jobs: list[tuple[str, dict, str]], out: Path, ledger: _Ledger, *, executor, scheduler,
-             n_workers: int) -> None:
+def _execute(jobs: list[tuple[str, dict, str]], out: Path, ledger: _Ledger, *, executor, n_workers: int) -> None:
     """Submit one :func:`~femodes.app.sweep.task.run_sweep_case` per job; record each as it finishes."""
-    with open_executor(executor, scheduler, n_workers) as (ex, where):
+    with open_executor(executor, n_workers) as (ex, where):
         log.info("sweep of %s: %d cases (%d to run) on %s", ledger.plan.base.name, len(ledger.plan.ids), len(jobs),
                  where)
         futures = {ex.submit(run_sweep_case, cid, text, str(out / "cases" / cid)): (cid, ov)
@@ -148,9 +148,8 @@ def _execute(jobs: list[tuple[str, dict, str]], out: Path, ledger: _Ledger, *, e
             ledger.done(record_from_task(_task_answer(fut, cid), ov, out))
 
 
-def run_sweep(case, parameters, *, out, executor=None, scheduler: str | None = None, n_workers: int = 2,
-              study: str = "study.npz", progress: bool = False,
-              callback: Callable[[CaseRecord, int, int], None] | None = None) -> SweepResult:
+def run_sweep(case, parameters, *, out, executor=None, n_workers: int = 2, study: str = "study.npz",
+              progress: bool | Callable[[CaseRecord, int, int], None] = False) -> SweepResult:
     """Run a case file for many parameter values as independent tasks; gather one study file.
 
     Every case ``i`` is the base case with its overrides applied; it runs
@@ -167,19 +166,21 @@ def run_sweep(case, parameters, *, out, executor=None, scheduler: str | None = N
         ``"contact.0.gap"``, ``"analysis.harmonics"`` (see :mod:`femodes.app.sweep.overrides`).
     out : str or Path
         Output folder: ``cases/<id>/`` per case and the study file.
-    executor : concurrent.futures.Executor or distributed.Client, optional
-        Where the tasks run; not shut down by the sweep. Worker environments are the caller's.
-    scheduler : str, optional
-        Address of a running Dask scheduler (``"tcp://host:8786"``); ``out`` must be shared.
+    executor : concurrent.futures.Executor, distributed.Client or str, optional
+        Where the tasks run. An executor or client is used as is and not shut down by the sweep
+        (worker environments are the caller's); a string is the address of a running Dask
+        scheduler (``"tcp://host:8786"``), which the sweep connects to and disconnects from (``out``
+        must be on a file system its workers share). Default: an embedded
+        :func:`~femodes.app.sweep.local_cluster` of ``n_workers``, started and closed by the sweep.
     n_workers : int
-        Workers of the embedded :func:`~femodes.app.sweep.local_cluster` used when neither of the
-        above is given.
+        Workers of the embedded cluster (used only when ``executor`` is None).
     study : str
         Study file name in ``out``: ``*.npz`` or ``*.h5`` (needs h5py).
-    progress : bool
-        Log one INFO line per finished case (logger ``femodes.app.sweep.run``).
-    callback : callable, optional
-        ``callback(record, n_done, n_total)`` after each finished case, in the calling process.
+    progress : bool or callable
+        ``True`` logs one INFO line per finished case (logger ``femodes.app.sweep.run``); a
+        callable is called as ``progress(record, n_done, n_total)`` after each finished case, in
+        the calling process (an exception it raises stops the sweep; the study file keeps the
+        finished cases).
 
     Returns
     -------
@@ -188,13 +189,12 @@ def run_sweep(case, parameters, *, out, executor=None, scheduler: str | None = N
         :func:`~femodes.app.sweep.load_study`).
     """
     t_start = time.perf_counter()
-    _check_arguments(out=out, study=study, callback=callback, executor=executor, scheduler=scheduler,
-                     n_workers=n_workers)
+    _check_arguments(out=out, study=study, progress=progress, executor=executor, n_workers=n_workers)
     plan = _plan(_base_case(case), parameters)
     out = Path(out).resolve()
     (out / "cases").mkdir(parents=True, exist_ok=True)
-    ledger = _Ledger(plan, out / study, t_start=t_start, progress=progress, callback=callback)
+    ledger = _Ledger(plan, out / study, t_start=t_start, progress=progress)
     jobs = _checked_jobs(plan, out, ledger)
     if jobs:
-        _execute(jobs, out, ledger, executor=executor, scheduler=scheduler, n_workers=n_workers)
+        _execute(jobs, out, ledger, executor=executor, n_workers=n_workers)
     return ledger.save()
