@@ -26,6 +26,7 @@ LAYERS = {
     "femodes.reduction": 2,
     "femodes.hbm": 3,
     "femodes.time": 3,
+    "femodes.time.shooting": 3,
     "femodes.store": 4,
     "femodes.results": 4,
     "femodes.analyses": 5,

@@ -6,6 +6,11 @@
   returning a :class:`TimeHistory`.
 * :func:`steady_state` -- integrate a forced model period by period until the state at the
   period start repeats (period-``nu`` orbits for ``nu <= 4``), returning a :class:`SteadyState`.
+* :func:`monodromy`, :func:`shoot`, :func:`trajectory` -- event-driven integration (DOP853 with
+  impact and kink events, saltation matrices) of the state and variational equations: monodromy
+  matrix and Floquet multipliers of a periodic orbit (:class:`Monodromy`), Newton shooting for
+  the orbit (:class:`ShootingResult`); the time-domain reference for Hill's method (module
+  ``shooting``).
 
 Modules: ``moreau`` (the scheme, described once, and the public names), ``results`` (the two
 result classes), ``stepper`` (operators of a step, its local problem, the stepping loop),
@@ -18,5 +23,7 @@ discretisations of the same model and can be compared.
 
 from .drivers import TimeSteppingOptions
 from .moreau import SteadyState, TimeHistory, simulate, steady_state
+from .shooting import Monodromy, ShootingResult, monodromy, shoot, trajectory
 
-__all__ = ["TimeHistory", "SteadyState", "simulate", "steady_state", "TimeSteppingOptions"]
+__all__ = ["TimeHistory", "SteadyState", "simulate", "steady_state", "TimeSteppingOptions",
+           "Monodromy", "ShootingResult", "monodromy", "shoot", "trajectory"]
