@@ -293,6 +293,10 @@ def default_linear_solver(A: Any, b: np.ndarray) -> np.ndarray:
     return np.linalg.solve(A, b)
 
 
+#: The dtype of float arrays: a float64 ndarray passes where ``np.asarray(a, dtype=float)`` would
+#: return ``a`` itself, without the call.
+_F64 = np.dtype(np.float64)
+
 #: Arrays up to this size are reduced in Python floats: a numpy reduction costs ~2 us whatever the
 #: size, several per iteration, and the local problems of a time step have 1 to a few unknowns.
 _SMALL = 16
@@ -301,9 +305,12 @@ _SMALL = 16
 def _inf(v: np.ndarray) -> float:
     """``max |v_i|`` of a float vector (0 if empty), the value of :func:`inf_norm`: the maximum is
     exact, so the Python reduction of a small vector gives the same float (nan if an entry is)."""
-    if v.size > _SMALL:
+    n = v.size
+    if n == 1:
+        return abs(v.item())  # nan stays nan, like np.abs(v).max()
+    if n > _SMALL:
         return float(np.abs(v).max())
-    if not v.size:
+    if not n:
         return 0.0
     a = v.tolist()
     if math.isnan(sum(a)):  # a nan entry (or inf - inf): numpy's nan propagation
@@ -313,14 +320,17 @@ def _inf(v: np.ndarray) -> float:
 
 def _finite(v: np.ndarray) -> bool:
     """All entries finite, ``np.all(np.isfinite(v))`` (in Python floats for small arrays)."""
-    if v.size <= _SMALL:
+    n = v.size
+    if n == 1:
+        return math.isfinite(v.item())
+    if n <= _SMALL:
         return all(map(math.isfinite, v.ravel().tolist()))
     return bool(np.isfinite(v).all())
 
 
 def _prepare_jacobian(J: Any, n: int) -> Any:
     """Validate shape; return dense ndarray or sparse matrix unchanged otherwise."""
-    if type(J) is np.ndarray and J.dtype == np.float64 and J.shape == (n, n):
+    if type(J) is np.ndarray and J.dtype is _F64 and J.shape == (n, n):
         return J  # what np.asarray(J, dtype=float) would return, checked
     if sp.issparse(J) or is_operator(J):
         if J.shape != (n, n):
@@ -417,7 +427,7 @@ def semismooth_newton(
         options = NewtonOptions()
     elif not isinstance(options, NewtonOptions):
         raise TypeError(f"options must be a NewtonOptions instance or None, got {type(options).__name__}")
-    if type(x0) is np.ndarray and x0.dtype == np.float64 and x0.ndim == 1 and x0.size and _finite(x0):
+    if type(x0) is np.ndarray and x0.dtype is _F64 and x0.ndim == 1 and x0.size and _finite(x0):
         x = x0.copy()  # what start_vector returns, without its generic conversion
     else:
         x = start_vector(x0)
@@ -433,7 +443,7 @@ class _Stop(Exception):
         self.status, self.message, self.nit, self.use_best = status, message, nit, use_best
 
 
-@dataclass
+@dataclass(slots=True)
 class _Step:
     """A step taken: ``x = x_from + alpha * dx`` with ``r(x)``, ``J(x)``; ``ok`` is False when the
     line search failed down to ``min_alpha`` (the best trial was taken anyway)."""
@@ -456,6 +466,8 @@ class _Watchdog:
     none does, the iteration returns to the watch point and backtracks along its direction.
     """
 
+    __slots__ = ("merits", "x", "dx", "relaxed", "budget", "memory", "on")
+
     def __init__(self, x: np.ndarray, r: np.ndarray, options: NewtonOptions) -> None:
         self.merits = [0.5 * float(r @ r)]  # merit values of the watch points
         self.x = x  # current watch point
@@ -473,7 +485,8 @@ class _Watchdog:
     def references(self) -> tuple[float, float]:
         """Merit at the watch point, and the non-monotone reference: the largest merit of the
         last ``nonmonotone_memory`` watch points."""
-        return self.merits[-1], max(self.merits[-self.memory:])
+        phi = self.merits[-1]
+        return phi, (phi if self.memory == 1 else max(self.merits[-self.memory:]))
 
     def may_relax(self) -> bool:
         return self.on and self.relaxed < self.budget
@@ -489,8 +502,9 @@ def _backtrack(evaluate: Callable, x0: np.ndarray, dx: np.ndarray, phi0: float, 
     """Non-monotone Armijo backtracking [GLL86]_ from ``x0`` along ``dx``, trials ``alpha, alpha/2, ...``
     down to ``min_alpha``.
 
-    Returns ``(accepted, alpha, x, r, J)``: the first trial that passes the test, or (``accepted``
-    False) the trial with the smallest merit; ``None`` if every trial residual was non-finite.
+    Returns ``(accepted, alpha, x, r, J, phi)``: the first trial that passes the test, or
+    (``accepted`` False) the trial with the smallest merit, with its merit ``phi``; ``None`` if
+    every trial residual was non-finite.
     """
     slope = -2.0 * phi0  # d/dalpha phi(x + alpha dx) at 0 for an exact Newton step
     trial_best = None
@@ -499,10 +513,10 @@ def _backtrack(evaluate: Callable, x0: np.ndarray, dx: np.ndarray, phi0: float, 
         r_try, J_try = evaluate(x_try)
         phi_try = 0.5 * float(r_try @ r_try) if _finite(r_try) else math.inf
         if math.isfinite(phi_try):  # a Python float
+            if phi_try <= phi_ref + _ARMIJO_SIGMA * alpha * slope:
+                return True, alpha, x_try, r_try, J_try, phi_try
             if trial_best is None or phi_try < trial_best[0]:
                 trial_best = (phi_try, alpha, x_try, r_try, J_try)
-            if phi_try <= phi_ref + _ARMIJO_SIGMA * alpha * slope:
-                return True, alpha, x_try, r_try, J_try
         if alpha <= min_alpha:
             break
         # plain halving: quadratic interpolation of phi(alpha) is misled by
@@ -510,7 +524,7 @@ def _backtrack(evaluate: Callable, x0: np.ndarray, dx: np.ndarray, phi0: float, 
         alpha = max(0.5 * alpha if math.isfinite(phi_try) else 0.1 * alpha, min_alpha)
     if trial_best is None:
         return None
-    return (False,) + trial_best[1:]
+    return (False,) + trial_best[1:] + trial_best[:1]
 
 
 def _converged_message(rnorm: float) -> str:
@@ -552,7 +566,7 @@ class _Iteration:
             r_raw, J_raw = out
         except (TypeError, ValueError):
             raise ValueError("fun must return a pair (r, J)") from None
-        r = np.asarray(r_raw, dtype=float)
+        r = r_raw if type(r_raw) is np.ndarray and r_raw.dtype is _F64 else np.asarray(r_raw, dtype=float)
         if r.shape != (n,):
             raise ValueError(
                 f"fun returned a residual of shape {r.shape}, expected ({n},) matching x of shape ({n},)"
@@ -603,7 +617,10 @@ class _Iteration:
             sol = self.solve(self.J, self.r)
         except LINSOLVE_ERRORS as exc:
             raise _Stop(3, f"singular or failed linear solve at iteration {it}: {exc}", it - 1, True) from exc
-        dx = -np.asarray(sol, dtype=float).reshape(-1)
+        if type(sol) is np.ndarray and sol.dtype is _F64 and sol.ndim == 1:
+            dx = -sol
+        else:
+            dx = -np.asarray(sol, dtype=float).reshape(-1)
         if dx.shape != (self.n,):
             raise ValueError(f"linear_solver returned shape {np.shape(sol)}, expected ({self.n},)")
         if not _finite(dx):
@@ -653,10 +670,10 @@ class _Iteration:
         out = _backtrack(self.evaluate, wd.x, wd.dx, phi_w, phi_ref, alpha0, self.options.min_alpha)
         if out is None:
             raise _Stop(3, f"non-finite residual at all line-search trials of step {it}", it - 1, True)
-        ok, alpha, x_new, r_new, J_new = out
+        ok, alpha, x_new, r_new, J_new, phi_new = out
         if ok and alpha == 1.0 and self.options.watchdog > 0:
             wd.on = True  # full Newton steps work again: re-enable relaxed steps
-        wd.move_to(x_new, 0.5 * float(r_new @ r_new))
+        wd.move_to(x_new, phi_new)
         return _Step(alpha, wd.dx, x_new, r_new, J_new, ok=ok, kind="backtracked" if ok else "line search failed")
 
     def accept(self, it: int, step: _Step) -> float:

@@ -29,6 +29,10 @@ __all__ = ["ImpactLaw", "fischer_burmeister", "solve_lcp"]
 
 _FB_KINK = 1.0 - 1.0 / math.sqrt(2.0)
 
+#: Up to this many contacts, :meth:`ImpactLaw.free_flight` tests them one by one in Python floats
+#: (~0.2 us each, against ~4 us for the vectorised test of any number).
+_FEW = 8
+
 
 class ImpactLaw:
     """The unilateral contacts of a model on a step of length ``h``: which are active, and ``b``.
@@ -52,7 +56,16 @@ class ImpactLaw:
         self.dofs = np.asarray(dofs, dtype=int)
         self.massless = np.asarray(massless, dtype=bool)
         self.any_massless = bool(np.any(self.massless))
+        self.all_massless = bool(self.massless.size) and bool(np.all(self.massless))
         self.e, self.h = float(restitution), float(h)
+        # per-step constants: h/2 of the predicted gap, and every contact active (all massless)
+        self.half_h = 0.5 * self.h
+        self.all_active = np.ones(self.dofs.size, dtype=bool)
+        self.all_active.flags.writeable = False
+        # a few massive contacts (the common case): the free-flight test in Python floats, the
+        # operations of predicted_active (g_N = gap - q, UnilateralContact.gap_function) per contact
+        self._few = (tuple(zip(self.law.gap.tolist(), self.dofs.tolist()))
+                     if self.dofs.size <= _FEW and not self.any_massless else None)
 
     def __len__(self) -> int:
         return self.dofs.size
@@ -60,16 +73,33 @@ class ImpactLaw:
     def predicted_active(self, qc: np.ndarray, vc: np.ndarray) -> np.ndarray:
         """Massive contacts whose gap predicted at mid-step, ``g_N(q_k) - (h/2) v_k``, is ``<= 0``
         (Moreau's viability lemma then enforces ``g_N >= 0`` up to ``O(h)``)."""
-        return self.law.gap_function(qc) - 0.5 * self.h * vc <= 0.0
+        return self.law.gap_function(qc) - self.half_h * vc <= 0.0
+
+    def free_flight(self, x: np.ndarray, n: int) -> bool:
+        """Whether the step from the state ``x = [q; v]`` of ``n`` DOFs is a free flight: no
+        contact in the complementarity problem (no massless contact, and :meth:`predicted_active`
+        False for every massive one). Called on every step of a contact-only model."""
+        if self.any_massless:
+            return False
+        if self._few is not None:
+            half_h = self.half_h
+            for gap, d in self._few:
+                if (gap - x.item(d)) - half_h * x.item(n + d) <= 0.0:
+                    return False
+            return True
+        return not self.predicted_active(x[self.dofs], x[n + self.dofs]).any()
 
     def rhs(self, qc: np.ndarray, vc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(active, b)`` at the start state of a step: the contacts in the complementarity problem
         and the right-hand sides of ``y = b - v_{c,k+1}``: ``-e v_{c,k}`` (impact law) or
-        ``g_N(q_k) / h`` (massless: ``g_N(q_{k+1}) = g_N(q_k) - h v_{c,k+1}`` with theta = 1)."""
+        ``g_N(q_k) / h`` (massless: ``g_N(q_{k+1}) = g_N(q_k) - h v_{c,k+1}`` with theta = 1).
+        ``active`` may be a shared read-only array."""
         if not self.any_massless:
             return self.predicted_active(qc, vc), -self.e * vc
         g0 = self.law.gap_function(qc)
-        active = self.massless | (g0 - 0.5 * self.h * vc <= 0.0)
+        if self.all_massless:  # every contact quasi-static: all in the problem
+            return self.all_active, g0 / self.h
+        active = self.massless | (g0 - self.half_h * vc <= 0.0)
         return active, np.where(self.massless, g0 / self.h, -self.e * vc)
 
 

@@ -24,6 +24,7 @@ larger ones with a sparse LU of ``A``.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,7 +47,15 @@ DENSE_LIMIT = 200
 def solve_or_lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``A^{-1} b`` (LAPACK ``gesv``), or the least-squares solution when ``A`` is exactly singular
     (a kink of the Fischer-Burmeister function can make the generalized Jacobian singular; the
-    minimum-norm step keeps the iteration going)."""
+    minimum-norm step keeps the iteration going).
+
+    A nonsingular ``1 x 1`` system (one local DOF, e.g. a Duffing oscillator: every step) is the
+    quotient ``b / a``, what ``gesv`` computes there, without the LAPACK call (~5 us).
+    """
+    if type(A) is np.ndarray and A.shape == (1, 1):
+        a = A.item()
+        if a != 0.0:
+            return b / a
     try:
         return np.linalg.solve(A, b)
     except np.linalg.LinAlgError:
@@ -122,7 +131,11 @@ class Stepper:
         self._local_dofs(model, contacts)
         self._contacts(contacts)
         self._delassus()
-        self.P_prev = np.zeros(len(self.impact))  # warm start of the next complementarity problem
+        # read-only constants of the per-step path: no contact impulse, no unilateral contact
+        self.no_impulse = np.zeros(len(self.impact))
+        self.no_contact = np.zeros(0, dtype=bool)
+        self.no_impulse.flags.writeable = self.no_contact.flags.writeable = False
+        self.P_prev = self.no_impulse  # warm start of the next complementarity problem
         self.lam_prev = None  # warm start of the next smooth-only local problem (None: from lam = 0)
         if self.dense:
             self._propagators()
@@ -192,6 +205,8 @@ class Stepper:
         self.has_smooth = bool(self.smooth_laws)
         self.smooth_everywhere = (len(self.smooth_laws) == 1 and isinstance(self.smooth_laws[0][1], slice)
                                   and self.smooth_laws[0][1] == slice(0, len(S)))
+        # what smooth_force(qS) calls: the stacked law itself when it covers every local DOF
+        self.smooth_force_fn = self.smooth_laws[0][0].force if self.smooth_everywhere else self.smooth_force
         # penalty contacts only: an open contact exerts no force, so a step that leaves them all open
         # needs no local solve
         self.penalty_only = all(isinstance(law, PenaltyContact) for law, _ in smooth)
@@ -230,6 +245,10 @@ class Stepper:
         self.Wuc = self.W[np.ix_(self.uc_loc, self.uc_loc)] if self.uc else np.zeros((0, 0))
         if self.uc and np.any(np.diag(self.Wuc) <= 0):
             raise ValueError("model: non-positive Delassus operator at a contact DOF")
+        # one unilateral contact: its local position and Delassus entry (closed-form impulse)
+        self.single_uc = len(self.uc) == 1
+        self.uc_loc1 = int(self.uc_loc[0]) if self.single_uc else -1
+        self.W1 = float(self.Wuc[0, 0]) if self.single_uc else math.nan
 
     def _propagators(self) -> None:
         """Dense propagators of the state ``x = [q; v]``: free step ``x_f = Phi x + Gam f_theta``,
@@ -299,7 +318,7 @@ class Stepper:
             return self._impacts_only(v0S, dvfS, active, b)
         h, W, hth, hhtt, eye = self.h, self.W, self.hth, self.hhtt, self.eye_S
         base_q = q0S + h * v0S + hth * dvfS
-        if not active.any():
+        if not self.uc or not active.any():
             return self._smooth_only(base_q)
         self.lam_prev = None
         s = self.S.size
@@ -338,8 +357,7 @@ class Stepper:
         step's ``lam`` (it changes by ``O(h^2)`` per step: measured 1.0 Newton iteration per step
         instead of 1.6 from ``lam = 0`` on a Duffing oscillator). Penalty contacts alone, all open
         at ``base_q``: ``lam = 0`` exactly, no solve."""
-        smooth_force = self.smooth_laws[0][0].force if self.smooth_everywhere else self.smooth_force
-        no_impulse = np.zeros(len(self.impact))
+        smooth_force, no_impulse = self.smooth_force_fn, self.no_impulse
         if self.penalty_only and not smooth_force(base_q)[0].any():  # every contact open: lam = 0 exactly
             self.lam_prev = None
             return np.zeros(self.S.size), no_impulse, None
@@ -358,6 +376,15 @@ class Stepper:
         """No smooth law: ``lam = -E P`` and an LCP in ``P`` with Delassus ``W_a`` (closed form for
         one active contact)."""
         s = self.S.size
+        if self.single_uc:  # one contact: the closed form in Python floats (s = 1)
+            if not active.item(0):
+                return np.zeros(s), self.no_impulse, None
+            i = self.uc_loc1
+            yfree = b.item(0) - (v0S.item(i) + dvfS.item(i))
+            p = max(0.0, -yfree / self.W1)
+            lam = np.zeros(s)
+            lam[i] = 0.0 - p
+            return lam, np.array([p]), None
         P = np.zeros(len(self.impact))
         ia = np.flatnonzero(active)
         if ia.size == 0:
@@ -391,13 +418,13 @@ class Stepper:
         if S.size:
             q0S, v0S = q0[S], v0[S]
             if self.has_smooth:
-                fs0, _ = self.smooth_force(q0S)
+                fs0, _ = self.smooth_force_fn(q0S)
                 r[S] -= h * (1.0 - self.thS) * fs0
             dvf = self.solve(r)
             if self.uc:
                 active, b = self.impact.rhs(q0[self.uc_dof], v0[self.uc_dof])
             else:
-                active, b = np.zeros(0, dtype=bool), np.zeros(0)
+                active = b = self.no_contact
             lam, P, failure = self.local(q0S, v0S, dvf[S], active, b)
             self.P_prev = P
             dv = dvf + self.Z @ lam
@@ -464,75 +491,96 @@ def _forcing_samples(st: Stepper, tk: np.ndarray, n_steps: int) -> np.ndarray:
     return np.tile(st.f0, (n_steps + 1, 1))
 
 
+def _take(idx: np.ndarray):
+    """DOF indices ``idx`` as a slice when they are ``i, i+1, ..., j``: ``x[idx]`` is then a view,
+    cheaper than the copy of fancy indexing (the loops below only read it)."""
+    if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
+
+
 class _DenseRun:
     """The loop of small models: the state ``x = [q; v]`` stepped by the dense propagators, the
-    contact impulses accumulated between stored samples."""
+    contact impulses accumulated between stored samples.
+
+    Per-step constants are set up here once. A model whose local DOFs are unilateral contacts on
+    massive DOFs only (no smooth law) takes the free step without a local problem whenever no
+    contact is predicted active (:meth:`ImpactLaw.free_flight`); one local DOF corrects the free
+    state by its column of ``Psi`` (the product ``Psi @ lam`` with one term).
+    """
 
     def __init__(self, st: Stepper, rec: _Recorder, tk: np.ndarray, fall: np.ndarray | None):
         self.st, self.rec, self.tk = st, rec, tk
         n = st.n
         self.fx = (st.thf * fall[1:] + (1.0 - st.thf) * fall[:-1]) @ st.Gam.T if fall is not None else None
-        self.S, self.vS_idx = st.S, n + st.S
-        if st.uc:
-            self.ucd, self.ucv = st.uc_dof, n + st.uc_dof
-            self.inline_impact, self.minus_e = not st.impact.any_massless, -st.e  # massive contacts only: written out
+        self.S, self.vS_idx = _take(st.S), _take(n + st.S)
+        self.ucd, self.ucv = _take(st.uc_dof), _take(n + st.uc_dof)
+        self.free_flight = (st.impact.free_flight if st.uc and not st.has_smooth and not st.impact.any_massless
+                            else None)
+        self.psi1 = st.Psi[:, 0].copy() if st.S.size == 1 else None
+        self.uc_col = np.asarray(st.uc, dtype=int)  # impulse columns of the unilateral contacts
         self.acc = np.zeros(st.n_contacts)
+        self.acc_used = False  # impulses accumulated since the last stored sample
 
     def run(self, q, v, n_steps: int):
         """Step ``n_steps`` times from ``(q, v)``; the final ``(q, v)``."""
         st, rec = self.st, self.rec
         n, nc, store = st.n, st.n_contacts, rec.store
-        Phi, fx = st.Phi, self.fx
-        forced, has_local = fx is not None, st.S.size > 0
+        U, V, IMP = rec.U, rec.V, rec.IMP
+        Phi, fx, free_flight, no_impulse = st.Phi, self.fx, self.free_flight, st.no_impulse
+        local_step = self._local_step if st.S.size else None
         x = np.concatenate([q, v])
+        j = rec.k
         for k in range(n_steps):
             xf = Phi @ x
-            if forced:
+            if fx is not None:
                 xf += fx[k]
-            x = self._local_step(k, x, xf) if has_local else xf
-            if store[k + 1]:
-                rec.sample(x[:n], x[n:], self.acc)
-                self.acc = np.zeros(nc)
+            if local_step is None:
+                x = xf
+            elif free_flight is not None and free_flight(x, n):  # no contact predicted: x = x_f
+                st.P_prev = no_impulse
+                x = xf
+            else:
+                x = local_step(k, x, xf)
+            if store[k + 1]:  # rec.sample(x[:n], x[n:], acc), IMP is zero where nothing accumulated
+                U[j] = x[:n]
+                V[j] = x[n:]
+                if self.acc_used:
+                    IMP[j] = self.acc
+                    self.acc = np.zeros(nc)
+                    self.acc_used = False
+                j += 1
+        rec.k = j
         return x[:n], x[n:]
 
     def _local_step(self, k: int, x: np.ndarray, xf: np.ndarray) -> np.ndarray:
-        """State after step ``k`` from ``x``, its free state ``xf`` corrected by the local problem."""
+        """State after step ``k`` from ``x``, its free state ``xf`` corrected (in place) by the
+        local problem."""
         st = self.st
-        S, vS_idx = self.S, self.vS_idx
-        q0S, v0S = x[S], x[vS_idx]
+        vS_idx = self.vS_idx
+        q0S, v0S = x[self.S], x[vS_idx]
         if st.has_smooth:
-            fs0, _ = st.smooth_force(q0S)
+            fs0, _ = st.smooth_force_fn(q0S)
             xf += st.Psi @ (st.free_fs * fs0)
-        active, b = self._impact_rhs(x)
-        if active is None:  # free flight: x = x_f
-            st.P_prev = np.zeros(len(st.uc))
-            return xf
+        if st.uc:
+            active, b = st.impact.rhs(x[self.ucd], x[self.ucv])
+        else:
+            active = b = st.no_contact
         lam, P, failure = st.local(q0S, v0S, xf[vS_idx] - v0S, active, b)
         if failure is not None:
             self.rec.failed(self.tk[k], failure)
         st.P_prev = P
-        x_new = xf + st.Psi @ lam
+        if self.psi1 is not None:
+            xf += self.psi1 * lam.item(0)
+        else:
+            xf += st.Psi @ lam
         if st.n_contacts:
             if st.uc:
-                self.acc[st.uc] += P
+                self.acc[self.uc_col] += P
             if st.pc:
-                self.acc += st.penalty_impulse(x[: st.n], x_new[: st.n])
-        return x_new
-
-    def _impact_rhs(self, x: np.ndarray):
-        """Active unilateral contacts and their impact-law right-hand sides at the state ``x``;
-        ``(None, None)`` for a free flight without smooth laws (the step is the free one)."""
-        st = self.st
-        if not st.uc:
-            active = np.zeros(0, dtype=bool)
-            return active, active
-        qc, vc = x[self.ucd], x[self.ucv]
-        if not self.inline_impact:
-            return st.impact.rhs(qc, vc)
-        active = st.impact.predicted_active(qc, vc)  # ImpactLaw.rhs without massless contacts
-        if not st.has_smooth and not active.any():
-            return None, None
-        return active, self.minus_e * vc
+                self.acc += st.penalty_impulse(x[: st.n], xf[: st.n])
+            self.acc_used = True
+        return xf
 
 
 def _run_sparse(st: Stepper, rec: _Recorder, tk: np.ndarray, fall: np.ndarray | None, q, v, n_steps: int):
