@@ -21,8 +21,10 @@ The curves bend to the right (hardening) and lean on the backbone of the free sy
 
 (c) Between the folds three periodic solutions coexist. At w = 2.0 (c = 0.1, eps = 1) they are
 re-solved with ``fm.semismooth_newton`` on ``fm.ForcedResponseProblem(...).residual`` from the
-nearest branch points: max|u| = 2.180126 (resonant, stable), 1.842510 (middle, unstable),
-0.342901 (non-resonant, stable) (shared/references.md).
+nearest branch points: max|u| = 2.180126, 1.842510, 0.342901 (shared/references.md). Their
+stability is *computed*, by Hill's method and by shooting (``fm.stability``): the resonant and
+non-resonant cycles are stable, the middle one is a saddle (a real Floquet multiplier > 1), and
+the forced branch traced with ``stability=True`` is unstable exactly between its two folds.
 """
 
 import dataclasses
@@ -66,7 +68,8 @@ CASES = {(0.1, 1.0): dict(peak=3.37896402, w_peak=3.03809479, folds=(3.03905472,
          (0.2, 1.0): dict(peak=2.31894315, w_peak=2.20760507, folds=(2.21316595, 1.63530555)),
          (0.1, 0.1): dict(peak=5.62884200, w_peak=1.81659786, folds=(1.81839650, 1.33474639))}
 FORCED_OPTIONS = fm.ContinuationOptions(step=0.05, max_step=0.1, newton=fm.NewtonOptions(atol=1e-9, max_iter=20))
-forced = {key: fm.frequency_response(duffing(*key, force=1.0), (0.5, 4.0), H_FORCED, options=FORCED_OPTIONS)
+forced = {key: fm.frequency_response(duffing(*key, force=1.0), (0.5, 4.0), H_FORCED, options=FORCED_OPTIONS,
+                                     stability=True)
           for key in CASES}
 folds = {key: br.omega[list(br.folds)] for key, br in forced.items()}
 peaks = {key: float(br.amplitude(0).max()) for key, br in forced.items()}
@@ -97,6 +100,9 @@ def solve_at(branch, problem, omega):
 
 coexisting = solve_at(_branch, _problem, W_COEXIST)  # in branch order: resonant, unstable, non-resonant
 coexisting_amplitude = np.array([sol.amplitude(0) for sol in coexisting])
+# their stability, by both methods (Floquet multipliers, largest modulus first)
+coexisting_stability = [{m: fm.stability(sol, method=m) for m in ("hill", "shooting")} for sol in coexisting]
+coexisting_stable = [st["hill"].stable for st in coexisting_stability]
 
 
 def main(out="out"):
@@ -125,18 +131,22 @@ def main(out="out"):
     ax2.plot(backbone_eps01.omega, backbone_eps01.amplitude(0), "k--", lw=1.0, label="backbone eps = 0.1")
     for key, br in forced.items():
         a = br.amplitude(0)
-        ax2.plot(br.omega, a, lw=1.5, label=f"c = {key[0]}, eps = {key[1]}")
+        solid = np.where(br.stable, a, np.nan)
+        (line,) = ax2.plot(br.omega, solid, lw=1.5, label=f"c = {key[0]}, eps = {key[1]}")
+        ax2.plot(br.omega, np.where(br.stable, np.nan, a), "--", lw=1.5, color=line.get_color())
         ax2.plot(br.omega[list(br.folds)], a[list(br.folds)], "kx")
     ax2.plot([W_COEXIST] * 3, coexisting_amplitude, "o", mfc="none", color="C3", label="w = 2.0 (panel 3)")
     ax2.set_xlim(0.5, 4.0)
     ax2.set_ylim(0, 6.5)
     ax2.set_xlabel("w [rad/s]")
     ax2.set_ylabel("max |u|")
-    ax2.set_title("forced Duffing, F = 1, H = 9 (folds x)")
+    ax2.set_title("forced Duffing, F = 1, H = 9 (folds x, unstable dashed)")
     ax2.legend(fontsize=8)
 
-    for sol, name in zip(coexisting, ("resonant (stable)", "middle (unstable)", "non-resonant (stable)")):
-        fm.plot.phase_portrait(sol, 0, ax=ax3, label=f"{name}: max|u| = {sol.amplitude(0):.4f}")
+    for sol, st, name in zip(coexisting, coexisting_stability, ("resonant", "middle", "non-resonant")):
+        mu = st["hill"].multipliers[0]
+        word = "stable" if st["hill"].stable else "unstable"
+        fm.plot.phase_portrait(sol, 0, ax=ax3, label=f"{name} ({word}, |mu| = {abs(mu):.3f}): max|u| = {sol.amplitude(0):.4f}")
     ax3.set_title("three coexisting cycles at w = 2.0 (c = 0.1, eps = 1)")
     ax3.legend(fontsize=8)
     fig.tight_layout()
@@ -155,4 +165,8 @@ if __name__ == "__main__":
         print(f"c = {key[0]}, eps = {key[1]}: folds {np.round(folds[key], 8)} (ref {ref['folds']}), "
               f"max|u| on branch {peaks[key]:.6f} (ref peak {ref['peak']}), {len(br)} points")
     print(f"coexisting at w = {W_COEXIST}: max|u| = {np.round(coexisting_amplitude, 6)} (ref {COEXIST_REF})")
+    for st in coexisting_stability:
+        print("   ", "stable  " if st["hill"].stable else "UNSTABLE",
+              "largest |mu|: Hill", f"{abs(st['hill'].multipliers[0]):.8f}", "shooting",
+              f"{abs(st['shooting'].multipliers[0]):.8f}")
     print("saved", main())

@@ -25,6 +25,7 @@ from .results import Branch, ContactInfo
 from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
+from .stability import METHODS, annotate_branch
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
            "branch_from_continuation", "model_fingerprint"]
@@ -97,6 +98,7 @@ def frequency_response(
     projection=None,
     progress: bool | Callable = False,
     checkpoint: str | os.PathLike | Checkpoint | None = None,
+    stability: bool | str = False,
 ) -> Branch:
     """Forced frequency-response curve by HBM and pseudo-arclength continuation.
 
@@ -163,14 +165,18 @@ def frequency_response(
             run_options = dataclasses.replace(run_options, x_scale=_response_scale(problem, span, xs))
         return xs, run_options
 
+    method = _stability_method(stability, "frequency_response")
+
     def wrap(res, meta) -> Branch:
-        return branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span), **meta})
+        branch = branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span), **meta})
+        return _with_stability(branch, problem, model, method, opts)
 
     description = {"analysis": "frequency_response", "omega": list(span), "harmonics": _harmonics_key(h),
                    "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
-    return run_continuation(problem, span, opts, "frequency_response", progress, x0=start, wrap=wrap, model=model,
-                            checkpoint=checkpoint, description=description)
+    branch = run_continuation(problem, span, opts, "frequency_response", progress, x0=start, wrap=wrap, model=model,
+                              checkpoint=checkpoint, description=description)
+    return _with_stability(branch, problem, model, method, opts)  # a finished checkpoint saved without it
 
 
 def frequency_response_options(**changes) -> ContinuationOptions:
@@ -267,6 +273,7 @@ def nonlinear_mode(
     projection=None,
     progress: bool | Callable = False,
     checkpoint: str | os.PathLike | Checkpoint | None = None,
+    stability: bool | str = False,
 ) -> Branch:
     """Nonlinear mode (frequency-energy backbone) by the extended periodic motion concept.
 
@@ -299,6 +306,7 @@ def nonlinear_mode(
     span = (math.log10(e0), math.log10(e1))
     x0 = problem.linear_guess(e0)
     options = nonlinear_mode_options(problem, x0, options)
+    method = _stability_method(stability, "nonlinear_mode")
 
     def wrap(res, meta) -> Branch:
         if res.status == 5:  # the start failed: say it in the user's terms, not as p = log10(E)
@@ -306,14 +314,36 @@ def nonlinear_mode(
                 f"no periodic motion found at the start energy {e0:g} by Newton from linear mode {mode} ({res.message}); "
                 f"start at a lower energy, where the motion is nearly linear (e.g. below first contact), "
                 f"or raise the harmonics"))
-        return branch_from_continuation(problem, res, kind="nonlinear mode", model=model,
-                                        meta={"mode": int(mode), "energy_span": [e0, e1], **meta})
+        branch = branch_from_continuation(problem, res, kind="nonlinear mode", model=model,
+                                          meta={"mode": int(mode), "energy_span": [e0, e1], **meta})
+        return _with_stability(branch, problem, model, method, options)
 
     description = {"analysis": "nonlinear_mode", "mode": int(mode), "energy": [e0, e1], "harmonics": _harmonics_key(h),
                    "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
-    return run_continuation(problem, span, options, "nonlinear_mode", progress, x0=lambda o: (x0, o), wrap=wrap, model=model,
-                            checkpoint=checkpoint, description=description)
+    branch = run_continuation(problem, span, options, "nonlinear_mode", progress, x0=lambda o: (x0, o), wrap=wrap,
+                              model=model, checkpoint=checkpoint, description=description)
+    return _with_stability(branch, problem, model, method, options)
+
+
+def _stability_method(stability: Any, owner: str) -> str | None:
+    """``stability=`` of the analyses: False (none), True (``"auto"``) or a method name."""
+    if stability is False or stability is None:
+        return None
+    if stability is True:
+        return "auto"
+    if stability in METHODS:
+        return stability
+    raise ValueError(f"{owner}: stability must be True, False or one of {', '.join(map(repr, METHODS))}, "
+                     f"got {stability!r}")
+
+
+def _with_stability(branch: Branch, problem, model: StructuralModel, method: str | None,
+                    options: ContinuationOptions) -> Branch:
+    """The branch with its stability and bifurcations (:mod:`femodes.stability`), once."""
+    if method is None or branch.stable is not None or not len(branch):
+        return branch
+    return annotate_branch(branch, problem, model, method=method, newton=options.newton)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -83,7 +83,8 @@ def frequency_energy(branches: Any, ax: Any = None, *, labels: Any = None, hz: b
     Parameters
     ----------
     branches : Branch or sequence of Branch
-        Nonlinear modes (solid lines) and forced responses (dashed lines).
+        Nonlinear modes (solid lines) and forced responses (dashed lines); with stability
+        computed, unstable parts are dotted and bifurcations marked by kind.
     ax : matplotlib Axes, optional
     labels : sequence of str, optional
         One legend label per branch (default: the branch kind, with the mode number).
@@ -123,10 +124,15 @@ def frequency_energy(branches: Any, ax: Any = None, *, labels: Any = None, hz: b
         else:
             label = br.kind
         ls = "-" if br.kind == "nonlinear mode" else "--"
-        (line,) = ax.plot(_freq(br.omega, hz), br.energy, ls, label=label,
+        energy = br.energy if br.stable is None else _split_by_stability(br.energy, br.stable)[0]
+        (line,) = ax.plot(_freq(br.omega, hz), energy, ls, label=label,
                           **({"marker": ".", "ms": 3} if show_points else {}))
+        if br.stable is not None and not br.stable.all():
+            ax.plot(_freq(br.omega, hz), _split_by_stability(br.energy, br.stable)[1], ":", color=line.get_color(),
+                    label=f"{label}, unstable")
         if mark_folds and br.folds:
             folds.append((br, line.get_color()))
+        _mark_bifurcations(ax, br, lambda b: b.energy, hz)
     for br, color in folds:
         idx = list(br.folds)
         ax.plot(_freq(br.omega[idx], hz), br.energy[idx], "x", color=color, ms=8, mew=2, label="_fold")
@@ -159,7 +165,11 @@ def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str |
     Returns
     -------
     matplotlib Axes
-        Line 0: ``(omega, amplitude)``; line 1 (if folds): the fold points.
+        Line 0: ``(omega, amplitude)``; line 1 (if folds): the fold points. With stability
+        computed (``stability=True``): line 0 the stable parts (NaN elsewhere), line 1 the
+        unstable parts dashed, then the folds, then one marker line per bifurcation kind other
+        than folds (period doubling squares, Neimark-Sacker diamonds, branch points circles,
+        nonsmooth triangles).
     """
     owner = "frequency_response"
     if not isinstance(branch, Branch):
@@ -168,15 +178,54 @@ def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str |
     ax = _axes(ax, owner)
     amp = branch.amplitude(idx)
     w = _freq(branch.omega, hz)
-    ax.plot(w, amp, "-", label=label or branch.kind)
+    if branch.stable is None:
+        ax.plot(w, amp, "-", label=label or branch.kind)
+    else:
+        solid, dashed = _split_by_stability(amp, branch.stable)
+        (line,) = ax.plot(w, solid, "-", label=f"{label or branch.kind}, stable")
+        ax.plot(w, dashed, "--", color=line.get_color(), label=f"{label or branch.kind}, unstable")
     if mark_folds and branch.folds:
         f = list(branch.folds)
         ax.plot(w[f], amp[f], "x", color="k", ms=8, mew=2, label="fold")
+    _mark_bifurcations(ax, branch, lambda b: _amplitude_of(branch, b, idx), hz)
     ax.set_xlabel(_freq_label(hz))
     ax.set_ylabel(f"amplitude ({dof_label})")
     ax.grid(True, alpha=0.3)
     ax.legend()
     return ax
+
+
+#: Marker and legend label of each bifurcation kind (folds have their own ``x`` markers).
+_BIFURCATION_STYLE = {"period_doubling": ("s", "period doubling"), "neimark_sacker": ("D", "Neimark-Sacker"),
+                      "branch_point": ("o", "branch point"), "nonsmooth": ("^", "nonsmooth (grazing)")}
+
+
+def _split_by_stability(y: np.ndarray, stable: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``y`` where stable and where unstable (NaN elsewhere); a point where stability changes is in
+    both, so that the two lines join."""
+    stable = np.asarray(stable, dtype=bool)
+    unstable = ~stable
+    edge = np.zeros_like(stable)
+    edge[:-1] |= stable[:-1] != stable[1:]
+    edge[1:] |= stable[:-1] != stable[1:]
+    solid = np.where(stable | edge, y, np.nan)
+    dashed = np.where(unstable | edge, y, np.nan)
+    return solid, dashed
+
+
+def _amplitude_of(branch: Branch, bif, dof: int) -> float:
+    n = max(512, 16 * branch.harmonics.n_coef)
+    E = branch.harmonics.synthesis(2 * np.pi * np.arange(n) / n)
+    return float(np.max(np.abs(E @ bif.Q[:, dof])))
+
+
+def _mark_bifurcations(ax, branch: Branch, value, hz: bool) -> None:
+    """One marker line per bifurcation kind (folds aside), black, labelled by kind."""
+    for kind, (marker, text) in _BIFURCATION_STYLE.items():
+        bifs = [b for b in branch.bifurcations if b.kind == kind]
+        if bifs:
+            ax.plot(_freq(np.array([b.omega for b in bifs]), hz), [value(b) for b in bifs], marker, color="k",
+                    mfc="none", ms=9, mew=1.5, ls="none", label=text)
 
 
 def _default_dof(solution: PeriodicSolution) -> int:

@@ -21,10 +21,57 @@ from .hbm.harmonics import Harmonics
 from .laws import PenaltyContact, UnilateralContact
 from .store import RECORD_SUFFIXES, read_record, write_record
 
-__all__ = ["PeriodicSolution", "Branch", "load_branch", "FORMAT_VERSION"]
+__all__ = ["PeriodicSolution", "Branch", "Bifurcation", "load_branch", "FORMAT_VERSION", "BIFURCATION_KINDS"]
 
 FORMAT_VERSION = 1
-#: Version of the checkpoint journal layout (header and point files), checked on resume.
+
+#: The kinds of :class:`Bifurcation`: a fold (saddle-node; a multiplier crosses +1 where the
+#: branch turns back), a branch point (a multiplier crosses +1 and another branch crosses this
+#: one), period doubling (-1), Neimark-Sacker (a complex pair), and "nonsmooth": multipliers that
+#: jump across the unit circle instead of crossing it (the contact pattern changes there: grazing).
+BIFURCATION_KINDS = ("fold", "branch_point", "period_doubling", "neimark_sacker", "nonsmooth")
+
+
+@dataclass(frozen=True, eq=False)
+class Bifurcation:
+    """A bifurcation located on a branch (``branch.bifurcations``).
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`BIFURCATION_KINDS`.
+    index : int
+        A fold: the index of the fold point of the branch; otherwise the point before the
+        bifurcation (it lies between points ``index`` and ``index + 1``).
+    omega, energy : float
+        Where it is (rad/s; period-averaged energy).
+    parameter : float
+        The continuation parameter there (``omega``, or ``log10(energy)`` for nonlinear modes).
+    multiplier : complex
+        The Floquet multiplier that crosses the unit circle there (1 for a fold).
+    Q, P : ndarray
+        The periodic solution at the bifurcation (displacement and contact-force coefficients).
+    xi : float
+        Artificial damping (nonlinear modes).
+    """
+
+    kind: str
+    index: int
+    omega: float
+    energy: float
+    parameter: float
+    multiplier: complex
+    Q: np.ndarray
+    P: np.ndarray
+    xi: float = 0.0
+
+    def __post_init__(self):
+        if self.kind not in BIFURCATION_KINDS:
+            raise ValueError(f"Bifurcation: kind must be one of {BIFURCATION_KINDS}, got {self.kind!r}")
+
+    def __repr__(self) -> str:
+        return (f"Bifurcation({self.kind!r}, index={self.index}, omega={self.omega:.8g}, "
+                f"multiplier={complex(self.multiplier):.4g})")
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,7 +166,10 @@ class PeriodicSolution:
     residual_norm : float
         Max-norm of the HBM residual at this point.
     model : StructuralModel or None
-        The model (``None`` after loading from a file); needed only for :meth:`full_displacement`.
+        The model (``None`` after loading from a file); needed for :meth:`full_displacement` and
+        :func:`femodes.stability`.
+    kind : str
+        ``"forced"`` or ``"nonlinear mode"`` (the branch it belongs to).
     """
 
     omega: float
@@ -132,6 +182,7 @@ class PeriodicSolution:
     residual_norm: float = math.nan
     nit: int = 0
     model: Any = None
+    kind: str = "forced"
 
     @property
     def period(self) -> float:
@@ -213,6 +264,12 @@ class Branch:
     omega, energy, converged, nit, residual_norm, parameter, xi, penetration, tension;
     ``folds`` (indices), ``kind`` ("forced" or "nonlinear mode"), ``success``, ``message``.
     ``branch[i]`` is a :class:`PeriodicSolution`; ``len(branch)`` the number of points.
+
+    With stability computed (``stability=True`` of the analyses, :mod:`femodes.stability`):
+    ``stable`` (bool per point), ``multipliers`` (complex, ``(n_points, m)``, largest modulus
+    first, NaN-padded), ``stability_method`` (``"hill"`` or ``"shooting"`` per point) and
+    ``bifurcations`` (:class:`Bifurcation` objects in branch order). Without it ``stable``,
+    ``multipliers`` and ``stability_method`` are ``None`` and ``bifurcations`` is empty.
     """
 
     def __init__(self, *, kind: str, harmonics: Harmonics, contacts: ContactInfo, omega, Q, P, energy, xi,
@@ -235,6 +292,26 @@ class Branch:
         self.message = str(message)
         self.model = model
         self.meta = dict(meta or {})
+        self.stable: np.ndarray | None = None
+        self.multipliers: np.ndarray | None = None
+        self.stability_method: np.ndarray | None = None
+        self.bifurcations: tuple = ()
+
+    def set_stability(self, *, stable, multipliers, bifurcations, methods, tol: float) -> "Branch":
+        """Attach the stability of every point (used by :mod:`femodes.stability`)."""
+        n = len(self)
+        stable = np.asarray(stable, dtype=bool)
+        multipliers = np.asarray(multipliers, dtype=complex).reshape(n, -1)
+        methods = np.asarray(methods, dtype=str)
+        if stable.shape != (n,) or methods.shape != (n,):
+            raise ValueError(f"set_stability: one value per point ({n}) expected")
+        for b in bifurcations:
+            if not isinstance(b, Bifurcation):
+                raise TypeError(f"set_stability: bifurcations must be Bifurcation objects, got {type(b).__name__}")
+        self.stable, self.multipliers, self.stability_method = stable, multipliers, methods
+        self.bifurcations = tuple(bifurcations)
+        self.meta["stability_tol"] = float(tol)
+        return self
 
     @property
     def converged(self) -> np.ndarray:
@@ -255,7 +332,7 @@ class Branch:
         return PeriodicSolution(
             omega=float(self.omega[i]), Q=self.Q[i], P=self.P[i], harmonics=self.harmonics, contacts=self.contacts,
             energy=float(self.energy[i]), xi=float(self.xi[i]), residual_norm=float(self.residual_norm[i]),
-            nit=int(self.nit[i]), model=self.model,
+            nit=int(self.nit[i]), model=self.model, kind=self.kind,
         )
 
     def __iter__(self):
@@ -295,11 +372,23 @@ class Branch:
 
     # -- persistence -------------------------------------------------------------------------
     def _arrays(self) -> dict:
-        return {
+        out = {
             "omega": self.omega, "Q": self.Q, "P": self.P, "energy": self.energy, "xi": self.xi,
             "residual_norm": self.residual_norm, "nit": self.nit, "parameter": self.parameter,
             "folds": np.asarray(self.folds, dtype=int),
         }
+        if self.stable is not None:
+            bifs = self.bifurcations
+            out.update({
+                "stable": self.stable.astype(np.int8), "multipliers_re": self.multipliers.real,
+                "multipliers_im": self.multipliers.imag,
+                "bif_index": np.asarray([b.index for b in bifs], dtype=int),
+                "bif_real": np.asarray([[b.omega, b.energy, b.parameter, b.multiplier.real, b.multiplier.imag, b.xi]
+                                        for b in bifs], dtype=float).reshape(len(bifs), 6),
+                "bif_Q": np.asarray([b.Q for b in bifs], dtype=float).reshape((len(bifs),) + self.Q.shape[1:]),
+                "bif_P": np.asarray([b.P for b in bifs], dtype=float).reshape((len(bifs),) + self.P.shape[1:]),
+            })
+        return out
 
     def _header(self) -> dict:
         return {
@@ -307,6 +396,8 @@ class Branch:
             "harmonics": [self.harmonics.n_harmonics, self.harmonics.n_time, self.harmonics.subharmonic],
             "contacts": self.contacts.to_json(), "success": self.success, "status": self.status,
             "message": self.message, "meta": self.meta,
+            "stability": None if self.stable is None else {
+                "methods": [str(m) for m in self.stability_method], "kinds": [b.kind for b in self.bifurcations]},
         }
 
     def save(self, path) -> Path:
@@ -343,6 +434,15 @@ def load_branch(path, model=None) -> Branch:
         folds=arrays["folds"].tolist(), success=header["success"], status=header["status"], message=header["message"],
         meta=header.get("meta"),
     )
+    stab = header.get("stability")
+    if stab is not None:
+        bifs = [Bifurcation(kind=k, index=int(i), omega=float(r[0]), energy=float(r[1]), parameter=float(r[2]),
+                            multiplier=complex(r[3], r[4]), xi=float(r[5]), Q=q, P=p)
+                for k, i, r, q, p in zip(stab["kinds"], arrays["bif_index"], arrays["bif_real"], arrays["bif_Q"],
+                                         arrays["bif_P"])]
+        br.set_stability(stable=arrays["stable"].astype(bool),
+                         multipliers=arrays["multipliers_re"] + 1j * arrays["multipliers_im"], bifurcations=bifs,
+                         methods=stab["methods"], tol=float(br.meta.get("stability_tol", 1e-4)))
     if model is not None:
         br.attach(model)
     return br

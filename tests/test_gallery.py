@@ -31,6 +31,16 @@ def test_duffing_forced_folds_and_coexisting_cycles(duffing, tmp_path):
     assert len(duffing.coexisting) == 3
     np.testing.assert_allclose(duffing.coexisting_amplitude, duffing.COEXIST_REF, atol=1e-3)
     assert all(sol.omega == 2.0 and sol.residual_norm < 1e-9 for sol in duffing.coexisting)
+    # stability computed, not written in (references.md: the middle orbit is the unstable one),
+    # by both methods; Hill and shooting agree on the largest multiplier to 1e-5 (H = 9 orbit)
+    assert duffing.coexisting_stable == [True, False, True]
+    for st in duffing.coexisting_stability:
+        assert st["shooting"].stable == st["hill"].stable
+        assert abs(st["hill"].multipliers[0]) == pytest.approx(abs(st["shooting"].multipliers[0]), abs=1e-5)
+    for br in duffing.forced.values():  # every forced branch: unstable exactly between its folds
+        lo, hi = sorted(br.folds)
+        idx = np.arange(len(br))
+        assert np.all(~br.stable[(idx > lo) & (idx < hi)]) and np.all(br.stable[(idx < lo) | (idx > hi)])
     png = duffing.main(tmp_path)
     assert png.stat().st_size > 10_000
 

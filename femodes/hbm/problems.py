@@ -104,6 +104,11 @@ class ForcedResponseProblem:
         Q, P = self.system.split(x)
         return HBMUnknowns(y=x, Q=Q, P=P, omega=float(p), xi=0.0)
 
+    def pack(self, Q: np.ndarray, P: np.ndarray, omega: float, xi: float = 0.0) -> np.ndarray:
+        """The unknowns ``x`` of a point from its parts (the inverse of :meth:`unpack`; ``omega``
+        is the parameter, not an unknown)."""
+        return self.system.join(Q, P)
+
 
 class NonlinearModeProblem:
     """Nonlinear mode (EPMC) of the autonomous system; parameter ``p = log10(energy)``.
@@ -211,3 +216,7 @@ class NonlinearModeProblem:
         y, omega, xi = self._parts(np.asarray(x, dtype=float))
         Q, P = self.system.split(y)
         return HBMUnknowns(y=y, Q=Q, P=P, omega=omega, xi=xi)
+
+    def pack(self, Q: np.ndarray, P: np.ndarray, omega: float, xi: float = 0.0) -> np.ndarray:
+        """The unknowns ``x = [y; w; xi]`` of a point from its parts (the inverse of :meth:`unpack`)."""
+        return np.concatenate([self.system.join(Q, P), [float(omega), float(xi)]])

@@ -832,7 +832,7 @@ def shoot(
         3: f"iteration {nit + 1}: Phi - I is singular (a multiplier at +1: fold) and no least-squares step reduced "
            f"max|x(T) - x0| = {res:.3g}",
     }[status]
-    (log.info if status == 0 else log.warning)("%s: %s", owner, message)
+    (log.info if status == 0 else log.debug)("%s: %s", owner, message)  # reported in the result
     return ShootingResult(
         x=x, success=status == 0, status=status, message=message, nit=nit, residual_norm=res,
         multipliers=mono.multipliers, monodromy=mono.matrix, impacts=mono.impacts, period=T,

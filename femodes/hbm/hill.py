@@ -1,0 +1,289 @@
+r"""Discretise layer: Floquet exponents of a harmonic balance solution by Hill's method.
+
+A perturbation ``y(t) = e^{s t} p(t)`` of a periodic solution, ``p`` periodic with the solution's
+period ``T = 2 pi nu / w``, solves the linearised equations of motion when ``s`` is a *Floquet
+exponent*; the Floquet multipliers are ``mu = exp(s T)``. Expanding ``p`` on the same harmonics
+as the solution, ``d/dt`` acts on the coefficients as ``w D1 + s``, so the harmonic balance
+Jacobian ``J0`` of the solution becomes the quadratic matrix polynomial (Hill's problem; Lazarus
+and Thomas, C. R. Mecanique 338 (2010) 510-517; Krack and Gross, *Harmonic Balance for
+Nonlinear Vibration Problems*, 2019, sec. 3.6)
+
+.. math::
+
+    \bigl(J_0 + s\,J_1 + s^2 J_2\bigr)\,v = 0, \qquad
+    J_1 = I \otimes (C - \xi M) + 2\omega\,D_1 \otimes M, \qquad J_2 = I \otimes M,
+
+on the displacement unknowns (zero on the contact-force unknowns, whose equations are algebraic).
+The contact and nonlinear terms enter through ``J0`` only: the generalized Jacobian of the
+projected laws (for a complementarity contact, the linearised law holds the contact DOF on the
+obstacle during the contact phases and frees its force elsewhere).
+
+Selection of the meaningful exponents. The truncated Hill spectrum holds each exponent ``s``
+together with copies ``s + i m w / nu`` whose eigenvectors are the same motion written with the
+harmonics shifted by ``m``; all give the same multiplier, and the copies near the truncation edge
+are inaccurate. Each eigenvector's *harmonic centroid* (the mass-weighted mean of the harmonic
+index of its complex Fourier coefficients ``e^{i m w t / nu}``, ``m = -H .. H``) tells the copies
+apart: the central copy has the centroid nearest to 0 (the symmetric-eigenvector criterion of
+Guillot, Lazarus, Thomas, Vergez and Cochelin, J. Comput. Phys. 416 (2020) 109477, in a
+weighted form). Exponents are taken in order of increasing ``|centroid|``, a copy of an exponent
+already taken (``s`` differing by a nonzero multiple of ``i w / nu``, as the two members
+``+- i w / 2 nu`` of a period-doubling family do) is skipped, until ``2 n_m`` exponents are held
+(``n_m`` the DOFs with mass).
+
+Solvers. Small problems (up to :data:`DENSE_LIMIT` unknowns) solve the linearised pencil densely
+(one shift-and-invert of the whole spectrum). Larger ones use ARPACK in shift-invert mode with one
+sparse LU of the complex Hill matrix ``J(sigma)`` per shift, the shifts placed along the
+stability boundary (``Re s = 0``) in the central strip ``0 <= Im s <= w / 2 nu``: exponents
+near the boundary, which decide stability, are found; strongly damped ones are not needed.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .system import HBMSystem
+
+__all__ = ["HillResult", "hill_matrices", "hill_exponents", "DENSE_LIMIT"]
+
+log = logging.getLogger(__name__)
+
+#: Sparse path: an eigenvector whose harmonic centroid is farther than this from 0 is a shifted
+#: copy, not the central member of its family (the central one has ``|centroid| <= 1/2`` when
+#: the Fourier series converges; the margin absorbs truncation).
+CENTRAL = 0.75
+
+#: Hill problems up to this many unknowns (``(2H + 1) (n + n_contacts)``) are solved densely.
+DENSE_LIMIT = 1500
+
+
+@dataclass(frozen=True, eq=False)
+class HillResult:
+    """Floquet exponents and multipliers of one periodic solution by Hill's method.
+
+    Attributes
+    ----------
+    exponents : ndarray (m,) complex
+        Selected Floquet exponents ``s`` (1/s), ``-w/2nu < Im s <= w/2nu`` after folding.
+    multipliers : ndarray (m,) complex
+        ``exp(s T)``, sorted by decreasing modulus.
+    centroids : ndarray (m,)
+        Harmonic centroid of each selected eigenvector (``|c| < 1/2`` for a well-resolved one).
+    vectors : ndarray (n_unknowns, m) complex
+        Eigenvectors ``v`` (harmonic coefficients of ``p``, the HBM layout), in the same order.
+    complete : bool
+        True when all ``2 n_m`` exponents were found (dense solve); False for the sparse path,
+        which returns those nearest to the stability boundary.
+    period : float
+    """
+
+    exponents: np.ndarray
+    multipliers: np.ndarray
+    centroids: np.ndarray
+    vectors: np.ndarray
+    complete: bool
+    period: float
+
+
+def hill_matrices(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0.0):
+    """``J0, J1, J2`` (sparse CSR, ``system.size`` square) of Hill's problem at solution ``x``
+    (module docstring); ``J0`` is the harmonic balance Jacobian of ``system``."""
+    _, J, _, _ = system.residual(np.asarray(x, dtype=float), float(omega), xi=float(xi), forced=False)
+    J0 = J.tocsr()
+    nc, N = system.h.n_coef, system.size
+    I = sp.identity(nc, format="csr")
+    D1 = system.D1
+    M, C = system.M, system.C
+    Cx = (C - xi * M) if xi else C
+    J1q = sp.kron(I, Cx, format="csr") + 2.0 * omega * sp.kron(D1, M, format="csr")
+    J2q = sp.kron(I, M, format="csr")
+    pad = N - system.nq
+
+    def embed(A):
+        return sp.block_diag([A, sp.csr_matrix((pad, pad))], format="csr") if pad else A.tocsr()
+
+    return J0, embed(J1q), embed(J2q)
+
+
+def _complex_harmonics(system: HBMSystem, V: np.ndarray) -> np.ndarray:
+    """Mass-weighted power of each eigenvector at complex harmonics ``m = -H .. H``: shape
+    ``(2H + 1, n_vectors)``. ``a cos + b sin = (a - ib)/2 e^{i.} + (a + ib)/2 e^{-i.}``."""
+    h, n = system.h, system.n
+    H = h.n_harmonics
+    Q = V[: system.nq].reshape(h.n_coef, n, -1)
+    Md = np.abs(system.M.diagonal())
+    w = Md if np.any(Md > 0) else np.ones(n)  # massless DOFs (redistributed contact nodes) weigh 0
+    power = np.zeros((2 * H + 1, V.shape[1]))
+    power[H] = np.einsum("d,dv->v", w, np.abs(Q[0]) ** 2)
+    k = np.arange(1, H + 1)
+    a, b = Q[2 * k - 1], Q[2 * k]
+    plus = np.einsum("d,kdv->kv", w, np.abs(a - 1j * b) ** 2) / 4.0
+    minus = np.einsum("d,kdv->kv", w, np.abs(a + 1j * b) ** 2) / 4.0
+    power[H + k] = plus
+    power[H - k] = minus
+    return power
+
+
+def _centroids(system: HBMSystem, V: np.ndarray) -> np.ndarray:
+    power = _complex_harmonics(system, V)
+    H = system.h.n_harmonics
+    m = np.arange(-H, H + 1)[:, None]
+    total = power.sum(axis=0)
+    total = np.where(total > 0, total, 1.0)
+    return (m * power).sum(axis=0) / total
+
+
+def _n_dynamic(system: HBMSystem) -> int:
+    """DOFs with mass (each contributes two exponents)."""
+    Md = system.M.diagonal()
+    scale = float(np.max(np.abs(Md))) if Md.size else 0.0
+    return int(np.count_nonzero(np.abs(Md) > 1e-14 * scale)) if scale > 0 else 0
+
+
+def _select(system: HBMSystem, s: np.ndarray, V: np.ndarray, base: float, n_keep: int):
+    """The central copy of each exponent family (module docstring), at most ``n_keep``."""
+    cen = _centroids(system, V)
+    order = np.lexsort((np.abs(s.imag), np.abs(cen)))
+    taken: list[int] = []
+    for i in order:
+        if len(taken) >= n_keep:
+            break
+        dup = False
+        for j in taken:
+            d = s[i] - s[j]
+            m = round(d.imag / base)
+            # a copy shifted by m != 0 harmonics of the same exponent (relative tolerance: the
+            # eigenvalues of the truncated problem agree to far better than 1e-6 of w for copies
+            # that matter; distinct exponents this close would be a double multiplier anyway)
+            if m != 0 and abs(d - 1j * m * base) <= 1e-6 * base:
+                dup = True
+                break
+        if not dup:
+            taken.append(int(i))
+    return np.asarray(taken, dtype=int), cen
+
+
+def _fold(s: np.ndarray, base: float) -> np.ndarray:
+    """Exponents with ``Im s`` folded into ``(-base/2, base/2]`` (same multipliers)."""
+    m = np.round(s.imag / base)
+    return s - 1j * m * base
+
+
+def hill_exponents(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0.0, *,
+                   n_shifts: int = 4, k_per_shift: int | None = None) -> HillResult:
+    """Floquet exponents and multipliers of the HBM solution ``x`` at ``omega`` (module docstring).
+
+    Parameters
+    ----------
+    system : HBMSystem
+        The harmonic balance system the solution belongs to.
+    x : ndarray
+        Unknowns (displacement and contact-force coefficients), as returned by the problems.
+    omega : float
+        Frequency (rad/s); the period is ``2 pi nu / omega``.
+    xi : float
+        Artificial damping of a nonlinear mode (0 for forced responses).
+    n_shifts, k_per_shift : int
+        Sparse path only: number of shifts along ``Re s = 0`` and eigenvalues per shift
+        (default ``max(12, 4 n_nl)`` with ``n_nl`` the nonlinear DOFs and contacts).
+
+    Returns
+    -------
+    HillResult
+    """
+    omega = float(omega)
+    if not (math.isfinite(omega) and omega > 0):
+        raise ValueError(f"hill_exponents: omega must be a positive finite number, got {omega!r}")
+    base = omega / system.h.subharmonic          # spacing of the copies, w / nu
+    T = system.h.period(omega)
+    J0, J1, J2 = hill_matrices(system, x, omega, xi)
+    N = system.size
+    n_keep = 2 * _n_dynamic(system)
+    if N <= DENSE_LIMIT:
+        s, V = _dense(J0, J1, J2, base)
+        complete = True
+    else:
+        k = k_per_shift or max(12, 4 * (system.nonlinear_dofs.size + system.n_uc))
+        s, V = _sparse(J0, J1, J2, base, n_shifts, k)
+        complete = False
+    idx, cen = _select(system, s, V, base, n_keep)
+    if not complete:
+        # the shifts find some families only through non-central copies (harmonics shifted by
+        # one or more, inaccurate near the truncation edge): keep central ones only
+        idx = idx[np.abs(cen[idx]) <= CENTRAL]
+    s_sel = _fold(s[idx], base)
+    mu = np.exp(s_sel * T)
+    order = np.argsort(-np.abs(mu), kind="stable")
+    if complete and idx.size < n_keep:
+        log.warning("hill_exponents: found %d of %d exponents (singular Hill pencil?)", idx.size, n_keep)
+        complete = False
+    return HillResult(exponents=s_sel[order], multipliers=mu[order], centroids=cen[idx][order],
+                      vectors=V[:, idx][:, order], complete=complete, period=T)
+
+
+def _dense(J0, J1, J2, base):
+    """All finite eigenvalues of the pencil ``[[0, I], [-J0, -J1]] - s [[I, 0], [0, J2]]``, by a
+    shift-and-invert of the whole spectrum (standard dense eigenproblem instead of QZ; the
+    infinite eigenvalues of the algebraic rows map to 0 and are dropped)."""
+    N = J0.shape[0]
+    sigma = 0.37 * base  # a real shift away from the spectrum near Re s = 0 (any non-eigenvalue works)
+    A0, A1, A2 = J0.toarray(), J1.toarray(), J2.toarray()
+    Js = A0 + sigma * A1 + sigma * sigma * A2
+    try:
+        lu = sla.lu_factor(Js, check_finite=False)
+    except (sla.LinAlgError, ValueError):
+        sigma = 0.53 * base
+        lu = sla.lu_factor(A0 + sigma * A1 + sigma * sigma * A2, check_finite=False)
+    # OP = (A - sigma B)^{-1} B on z = [v; w]:  (J(sigma)) z1 = -J2 y2 - (J1 + sigma J2) y1, z2 = y1 + sigma z1
+    rhs1 = -(A1 + sigma * A2)
+    rhs2 = -A2
+    Z1 = sla.lu_solve(lu, np.hstack([rhs1, rhs2]), check_finite=False)
+    OP = np.empty((2 * N, 2 * N))
+    OP[:N] = Z1
+    OP[N:] = sigma * Z1
+    OP[N:, :N] += np.eye(N)
+    theta, Zv = sla.eig(OP, check_finite=False)
+    tol = 1e-10 * max(1.0, float(np.max(np.abs(theta))) if theta.size else 1.0)
+    finite = np.abs(theta) > tol
+    s = sigma + 1.0 / theta[finite]
+    V = Zv[:N, finite]
+    return s, V
+
+
+def _sparse(J0, J1, J2, base, n_shifts, k):
+    """Exponents nearest to shifts along the stability boundary, by ARPACK shift-invert with a
+    sparse LU of ``J(sigma)`` per shift."""
+    N = J0.shape[0]
+    J0c, J1c, J2c = (A.astype(complex).tocsc() for A in (J0, J1, J2))
+    found_s, found_V = [], []
+    k = min(k, 2 * N - 2)
+    for j in range(n_shifts):
+        # slightly right of the boundary (the boundary itself holds the trivial exponents of free
+        # orbits, which make J(0) singular)
+        sigma = 1e-3 * base + 1j * base * 0.5 * j / max(n_shifts - 1, 1)
+        Js = (J0c + sigma * J1c + sigma * sigma * J2c).tocsc()
+        lu = spla.splu(Js)
+        S1 = (J1c + sigma * J2c)
+
+        def op(y, lu=lu, S1=S1, sigma=sigma):
+            y1, y2 = y[:N], y[N:]
+            z1 = lu.solve(-(J2c @ y2) - S1 @ y1)
+            return np.concatenate([z1, y1 + sigma * z1])
+
+        L = spla.LinearOperator((2 * N, 2 * N), matvec=op, dtype=complex)
+        theta, Z = spla.eigs(L, k=k, which="LM", tol=1e-12)
+        good = np.abs(theta) > 0
+        found_s.append(sigma + 1.0 / theta[good])
+        found_V.append(Z[:N, good])
+    s, V = np.concatenate(found_s), np.hstack(found_V)
+    keep: list[int] = []  # the same eigenvalue found from two shifts counts once
+    for i in np.argsort(np.abs(s)):
+        if all(abs(s[i] - s[j]) > 1e-8 * base for j in keep):
+            keep.append(int(i))
+    return s[keep], V[:, keep]

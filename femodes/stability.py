@@ -1,0 +1,397 @@
+r"""Analyses layer: stability of periodic solutions and bifurcations along branches.
+
+A periodic orbit is asymptotically stable when all its Floquet multipliers ``mu`` lie inside the
+unit circle; here *stable* means ``max |mu| <= 1 + tol`` (the trivial multipliers of free orbits,
+exactly 1, and round-off stay stable). Two independent methods give the multipliers:
+
+``"hill"``
+    Hill's method on the harmonic balance Jacobian (:mod:`femodes.hbm.hill`). Valid for every
+    model femodes solves, full or reduced, with the HBM's own accuracy: spectrally accurate for
+    smooth laws (cubic springs; penalty contacts, whose Jacobian is exact), but for
+    complementarity contacts it describes the HBM orbit, whose contact *phases* stand in for
+    instantaneous impacts, so near grazing and at few harmonics its multipliers are rough.
+``"shooting"``
+    Event-driven shooting (:mod:`femodes.time.shooting`) from the HBM state: the orbit is
+    refined into a true periodic orbit of the time-continuous model (impacts with restitution 1,
+    the time-domain counterpart of the Signorini law) and its monodromy matrix, with saltation
+    matrices at impacts, gives the multipliers. The reference for contact, for models whose
+    contact DOFs carry mass and that are small (or reduced): at most
+    :data:`femodes.time.shooting.MAX_DOFS` DOFs.
+``"auto"``
+    Shooting for forced responses of small models with complementarity contacts (falling back
+    to Hill at a point where shooting does not converge), Hill otherwise.
+
+Along a branch (``frequency_response(..., stability=True)``), a change in the number of
+multipliers outside the circle between two points is a bifurcation; unless a located fold sits
+there, it is located by regula falsi on the test function ``|mu_(k)| - 1`` (the ``k``-th largest
+modulus, ``k`` the larger count) over solutions corrected on the secant between the points, and
+classified by the crossing multiplier: ``+1`` a branch point, ``-1`` period doubling, a complex
+pair a Neimark-Sacker bifurcation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from typing import Any
+
+import numpy as np
+
+from .hbm.hill import hill_exponents
+from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
+from .hbm.system import HBMSystem
+from .laws import UnilateralContact
+from .model import StructuralModel
+from .results import Bifurcation, Branch, PeriodicSolution
+from .solvers import NewtonOptions, semismooth_newton
+from .time.shooting import MAX_DOFS, shoot
+
+__all__ = ["stability", "StabilityResult", "annotate_branch", "METHODS"]
+
+log = logging.getLogger(__name__)
+
+#: The methods :func:`stability` accepts.
+METHODS = ("auto", "hill", "shooting")
+
+#: Default tolerance on ``|mu| - 1`` above which an orbit is unstable.
+TOL = 1e-4
+
+#: Shooting that moves the HBM start state by more than this fraction of its size has found
+#: another orbit (``"auto"`` then uses Hill's method at that point).
+MAX_CORRECTION = 0.2
+
+#: A located crossing whose test function ``|mu| - 1`` stays above this on both sides of a
+#: bracket of 1e-7 of the segment is a jump (kind ``"nonsmooth"``), not a smooth crossing.
+JUMP = 1e-3
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class StabilityResult:
+    """Floquet multipliers of one periodic solution.
+
+    Attributes
+    ----------
+    multipliers : ndarray, complex
+        Largest modulus first.
+    stable : bool
+        ``max |mu| <= 1 + tol``.
+    method : str
+        ``"hill"`` or ``"shooting"`` (the method actually used).
+    message : str
+        Why ``"auto"`` fell back to Hill, or ``""``.
+    orbit_correction : float
+        Shooting only: ``max |x_shooting - x_hbm|`` of the state at the start time, relative to
+        ``max |x_hbm|`` (how far the HBM orbit is from the true periodic orbit); NaN for Hill.
+    """
+
+    multipliers: np.ndarray
+    stable: bool
+    method: str
+    message: str = ""
+    orbit_correction: float = math.nan
+
+
+def _check_method(method: Any, owner: str) -> str:
+    if method not in METHODS:
+        raise ValueError(f"{owner}: method must be one of {', '.join(repr(m) for m in METHODS)}, got {method!r}")
+    return method
+
+
+def _check_tol(tol: Any, owner: str) -> float:
+    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)) or not (0 <= tol < 1):
+        raise ValueError(f"{owner}: tol must be a number in [0, 1) (the margin of |mu| above 1), got {tol!r}")
+    return float(tol)
+
+
+def _shootable(model: StructuralModel) -> str:
+    """Why event-driven shooting cannot take ``model`` ("" if it can)."""
+    if model.n_dofs > MAX_DOFS:
+        return f"{model.n_dofs} DOFs (shooting takes at most {MAX_DOFS}; reduce the model with craig_bampton)"
+    Md = model.M.diagonal()
+    for a in model.contacts:
+        if isinstance(a.item, UnilateralContact) and not Md[a.dof] > 0:
+            return f"contact DOF {a.dof} carries no mass (mass redistribution): impacts are not defined"
+    return ""
+
+
+def _prefers_shooting(model: StructuralModel, forced: bool) -> bool:
+    has_uc = any(isinstance(a.item, UnilateralContact) for a in model.contacts)
+    return forced and has_uc and not _shootable(model)
+
+
+def _start_time(system: HBMSystem, Q: np.ndarray, omega: float) -> float:
+    """The most open instant of the orbit (largest smallest gap): the shooting starts there, away
+    from the HBM's contact phases and slight penetrations."""
+    if not system.n_uc:
+        return 0.0
+    h = system.h
+    n = max(256, 8 * h.n_coef)
+    theta = 2.0 * np.pi * np.arange(n) / n
+    E = h.synthesis(theta)
+    gaps = np.column_stack([ct.law.gap - E @ Q[:, ct.dof] for ct in system.unilateral])
+    j = int(np.argmax(gaps.min(axis=1)))
+    return float(theta[j] / (2.0 * np.pi) * h.period(omega))
+
+
+def _by_shooting(model: StructuralModel, system: HBMSystem, Q: np.ndarray, omega: float, tol: float) -> StabilityResult:
+    h = system.h
+    t0 = _start_time(system, Q, omega)
+    theta = np.array([2.0 * np.pi * t0 / h.period(omega)])
+    E = h.synthesis(theta)
+    q0 = (E @ Q)[0]
+    v0 = (E @ (omega * (system.D1 @ Q)))[0]
+    x0 = np.concatenate([q0, v0])
+    res = shoot(model, omega, x0, period=h.period(omega), t0=t0)
+    if not res.success:
+        raise _ShootingFailed(res.message)
+    mu = np.asarray(res.multipliers)
+    corr = float(np.max(np.abs(res.x - x0)) / max(float(np.max(np.abs(x0))), 1e-300))
+    if corr > MAX_CORRECTION:
+        # Newton found a periodic orbit, but not this one (near an HBM fold the true orbit of the
+        # same branch may not exist at this frequency, and shooting lands on a coexisting one)
+        raise _ShootingFailed(f"shooting moved the start state by {corr:.0%} of its size: another orbit")
+    return StabilityResult(multipliers=mu, stable=_is_stable(mu, tol, free=False), method="shooting",
+                           orbit_correction=corr)
+
+
+class _ShootingFailed(RuntimeError):
+    pass
+
+
+def _significant(mu: np.ndarray, free: bool) -> np.ndarray:
+    """The multipliers that decide stability, largest modulus first: all of a forced orbit's; a
+    free orbit's without its two trivial ones (the double +1 of phase and energy, a Jordan block
+    whose computed pair splits by the square root of the solver tolerance, ~1e-5)."""
+    mu = mu[np.isfinite(mu)]
+    if free and mu.size >= 2:
+        mu = mu[np.argsort(np.abs(mu - 1.0), kind="stable")[2:]]
+    return mu[np.argsort(-np.abs(mu), kind="stable")]
+
+
+def _is_stable(mu: np.ndarray, tol: float, free: bool) -> bool:
+    m = _significant(mu, free)
+    return bool(m.size == 0 or np.abs(m[0]) <= 1.0 + tol)
+
+
+def _by_hill(system: HBMSystem, y: np.ndarray, omega: float, xi: float, tol: float, free: bool,
+             message: str = "") -> StabilityResult:
+    mu = hill_exponents(system, y, omega, xi).multipliers
+    return StabilityResult(multipliers=mu, stable=_is_stable(mu, tol, free), method="hill", message=message)
+
+
+def _point_stability(model, system, y, Q, omega, xi, method, tol, forced) -> StabilityResult:
+    if method == "hill" or (method == "auto" and not _prefers_shooting(model, forced)):
+        return _by_hill(system, y, omega, xi, tol, not forced)
+    if method == "shooting":
+        why = _shootable(model)
+        if why:
+            raise ValueError(f"stability: method='shooting' cannot take this model: {why}; use method='hill'")
+        try:
+            return _by_shooting(model, system, Q, omega, tol)
+        except _ShootingFailed as exc:
+            raise RuntimeError(f"stability: shooting from the HBM orbit at w = {omega:g} did not converge ({exc}); "
+                               "use method='hill' or raise the harmonics") from None
+    try:
+        return _by_shooting(model, system, Q, omega, tol)
+    except (_ShootingFailed, ValueError) as exc:
+        return _by_hill(system, y, omega, xi, tol, not forced, message=f"shooting failed ({exc}); Hill's method used")
+
+
+def stability(solution: PeriodicSolution, method: str = "auto", *, tol: float = TOL) -> StabilityResult:
+    """Floquet multipliers and stability of one periodic solution (module docstring).
+
+    Parameters
+    ----------
+    solution : PeriodicSolution
+        ``branch[i]``; its model must be attached (``branch.attach(model)`` after loading).
+    method : {"auto", "hill", "shooting"}
+    tol : float
+        Unstable when ``max |mu| > 1 + tol`` (default 1e-4).
+
+    Returns
+    -------
+    StabilityResult
+    """
+    if not isinstance(solution, PeriodicSolution):
+        raise TypeError(f"stability: solution must be a femodes PeriodicSolution (branch[i]), got {type(solution).__name__}")
+    method = _check_method(method, "stability")
+    tol = _check_tol(tol, "stability")
+    model = solution.model
+    if model is None:
+        raise ValueError("stability: the solution has no model (loaded from a file?); attach it with "
+                         "branch.attach(model) first")
+    forced = bool(model.forces) and solution.xi == 0.0
+    system = HBMSystem(model if forced else model.without_forcing(), solution.harmonics)
+    y = system.join(solution.Q, solution.P)
+    return _point_stability(model, system, y, solution.Q, solution.omega, solution.xi, method, tol, forced)
+
+
+# ------------------------------------------------------------------------------------------------
+# Along a branch
+# ------------------------------------------------------------------------------------------------
+class _Annotator:
+    """Multipliers at every point of a branch, and its bifurcations located between points."""
+
+    def __init__(self, branch: Branch, problem, model: StructuralModel, method: str, tol: float,
+                 newton: NewtonOptions):
+        self.branch, self.problem, self.model = branch, problem, model
+        self.method, self.tol, self.newton = method, tol, newton
+        self.forced = isinstance(problem, ForcedResponseProblem)
+        self.system = problem.system
+
+    def at(self, x: np.ndarray, p: float, method: str | None = None) -> StabilityResult:
+        u = self.problem.unpack(x, p)
+        return _point_stability(self.model, self.system, u.y, u.Q, u.omega, u.xi, method or self.method, self.tol,
+                                self.forced)
+
+    def _outside(self, mu: np.ndarray) -> np.ndarray:
+        return _significant(mu, not self.forced)
+
+    def count(self, mu: np.ndarray) -> int:
+        return int(np.count_nonzero(np.abs(self._outside(mu)) > 1.0 + self.tol))
+
+    def tau(self, mu: np.ndarray, k: int) -> float:
+        """Test function ``|mu_(k)| - 1`` (``k``-th largest modulus)."""
+        a = np.abs(self._outside(mu))
+        return float(a[k - 1] - 1.0) if a.size >= k else -1.0
+
+    def crossing(self, mu: np.ndarray, k: int) -> complex:
+        m = self._outside(mu)
+        return complex(m[k - 1]) if m.size >= k else complex(1.0)
+
+    def point(self, i: int) -> np.ndarray:
+        b = self.branch
+        return self.problem.pack(b.Q[i], b.P[i], b.omega[i], b.xi[i])
+
+    def run(self):
+        b = self.branch
+        results = [self.at(self.point(i), b.parameter[i]) for i in range(len(b))]
+        counts = [self.count(r.multipliers) for r in results]
+        bifs = [self._fold(f) for f in b.folds]
+        near_fold = set()
+        for f in b.folds:
+            near_fold.update((f - 1, f))
+        for i in range(len(b) - 1):
+            if counts[i] == counts[i + 1] or i in near_fold:
+                continue
+            if results[i].method != results[i + 1].method:
+                # "auto" fell back to Hill at one end: the two methods' multipliers differ by the
+                # HBM's contact error, which is not a bifurcation
+                log.info("stability: no bifurcation test between points %d and %d (%s vs %s)", i, i + 1,
+                         results[i].method, results[i + 1].method)
+                continue
+            bif = self._locate(i, max(counts[i], counts[i + 1]), results[i], results[i + 1])
+            if bif is not None:
+                bifs.append(bif)
+        bifs.sort(key=lambda z: (z.index, z.parameter))
+        return results, bifs
+
+    def _fold(self, f: int) -> Bifurcation:
+        b = self.branch
+        return Bifurcation(kind="fold", index=int(f), omega=float(b.omega[f]), energy=float(b.energy[f]),
+                           parameter=float(b.parameter[f]), multiplier=complex(1.0), Q=b.Q[f], P=b.P[f], xi=float(b.xi[f]))
+
+    def _solve_on_secant(self, za: np.ndarray, zb: np.ndarray, theta: float):
+        """Solution on the hyperplane through ``(1 - theta) za + theta zb`` normal to the secant."""
+        d = zb - za
+        t = d / float(d @ d)
+        zp = za + theta * d
+        n = za.size - 1
+
+        def fun(z):
+            r, J, dr_dp = self.problem.residual(z[:n], z[n])
+            F = np.append(r, t @ (z - zp))
+            return F, J.bordered(dr_dp[:, None], t[None, :n], np.array([[t[n]]]))
+
+        res = semismooth_newton(fun, zp, options=self.newton)
+        return res.x if res.success else None
+
+    def _locate(self, i: int, k: int, ra: StabilityResult, rb: StabilityResult) -> Bifurcation | None:
+        """Regula falsi (Illinois, with bisection whenever the bracket does not halve) on
+        ``tau(theta) = |mu_(k)| - 1`` along the secant from point ``i`` to ``i + 1``.
+
+        A bracket that shrinks below ``1e-7`` of the segment while ``|tau|`` stays above
+        :data:`JUMP` on both sides is a jump of the multipliers across the circle, not a smooth
+        crossing: kind ``"nonsmooth"`` (a change of the contact pattern, e.g. grazing)."""
+        b = self.branch
+        za = np.append(self.point(i), b.parameter[i])
+        zb = np.append(self.point(i + 1), b.parameter[i + 1])
+        lo, hi = 0.0, 1.0
+        flo, fhi = self.tau(ra.multipliers, k), self.tau(rb.multipliers, k)
+        ends = {0.0: (za, ra), 1.0: (zb, rb)}
+        glo, ghi = flo, fhi  # Illinois-weighted values
+        last = None
+        for it in range(40):
+            width = hi - lo
+            if width < 1e-7 or min(abs(flo), abs(fhi)) <= 1e-10:
+                break
+            theta = (lo * ghi - hi * glo) / (ghi - glo) if ghi != glo else 0.5 * (lo + hi)
+            if last is not None and width > 0.5 * last:
+                theta = 0.5 * (lo + hi)  # the previous step did not halve the bracket
+            theta = min(max(theta, lo + 1e-3 * width), hi - 1e-3 * width)
+            last = width
+            z = self._solve_on_secant(za, zb, theta)
+            if z is None:
+                break
+            try:
+                r = self.at(z[:-1], z[-1], ra.method)
+            except (RuntimeError, ValueError):  # shooting lost the orbit between the points
+                break
+            f = self.tau(r.multipliers, k)
+            ends[theta] = (z, r)
+            if (f > 0) == (fhi > 0):
+                hi, fhi, ghi = theta, f, f
+                glo *= 0.5
+            else:
+                lo, flo, glo = theta, f, f
+                ghi *= 0.5
+        smooth = min(abs(flo), abs(fhi)) <= JUMP
+        th = lo if abs(flo) <= abs(fhi) else hi
+        if not smooth:
+            th = hi if fhi > 0 else lo  # the unstable side: its crossing multiplier is reported
+        z, r = ends[th]
+        u = self.problem.unpack(z[:-1], z[-1])
+        crossing = self.crossing(r.multipliers, k)
+        kind = _kind(crossing, r.multipliers) if smooth else "nonsmooth"
+        energy = float(self.system.energy(u.y, u.omega)[0])
+        return Bifurcation(kind=kind, index=int(i), omega=float(u.omega), energy=energy, parameter=float(z[-1]),
+                           multiplier=complex(crossing), Q=np.array(u.Q), P=np.array(u.P), xi=float(u.xi))
+
+
+def _kind(mu: complex, all_mu: np.ndarray) -> str:
+    """Bifurcation kind from the crossing multiplier: a complex one whose conjugate is also a
+    multiplier crosses as a pair (Neimark-Sacker); otherwise it is real (Hill's multipliers of a
+    contact orbit carry an imaginary error that breaks the conjugate symmetry) and its sign tells
+    period doubling (-1) from a branch point (+1)."""
+    scale = max(abs(mu), 1.0)
+    if abs(mu.imag) > 1e-8 * scale:
+        partner = np.min(np.abs(all_mu[np.isfinite(all_mu)] - np.conj(mu)))
+        if partner <= 1e-6 * scale:
+            return "neimark_sacker"
+    return "period_doubling" if mu.real < 0 else "branch_point"
+
+
+def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: str = "auto", tol: float = TOL,
+                    newton: NewtonOptions | None = None) -> Branch:
+    """Fill ``branch.stable``, ``branch.multipliers``, ``branch.bifurcations`` (module docstring).
+
+    ``problem`` is the :class:`ForcedResponseProblem` or :class:`NonlinearModeProblem` the
+    branch was traced with; ``newton`` the corrector options of the located points.
+    """
+    method = _check_method(method, "stability")
+    tol = _check_tol(tol, "stability")
+    if not isinstance(problem, (ForcedResponseProblem, NonlinearModeProblem)):
+        raise TypeError(f"annotate_branch: problem must be an HBM problem, got {type(problem).__name__}")
+    ann = _Annotator(branch, problem, model, method, tol, newton or NewtonOptions(atol=1e-9, max_iter=20))
+    results, bifs = ann.run()
+    m = max((r.multipliers.size for r in results), default=0)
+    mult = np.full((len(branch), m), np.nan + 0j)
+    for i, r in enumerate(results):
+        mult[i, : r.multipliers.size] = r.multipliers
+    branch.set_stability(stable=[ann.count(r.multipliers) == 0 for r in results], multipliers=mult,
+                         bifurcations=bifs, methods=[r.method for r in results], tol=tol)
+    n_fb = sum(r.message != "" for r in results)
+    if n_fb:
+        log.info("stability: shooting failed at %d of %d points; Hill's method used there", n_fb, len(results))
+    return branch
