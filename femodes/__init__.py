@@ -14,8 +14,10 @@ from .reduction import ReducedModel, craig_bampton
 from .hbm import ForcedResponseProblem, Harmonics, NonlinearModeProblem
 from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState, NewtonOptions, NewtonResult,
                       continuation, semismooth_newton)
-from .results import Branch, PeriodicSolution, load_branch
+from .results import Bifurcation, Branch, PeriodicSolution, load_branch
 from .analyses import StaticContactResult, frequency_response, nonlinear_mode, static_contact
+from .stability import StabilityResult, stability
+from .switching import switch_branch
 from .store import Checkpoint
 from .time import SteadyState, TimeHistory, TimeSteppingOptions, simulate, steady_state
 from . import io, plot  # outputs; matplotlib is imported lazily inside plot functions
@@ -42,6 +44,10 @@ __all__ = [
     "DofMap",
     "HarmonicForce",
     "StructuralModel",
+    "Bifurcation",
+    "StabilityResult",
+    "stability",
+    "switch_branch",
     "ReducedModel",
     "craig_bampton",
     "Harmonics",

@@ -31,6 +31,8 @@ LAYERS = {
     "femodes.results": 4,
     "femodes.analyses": 5,
     "femodes.runs": 5,
+    "femodes.stability": 5,
+    "femodes.switching": 5,
     "femodes.fields": 6,
     "femodes.plot": 6,
     "femodes.io": 6,
