@@ -170,6 +170,9 @@ class PeriodicSolution:
         :func:`femodes.stability`.
     kind : str
         ``"forced"`` or ``"nonlinear mode"`` (the branch it belongs to).
+    multipliers, stable : ndarray (complex) and bool, or None
+        Floquet multipliers (largest modulus first) and stability, when the branch has them
+        (``stability=True``); ``None`` otherwise.
     """
 
     omega: float
@@ -183,6 +186,8 @@ class PeriodicSolution:
     nit: int = 0
     model: Any = None
     kind: str = "forced"
+    multipliers: np.ndarray | None = None
+    stable: bool | None = None
 
     @property
     def period(self) -> float:
@@ -333,6 +338,8 @@ class Branch:
             omega=float(self.omega[i]), Q=self.Q[i], P=self.P[i], harmonics=self.harmonics, contacts=self.contacts,
             energy=float(self.energy[i]), xi=float(self.xi[i]), residual_norm=float(self.residual_norm[i]),
             nit=int(self.nit[i]), model=self.model, kind=self.kind,
+            multipliers=None if self.multipliers is None else self.multipliers[i][np.isfinite(self.multipliers[i])],
+            stable=None if self.stable is None else bool(self.stable[i]),
         )
 
     def __iter__(self):

@@ -186,3 +186,23 @@ def test_discrete_model_is_rejected(tmp_path):
         write_animation(nnm[0], model, tmp_path / "x")
     with pytest.raises(ValueError, match="no mesh"):
         write_linear_mode(fm.linear_modes(model, 1), model, tmp_path / "x")
+
+
+def test_animation_carries_the_floquet_multipliers(tmp_path):
+    """A solution of a branch with stability writes its multipliers and stability as field data."""
+    mesh = fm.line_mesh(1.0, 6, boundaries={"clamp": 0.0, "tip": 1.0})
+    model = (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
+             .with_damping(beta=0.01).with_forcing(fm.HarmonicForce(at="tip", amplitude=0.02))
+             .with_contact(fm.PenaltyContact(at="tip", gap=0.02, stiffness=5.0)))
+    br = fm.frequency_response(model, (1.4, 1.6), 3, stability="hill")
+    sol = br[1]
+    assert sol.stable == bool(br.stable[1]) and sol.multipliers.size == 2 * model.n_dofs
+    pvd = write_animation(sol, model, tmp_path / "m", n_frames=2)
+    m = meshio.read(pvd.parent / "m_0000.vtu")
+    np.testing.assert_array_equal(m.field_data["floquet_multipliers_real"], sol.multipliers.real)
+    np.testing.assert_array_equal(m.field_data["floquet_multipliers_imag"], sol.multipliers.imag)
+    assert m.field_data["stable"].tolist() == [int(sol.stable)]
+    # without stability: no such field data
+    plain = fm.frequency_response(model, (1.4, 1.6), 3)[1]
+    m2 = meshio.read(write_animation(plain, model, tmp_path / "p", n_frames=2).parent / "p_0000.vtu")
+    assert "stable" not in m2.field_data

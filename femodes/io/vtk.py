@@ -74,7 +74,7 @@ def _add_field_data(path: Path, field_data: dict) -> None:
     path.write_text(text[:i] + block + text[i:], encoding="utf-8")
 
 
-def _write_series(fields: MeshFields, stem: Path, scale: float | None, owner: str) -> Path:
+def _write_series(fields: MeshFields, stem: Path, scale: float | None, owner: str, extra: dict | None = None) -> Path:
     import meshio
 
     stem.parent.mkdir(parents=True, exist_ok=True)
@@ -90,6 +90,7 @@ def _write_series(fields: MeshFields, stem: Path, scale: float | None, owner: st
         field_base["contact_gap"] = fields.contact_gaps
     if scale is not None:
         field_base["scale"] = np.array([scale])
+    field_base.update(extra or {})
     entries = []
     for j in range(n):
         pd = {"displacement": disp[j], "velocity": vel[j], "contact_force": fnode[j]}
@@ -144,7 +145,9 @@ def write_animation(solution: PeriodicSolution, model: StructuralModel | None, p
     beams along ``y``), ``"rotation"`` (beams: ``theta``), ``"contact_force"`` (nonzero only at
     contact nodes, compression positive). Field data: ``"TimeValue"``, ``"period"``,
     ``"omega"``, and with contacts ``"contact_node"`` and ``"contact_gap"`` (the obstacle is at
-    ``displacement = gap`` in the motion direction).
+    ``displacement = gap`` in the motion direction); for a solution of a branch computed with
+    ``stability=True`` also ``"floquet_multipliers_real"``, ``"floquet_multipliers_imag"``
+    (largest modulus first) and ``"stable"`` (1 or 0).
 
     ``"contact_force"`` is the truncated Fourier series of the contact force evaluated at the
     frame's time, so it *leaks*: it is not exactly zero while the node is away from the obstacle
@@ -170,7 +173,12 @@ def write_animation(solution: PeriodicSolution, model: StructuralModel | None, p
     scale = check_scale(scale, owner)
     stem = _stem(path, owner)
     fields = mesh_fields(solution, model, n_frames=n_frames, owner=owner)
-    return _write_series(fields, stem, scale, owner)
+    extra = {}
+    if solution.multipliers is not None:  # computed with stability=True
+        extra = {"floquet_multipliers_real": solution.multipliers.real,
+                 "floquet_multipliers_imag": solution.multipliers.imag,
+                 "stable": np.array([int(bool(solution.stable))], dtype=np.int64)}
+    return _write_series(fields, stem, scale, owner, extra)
 
 
 def write_linear_mode(modes: LinearModes, model: StructuralModel, path: Any, n_frames: int = 36,
