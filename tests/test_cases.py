@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CASES = ROOT / "examples" / "cases"
 NNM = CASES / "cantilever_nnm.toml"
 FRC = CASES / "oscillator_frc.toml"
+STAB = CASES / "oscillator_stability.toml"
 
 
 def _run(*args, cwd=None):
@@ -52,6 +54,59 @@ def test_cantilever_nnm_case(tmp_path):
     assert br.omega.max() > br.omega[0] + 0.1  # stiffening by the stop
     assert np.max(np.abs(br.xi)) < 1e-8
     assert br.energy[0] == pytest.approx(7.725e-5, rel=1e-6) and br.energy[-1] == pytest.approx(3.09e-3, rel=1e-6)
+
+
+def test_oscillator_stability_case_reports_the_period_doubling(tmp_path, capsys):
+    """examples/cases/oscillator_stability.toml (the seed contact oscillator, stability = true):
+    the impacting orbit period-doubles at w = 0.996204 (shooting; tests/test_stability.py)."""
+    assert main(["run", str(STAB), "--out", str(tmp_path), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    summary = (tmp_path / "summary.txt").read_text()
+    assert summary.strip() in out  # what femodes run prints is summary.txt
+    br = fm.load_branch(tmp_path / "response.npz")
+    assert br.stable is not None and set(br.stability_method) == {"shooting"}
+    pd = [b for b in br.bifurcations if b.kind == "period_doubling"]
+    assert len(pd) == 1 and pd[0].omega == pytest.approx(0.996204, abs=2e-6)
+    # the summary states the stable/unstable counts and lists the bifurcation with w to 6 digits
+    n_stable = int(br.stable.sum())
+    assert 0 < n_stable < len(br)
+    assert f"stability (shooting): {n_stable} stable, {len(br) - n_stable} unstable of {len(br)} points" in summary
+    assert f"bifurcations: {len(br.bifurcations)}" in summary
+    m = re.search(r"^  period_doubling at w = (\S+) \(between points (\d+) and \d+, multiplier (\S+)\)$", summary,
+                  flags=re.M)
+    assert m, summary
+    assert float(m.group(1)) == pytest.approx(0.996204, abs=2e-6) and m.group(1) == "0.996204"
+    assert int(m.group(2)) == pd[0].index and float(m.group(3)) == pytest.approx(-1.0, abs=1e-5)
+
+
+def test_stability_key_reaches_both_analyses(tmp_path):
+    """stability = "hill" on a nonlinear mode and false (the default) on a forced response: the
+    branch has stability exactly when asked, and the summary says so."""
+    nnm = """
+[model]
+kind = "discrete"
+M = [[1.0]]
+K = [[1.0]]
+[[cubic]]
+at = 0
+k3 = 0.5
+[analysis]
+type = "nonlinear_mode"
+energy = [1e-3, 1e-1]
+harmonics = 3
+stability = "hill"
+[outputs]
+plot = false
+branch = false
+"""
+    res = cases.run_case(cases.parse_case(nnm, tmp_path / "nnm.toml"), tmp_path / "nnm")
+    assert res.branch.stable is not None and set(res.branch.stability_method) == {"hill"}
+    n_stable = int(res.branch.stable.sum())
+    assert any(line.startswith(f"stability (hill): {n_stable} stable") for line in res.lines)
+    assert any(line.startswith("bifurcations: ") for line in res.lines)
+    frc = _frc(**{"harmonics = 20": "harmonics = 3\nmax_points = 5\nstability = false", "plot = true": "plot = false"})
+    res = cases.run_case(cases.parse_case(frc, tmp_path / "frc.toml"), tmp_path / "frc")
+    assert res.branch.stable is None and not any(line.startswith(("stability", "bifurcations")) for line in res.lines)
 
 
 # --------------------------------------------------------------------------------- bad case files
@@ -113,6 +168,19 @@ def test_bad_type(tmp_path):
     t = _frc(**{"harmonics = 20": 'harmonics = "20"'})
     err = _bad(tmp_path, "type.toml", t)
     assert f"type.toml:{_line(t, 'harmonics')}: [analysis] harmonics must be an integer, got '20'" in err
+
+
+def test_bad_stability_value(tmp_path):
+    t = _frc(**{"harmonics = 20": 'harmonics = 20\nstability = "shoot"'})
+    err = _bad(tmp_path, "stab.toml", t)
+    assert err.endswith(f"stab.toml:{_line(t, 'stability')}: [analysis] stability must be true, false or one of "
+                        "'auto', 'hill', 'shooting', got 'shoot' (did you mean 'shooting'?)")
+    for bad, quoted in (("1", "1"), ('["hill"]', "['hill']"), ('"true"', "'true'")):
+        t = _frc(**{"harmonics = 20": f"harmonics = 20\nstability = {bad}"})
+        with pytest.raises(cases.CaseError) as ei:
+            cases.parse_case(t, "x.toml")
+        assert ei.value.line == _line(t, "stability") and "[analysis] stability must be true, false" in str(ei.value)
+        assert str(ei.value).endswith(f"got {quoted}")
 
 
 def test_bad_location(tmp_path):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import dataclasses
+import json
 import math
 import multiprocessing
 import os
@@ -187,6 +188,59 @@ def test_study_file_round_trip(thread_sweep, tmp_path):
     with pytest.raises(ValueError, match="not a readable femodes study"):
         load_study(tmp_path / "junk.npz")
     assert not list(res.study.parent.glob("*.tmp"))  # atomic write left nothing behind
+
+
+def test_sweep_reports_stable_points_per_case(tmp_path, thread_sweep):
+    """analysis.stability as a sweep parameter: n_stable (stable points of the branch, -1 without
+    stability), the methods and the bifurcations by kind, in the records, the study file and the table."""
+    assert parse_set("analysis.stability=true,false,hill") == ("analysis.stability", [True, False, "hill"])
+    params = {"contact.0.gap": [1.0], "analysis.stability": [True, False], **{k: [v] for k, v in SMALL.items()}}
+    with cf.ThreadPoolExecutor(2) as ex:
+        res = run_sweep(FRC, params, out=tmp_path, executor=ex)
+    assert res.success and [r.parameters["analysis.stability"] for r in res] == [True, False]
+    on, off = res
+    br = res.load_branch(on.id)
+    assert br.stable is not None and on.n_stable == int(br.stable.sum())
+    assert 0 < on.n_stable < on.n_points == len(br) == 12  # H = 3: unstable past the grazing point
+    assert on.stability_method == "shooting" == "+".join(sorted(set(br.stability_method)))
+    kinds = [b.kind for b in br.bifurcations]
+    assert (on.n_branch_point, on.n_period_doubling, on.n_neimark_sacker, on.n_nonsmooth) == tuple(
+        kinds.count(k) for k in ("branch_point", "period_doubling", "neimark_sacker", "nonsmooth"))
+    assert on.n_nonsmooth >= 1  # the multipliers jump across the circle where contact starts
+    assert res.load_branch(off.id).stable is None
+    assert (off.n_stable, off.stability_method, off.n_period_doubling, off.n_nonsmooth) == (-1, "", -1, -1)
+    assert all(r.n_stable == -1 for r in thread_sweep[0])  # no stability asked: -1
+    back = load_study(res.study)
+    _same(back, res)
+    with np.load(res.study) as f:  # readable without femodes: integer columns, -1 = not computed
+        assert f["n_stable"].dtype.kind == "i" and list(f["n_stable"]) == [on.n_stable, -1]
+        assert list(f["n_nonsmooth"]) == [on.n_nonsmooth, -1] and list(f["stability_method"]) == ["shooting", ""]
+        assert json.loads(str(f["header"]))["version"] == 2
+    lines = res.table().splitlines()
+    assert "stable" in lines[0] and "bifurcations" in lines[0]
+    assert f"{on.n_stable}/12" in lines[2] and f"nonsmooth {on.n_nonsmooth}" in lines[2]
+    assert " - " in lines[3]
+    assert "stable" not in thread_sweep[0].table().splitlines()[0]  # no stability column without stability
+
+
+def test_study_version_1_is_read(thread_sweep, tmp_path):
+    """A study file written before the stability columns (version 1) still reads: no stability (-1)."""
+    res, _ = thread_sweep
+    with np.load(res.study) as f:
+        arrays = {k: f[k] for k in f.files}
+    header = json.loads(str(arrays.pop("header")))
+    new = ("n_stable", "stability_method", "n_branch_point", "n_period_doubling", "n_neimark_sacker", "n_nonsmooth")
+    header["version"] = 1
+    header["records"] = [{k: v for k, v in r.items() if k not in new} for r in header["records"]]
+    old = tmp_path / "old.npz"
+    np.savez_compressed(old, header=np.array(json.dumps(header)), **{k: v for k, v in arrays.items() if k not in new})
+    back = load_study(old)
+    assert [r.id for r in back] == [r.id for r in res] and all(r.n_stable == -1 for r in back)
+    assert back[1].max_amplitude == res[1].max_amplitude
+    header["version"] = 99
+    np.savez_compressed(old, header=np.array(json.dumps(header)))
+    with pytest.raises(ValueError, match="study version 99, this femodes reads versions 1, 2"):
+        load_study(old)
 
 
 class _LostWorkers(cf.Executor):

@@ -55,6 +55,8 @@ Schema (see ``examples/cases/*.toml`` for commented examples)::
     # omega = [3.0, 4.2]        # frequency_response: frequency span (rad/s)
     harmonics = 10
     # max_points = 2000         # optional cap on the number of continuation points
+    # stability = true          # Floquet multipliers and bifurcations of every point: true ("auto"),
+                                # "hill", "shooting" or false (default); see femodes.stability
 
     [outputs]                   # optional; defaults shown
     plot = true                 # frequency_energy.png (nonlinear mode) / response.png (forced)
@@ -90,7 +92,7 @@ SCHEMA: dict[str, dict[str, str]] = {
     "cubic": {"at": "location", "k3": "number"},
     "reduction": {"craig_bampton": "integer"},
     "analysis": {"type": "string", "mode": "integer", "energy": "pair", "omega": "pair", "harmonics": "integer",
-                 "max_points": "integer"},
+                 "max_points": "integer", "stability": "boolean or method"},
     "outputs": {"plot": "boolean", "branch": "string or false", "animation": "boolean", "gif": "boolean",
                 "response_dof": "location"},
 }
@@ -196,6 +198,8 @@ def _check_type(v: Any, kind: str) -> bool:
         return isinstance(v, str)
     if kind == "boolean":
         return isinstance(v, bool)
+    if kind == "boolean or method":
+        return isinstance(v, (bool, str))
     if kind == "table":
         return isinstance(v, dict)
     if kind == "pair":
@@ -230,6 +234,7 @@ def _all_finite(v: Any) -> bool:
 
 _TYPE_TEXT = {
     "number": "a number", "integer": "an integer", "string": "a string", "boolean": "true or false",
+    "boolean or method": "true, false or a method name (\"auto\", \"hill\", \"shooting\")",
     "table": "a table like { name = value }", "pair": "a pair [start, end] of numbers",
     "string or list": "a name or a list of names", "string or false": "a file name or false",
     "number or list": "a number or a list of numbers", "list": "a list",
@@ -407,7 +412,14 @@ def _check_analysis(case: Case) -> None:
 
 
 def _check_analysis_settings(case: Case, an: dict, typ: str) -> None:
-    """The optional [analysis] keys: max_points, harmonics, mode."""
+    """The optional [analysis] keys: max_points, harmonics, mode, stability."""
+    st = an.get("stability")
+    if isinstance(st, str):
+        from ..stability import METHODS  # "auto", "hill", "shooting"; true is "auto"
+
+        if st not in METHODS:
+            raise case.error("analysis", "stability", f"stability must be true, false or one of "
+                             f"{', '.join(map(repr, METHODS))}, got {st!r}{_suggest(st, METHODS)}")
     if typ == "nonlinear_mode" and "max_points" in an:
         raise case.error("analysis", "max_points", "max_points is only supported for frequency_response")
     for k in ("harmonics", "mode", "max_points"):
@@ -690,12 +702,19 @@ def _run_analysis(case: Case, model, progress):
     opts = {}
     if "max_points" in an:
         opts["max_points"] = an["max_points"]
-    if an["type"] == "nonlinear_mode":
-        return api("analysis", ["mode", "energy", "harmonics"], fm.nonlinear_mode, model, an.get("mode", 1),
-                   energy=tuple(an["energy"]), harmonics=H, progress=progress)
-    options = frequency_response_options(**opts) if opts else None
-    return api("analysis", ["omega", "harmonics"], fm.frequency_response, model, tuple(an["omega"]), H,
-               options=options, progress=progress)
+    stability = an.get("stability", False)
+    try:
+        if an["type"] == "nonlinear_mode":
+            return api("analysis", ["mode", "energy", "harmonics", "stability"], fm.nonlinear_mode, model,
+                       an.get("mode", 1), energy=tuple(an["energy"]), harmonics=H, progress=progress,
+                       stability=stability)
+        options = frequency_response_options(**opts) if opts else None
+        return api("analysis", ["omega", "harmonics", "stability"], fm.frequency_response, model, tuple(an["omega"]),
+                   H, options=options, progress=progress, stability=stability)
+    except RuntimeError as exc:  # stability = "shooting" that does not converge: "stability: ... use method='hill'"
+        if not str(exc).startswith("stability:"):
+            raise
+        raise case.error("analysis", "stability", str(exc)) from None
 
 
 def _summary_lines(case: Case, model, branch) -> list[str]:
@@ -708,6 +727,41 @@ def _summary_lines(case: Case, model, branch) -> list[str]:
         lines.append(f"max |xi| (artificial damping) = {abs(branch.xi).max():.2e}")
     if len(branch.folds):
         lines.append(f"folds at w = {', '.join(f'{w:.6g}' for w in branch.omega[list(branch.folds)])}")
+    lines.extend(stability_lines(branch))
+    return lines
+
+
+def _fmt_multiplier(mu: complex) -> str:
+    """A Floquet multiplier: a real number, or ``a+bj (|mu| = r)``."""
+    mu = complex(mu)
+    if abs(mu.imag) <= 1e-9 * max(1.0, abs(mu)):
+        return f"{mu.real:.6g}"
+    return f"{mu.real:.4g}{mu.imag:+.4g}j (|mu| = {abs(mu):.6g})"
+
+
+def stability_lines(branch) -> list[str]:
+    """summary.txt lines on the stability of a branch, none if it was not computed.
+
+    ``stability (shooting): 2 stable, 4 unstable of 6 points`` (the methods used, with their
+    point counts when ``"auto"`` mixed them), then ``bifurcations: none`` or
+    ``bifurcations: N`` and one line per bifurcation in branch order:
+    ``  period_doubling at w = 0.996204 (between points 3 and 4, multiplier -1)``.
+    """
+    if branch.stable is None:
+        return []
+    n, n_stable = len(branch), int(sum(bool(s) for s in branch.stable))
+    used: dict[str, int] = {}
+    for m in branch.stability_method:
+        used[str(m)] = used.get(str(m), 0) + 1
+    methods = ", ".join(used) if len(used) == 1 else ", ".join(f"{m} at {k} points" for m, k in sorted(used.items()))
+    lines = [f"stability ({methods or '-'}): {n_stable} stable, {n - n_stable} unstable of {n} points"]
+    if not branch.bifurcations:
+        return lines + ["bifurcations: none"]
+    lines.append(f"bifurcations: {len(branch.bifurcations)}")
+    for b in branch.bifurcations:
+        where = f"w = {b.omega:.6g}" + (f", energy {b.energy:.4g}" if branch.kind == "nonlinear mode" else "")
+        pos = f"point {b.index}" if b.kind == "fold" else f"between points {b.index} and {b.index + 1}"
+        lines.append(f"  {b.kind} at {where} ({pos}, multiplier {_fmt_multiplier(b.multiplier)})")
     return lines
 
 

@@ -56,7 +56,7 @@ RUN_HELP = """Run a TOML case file. Tables (see examples/cases/*.toml for commen
   [[cubic]]     at, k3
   [reduction]   craig_bampton = 10
   [analysis]    type = "nonlinear_mode" (mode, energy = [a, b]) | "frequency_response" (omega = [a, b]);
-                harmonics = 10
+                harmonics = 10, stability = true | "hill" | "shooting" (Floquet multipliers, bifurcations)
   [outputs]     plot = true, branch = "branch.npz", animation = true, gif = false, response_dof = "tip"
 """
 

@@ -12,7 +12,13 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["CaseRecord", "SweepResult", "NUMERIC_FIELDS", "TEXT_FIELDS", "fmt_value", "record_from_task"]
+__all__ = ["CaseRecord", "SweepResult", "NUMERIC_FIELDS", "INTEGER_FIELDS", "TEXT_FIELDS", "BIFURCATION_FIELDS",
+           "fmt_value", "record_from_task"]
+
+#: The record fields that count bifurcations by kind (``n_<kind>`` for the kinds of
+#: :data:`femodes.results.BIFURCATION_KINDS` other than folds, which ``n_folds`` counts).
+BIFURCATION_FIELDS = {"n_branch_point": "branch_point", "n_period_doubling": "period_doubling",
+                      "n_neimark_sacker": "neimark_sacker", "n_nonsmooth": "nonsmooth"}
 
 
 @dataclass(frozen=True)
@@ -27,6 +33,13 @@ class CaseRecord:
     summarise the branch: frequency and energy ranges, ``max_amplitude`` = max over the branch of
     ``max_t |q(t)|`` at ``amplitude_dof`` (``[outputs] response_dof``, else the first force, else
     the first contact DOF), ``max_penetration`` of the contacts; NaN when failed.
+
+    Stability (``[analysis] stability``, e.g. the sweep parameter ``analysis.stability``):
+    ``n_stable`` is the number of stable points (orbits) of the branch, ``stability_method`` the
+    methods used (``"shooting"``, ``"hill"`` or ``"hill+shooting"``) and ``n_branch_point``,
+    ``n_period_doubling``, ``n_neimark_sacker``, ``n_nonsmooth`` count the bifurcations by kind
+    (folds: ``n_folds``). When stability was not computed (or the case failed) the counts are
+    ``-1`` and ``stability_method`` is ``""``.
     """
 
     id: str
@@ -46,6 +59,12 @@ class CaseRecord:
     n_folds: int = 0
     max_penetration: float = math.nan
     worker: str = ""
+    n_stable: int = -1
+    stability_method: str = ""
+    n_branch_point: int = -1
+    n_period_doubling: int = -1
+    n_neimark_sacker: int = -1
+    n_nonsmooth: int = -1
 
     @property
     def ok(self) -> bool:
@@ -54,8 +73,10 @@ class CaseRecord:
 
 #: The record fields stored as one number array, and as one text array, over the cases.
 NUMERIC_FIELDS = ("n_points", "wall_time", "cpu_time", "omega_min", "omega_max", "energy_min", "energy_max",
-                  "max_amplitude", "n_folds", "max_penetration")
-TEXT_FIELDS = ("id", "status", "message", "branch", "amplitude_dof", "worker")
+                  "max_amplitude", "n_folds", "max_penetration", "n_stable", *BIFURCATION_FIELDS)
+#: The numeric fields that are integers (stored as integer arrays; ``-1`` = not computed).
+INTEGER_FIELDS = ("n_points", "n_folds", "n_stable", *BIFURCATION_FIELDS)
+TEXT_FIELDS = ("id", "status", "message", "branch", "amplitude_dof", "worker", "stability_method")
 
 
 @dataclass(frozen=True)
@@ -117,17 +138,31 @@ class SweepResult:
         return load_branch(self.study.parent / rec.branch)
 
     def table(self, max_message: int = 60) -> str:
-        """Text table: id, parameter values, status, points, frequency range, amplitude, time, message."""
-        head = ["id", *self.parameters, "status", "points", "w range [rad/s]", "max amp", "time [s]", "message"]
+        """Text table: id, parameter values, status, points, frequency range, amplitude, time, message;
+        when any case computed stability, also ``stable`` (stable of all points, ``-`` where not
+        computed) and ``bifurcations`` (counts by kind, e.g. ``period_doubling 1``)."""
+        stab = any(r.n_stable >= 0 for r in self.cases)
+        head = ["id", *self.parameters, "status", "points", *(["stable"] if stab else []), "w range [rad/s]",
+                "max amp", *(["bifurcations"] if stab else []), "time [s]", "message"]
         rows = []
         for r in self.cases:
             w = f"{r.omega_min:.4g}..{r.omega_max:.4g}" if r.n_points else "-"
             msg = r.message if len(r.message) <= max_message else r.message[: max_message - 3] + "..."
+            st = [f"{r.n_stable}/{r.n_points}" if r.n_stable >= 0 else "-"] if stab else []
+            bif = [_bifurcation_text(r)] if stab else []
             rows.append([r.id, *(fmt_value(r.parameters.get(p)) for p in self.parameters), r.status, str(r.n_points),
-                         w, f"{r.max_amplitude:.6g}" if r.n_points else "-", f"{r.wall_time:.2f}", msg])
+                         *st, w, f"{r.max_amplitude:.6g}" if r.n_points else "-", *bif, f"{r.wall_time:.2f}", msg])
         widths = [max(len(h), *(len(row[j]) for row in rows)) if rows else len(h) for j, h in enumerate(head)]
         fmt = lambda row: "  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip()  # noqa: E731
         return "\n".join([fmt(head), fmt(["-" * w for w in widths]), *map(fmt, rows)])
+
+
+def _bifurcation_text(r: CaseRecord) -> str:
+    """``period_doubling 1, nonsmooth 2`` (``none``; ``-`` without stability) for :meth:`SweepResult.table`."""
+    if r.n_stable < 0:
+        return "-"
+    found = [f"{kind} {getattr(r, f)}" for f, kind in BIFURCATION_FIELDS.items() if getattr(r, f) > 0]
+    return ", ".join(found) or "none"
 
 
 def fmt_value(v: Any) -> str:

@@ -3,8 +3,13 @@ every finished case and read back by :func:`load_study`.
 
 Layout (``.npz`` arrays or ``.h5`` datasets): ``header`` (JSON: format, version, base case name
 and text, parameter paths, every record), plus one array per record field over the cases
-(``status``, ``message``, ``branch``, ``max_amplitude``, ...) and ``param:<path>`` per parameter
-(JSON text of each value) for readers without femodes.
+(``status``, ``message``, ``branch``, ``max_amplitude``, ``n_stable``, ...) and ``param:<path>`` per
+parameter (JSON text of each value) for readers without femodes.
+
+Versions: 2 added the stability columns (``n_stable``, ``stability_method``, ``n_branch_point``,
+``n_period_doubling``, ``n_neimark_sacker``, ``n_nonsmooth``; ``-1`` / ``""`` when stability was
+not computed). :func:`load_study` reads versions 1 and 2; a version-1 study reads with those
+fields at ``-1`` / ``""`` (it has no stability).
 """
 
 from __future__ import annotations
@@ -17,11 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from ...store import atomic_write
-from .records import NUMERIC_FIELDS, TEXT_FIELDS, CaseRecord, SweepResult
+from .records import INTEGER_FIELDS, NUMERIC_FIELDS, TEXT_FIELDS, CaseRecord, SweepResult
 
 __all__ = ["STUDY_VERSION", "save_study", "load_study"]
 
-STUDY_VERSION = 1
+STUDY_VERSION = 2
+#: The versions :func:`load_study` reads (see the module docstring).
+READABLE_VERSIONS = (1, 2)
 
 
 def _header(result: SweepResult, text: str) -> dict:
@@ -32,7 +39,7 @@ def _header(result: SweepResult, text: str) -> dict:
 
 def _columns(result: SweepResult) -> dict[str, np.ndarray]:
     """One array per record field and per parameter (``param:<path>``, JSON text) over the cases."""
-    arrays = {k: np.array([getattr(r, k) for r in result.cases], dtype=int if k in ("n_points", "n_folds") else float)
+    arrays = {k: np.array([getattr(r, k) for r in result.cases], dtype=int if k in INTEGER_FIELDS else float)
               for k in NUMERIC_FIELDS}
     arrays.update({k: np.array([getattr(r, k) for r in result.cases], dtype=str) for k in TEXT_FIELDS})
     arrays.update({f"param:{p}": np.array([json.dumps(r.parameters.get(p)) for r in result.cases], dtype=str)
@@ -92,9 +99,9 @@ def load_study(path) -> SweepResult:
     header = _read_header(path)
     if not isinstance(header, dict) or header.get("format") != "femodes.Study":
         raise ValueError(f"load_study: {str(path)!r} is not a femodes study file")
-    if header.get("version") != STUDY_VERSION:
+    if header.get("version") not in READABLE_VERSIONS:
         raise ValueError(f"load_study: {str(path)!r} has study version {header.get('version')}, this femodes reads "
-                         f"version {STUDY_VERSION}")
+                         f"versions {', '.join(map(str, READABLE_VERSIONS))}")
     recs = tuple(CaseRecord(**r) for r in header["records"])
     return SweepResult(cases=recs, parameters=tuple(header["parameters"]), study=path, case=header.get("case", ""),
                        elapsed=header.get("elapsed", math.nan))

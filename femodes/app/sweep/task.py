@@ -17,8 +17,9 @@ import numpy as np
 
 from ..cases import Case, CaseError, parse_case, run_case
 from .overrides import CASE_OUTPUTS
+from .records import BIFURCATION_FIELDS
 
-__all__ = ["run_sweep_case", "max_penetration"]
+__all__ = ["run_sweep_case", "max_penetration", "stability_summary"]
 
 
 def _amplitude_dof(case: Case, model) -> int | None:
@@ -38,6 +39,19 @@ def max_penetration(br) -> float:
     return float(np.max(br.penetration, initial=0.0))
 
 
+def stability_summary(br) -> dict[str, Any]:
+    """The stability fields of a :class:`~femodes.app.sweep.CaseRecord` for a branch: ``n_stable``
+    (stable points), ``stability_method`` (the methods used, ``"+"``-joined) and the bifurcation
+    counts by kind (``n_period_doubling``, ...); ``{}`` (the record's defaults: -1 and "") when the
+    branch has no stability."""
+    if br.stable is None:
+        return {}
+    kinds = [b.kind for b in br.bifurcations]
+    return dict(n_stable=int(np.count_nonzero(br.stable)),
+                stability_method="+".join(sorted({str(m) for m in br.stability_method})),
+                **{f: kinds.count(kind) for f, kind in BIFURCATION_FIELDS.items()})
+
+
 def _branch_summary(case: Case, res, folder: Path) -> dict[str, Any]:
     """The :class:`~femodes.app.sweep.CaseRecord` fields that summarise the branch of a run case."""
     br = res.branch
@@ -48,7 +62,7 @@ def _branch_summary(case: Case, res, folder: Path) -> dict[str, Any]:
         branch=str(folder / CASE_OUTPUTS["branch"]), omega_min=float(br.omega.min()),
         omega_max=float(br.omega.max()), energy_min=float(br.energy.min()), energy_max=float(br.energy.max()),
         max_amplitude=float(amp.max()), amplitude_dof="all" if dof is None else res.model.dofmap.label(dof),
-        n_folds=len(br.folds), max_penetration=max_penetration(br),
+        n_folds=len(br.folds), max_penetration=max_penetration(br), **stability_summary(br),
     )
 
 
