@@ -16,7 +16,7 @@ from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState
                       continuation, semismooth_newton)
 from .results import Bifurcation, Branch, PeriodicSolution, load_branch
 from .analyses import StaticContactResult, frequency_response, nonlinear_mode, static_contact
-from .stability import StabilityResult, stability
+from .floquet import StabilityResult, stability
 from .switching import switch_branch
 from .store import Checkpoint
 from .time import SteadyState, TimeHistory, TimeSteppingOptions, simulate, steady_state

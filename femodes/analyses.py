@@ -25,7 +25,7 @@ from .results import Branch, ContactInfo
 from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
-from .stability import METHODS, annotate_branch
+from .floquet import METHODS, annotate_branch
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
            "branch_from_continuation", "model_fingerprint"]
@@ -340,7 +340,7 @@ def _stability_method(stability: Any, owner: str) -> str | None:
 
 def _with_stability(branch: Branch, problem, model: StructuralModel, method: str | None,
                     options: ContinuationOptions) -> Branch:
-    """The branch with its stability and bifurcations (:mod:`femodes.stability`), once."""
+    """The branch with its stability and bifurcations (:mod:`femodes.floquet`), once."""
     if method is None or branch.stable is not None or not len(branch):
         return branch
     return annotate_branch(branch, problem, model, method=method, newton=options.newton)

@@ -270,7 +270,7 @@ class Branch:
     ``folds`` (indices), ``kind`` ("forced" or "nonlinear mode"), ``success``, ``message``.
     ``branch[i]`` is a :class:`PeriodicSolution`; ``len(branch)`` the number of points.
 
-    With stability computed (``stability=True`` of the analyses, :mod:`femodes.stability`):
+    With stability computed (``stability=True`` of the analyses, :mod:`femodes.floquet`):
     ``stable`` (bool per point), ``multipliers`` (complex, ``(n_points, m)``, largest modulus
     first, NaN-padded), ``stability_method`` (``"hill"`` or ``"shooting"`` per point) and
     ``bifurcations`` (:class:`Bifurcation` objects in branch order). Without it ``stable``,
@@ -303,7 +303,7 @@ class Branch:
         self.bifurcations: tuple = ()
 
     def set_stability(self, *, stable, multipliers, bifurcations, methods, tol: float) -> "Branch":
-        """Attach the stability of every point (used by :mod:`femodes.stability`)."""
+        """Attach the stability of every point (used by :mod:`femodes.floquet`)."""
         n = len(self)
         stable = np.asarray(stable, dtype=bool)
         multipliers = np.asarray(multipliers, dtype=complex).reshape(n, -1)

@@ -31,7 +31,7 @@ LAYERS = {
     "femodes.results": 4,
     "femodes.analyses": 5,
     "femodes.runs": 5,
-    "femodes.stability": 5,
+    "femodes.floquet": 5,
     "femodes.switching": 5,
     "femodes.fields": 6,
     "femodes.plot": 6,

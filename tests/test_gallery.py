@@ -82,3 +82,16 @@ def test_penalty_vs_complementarity(tmp_path):
     gaps = [abs(ex.peak_amplitude[k] - ex.peak_amplitude_complementarity) for k in ks]
     assert gaps[-1] < 0.05 and gaps[-1] < gaps[0] / 2
     assert ex.main(tmp_path).stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_period_doubling_example(tmp_path):
+    """~50 s: stability by shooting at every point of a 136-point branch."""
+    ex = load("period_doubling")
+    kinds = [b.kind for b in ex.branch.bifurcations]
+    assert kinds.count("fold") == 2 and kinds.count("period_doubling") == 1
+    assert ex.doubling.omega == pytest.approx(0.996204, abs=2e-6)
+    assert ex.doubled.meta["switched_from"]["omega_hbm"] == pytest.approx(0.95959, abs=1e-4)
+    # the shot period-2 orbit is the HBM one up to the contact error, and truly period 2
+    assert ex.shot.success and ex.orbit_correction < 0.06 and ex.half_period_gap > 0.1
+    assert ex.main(tmp_path).stat().st_size > 10_000

@@ -56,7 +56,7 @@ Schema (see ``examples/cases/*.toml`` for commented examples)::
     harmonics = 10
     # max_points = 2000         # optional cap on the number of continuation points
     # stability = true          # Floquet multipliers and bifurcations of every point: true ("auto"),
-                                # "hill", "shooting" or false (default); see femodes.stability
+                                # "hill", "shooting" or false (default); see femodes.floquet
 
     [outputs]                   # optional; defaults shown
     plot = true                 # frequency_energy.png (nonlinear mode) / response.png (forced)
@@ -415,7 +415,7 @@ def _check_analysis_settings(case: Case, an: dict, typ: str) -> None:
     """The optional [analysis] keys: max_points, harmonics, mode, stability."""
     st = an.get("stability")
     if isinstance(st, str):
-        from ..stability import METHODS  # "auto", "hill", "shooting"; true is "auto"
+        from ..floquet import METHODS  # "auto", "hill", "shooting"; true is "auto"
 
         if st not in METHODS:
             raise case.error("analysis", "stability", f"stability must be true, false or one of "

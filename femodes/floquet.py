@@ -1,4 +1,4 @@
-r"""Analyses layer: stability of periodic solutions and bifurcations along branches.
+r"""Analyses layer: stability of periodic solutions (Floquet multipliers) and bifurcations along branches.
 
 A periodic orbit is asymptotically stable when all its Floquet multipliers ``mu`` lie inside the
 unit circle; here *stable* means ``max |mu| <= 1 + tol`` (the trivial multipliers of free orbits,
@@ -324,7 +324,7 @@ class _Annotator:
         last = None
         for it in range(40):
             width = hi - lo
-            if width < 1e-7 or min(abs(flo), abs(fhi)) <= 1e-10:
+            if width < 1e-7 or min(abs(flo), abs(fhi)) <= 1e-9:
                 break
             theta = (lo * ghi - hi * glo) / (ghi - glo) if ghi != glo else 0.5 * (lo + hi)
             if last is not None and width > 0.5 * last:
