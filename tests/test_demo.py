@@ -243,3 +243,13 @@ def test_summary_mentions_units_and_story(run):
                    "folds at", "internal resonance", "penetration", "frames per period"):
         assert phrase in text, phrase
     assert re.search(r"w rises to 3\.70\d\d rad/s \(\+5\.\d %\)", text)
+
+
+def test_demo_shows_stability_and_the_period_doubling(run):
+    """The impact oscillator's period doubling (shooting) is reported, drawn and switched onto."""
+    summary = (run["out"] / "summary.txt").read_text()
+    assert "period doubling at w = 0.996204" in summary
+    assert "period-2 branch (switch_branch" in summary
+    osc = fm.load_branch(run["out"] / "oscillator.npz")
+    assert [b.kind for b in osc.bifurcations].count("period_doubling") == 1
+    assert (run["out"] / "stability.png") in run["files"] and (run["out"] / "stability.png").stat().st_size > 10_000
