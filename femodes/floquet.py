@@ -45,9 +45,10 @@ from .laws import UnilateralContact
 from .model import StructuralModel
 from .results import Bifurcation, Branch, PeriodicSolution
 from .solvers import NewtonOptions, semismooth_newton
+from .solvers.roots import illinois
 from .time.shooting import MAX_DOFS, shoot
 
-__all__ = ["stability", "StabilityResult", "annotate_branch", "METHODS"]
+__all__ = ["stability", "StabilityResult", "annotate_branch", "solve_on_secant", "METHODS"]
 
 log = logging.getLogger(__name__)
 
@@ -292,23 +293,8 @@ class _Annotator:
         return Bifurcation(kind="fold", index=int(f), omega=float(b.omega[f]), energy=float(b.energy[f]),
                            parameter=float(b.parameter[f]), multiplier=complex(1.0), Q=b.Q[f], P=b.P[f], xi=float(b.xi[f]))
 
-    def _solve_on_secant(self, za: np.ndarray, zb: np.ndarray, theta: float):
-        """Solution on the hyperplane through ``(1 - theta) za + theta zb`` normal to the secant."""
-        d = zb - za
-        t = d / float(d @ d)
-        zp = za + theta * d
-        n = za.size - 1
-
-        def fun(z):
-            r, J, dr_dp = self.problem.residual(z[:n], z[n])
-            F = np.append(r, t @ (z - zp))
-            return F, J.bordered(dr_dp[:, None], t[None, :n], np.array([[t[n]]]))
-
-        res = semismooth_newton(fun, zp, options=self.newton)
-        return res.x if res.success else None
-
     def _locate(self, i: int, k: int, ra: StabilityResult, rb: StabilityResult) -> Bifurcation | None:
-        """Regula falsi (Illinois, with bisection whenever the bracket does not halve) on
+        """Regula falsi (Illinois, bisecting whenever the bracket does not halve) on
         ``tau(theta) = |mu_(k)| - 1`` along the secant from point ``i`` to ``i + 1``.
 
         A bracket that shrinks below ``1e-7`` of the segment while ``|tau|`` stays above
@@ -317,39 +303,25 @@ class _Annotator:
         b = self.branch
         za = np.append(self.point(i), b.parameter[i])
         zb = np.append(self.point(i + 1), b.parameter[i + 1])
-        lo, hi = 0.0, 1.0
-        flo, fhi = self.tau(ra.multipliers, k), self.tau(rb.multipliers, k)
         ends = {0.0: (za, ra), 1.0: (zb, rb)}
-        glo, ghi = flo, fhi  # Illinois-weighted values
-        last = None
-        for it in range(40):
-            width = hi - lo
-            if width < 1e-7 or min(abs(flo), abs(fhi)) <= 1e-9:
-                break
-            theta = (lo * ghi - hi * glo) / (ghi - glo) if ghi != glo else 0.5 * (lo + hi)
-            if last is not None and width > 0.5 * last:
-                theta = 0.5 * (lo + hi)  # the previous step did not halve the bracket
-            theta = min(max(theta, lo + 1e-3 * width), hi - 1e-3 * width)
-            last = width
-            z = self._solve_on_secant(za, zb, theta)
+
+        def tau(theta: float) -> float | None:
+            z = solve_on_secant(self.problem, za, zb, theta, self.newton)
             if z is None:
-                break
+                return None
             try:
                 r = self.at(z[:-1], z[-1], ra.method)
             except (RuntimeError, ValueError):  # shooting lost the orbit between the points
-                break
-            f = self.tau(r.multipliers, k)
+                return None
             ends[theta] = (z, r)
-            if (f > 0) == (fhi > 0):
-                hi, fhi, ghi = theta, f, f
-                glo *= 0.5
-            else:
-                lo, flo, glo = theta, f, f
-                ghi *= 0.5
-        smooth = min(abs(flo), abs(fhi)) <= JUMP
-        th = lo if abs(flo) <= abs(fhi) else hi
+            return self.tau(r.multipliers, k)
+
+        br = illinois(tau, 0.0, 1.0, self.tau(ra.multipliers, k), self.tau(rb.multipliers, k), max_iter=40,
+                      ftol=1e-9, xtol=1e-7, margin=1e-3, bisect_if_slow=True)
+        smooth = min(abs(br.f_lo), abs(br.f_hi)) <= JUMP
+        th = br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi
         if not smooth:
-            th = hi if fhi > 0 else lo  # the unstable side: its crossing multiplier is reported
+            th = br.hi if br.f_hi > 0 else br.lo  # the unstable side: its crossing multiplier is reported
         z, r = ends[th]
         u = self.problem.unpack(z[:-1], z[-1])
         crossing = self.crossing(r.multipliers, k)
@@ -357,6 +329,23 @@ class _Annotator:
         energy = float(self.system.energy(u.y, u.omega)[0])
         return Bifurcation(kind=kind, index=int(i), omega=float(u.omega), energy=energy, parameter=float(z[-1]),
                            multiplier=complex(crossing), Q=np.array(u.Q), P=np.array(u.P), xi=float(u.xi))
+
+
+def solve_on_secant(problem, za: np.ndarray, zb: np.ndarray, theta: float, newton: NewtonOptions) -> np.ndarray | None:
+    """The solution ``z = [x; p]`` of ``problem`` on the hyperplane through ``(1 - theta) za +
+    theta zb`` normal to the secant ``zb - za`` (None if Newton fails): a point between two
+    points of a branch, for locating what happens between them."""
+    d = zb - za
+    t = d / float(d @ d)
+    zp = za + theta * d
+    n = za.size - 1
+
+    def fun(z):
+        r, J, dr_dp = problem.residual(z[:n], z[n])
+        return np.append(r, t @ (z - zp)), J.bordered(dr_dp[:, None], t[None, :n], np.array([[t[n]]]))
+
+    res = semismooth_newton(fun, zp, options=newton)
+    return res.x if res.success else None
 
 
 def _kind(mu: complex, all_mu: np.ndarray) -> str:

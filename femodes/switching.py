@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Any
-
 import numpy as np
 import scipy.linalg as sla
 
@@ -30,7 +28,9 @@ from .analyses import frequency_response
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem
 from .results import Bifurcation, Branch
+from .floquet import solve_on_secant
 from .solvers import ContinuationOptions, NewtonOptions, semismooth_newton
+from .solvers.roots import illinois
 
 __all__ = ["switch_branch", "DENSE_LIMIT"]
 
@@ -85,20 +85,6 @@ class _Doubled:
         return float(sign * math.exp(logdet / A.shape[0])) if sign != 0 else 0.0
 
 
-def _secant_point(problem: ForcedResponseProblem, za, zb, theta, newton):
-    d = zb - za
-    t = d / float(d @ d)
-    zp = za + theta * d
-    n = za.size - 1
-
-    def fun(z):
-        r, J, dr_dp = problem.residual(z[:n], z[n])
-        return np.append(r, t @ (z - zp)), J.bordered(dr_dp[:, None], t[None, :n], np.array([[t[n]]]))
-
-    res = semismooth_newton(fun, zp, options=newton)
-    return res.x if res.success else None
-
-
 def _locate_hbm_doubling(branch: Branch, bif: Bifurcation, dbl: _Doubled, newton: NewtonOptions, window: int):
     """The HBM orbit's own period doubling nearest to ``bif``: ``(x1, omega)`` on the branch."""
     p1 = ForcedResponseProblem(branch.model, branch.harmonics)
@@ -113,35 +99,18 @@ def _locate_hbm_doubling(branch: Branch, bif: Bifurcation, dbl: _Doubled, newton
     i = min(changes, key=lambda j: abs(j + 0.5 - (bif.index + 0.5)))
     za = np.append(p1.pack(branch.Q[i], branch.P[i], branch.omega[i]), branch.omega[i])
     zb = np.append(p1.pack(branch.Q[i + 1], branch.P[i + 1], branch.omega[i + 1]), branch.omega[i + 1])
+    points = {0.0: za, 1.0: zb}
 
-    def f(z):
+    def test(theta: float) -> float | None:
+        z = solve_on_secant(p1, za, zb, theta, newton)
+        if z is None:
+            return None
+        points[theta] = z
         u = p1.unpack(z[:-1], z[-1])
         return dbl.test(dbl.point(u.Q, u.P), u.omega)
 
-    a, b, fa, fb, za_, zb_ = 0.0, 1.0, vals[i], vals[i + 1], za, zb
-    best = za if abs(fa) <= abs(fb) else zb
-    side = 0
-    for _ in range(60):  # Illinois regula falsi on theta
-        if b - a < 1e-12 or fa == fb:
-            break
-        theta = (a * fb - b * fa) / (fb - fa)
-        z = _secant_point(p1, za, zb, theta, newton)
-        if z is None:
-            break
-        ft = f(z)
-        best = z
-        if abs(ft) <= 1e-13:
-            break
-        if (ft > 0) == (fb > 0):
-            b, fb = theta, ft
-            if side == 1:
-                fa *= 0.5
-            side = 1
-        else:
-            a, fa = theta, ft
-            if side == -1:
-                fb *= 0.5
-            side = -1
+    br = illinois(test, 0.0, 1.0, vals[i], vals[i + 1], max_iter=60, ftol=1e-13, xtol=1e-12)
+    best = points[br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi]
     u = p1.unpack(best[:-1], best[-1])
     return u, i
 

@@ -119,3 +119,30 @@ def test_solvers_import_nothing_from_femodes_and_no_private_names(path):
         if level == 1:
             private = [n for n in names if n.startswith("_")]
             assert not private, f"{path.name} imports private names {private} from .{module}"
+
+
+def test_illinois_finds_a_smooth_root_superlinearly():
+    from femodes.solvers.roots import illinois
+
+    calls = []
+
+    def f(x):
+        calls.append(x)
+        return x ** 3 - 2.0
+
+    br = illinois(f, 0.0, 2.0, -2.0, 6.0, max_iter=50, ftol=1e-14)
+    root = 2.0 ** (1 / 3)
+    x = br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi
+    assert abs(x - root) < 1e-13 and br.nfev == len(calls) < 15  # plain regula falsi needs ~40 here
+    assert br.lo <= root <= br.hi
+
+
+def test_illinois_stops_on_failed_evaluation_and_brackets_a_jump():
+    from femodes.solvers.roots import illinois
+
+    br = illinois(lambda x: None, 0.0, 1.0, -1.0, 1.0, max_iter=10)
+    assert (br.lo, br.hi, br.nfev) == (0.0, 1.0, 1)
+    # a jump at 0.3: the bracket closes on it; |f| stays 1 at both ends
+    br = illinois(lambda x: -1.0 if x < 0.3 else 1.0, 0.0, 1.0, -1.0, 1.0, max_iter=100, xtol=1e-9,
+                  bisect_if_slow=True)
+    assert br.lo < 0.3 <= br.hi and br.hi - br.lo <= 2e-9 and (br.f_lo, br.f_hi) == (-1.0, 1.0)

@@ -12,7 +12,8 @@
 Modules: ``newton`` (semismooth Newton), ``continuation`` (the driver and its
 tracer), ``continuation_types`` (options, points, states, results),
 ``arclength`` (the problem's evaluation, scaled geometry, tangent and corrector
-solves), ``bordered`` (bordered matrices and their solver), ``checks`` (the
+solves), ``bordered`` (bordered matrices and their solver), ``roots`` (a bracketed
+scalar root by Illinois regula falsi: folds, stability changes), ``checks`` (the
 argument validators shared by the solvers and the layers above).
 """
 

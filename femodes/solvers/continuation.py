@@ -71,6 +71,7 @@ import numpy as np
 from .arclength import ArclengthSystem
 from .bordered import bordered_matrix, bordered_solver
 from .checks import is_real_number, show, start_vector
+from .roots import illinois
 from .continuation_types import (
     STATUS_MESSAGES,
     ContinuationOptions,
@@ -517,37 +518,20 @@ class _Tracer:
         """Regula falsi (Illinois) on s -> dp/ds along the step family from ``a``."""
         n = self.n
         c = self.sys.w * a.t
-        s_lo, g_lo = 0.0, a.t[n]
-        s_hi, g_hi = ds, b.t[n]
-        best: _Pt | None = None
-        side = 0
-        for _ in range(_FOLD_MAX_ITER):
-            s = (s_lo * g_hi - s_hi * g_lo) / (g_hi - g_lo)
-            if not (s_lo < s < s_hi):
-                s = 0.5 * (s_lo + s_hi)
+        found: list[_Pt] = []
+
+        def dp_ds(s: float) -> float | None:
             res = self.sys.correct(a.y + s * a.t, c)
             if not res.success:
-                break
+                return None
             t = self.sys.tangent_from(res.jac)
             if t is None:
-                break
-            q = _Pt(y=np.array(res.x), t=t, nit=res.nit, rnorm=float(np.max(np.abs(res.fun[:n]))), step=s)
-            if best is None or abs(t[n]) < abs(best.t[n]):
-                best = q
-            g = t[n]
-            if abs(g) <= _FOLD_TOL or (s_hi - s_lo) <= 1e-12 * ds:
-                break
-            if np.sign(g) == np.sign(g_lo):
-                s_lo, g_lo = s, g
-                if side == -1:
-                    g_hi *= 0.5
-                side = -1
-            else:
-                s_hi, g_hi = s, g
-                if side == 1:
-                    g_lo *= 0.5
-                side = 1
-        return best
+                return None
+            found.append(_Pt(y=np.array(res.x), t=t, nit=res.nit, rnorm=float(np.max(np.abs(res.fun[:n]))), step=s))
+            return t[n]
+
+        illinois(dp_ds, 0.0, ds, a.t[n], b.t[n], max_iter=_FOLD_MAX_ITER, ftol=_FOLD_TOL, xtol=1e-12 * ds)
+        return min(found, key=lambda q: abs(q.t[n])) if found else None
 
     # -- span end ---------------------------------------------------------- #
     def crossed(self, p: float) -> float | None:
