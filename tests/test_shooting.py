@@ -8,9 +8,7 @@ carry their O(h^2) truncation and O(eps_int / h) round-off, about 1e-8 here, ass
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,7 +16,7 @@ import pytest
 import femodes as fm
 from femodes.time.shooting import monodromy, shoot, trajectory
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "subharmonic_contact.py"
+from .test_examples import load
 
 
 def oscillator(c=0.1, k=1.0, amplitude=1.0):
@@ -182,10 +180,7 @@ def test_penalty_contact_kinks_are_stopped_at():
 
 @pytest.fixture(scope="module")
 def ex():
-    spec = importlib.util.spec_from_file_location("subharmonic_contact", EXAMPLE)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("subharmonic_contact")
 
 
 def test_subharmonic_example_multipliers(ex):

@@ -4,23 +4,17 @@ Tolerances are from the measured values (see the example's docstring), with marg
 of an impacting motion converges algebraically (~1/H) because the velocity jumps at impacts.
 """
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import femodes as fm
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "subharmonic_contact.py"
+from .test_examples import load
 
 
 @pytest.fixture(scope="module")
 def ex():
-    spec = importlib.util.spec_from_file_location("subharmonic_contact", EXAMPLE)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("subharmonic_contact")
 
 
 def test_time_domain_orbit_is_an_attracting_period_2_orbit(ex):
