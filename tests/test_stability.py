@@ -136,23 +136,32 @@ def test_conservative_backbone_is_stable():
     assert np.nanmax(np.abs(b.multipliers - 1.0)) < 1e-3
 
 
-def test_sparse_hill_finds_the_exponents_nearest_the_boundary(monkeypatch):
-    """A clamped bar against a stop (penalty contact): the shift-invert path (used above
-    DENSE_LIMIT unknowns) returns the same leading multipliers as the dense solve."""
-    mesh = fm.line_mesh(length=1.0, n_elements=12, boundaries={"clamp": 0.0, "tip": 1.0})
+@pytest.mark.parametrize("contact, H", [("penalty", 5), ("penalty", 10), ("unilateral", 10)])
+def test_sparse_hill_finds_the_leading_exponents(monkeypatch, contact, H):
+    """A clamped bar against a stop: the shift-invert path (used above DENSE_LIMIT unknowns)
+    returns the dense solve's leading multiplier. Its leading exponent lies outside the band of
+    the shifts (Im s ~ w + 0.07), so the shifts find a copy first and must follow it to the
+    central member (a copy's real part is off by 13 % here; benchmarks/README_stability.md)."""
+    mesh = fm.line_mesh(length=1.0, n_elements=10, boundaries={"clamp": 0.0, "tip": 1.0})
+    law = (fm.PenaltyContact(at="tip", gap=0.05, stiffness=5.0) if contact == "penalty"
+           else fm.UnilateralContact(at="tip", gap=0.05))
     model = (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
              .with_damping(beta=0.01)
-             .with_forcing(fm.HarmonicForce(at="tip", amplitude=0.05))
-             .with_contact(fm.PenaltyContact(at="tip", gap=0.02, stiffness=5.0)))
-    b = fm.frequency_response(model, (1.2, 1.8), 5)
-    sol = b[len(b) // 2]
+             .with_forcing(fm.HarmonicForce(at="tip", amplitude=0.01))
+             .with_contact(law, contact_mass=fm.ConsistentMass()))
+    b = fm.frequency_response(model, (1.3, 1.9), H)
+    sol = b[int(np.argmax(b.amplitude(model.n_dofs - 1)))]  # the deepest contact
     system = HBMSystem(model, sol.harmonics)
     y = system.join(sol.Q, sol.P)
     dense = hill_exponents(system, y, sol.omega)
     monkeypatch.setattr(hill_mod, "DENSE_LIMIT", 10)
-    sparse = hill_exponents(system, y, sol.omega, n_shifts=6, k_per_shift=24)
+    sparse = hill_exponents(system, y, sol.omega)
     assert dense.complete and not sparse.complete
-    assert np.abs(sparse.multipliers[0]) == pytest.approx(np.abs(dense.multipliers[0]), rel=1e-8)
+    # ARPACK tol 1e-8 on the shifted-inverted Ritz values: the leading modulus to ~1e-8
+    assert np.abs(sparse.multipliers[0]) == pytest.approx(np.abs(dense.multipliers[0]), rel=1e-7)
+    # what the sparse path returns is a subset of the dense multipliers (conjugate pairs included)
+    for mu in sparse.multipliers:
+        assert np.min(np.abs(dense.multipliers - mu)) < 1e-6
 
 
 def test_bad_input_names_the_argument(duffing):

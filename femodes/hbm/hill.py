@@ -33,8 +33,10 @@ already taken (``s`` differing by a nonzero multiple of ``i w / nu``, as the two
 Solvers. Small problems (up to :data:`DENSE_LIMIT` unknowns) solve the linearised pencil densely
 (one shift-and-invert of the whole spectrum). Larger ones use ARPACK in shift-invert mode with one
 sparse LU of the complex Hill matrix ``J(sigma)`` per shift, the shifts placed along the
-stability boundary (``Re s = 0``) in the central strip ``0 <= Im s <= w / 2 nu``: exponents
-near the boundary, which decide stability, are found; strongly damped ones are not needed.
+stability boundary (``Re s = 0``) in the central strip ``0 <= Im s <= w / 2 nu``, and every
+exponent found is followed to the central member of its family: the exponents nearest the
+boundary are found (not all ``2 n_m``: ``HillResult.complete`` is False); an exponent far to the
+right of the boundary, farther than the spacing of the spectrum near it, can be missed.
 """
 
 from __future__ import annotations
@@ -59,8 +61,10 @@ log = logging.getLogger(__name__)
 #: the Fourier series converges; the margin absorbs truncation).
 CENTRAL = 0.75
 
-#: Hill problems up to this many unknowns (``(2H + 1) (n + n_contacts)``) are solved densely.
-DENSE_LIMIT = 1500
+#: Hill problems up to this many unknowns (``(2H + 1) (n + n_contacts)``) are solved densely
+#: (measured: the dense eigen-solve grows like unknowns^2.7, 0.19 s at 275 unknowns and 6.3 s at
+#: 1100, where shift-invert took 0.2-0.7 s; benchmarks/README_stability.md).
+DENSE_LIMIT = 400
 
 
 @dataclass(frozen=True, eq=False)
@@ -176,7 +180,7 @@ def _fold(s: np.ndarray, base: float) -> np.ndarray:
 
 
 def hill_exponents(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0.0, *,
-                   n_shifts: int = 4, k_per_shift: int | None = None) -> HillResult:
+                   n_shifts: int = 2, k_per_shift: int | None = None) -> HillResult:
     """Floquet exponents and multipliers of the HBM solution ``x`` at ``omega`` (module docstring).
 
     Parameters
@@ -191,7 +195,7 @@ def hill_exponents(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0
         Artificial damping of a nonlinear mode (0 for forced responses).
     n_shifts, k_per_shift : int
         Sparse path only: number of shifts along ``Re s = 0`` and eigenvalues per shift
-        (default ``max(12, 4 n_nl)`` with ``n_nl`` the nonlinear DOFs and contacts).
+        (default ``max(6, 2 n_nl)`` with ``n_nl`` the nonlinear DOFs and contacts).
 
     Returns
     -------
@@ -209,13 +213,11 @@ def hill_exponents(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0
         s, V = _dense(J0, J1, J2, base)
         complete = True
     else:
-        k = k_per_shift or max(12, 4 * (system.nonlinear_dofs.size + system.n_uc))
-        s, V = _sparse(J0, J1, J2, base, n_shifts, k)
+        k = k_per_shift or max(6, 2 * (system.nonlinear_dofs.size + system.n_uc))
+        s, V = _sparse(system, J0, J1, J2, base, n_shifts, k)
         complete = False
     idx, cen = _select(system, s, V, base, n_keep)
-    if not complete:
-        # the shifts find some families only through non-central copies (harmonics shifted by
-        # one or more, inaccurate near the truncation edge): keep central ones only
+    if not complete:  # central members only (_sparse followed the copies to them)
         idx = idx[np.abs(cen[idx]) <= CENTRAL]
     s_sel = _fold(s[idx], base)
     mu = np.exp(s_sel * T)
@@ -256,34 +258,67 @@ def _dense(J0, J1, J2, base):
     return s, V
 
 
-def _sparse(J0, J1, J2, base, n_shifts, k):
-    """Exponents nearest to shifts along the stability boundary, by ARPACK shift-invert with a
-    sparse LU of ``J(sigma)`` per shift."""
-    N = J0.shape[0]
-    J0c, J1c, J2c = (A.astype(complex).tocsc() for A in (J0, J1, J2))
+class _ShiftInvert:
+    """ARPACK shift-invert on the linearised Hill pencil, one sparse LU of ``J(sigma)`` per shift."""
+
+    def __init__(self, J0, J1, J2):
+        self.N = J0.shape[0]
+        self.J0, self.J1, self.J2 = (A.astype(complex).tocsc() for A in (J0, J1, J2))
+
+    def near(self, sigma: complex, k: int):
+        N, J1, J2 = self.N, self.J1, self.J2
+        lu = spla.splu((self.J0 + sigma * J1 + sigma * sigma * J2).tocsc())
+        S1 = J1 + sigma * J2
+
+        def op(y):
+            y1, y2 = y[:N], y[N:]
+            z1 = lu.solve(-(J2 @ y2) - S1 @ y1)
+            return np.concatenate([z1, y1 + sigma * z1])
+
+        L = spla.LinearOperator((2 * N, 2 * N), matvec=op, dtype=complex)
+        # tol 1e-8 on the Ritz values of the shifted-inverted operator: the exponents to ~1e-8 of
+        # their distance from the shift, far below what decides stability (measured: multipliers
+        # unchanged to 1e-9 against tol 1e-12, at a tenth of the Arnoldi steps)
+        theta, Z = spla.eigs(L, k=min(k, 2 * N - 2), which="LM", tol=1e-8)
+        good = np.abs(theta) > 0
+        return sigma + 1.0 / theta[good], Z[:N, good]
+
+
+def _sparse(system, J0, J1, J2, base, n_shifts, k):
+    """Exponents nearest to shifts along the stability boundary, each replaced by the central
+    member of its family.
+
+    A shift finds some families only through a shifted copy (an exponent with ``Im s`` beyond
+    ``w/2nu`` is nearest the shifts as ``s - i w/nu``), whose real part carries the truncation
+    error of the harmonic it lost (measured: 13 % on a bar with a penalty stop). Each copy is
+    therefore followed to its central member by one more shift-invert at
+    ``s - i round(c) w/nu`` (``c`` its harmonic centroid), until ``|c| <= 1/2``.
+    """
+    si = _ShiftInvert(J0, J1, J2)
     found_s, found_V = [], []
-    k = min(k, 2 * N - 2)
     for j in range(n_shifts):
         # slightly right of the boundary (the boundary itself holds the trivial exponents of free
         # orbits, which make J(0) singular)
         sigma = 1e-3 * base + 1j * base * 0.5 * j / max(n_shifts - 1, 1)
-        Js = (J0c + sigma * J1c + sigma * sigma * J2c).tocsc()
-        lu = spla.splu(Js)
-        S1 = (J1c + sigma * J2c)
-
-        def op(y, lu=lu, S1=S1, sigma=sigma):
-            y1, y2 = y[:N], y[N:]
-            z1 = lu.solve(-(J2c @ y2) - S1 @ y1)
-            return np.concatenate([z1, y1 + sigma * z1])
-
-        L = spla.LinearOperator((2 * N, 2 * N), matvec=op, dtype=complex)
-        theta, Z = spla.eigs(L, k=k, which="LM", tol=1e-12)
-        good = np.abs(theta) > 0
-        found_s.append(sigma + 1.0 / theta[good])
-        found_V.append(Z[:N, good])
+        s, V = si.near(sigma, k)
+        found_s.append(s)
+        found_V.append(V)
     s, V = np.concatenate(found_s), np.hstack(found_V)
-    keep: list[int] = []  # the same eigenvalue found from two shifts counts once
+    out_s, out_V = [], []
+    for i in range(s.size):
+        si_, vi = s[i], V[:, i]
+        for _ in range(4):
+            c = float(_centroids(system, vi[:, None])[0])
+            m = round(c)
+            if m == 0:
+                break
+            s2, V2 = si.near(si_ - 1j * m * base, 1)
+            si_, vi = s2[0], V2[:, 0]
+        out_s.append(si_)
+        out_V.append(vi)
+    s, V = np.asarray(out_s), np.column_stack(out_V)
+    keep: list[int] = []  # the same exponent found twice counts once
     for i in np.argsort(np.abs(s)):
-        if all(abs(s[i] - s[j]) > 1e-8 * base for j in keep):
+        if all(abs(s[i] - s[j]) > 1e-7 * base for j in keep):
             keep.append(int(i))
     return s[keep], V[:, keep]

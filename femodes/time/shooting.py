@@ -65,7 +65,9 @@ from scipy.integrate import solve_ivp
 
 from ..laws import PenaltyContact, UnilateralContact
 from ..model import StructuralModel
+from ..solvers import NewtonOptions, semismooth_newton
 from ..solvers.checks import check_int, check_positive, is_real_number, show
+from .stepper import solve_or_lstsq
 
 __all__ = ["Monodromy", "ShootingResult", "monodromy", "shoot", "trajectory", "MAX_IMPACTS", "GRAZING_VELOCITY",
            "MAX_DOFS", "STATUS"]
@@ -83,7 +85,7 @@ GRAZING_VELOCITY = 1e-9
 MAX_DOFS = 500
 #: Bound on penalty-contact kinks per run (a hang guard: each kink restarts the integrator).
 _MAX_KINKS = 100_000
-#: Step halvings of the damped Newton step in :func:`shoot`.
+#: Step halvings of the line search of :func:`shoot` (smallest step 2^-12).
 _MAX_HALVINGS = 12
 
 _HILL = 'use Hill\'s method on the harmonic balance Jacobian instead: fm.stability(solution, method="hill")'
@@ -281,6 +283,15 @@ class _Flow:
         self.n, self.owner = n, owner
         self.omega, self.e, self.rtol, self.atol = omega, restitution, rtol, atol
         M = model.M.toarray()
+        self._contacts(model, M)
+        self._inverse_mass(model, M)
+        self._forcing(model)
+        self._smooth_laws(model)
+        self._impact_directions(M)
+
+    def _contacts(self, model, M: np.ndarray) -> None:
+        """Unilateral contacts (on DOFs with mass) and penalty contacts."""
+        owner = self.owner
         self.unilateral: list[tuple[int, UnilateralContact, int]] = []
         self.penalty: list[tuple[int, PenaltyContact, int]] = []
         for j, a in enumerate(model.contacts):
@@ -297,45 +308,55 @@ class _Flow:
                 self.penalty.append((j, a.item, a.dof))
             else:
                 raise TypeError(f"{owner}: model: contact law {type(a.item).__name__} is not known to the shooting")
+
+    def _inverse_mass(self, model, M: np.ndarray) -> None:
+        """``M^-1``, ``M^-1 K``, ``M^-1 C`` (dense); M must be definite."""
         # Mass matrix: symmetric positive semidefinite by construction of the model; the state
         # equations need it definite. The eigenvalue test also catches near-singular M.
         lam = np.linalg.eigvalsh(M)
         if lam[0] <= 1e-12 * lam[-1]:
             massless = [model.dofmap.label(i) for i in np.flatnonzero(np.diag(M) <= 0.0)[:5]]
             raise ValueError(
-                f"{owner}: model: M is singular (smallest eigenvalue {lam[0]:.3g}, largest {lam[-1]:.3g}"
+                f"{self.owner}: model: M is singular (smallest eigenvalue {lam[0]:.3g}, largest {lam[-1]:.3g}"
                 + (f"; massless DOFs {massless}" if massless else "")
                 + f"), so the state equations M v' = ... cannot be integrated explicitly: {_HILL}"
             )
         chol = sla.cho_factor(M)
-        self.Minv = sla.cho_solve(chol, np.eye(n))
-        self.Minv = 0.5 * (self.Minv + self.Minv.T)
+        Minv = sla.cho_solve(chol, np.eye(self.n))
+        self.Minv = 0.5 * (Minv + Minv.T)
         self.MinvK = self.Minv @ model.K.toarray()
         self.MinvC = self.Minv @ model.C.toarray()
-        # forcing Re sum_k (M^-1 F_k) e^{i k w t}
+
+    def _forcing(self, model) -> None:
+        """Forcing ``Re sum_k (M^-1 F_k) e^{i k w t}``."""
         fv = model.force_vectors()
         self.harmonics = np.array(sorted(fv), dtype=float)
-        self.MinvF = np.array([self.Minv @ fv[k] for k in sorted(fv)]).reshape(len(fv), n)
-        # smooth laws, stacked per class (their force() gives value and derivative at once)
+        self.MinvF = np.array([self.Minv @ fv[k] for k in sorted(fv)]).reshape(len(fv), self.n)
+
+    def _smooth_laws(self, model) -> None:
+        """Smooth laws (cubic springs, penalty contacts), stacked per class: their force() gives
+        value and derivative at once."""
         groups: dict[type, list] = {}
         for a in list(model.nonlinearities) + [model.contacts[j] for j, _, _ in self.penalty]:
             if not callable(getattr(a.item, "force", None)) or not hasattr(type(a.item), "stack"):
                 raise TypeError(
-                    f"{owner}: model: law {type(a.item).__name__} has no force(); the shooting cannot use it"
+                    f"{self.owner}: model: law {type(a.item).__name__} has no force(); the shooting cannot use it"
                 )
             groups.setdefault(type(a.item), []).append(a)
         self.smooth = [(cls.stack([a.item for a in atts]), np.array([a.dof for a in atts], dtype=int))
                        for cls, atts in groups.items()]
         self.nl_dofs = (np.concatenate([d for _, d in self.smooth]) if self.smooth else np.zeros(0, dtype=int))
         self.Minv_nl = self.Minv[:, self.nl_dofs]
-        # impact directions w_c = M^-1 e_c / (e_c.M^-1 e_c); exactly e_c when row c of M is diagonal,
-        # where the generalised law reduces to v_c+ = -e v_c- on the contact DOF alone
+
+    def _impact_directions(self, M: np.ndarray) -> None:
+        """Impact directions ``w_c = M^-1 e_c / (e_c.M^-1 e_c)``: exactly ``e_c`` when row ``c`` of
+        M is diagonal, where the generalised law reduces to ``v_c+ = -e v_c-`` on the contact DOF."""
         self.impact_dir = {}
         for j, _, c in self.unilateral:
             row = M[c].copy()
             row[c] = 0.0
             if not np.any(row):
-                w = np.zeros(n)
+                w = np.zeros(self.n)
                 w[c] = 1.0
             else:
                 w = self.Minv[:, c] / self.Minv[c, c]
@@ -680,6 +701,60 @@ def trajectory(
     return out
 
 
+class _ShootingEquations:
+    """The periodicity equations ``x(t0 + T) - x(t0) = 0`` in the Newton unknowns ``z``.
+
+    Forced model: ``z = x``, Jacobian ``Phi - I``. Autonomous model: ``z = [x_free; T]`` with
+    ``q_j`` and ``v_j = 0`` pinned (``shoot``'s docstring) and the equation of ``q_j`` left out:
+    for a conservative orbit it follows from the others by energy conservation (with the other
+    states periodic and ``v_j(T) = 0``, the energy fixes ``q_j(T)`` up to the other turning
+    point, far from the orbit), so the system is square. The ``q_j`` equation is the one to drop:
+    at a turning point ``d q_j / dT = v_j = 0``, so it would only fix ``T`` to second order, while
+    ``v_j(T)`` moves with ``T`` at the acceleration. The column of ``T`` is the vector field at
+    ``t0 + T``.
+    A state the flow cannot follow gives a non-finite residual (the line search then shortens
+    the step).
+    """
+
+    def __init__(self, flow, x0: np.ndarray, T0: float, t0: float, free: np.ndarray, rows: np.ndarray,
+                 autonomous: bool, owner: str):
+        self.flow, self.x0, self.T0, self.t0 = flow, x0, T0, t0
+        self.free, self.rows, self.autonomous, self.owner = free, rows, autonomous, owner
+        self.z0 = np.append(x0[free], T0) if autonomous else x0.copy()
+        self._cache: dict = {}
+
+    def state(self, z: np.ndarray) -> tuple[np.ndarray, float]:
+        x = self.x0.copy()
+        x[self.free] = z[: self.free.size]
+        return x, float(z[-1]) if self.autonomous else self.T0
+
+    def last(self, z: np.ndarray):
+        key = z.tobytes()
+        if key not in self._cache:
+            self(z)
+        if key not in self._cache:  # pragma: no cover - the iterate returned was evaluated finite
+            raise ValueError(f"{self.owner}: the flow cannot be followed from the final iterate")
+        return self._cache[key]
+
+    def __call__(self, z: np.ndarray):
+        x, T = self.state(z)
+        size = z.size
+        if not T > 0:
+            return np.full(size, np.inf), np.eye(size)
+        try:
+            mono = _monodromy(self.flow, x, self.t0, T)
+        except _TrialFailure as exc:
+            log.debug("%s: trial state rejected: %s", self.owner, exc)
+            return np.full(size, np.inf), np.eye(size)
+        self._cache = {z.tobytes(): mono}
+        n2 = 2 * self.flow.n
+        r = (mono.state_end - x)[self.rows]
+        J = (mono.matrix - np.eye(n2))[np.ix_(self.rows, self.free)]
+        if self.autonomous:
+            J = np.column_stack([J, self.flow.field(self.t0 + T, mono.state_end)[self.rows]])
+        return r, J
+
+
 def shoot(
     model: StructuralModel,
     omega: float,
@@ -696,9 +771,10 @@ def shoot(
 ) -> ShootingResult:
     r"""Periodic orbit by Newton shooting, ``x(t0 + T; x0) - x0 = 0``, and its Floquet multipliers.
 
-    Forced model (harmonic forcing): the unknown is ``x0``; the Newton matrix is ``Phi - I``
-    (``Phi`` the monodromy matrix, :func:`monodromy`); a step that increases
-    ``max|x(T) - x0|`` is halved (up to 12 times).
+    Solved by :func:`femodes.solvers.semismooth_newton` (monotone Armijo search down to a step
+    of ``2^-12``, least-squares steps at a singular matrix). Forced model (harmonic forcing): the
+    unknown is ``x0``; the Newton matrix is ``Phi - I`` (``Phi`` the monodromy matrix,
+    :func:`monodromy`).
 
     Autonomous model (no harmonic forcing: free orbits, nonlinear modes): the period ``T`` is
     unknown too. Free periodic orbits of the models femodes builds exist only without
@@ -706,10 +782,9 @@ def shoot(
     +1 twice and a phase condition alone leaves the bordered system singular. The orbit is
     therefore pinned at a turning point of DOF ``j = phase_dof``: ``v_j(t0) = 0`` (phase) and
     ``q_j(t0) = state0[j]`` (amplitude, the member of the family), and the remaining ``2n - 2``
-    states and ``T`` solve ``x(t0 + T) - x0 = 0`` in the least-squares sense (Gauss-Newton,
-    ``2n`` equations, ``2n - 1`` unknowns; one equation is redundant by energy conservation, so
-    the residual vanishes at the orbit and convergence stays quadratic). The columns are
-    ``Phi - I`` for the states and the vector field ``f(x(t0 + T))`` for ``T``.
+    states and ``T`` solve the ``2n - 1`` periodicity equations other than that of ``q_j``
+    (redundant by energy conservation; see ``_ShootingEquations``). The columns are ``Phi - I``
+    for the states and the vector field ``f(x(t0 + T))`` for ``T``.
 
     Parameters
     ----------
@@ -774,64 +849,32 @@ def shoot(
         raise ValueError(f"{owner}: phase_dof={show(phase_dof)} is for autonomous models; this model is forced "
                          "(its phase is fixed by the forcing)")
 
-    def evaluate(x_, T_):
-        m = _monodromy(flow, x_, t0, T_)
-        return m, m.state_end - x_
-
-    def norm(r):
-        return float(np.max(np.abs(r)))
-
+    rows = np.setdiff1d(np.arange(2 * n), [j]) if autonomous else np.arange(2 * n)
+    problem = _ShootingEquations(flow, x, T, t0, free, rows, autonomous, owner)
     try:
-        mono, r = evaluate(x, T)
+        problem(problem.z0)
     except _TrialFailure as exc:
         raise ValueError(f"{str(exc)} (first guess state0)") from None
-    status, nit = 1, 0
-    for nit in range(max_iter + 1):
-        if norm(r) <= tol * max(1.0, norm(x)):
-            status = 0
-            break
-        if nit == max_iter:
-            break
-        J = mono.matrix[:, free] - np.eye(2 * n)[:, free]
-        singular = False
-        if autonomous:
-            J = np.column_stack([J, flow.field(t0 + T, mono.state_end)])
-            step, *_ = np.linalg.lstsq(J, -r, rcond=None)
-        else:
-            try:
-                step = np.linalg.solve(J, -r)
-            except np.linalg.LinAlgError:
-                step, *_ = np.linalg.lstsq(J, -r, rcond=None)
-                singular = True
-        dx = np.zeros(2 * n)
-        dx[free] = step[: free.size]
-        dT = float(step[free.size]) if autonomous else 0.0
-        lam, accepted = 1.0, False
-        for _ in range(_MAX_HALVINGS + 1):
-            T_try = T + lam * dT
-            if T_try > 0:
-                try:
-                    mono_try, r_try = evaluate(x + lam * dx, T_try)
-                except _TrialFailure as exc:
-                    log.debug("%s: trial step %.3g rejected: %s", owner, lam, exc)
-                else:
-                    if norm(r_try) < norm(r):
-                        accepted = True
-                        break
-            lam *= 0.5
-        if not accepted:
-            status = 3 if singular else 2
-            break
-        x, T, mono, r = x + lam * dx, T_try, mono_try, r_try
-        log.debug("%s: iteration %d, step %.3g, residual %.3e", owner, nit + 1, lam, norm(r))
-    res = norm(r)
+    # One Newton for all of femodes: semismooth_newton with a monotone Armijo search (no
+    # watchdog: each trial is a whole period of integration), the house's least-squares fallback
+    # at a singular Phi - I, and the stopping rule max|x(T) - x0| <= tol max(1, max|x0|).
+    res = semismooth_newton(problem, problem.z0, options=NewtonOptions(
+        atol=tol, rtol=0.0, rtol_x=tol, xtol=1e-15, max_iter=max_iter, watchdog=0, min_alpha=0.5 ** _MAX_HALVINGS,
+        linear_solver=solve_or_lstsq))
+    x, T = problem.state(res.x)
+    mono = problem.last(res.x)
+    r = mono.state_end - x
+    norm = float(np.max(np.abs(r)))
+    status = 0 if norm <= tol * max(1.0, float(np.max(np.abs(x)))) else min(res.status, 3) or 2
+    nit = res.nit
     message = {
-        0: f"converged in {nit} Newton iterations: max|x(T) - x0| = {res:.3g} <= tol*max(1, max|x0|)",
-        1: f"max_iter={max_iter} Newton iterations reached with max|x(T) - x0| = {res:.3g} (tol={tol:g})",
-        2: f"iteration {nit + 1}: no step (halved {_MAX_HALVINGS} times) reduced max|x(T) - x0| = {res:.3g}",
+        0: f"converged in {nit} Newton iterations: max|x(T) - x0| = {norm:.3g} <= tol*max(1, max|x0|)",
+        1: f"max_iter={max_iter} Newton iterations reached with max|x(T) - x0| = {norm:.3g} (tol={tol:g})",
+        2: f"iteration {nit + 1}: no step reduced max|x(T) - x0| = {norm:.3g} ({res.message})",
         3: f"iteration {nit + 1}: Phi - I is singular (a multiplier at +1: fold) and no least-squares step reduced "
-           f"max|x(T) - x0| = {res:.3g}",
+           f"max|x(T) - x0| = {norm:.3g}",
     }[status]
+    res = norm
     (log.info if status == 0 else log.debug)("%s: %s", owner, message)  # reported in the result
     return ShootingResult(
         x=x, success=status == 0, status=status, message=message, nit=nit, residual_norm=res,
