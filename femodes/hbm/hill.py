@@ -61,6 +61,9 @@ log = logging.getLogger(__name__)
 #: the Fourier series converges; the margin absorbs truncation).
 CENTRAL = 0.75
 
+#: Sparse path: shifted copies followed to their central member, rightmost first.
+FOLLOW = 3
+
 #: Hill problems up to this many unknowns (``(2H + 1) (n + n_contacts)``) are solved densely
 #: (measured: the dense eigen-solve grows like unknowns^2.7, 0.19 s at 275 unknowns and 6.3 s at
 #: 1100, where shift-invert took 0.2-0.7 s; benchmarks/README_stability.md).
@@ -292,7 +295,8 @@ def _sparse(system, J0, J1, J2, base, n_shifts, k):
     ``w/2nu`` is nearest the shifts as ``s - i w/nu``), whose real part carries the truncation
     error of the harmonic it lost (measured: 13 % on a bar with a penalty stop). Each copy is
     therefore followed to its central member by one more shift-invert at
-    ``s - i round(c) w/nu`` (``c`` its harmonic centroid), until ``|c| <= 1/2``.
+    ``s + i round(c) w/nu`` (``c`` its harmonic centroid: the copy whose content sits at
+    harmonic ``c`` becomes central when multiplied by ``e^{-i c w t / nu}``), until ``|c| <= 1/2``.
     """
     si = _ShiftInvert(J0, J1, J2)
     found_s, found_V = [], []
@@ -304,15 +308,22 @@ def _sparse(system, J0, J1, J2, base, n_shifts, k):
         found_s.append(s)
         found_V.append(V)
     s, V = np.concatenate(found_s), np.hstack(found_V)
-    out_s, out_V = [], []
-    for i in range(s.size):
+    cen = _centroids(system, V)
+    # follow only the copies that can decide stability: the FOLLOW rightmost (each follow costs a
+    # factorisation and an Arnoldi run); the other copies are dropped
+    copies = [i for i in np.argsort(-s.real) if round(float(cen[i])) != 0][:FOLLOW]
+    central = [i for i in range(s.size) if round(float(cen[i])) == 0]
+    out_s, out_V = [s[i] for i in central], [V[:, i] for i in central]
+    for i in copies:
         si_, vi = s[i], V[:, i]
         for _ in range(4):
             c = float(_centroids(system, vi[:, None])[0])
             m = round(c)
             if m == 0:
                 break
-            s2, V2 = si.near(si_ - 1j * m * base, 1)
+            s2, V2 = si.near(si_ + 1j * m * base, 2)
+            j = int(np.argmin(np.abs(s2 - (si_ + 1j * m * base))))
+            s2, V2 = s2[j:j + 1], V2[:, j:j + 1]
             si_, vi = s2[0], V2[:, 0]
         out_s.append(si_)
         out_V.append(vi)
