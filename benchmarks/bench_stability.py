@@ -909,7 +909,7 @@ def main(argv=None) -> int:
             if "timeout" in c or "failed" in c:
                 out.append(f"| {c['contact']} | {c['H']} | - | {'timeout' if 'timeout' in c else c['failed']} | | | | | |")
                 continue
-            for key, label in (("dense", "dense (femodes)"), ("sparse_default", "shift-invert, femodes defaults (4 shifts, k=12)"),
+            for key, label in (("dense", "dense (femodes)"), ("sparse_default", "shift-invert, femodes defaults"),
                                ("sparse_test", "shift-invert, n_shifts=6, k_per_shift=24"),
                                ("sparse_shift_at_w", "bench variant: 1 shift at Im = w, k=4, tol 1e-8"),
                                ("sparse_family", "bench variant: 2 shifts at Im {0, w}, k=4, tol 1e-8, family-aware selection"),
