@@ -222,7 +222,7 @@ def stability(solution: PeriodicSolution, method: str = "auto", *, tol: float = 
     if model is None:
         raise ValueError("stability: the solution has no model (loaded from a file?); attach it with "
                          "branch.attach(model) first")
-    forced = bool(model.forces) and solution.xi == 0.0
+    forced = solution.kind == "forced"
     system = HBMSystem(model if forced else model.without_forcing(), solution.harmonics)
     y = system.join(solution.Q, solution.P)
     return _point_stability(model, system, y, solution.Q, solution.omega, solution.xi, method, tol, forced)

@@ -218,3 +218,13 @@ def test_switch_onto_the_period_doubled_branch_confirmed_by_shooting():
 def test_switch_branch_rejects_other_kinds(duffing):
     with pytest.raises(NotImplementedError, match="period doubling"):
         fm.switch_branch(duffing, duffing.bifurcations[0], omega=(1.0, 2.0))
+
+
+def test_a_free_orbit_of_a_model_with_forcing_is_judged_as_free():
+    """A nonlinear mode of a model that also declares a forcing: fm.stability goes by the
+    solution's branch kind (free orbit: the trivial pair aside), not by the model's forcing."""
+    model = (fm.StructuralModel(M=sp.eye(1), K=sp.eye(1)).with_nonlinearity(fm.CubicSpring(at=0, k3=1.0))
+             .with_forcing(fm.HarmonicForce(at=0, amplitude=1.0)))
+    b = fm.nonlinear_mode(model, energy=(1e-2, 1.0), harmonics=7)
+    r = fm.stability(b[3], method="hill")
+    assert b[3].kind == "nonlinear mode" and r.stable
