@@ -100,8 +100,10 @@ def _check_method(method: Any, owner: str) -> str:
 
 
 def _check_tol(tol: Any, owner: str) -> float:
-    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)) or not (0 <= tol < 1):
-        raise ValueError(f"{owner}: tol must be a number in [0, 1) (the margin of |mu| above 1), got {tol!r}")
+    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{owner}: tol must be a number (the margin of |mu| above 1), got {tol!r}")
+    if not 0 <= tol < 1:
+        raise ValueError(f"{owner}: tol must be in [0, 1) (the margin of |mu| above 1), got {tol!r}")
     return float(tol)
 
 
@@ -135,7 +137,8 @@ def _start_time(system: HBMSystem, Q: np.ndarray, omega: float) -> float:
     return float(theta[j] / (2.0 * np.pi) * h.period(omega))
 
 
-def _by_shooting(model: StructuralModel, system: HBMSystem, Q: np.ndarray, omega: float, tol: float) -> StabilityResult:
+def _by_shooting(model: StructuralModel, system: HBMSystem, Q: np.ndarray, omega: float, tol: float,
+                 free: bool = False) -> StabilityResult:
     h = system.h
     t0 = _start_time(system, Q, omega)
     theta = np.array([2.0 * np.pi * t0 / h.period(omega)])
@@ -143,7 +146,8 @@ def _by_shooting(model: StructuralModel, system: HBMSystem, Q: np.ndarray, omega
     q0 = (E @ Q)[0]
     v0 = (E @ (omega * (system.D1 @ Q)))[0]
     x0 = np.concatenate([q0, v0])
-    res = shoot(model, omega, x0, period=h.period(omega), t0=t0)
+    # a free orbit is shot on the free model (its period an unknown); a forced one with its forcing
+    res = shoot(model.without_forcing() if free else model, omega, x0, period=h.period(omega), t0=t0)
     if not res.success:
         raise _ShootingFailed(res.message)
     mu = np.asarray(res.multipliers)
@@ -152,7 +156,7 @@ def _by_shooting(model: StructuralModel, system: HBMSystem, Q: np.ndarray, omega
         # Newton found a periodic orbit, but not this one (near an HBM fold the true orbit of the
         # same branch may not exist at this frequency, and shooting lands on a coexisting one)
         raise _ShootingFailed(f"shooting moved the start state by {corr:.0%} of its size: another orbit")
-    return StabilityResult(multipliers=mu, stable=_is_stable(mu, tol, free=False), method="shooting",
+    return StabilityResult(multipliers=mu, stable=_is_stable(mu, tol, free), method="shooting",
                            orbit_correction=corr)
 
 
@@ -189,12 +193,12 @@ def _point_stability(model, system, y, Q, omega, xi, method, tol, forced) -> Sta
         if why:
             raise ValueError(f"stability: method='shooting' cannot take this model: {why}; use method='hill'")
         try:
-            return _by_shooting(model, system, Q, omega, tol)
+            return _by_shooting(model, system, Q, omega, tol, not forced)
         except _ShootingFailed as exc:
             raise RuntimeError(f"stability: shooting from the HBM orbit at w = {omega:g} did not converge ({exc}); "
                                "use method='hill' or raise the harmonics") from None
     try:
-        return _by_shooting(model, system, Q, omega, tol)
+        return _by_shooting(model, system, Q, omega, tol, not forced)
     except (_ShootingFailed, ValueError) as exc:
         return _by_hill(system, y, omega, xi, tol, not forced, message=f"shooting failed ({exc}); Hill's method used")
 

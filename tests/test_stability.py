@@ -228,3 +228,15 @@ def test_a_free_orbit_of_a_model_with_forcing_is_judged_as_free():
     b = fm.nonlinear_mode(model, energy=(1e-2, 1.0), harmonics=7)
     r = fm.stability(b[3], method="hill")
     assert b[3].kind == "nonlinear mode" and r.stable
+
+
+def test_shooting_a_free_orbit_of_the_backbone():
+    """method="shooting" on a nonlinear mode shoots the free model (period unknown): the free
+    Duffing orbit is stable, its trivial pair at +1 aside."""
+    model = fm.StructuralModel(M=sp.eye(1), K=sp.eye(1)).with_nonlinearity(fm.CubicSpring(at=0, k3=1.0))
+    b = fm.nonlinear_mode(model, energy=(1e-2, 1.0), harmonics=9)
+    r = fm.stability(b[len(b) // 2], method="shooting")
+    assert r.method == "shooting" and r.stable
+    assert np.max(np.abs(r.multipliers - 1.0)) < 1e-3
+    with pytest.raises(TypeError, match="tol must be a number"):
+        fm.stability(b[0], tol="small")
