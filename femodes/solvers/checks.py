@@ -56,6 +56,23 @@ def _prefix(owner: str | None) -> str:
     return f"{owner}: " if owner else ""
 
 
+def check_finite(name: str, value: Any, *, owner: str | None = None) -> float:
+    """``value`` as a float: TypeError if it is not a real number, ValueError if not finite."""
+    if not is_real_number(value):
+        raise TypeError(f"{_prefix(owner)}{name} must be a real number, got {show(value)}")
+    if not math.isfinite(value):
+        raise ValueError(f"{_prefix(owner)}{name} must be finite, got {show(value)}")
+    return float(value)
+
+
+def check_in_range(name: str, value: Any, lo: float, hi: float, *, owner: str | None = None) -> float:
+    """``value`` as a float in ``[lo, hi]`` (:func:`check_finite` first, then ValueError)."""
+    v = check_finite(name, value, owner=owner)
+    if not lo <= v <= hi:
+        raise ValueError(f"{_prefix(owner)}{name} must be in [{lo:g}, {hi:g}], got {show(value)}")
+    return v
+
+
 def check_positive(name: str, value: Any, *, owner: str | None = None) -> float:
     """``value`` as a float; ValueError unless it is a finite real number > 0."""
     if not is_real_number(value) or not math.isfinite(value) or value <= 0:

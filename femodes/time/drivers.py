@@ -17,7 +17,7 @@ import numpy as np
 
 from ..model import StructuralModel
 from ..solvers import NewtonOptions
-from ..solvers.checks import check_int, check_positive, is_real_number, show
+from ..solvers.checks import check_finite, check_in_range, check_int, check_positive
 from .results import SteadyState, TimeHistory
 from .stepper import Segment, Stepper, integrate
 
@@ -35,22 +35,6 @@ _MAX_STORED = 2**28
 # --------------------------------------------------------------------------------------------
 # Validation
 # --------------------------------------------------------------------------------------------
-def _number(name: str, value: Any, owner: str) -> float:
-    """``value`` as a finite float: TypeError if it is not a real number, ValueError if not finite."""
-    if not is_real_number(value):
-        raise TypeError(f"{owner}: {name} must be a real number, got {show(value)}")
-    if not math.isfinite(value):
-        raise ValueError(f"{owner}: {name} must be finite, got {show(value)}")
-    return float(value)
-
-
-def _in_range(name: str, value: Any, lo: float, hi: float, owner: str) -> float:
-    v = _number(name, value, owner)
-    if not lo <= v <= hi:
-        raise ValueError(f"{owner}: {name} must be in [{lo:g}, {hi:g}], got {show(value)}")
-    return v
-
-
 def _state(x: Any, name: str, n: int) -> np.ndarray:
     if x is None:
         return np.zeros(n)
@@ -73,7 +57,7 @@ def _check_omega(model: StructuralModel, omega: Any, owner: str) -> float | None
         if harmonic:
             raise ValueError(f"{owner}: omega (forcing frequency, rad/s) is required: the model has harmonic forcing")
         return None
-    _number("omega", omega, owner)
+    check_finite("omega", omega, owner=owner)
     w = check_positive("omega", omega, owner=owner)
     if not harmonic:
         raise ValueError(
@@ -85,10 +69,10 @@ def _check_omega(model: StructuralModel, omega: Any, owner: str) -> float | None
 def _check_common(model, dt, restitution, theta, newton, owner):
     if not isinstance(model, StructuralModel):
         raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
-    _number("dt", dt, owner)
+    check_finite("dt", dt, owner=owner)
     dt = check_positive("dt", dt, owner=owner)
-    e = _in_range("restitution", restitution, 0.0, 1.0, owner)
-    th = _in_range("theta", theta, 0.5, 1.0, owner)
+    e = check_in_range("restitution", restitution, 0.0, 1.0, owner=owner)
+    th = check_in_range("theta", theta, 0.5, 1.0, owner=owner)
     if newton is not None and not isinstance(newton, NewtonOptions):
         raise TypeError(f"{owner}: newton must be a NewtonOptions or None, got {type(newton).__name__}")
     return model, dt, e, th
@@ -156,13 +140,13 @@ class TimeSteppingOptions:
 
     def __post_init__(self) -> None:
         owner = "TimeSteppingOptions"
-        object.__setattr__(self, "theta", _in_range("theta", self.theta, 0.5, 1.0, owner))
+        object.__setattr__(self, "theta", check_in_range("theta", self.theta, 0.5, 1.0, owner=owner))
         if self.newton is not None and not isinstance(self.newton, NewtonOptions):
             raise TypeError(f"{owner}: newton must be a NewtonOptions or None, got {type(self.newton).__name__}")
-        object.__setattr__(self, "t0", _number("t0", self.t0, owner))
+        object.__setattr__(self, "t0", check_finite("t0", self.t0, owner=owner))
         for name in ("store_every", "n_periods_max", "periods_per_check"):
             object.__setattr__(self, name, check_int(name, getattr(self, name), 1, owner=owner))
-        _number("tol", self.tol, owner)
+        check_finite("tol", self.tol, owner=owner)
         object.__setattr__(self, "tol", check_positive("tol", self.tol, owner=owner))
 
 
@@ -231,7 +215,7 @@ def simulate(
     opts = _options(options, owner)
     theta, newton, t0, store_every = opts.theta, opts.newton, opts.t0, opts.store_every
     model, dt, e, th = _check_common(model, dt, restitution, theta, newton, owner)
-    t_end = _number("t_end", t_end, owner)
+    t_end = check_finite("t_end", t_end, owner=owner)
     if t_end <= t0:
         raise ValueError(f"{owner}: t_end must be > t0 = {t0}, got {t_end!r}")
     if not math.isfinite(t_end - t0):

@@ -66,7 +66,7 @@ from scipy.integrate import solve_ivp
 from ..laws import PenaltyContact, UnilateralContact
 from ..model import StructuralModel
 from ..solvers import NewtonOptions, semismooth_newton
-from ..solvers.checks import check_int, check_positive, is_real_number, show
+from ..solvers.checks import check_finite, check_in_range, check_int, check_positive, show
 from .stepper import solve_or_lstsq
 
 __all__ = ["Monodromy", "ShootingResult", "monodromy", "shoot", "trajectory", "MAX_IMPACTS", "GRAZING_VELOCITY",
@@ -214,12 +214,6 @@ def _v_index(n: int, dof: int) -> int:
 # --------------------------------------------------------------------------------------------
 # Validation
 # --------------------------------------------------------------------------------------------
-def _number(name: str, value: Any, owner: str) -> float:
-    if not is_real_number(value) or not math.isfinite(value):
-        raise ValueError(f"{owner}: {name} must be a finite real number, got {show(value)}")
-    return float(value)
-
-
 def _state0(state0: Any, n: int, owner: str) -> np.ndarray:
     try:
         x = np.array(state0, dtype=float)
@@ -235,13 +229,6 @@ def _state0(state0: Any, n: int, owner: str) -> np.ndarray:
     if not np.all(np.isfinite(x)):
         raise ValueError(f"{owner}: state0 contains NaN or infinite values: {show(state0)}")
     return x
-
-
-def _restitution(e: Any, owner: str) -> float:
-    e = _number("restitution", e, owner)
-    if not 0.0 <= e <= 1.0:
-        raise ValueError(f"{owner}: restitution must be in [0, 1], got {e!r}")
-    return e
 
 
 def _forced(model: StructuralModel) -> bool:
@@ -569,7 +556,7 @@ class _Run:
 
 def _setup(model, omega, state0, restitution, rtol, atol, owner):
     w = check_positive("omega", omega, owner=owner)
-    e = _restitution(restitution, owner)
+    e = check_in_range("restitution", restitution, 0.0, 1.0, owner=owner)
     rtol = check_positive("rtol", rtol, owner=owner)
     atol = check_positive("atol", atol, owner=owner)
     flow = _Flow(model, w, e, rtol, atol, owner)
@@ -642,7 +629,7 @@ def monodromy(
     """
     owner = "monodromy"
     flow, x0 = _setup(model, omega, state0, restitution, rtol, atol, owner)
-    t0 = _number("t0", t0, owner)
+    t0 = check_finite("t0", t0, owner=owner)
     T = _period(model, flow.omega, period, owner)
     try:
         return _monodromy(flow, x0, t0, T)
@@ -677,7 +664,7 @@ def trajectory(
     """
     owner = "trajectory"
     flow, x0 = _setup(model, omega, state0, restitution, rtol, atol, owner)
-    t0 = _number("t0", t0, owner)
+    t0 = check_finite("t0", t0, owner=owner)
     tt = np.atleast_1d(np.asarray(t, dtype=float))
     if tt.ndim != 1 or tt.size == 0 or not np.all(np.isfinite(tt)) or np.any(tt < t0):
         raise ValueError(f"{owner}: t must be a non-empty 1-D array of finite times >= t0 = {t0}, got {show(t)}")
@@ -829,7 +816,7 @@ def shoot(
     """
     owner = "shoot"
     flow, x = _setup(model, omega, state0, restitution, rtol, atol, owner)
-    t0 = _number("t0", t0, owner)
+    t0 = check_finite("t0", t0, owner=owner)
     T = _period(model, flow.omega, period, owner)
     tol = check_positive("tol", tol, owner=owner)
     max_iter = check_int("max_iter", max_iter, 1, owner=owner)
