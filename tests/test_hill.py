@@ -10,7 +10,7 @@ Mook, *Nonlinear Oscillations*, 1979, sec. 5.2.1):
     delta = -eps^2/2 + O(eps^4)
 
 The test double below is the smallest "system" Hill's method reads: harmonics, ``M``, ``C``,
-``D1`` and the Jacobian of ``u'' + (delta + eps cos t) u`` (the multiplication by ``cos t`` is
+``D1``, the block operators ``I x M``, ``I x C``, ``D1 x M`` and the Jacobian of ``u'' + (delta + eps cos t) u`` (the multiplication by ``cos t`` is
 projected on the harmonics with the same synthesis/analysis as the HBM, exact at this sampling).
 """
 
@@ -42,6 +42,8 @@ class MathieuSystem:
         self.M = sp.identity(1, format="csr")
         self.C = sp.csr_matrix((1, 1))
         self.D1 = sp.csr_matrix(np.asarray(self.h.derivative_domega()))
+        eye = sp.identity(self.h.n_coef, format="csr")
+        self.IM, self.IC, self.AM = sp.kron(eye, self.M), sp.kron(eye, self.C), sp.kron(self.D1, self.M)
         self.nonlinear_dofs = np.array([0])
         E, Pa = np.asarray(self.h.synthesis()), np.asarray(self.h.analysis())
         self.cos = Pa @ (np.cos(self.h.phases())[:, None] * E)

@@ -103,14 +103,12 @@ def hill_matrices(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0.
     (module docstring); ``J0`` is the harmonic balance Jacobian of ``system``."""
     _, J, _, _ = system.residual(np.asarray(x, dtype=float), float(omega), xi=float(xi), forced=False)
     J0 = J.tocsr()
-    nc, N = system.h.n_coef, system.size
-    I = sp.identity(nc, format="csr")
-    D1 = system.D1
-    M, C = system.M, system.C
-    Cx = (C - xi * M) if xi else C
-    J1q = sp.kron(I, Cx, format="csr") + 2.0 * omega * sp.kron(D1, M, format="csr")
-    J2q = sp.kron(I, M, format="csr")
-    pad = N - system.nq
+    # the system's cached Kronecker operators (built once per system, not per point)
+    J1q = system.IC + 2.0 * omega * system.AM
+    if xi:
+        J1q = J1q - xi * system.IM
+    J2q = system.IM
+    pad = system.size - system.nq
 
     def embed(A):
         return sp.block_diag([A, sp.csr_matrix((pad, pad))], format="csr") if pad else A.tocsr()

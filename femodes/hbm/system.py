@@ -181,7 +181,15 @@ class HBMSystem:
 
     @property
     def AM(self):
-        return self._kron("AM", self.D1, self.M)  # for the artificial damping of EPMC
+        return self._kron("AM", self.D1, self.M)  # for the artificial damping of EPMC and Hill's method
+
+    @property
+    def IM(self):
+        return self._kron("IM", sp.identity(self.h.n_coef, format="csr"), self.M)  # Hill's method: s^2 term
+
+    @property
+    def IC(self):
+        return self._kron("IC", sp.identity(self.h.n_coef, format="csr"), self.C)  # Hill's method: s term
 
     def apply_linear(self, q: np.ndarray, omega: float, xi: float = 0.0, *, absolute: bool = False) -> np.ndarray:
         """``S(w) q - xi w (D1 x M) q`` without forming the Kronecker products (``absolute``: an
