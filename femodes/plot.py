@@ -187,7 +187,7 @@ def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str |
     if mark_folds and branch.folds:
         f = list(branch.folds)
         ax.plot(w[f], amp[f], "x", color="k", ms=8, mew=2, label="fold")
-    _mark_bifurcations(ax, branch, lambda b: _amplitude_of(branch, b, idx), hz)
+    _mark_bifurcations(ax, branch, lambda b: float(branch.amplitude(idx, b.Q[None])[0]), hz)
     ax.set_xlabel(_freq_label(hz))
     ax.set_ylabel(f"amplitude ({dof_label})")
     ax.grid(True, alpha=0.3)
@@ -211,12 +211,6 @@ def _split_by_stability(y: np.ndarray, stable: np.ndarray) -> tuple[np.ndarray, 
     solid = np.where(stable | edge, y, np.nan)
     dashed = np.where(unstable | edge, y, np.nan)
     return solid, dashed
-
-
-def _amplitude_of(branch: Branch, bif, dof: int) -> float:
-    n = max(512, 16 * branch.harmonics.n_coef)
-    E = branch.harmonics.synthesis(2 * np.pi * np.arange(n) / n)
-    return float(np.max(np.abs(E @ bif.Q[:, dof])))
 
 
 def _mark_bifurcations(ax, branch: Branch, value, hz: bool) -> None:

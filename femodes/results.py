@@ -345,11 +345,13 @@ class Branch:
     def __iter__(self):
         return (self[i] for i in range(len(self)))
 
-    def amplitude(self, dof: int) -> np.ndarray:
-        """``max_t |q_dof(t)|`` at every point."""
+    def amplitude(self, dof: int, Q: np.ndarray | None = None) -> np.ndarray:
+        """``max_t |q_dof(t)|`` at every point (or of the coefficient stack ``Q`` of shape
+        ``(m, n_coef, n_dofs)`` on this branch's harmonics, e.g. of its bifurcations)."""
+        Q = self.Q if Q is None else np.asarray(Q, dtype=float)
         n = max(512, 16 * self.harmonics.n_coef)
         E = self.harmonics.synthesis(2 * np.pi * np.arange(n) / n)
-        return np.max(np.abs(E @ self.Q[:, :, dof].T), axis=0)
+        return np.max(np.abs(E @ Q[:, :, dof].T), axis=0)
 
     @property
     def penetration(self) -> np.ndarray:
