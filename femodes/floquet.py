@@ -46,7 +46,7 @@ from .model import StructuralModel
 from .results import Bifurcation, Branch, PeriodicSolution
 from .solvers import NewtonOptions, semismooth_newton
 from .solvers.roots import illinois
-from .time.shooting import MAX_DOFS, shoot
+from .time.shooting import shoot, unsupported
 
 __all__ = ["stability", "StabilityResult", "annotate_branch", "solve_on_secant", "METHODS"]
 
@@ -107,20 +107,9 @@ def _check_tol(tol: Any, owner: str) -> float:
     return float(tol)
 
 
-def _shootable(model: StructuralModel) -> str:
-    """Why event-driven shooting cannot take ``model`` ("" if it can)."""
-    if model.n_dofs > MAX_DOFS:
-        return f"{model.n_dofs} DOFs (shooting takes at most {MAX_DOFS}; reduce the model with craig_bampton)"
-    Md = model.M.diagonal()
-    for a in model.contacts:
-        if isinstance(a.item, UnilateralContact) and not Md[a.dof] > 0:
-            return f"contact DOF {a.dof} carries no mass (mass redistribution): impacts are not defined"
-    return ""
-
-
 def _prefers_shooting(model: StructuralModel, forced: bool) -> bool:
     has_uc = any(isinstance(a.item, UnilateralContact) for a in model.contacts)
-    return forced and has_uc and not _shootable(model)
+    return forced and has_uc and not unsupported(model)
 
 
 def _start_time(system: HBMSystem, Q: np.ndarray, omega: float) -> float:
@@ -189,7 +178,7 @@ def _point_stability(model, system, y, Q, omega, xi, method, tol, forced) -> Sta
     if method == "hill" or (method == "auto" and not _prefers_shooting(model, forced)):
         return _by_hill(system, y, omega, xi, tol, not forced)
     if method == "shooting":
-        why = _shootable(model)
+        why = unsupported(model)
         if why:
             raise ValueError(f"stability: method='shooting' cannot take this model: {why}; use method='hill'")
         try:

@@ -70,7 +70,7 @@ from ..solvers.checks import check_finite, check_in_range, check_int, check_posi
 from .stepper import solve_or_lstsq
 
 __all__ = ["Monodromy", "ShootingResult", "monodromy", "shoot", "trajectory", "MAX_IMPACTS", "GRAZING_VELOCITY",
-           "MAX_DOFS", "STATUS"]
+           "MAX_DOFS", "STATUS", "unsupported"]
 
 log = logging.getLogger(__name__)
 
@@ -255,6 +255,24 @@ def _period(model: StructuralModel, omega: float, period: Any, owner: str) -> fl
 # --------------------------------------------------------------------------------------------
 # The event-driven flow
 # --------------------------------------------------------------------------------------------
+def unsupported(model: StructuralModel) -> str:
+    """Why the event-driven shooting cannot take ``model`` (``""`` if it can): more than
+    :data:`MAX_DOFS` DOFs, or a UnilateralContact on a DOF without mass. The one place these
+    limits are checked (``fm.stability(method="auto")`` asks before choosing the method)."""
+    n = model.n_dofs
+    if n > MAX_DOFS:
+        return (f"model has {n} DOFs; the dense variational equations ((2n)^2 = {4 * n * n} unknowns) are "
+                f"limited to {MAX_DOFS} DOFs: reduce the model first (fm.craig_bampton) or {_HILL}")
+    Md = model.M.diagonal()
+    for j, a in enumerate(model.contacts):
+        if isinstance(a.item, UnilateralContact) and not Md[a.dof] > 0.0:
+            return (f"model: UnilateralContact {j} (at={a.item.at!r}) acts on DOF {model.dofmap.label(a.dof)!r}, "
+                    "which has no mass (mass redistributed away from the contact, e.g. fm.RedistributeMass()); an "
+                    f"event-driven impact law needs a mass at the contact DOF: {_HILL}, or keep the mass with "
+                    "with_contact(..., contact_mass=fm.ConsistentMass())")
+    return ""
+
+
 class _Flow:
     """Vector field, Jacobian, events and resets of a model (dense matrices; see module docstring)."""
 
@@ -262,11 +280,9 @@ class _Flow:
         if not isinstance(model, StructuralModel):
             raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
         n = model.n_dofs
-        if n > MAX_DOFS:
-            raise ValueError(
-                f"{owner}: model has {n} DOFs; the dense variational equations ((2n)^2 = {4 * n * n} unknowns) are "
-                f"limited to {MAX_DOFS} DOFs: reduce the model first (fm.craig_bampton) or {_HILL}"
-            )
+        why = unsupported(model)
+        if why:
+            raise ValueError(f"{owner}: {why}")
         self.n, self.owner = n, owner
         self.omega, self.e, self.rtol, self.atol = omega, restitution, rtol, atol
         M = model.M.toarray()
@@ -282,14 +298,7 @@ class _Flow:
         self.unilateral: list[tuple[int, UnilateralContact, int]] = []
         self.penalty: list[tuple[int, PenaltyContact, int]] = []
         for j, a in enumerate(model.contacts):
-            if isinstance(a.item, UnilateralContact):
-                if M[a.dof, a.dof] <= 0.0:
-                    raise ValueError(
-                        f"{owner}: model: UnilateralContact {j} (at={a.item.at!r}) acts on DOF "
-                        f"{model.dofmap.label(a.dof)!r}, which has no mass (mass redistributed away from the contact, "
-                        "e.g. fm.RedistributeMass()); an event-driven impact law needs a mass at the contact DOF: "
-                        f"{_HILL}, or keep the mass with with_contact(..., contact_mass=fm.ConsistentMass())"
-                    )
+            if isinstance(a.item, UnilateralContact):  # on a DOF with mass: unsupported() checked it
                 self.unilateral.append((j, a.item, a.dof))
             elif isinstance(a.item, PenaltyContact):
                 self.penalty.append((j, a.item, a.dof))
