@@ -63,9 +63,10 @@ class _Doubled:
         self.problem = ForcedResponseProblem(model, self.h2)
         s = self.problem.system
         rows = np.flatnonzero(self.h2.harmonic_of % 2 == 1)
-        self.odd = np.concatenate([s.h.global_index(rows[:, None], np.arange(s.n), s.n).ravel(),
-                                   s.nq + s.h.global_index(rows[:, None], np.arange(s.n_uc), max(s.n_uc, 1)).ravel()
-                                   if s.n_uc else np.zeros(0, dtype=int)])
+        # the odd-harmonic unknowns, by the system's own index maps (a symmetric permutation of
+        # the block: its determinant's sign and its null vector are unaffected)
+        self.odd = np.concatenate([s.q_index(d)[rows] for d in range(s.n)]
+                                  + [s.p_index(k)[rows] for k in range(s.n_uc)])
         if self.odd.size > DENSE_LIMIT:
             raise NotImplementedError(
                 f"switch_branch: the period-doubled problem has {self.odd.size} odd unknowns (dense limit "
