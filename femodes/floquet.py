@@ -48,7 +48,7 @@ from .solvers import NewtonOptions, semismooth_newton
 from .solvers.roots import illinois
 from .time.shooting import shoot, unsupported
 
-__all__ = ["stability", "StabilityResult", "annotate_branch", "solve_on_secant", "METHODS"]
+__all__ = ["stability", "StabilityResult", "ShootingError", "annotate_branch", "solve_on_secant", "METHODS"]
 
 log = logging.getLogger(__name__)
 
@@ -153,6 +153,11 @@ class _ShootingFailed(RuntimeError):
     pass
 
 
+class ShootingError(RuntimeError):
+    """``method="shooting"`` did not converge on a solution's orbit (``"auto"`` falls back to
+    Hill's method instead)."""
+
+
 def _significant(mu: np.ndarray, free: bool) -> np.ndarray:
     """The multipliers that decide stability, largest modulus first: all of a forced orbit's; a
     free orbit's without its two trivial ones (the double +1 of phase and energy, a Jordan block
@@ -184,7 +189,7 @@ def _point_stability(model, system, y, Q, omega, xi, method, tol, forced) -> Sta
         try:
             return _by_shooting(model, system, Q, omega, tol, not forced)
         except _ShootingFailed as exc:
-            raise RuntimeError(f"stability: shooting from the HBM orbit at w = {omega:g} did not converge ({exc}); "
+            raise ShootingError(f"stability: shooting from the HBM orbit at w = {omega:g} did not converge ({exc}); "
                                "use method='hill' or raise the harmonics") from None
     try:
         return _by_shooting(model, system, Q, omega, tol, not forced)

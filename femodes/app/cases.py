@@ -695,6 +695,7 @@ def _run_analysis(case: Case, model, progress):
     """The [analysis] of the case on ``model``: its branch."""
     import femodes as fm
     from ..analyses import frequency_response_options
+    from ..floquet import ShootingError
 
     api = _Api(case)
     an = case.data["analysis"]
@@ -711,9 +712,7 @@ def _run_analysis(case: Case, model, progress):
         options = frequency_response_options(**opts) if opts else None
         return api("analysis", ["omega", "harmonics", "stability"], fm.frequency_response, model, tuple(an["omega"]),
                    H, options=options, progress=progress, stability=stability)
-    except RuntimeError as exc:  # stability = "shooting" that does not converge: "stability: ... use method='hill'"
-        if not str(exc).startswith("stability:"):
-            raise
+    except ShootingError as exc:  # stability = "shooting" that does not converge (the message says: use "hill")
         raise case.error("analysis", "stability", str(exc)) from None
 
 
