@@ -1,0 +1,116 @@
+"""Hill's method on a Craig-Bampton reduction (large models; femodes.hbm.hill module docstring).
+
+References are independent of the reduction: the shift-invert solve of the whole model's Hill
+matrix (``reduce=False``, itself checked against the dense solve in test_stability.py) and the
+residual of the full Hill problem at the expanded eigenvector.
+"""
+
+import numpy as np
+import pytest
+
+import femodes as fm
+from femodes.hbm import hill as hill_mod
+from femodes.hbm.hill import REDUCTION_TOL, hill_exponents, hill_matrices
+from femodes.hbm.system import HBMSystem
+
+N_ELEMENTS = 300  # above REDUCE_MIN_DOFS: the default takes the reduction
+
+
+def _bar(contact):
+    mesh = fm.line_mesh(length=1.0, n_elements=N_ELEMENTS, boundaries={"clamp": 0.0, "tip": 1.0})
+    law = (fm.PenaltyContact(at="tip", gap=0.05, stiffness=5.0) if contact == "penalty"
+           else fm.UnilateralContact(at="tip", gap=0.05))
+    return (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
+            .with_damping(beta=0.01)
+            .with_forcing(fm.HarmonicForce(at="tip", amplitude=0.01))
+            .with_contact(law, contact_mass=fm.ConsistentMass()))
+
+
+@pytest.fixture(scope="module", params=["penalty", "unilateral"])
+def deepest(request):
+    """The deepest-contact orbit of a frequency response of the bar (H = 5)."""
+    model = _bar(request.param)
+    # the contact branch (the tip hits the stop from w ~ 1.42; fold near 1.87)
+    b = fm.frequency_response(model, (1.75, 1.9), 5, options=fm.ContinuationOptions(max_points=15))
+    sol = b[int(np.argmax(b.amplitude(model.n_dofs - 1)))]
+    system = HBMSystem(model, sol.harmonics)
+    y = system.join(sol.Q, sol.P)
+    whole = hill_exponents(system, y, sol.omega, reduce=False)
+    return model, sol, system, y, whole
+
+
+def test_reduced_hill_matches_the_whole_model_within_its_error_estimate(deepest):
+    model, sol, system, y, whole = deepest
+    assert system.size > hill_mod.DENSE_LIMIT and model.n_dofs > hill_mod.REDUCE_MIN_DOFS
+    red = hill_exponents(system, y, sol.omega)
+    assert whole.n_modes is None and red.n_modes is not None
+    assert red.n_modes < model.n_dofs // 2
+    true = abs(abs(red.multipliers[0]) - abs(whole.multipliers[0]))
+    # the estimate is not optimistic; it meets the target REDUCTION_TOL (1e-5) unless the
+    # reduction would have to hold half of these 300 DOFs, and stays far below the stability
+    # tolerance 1e-4 (measured: true 5e-7 / estimate 2e-6 with a penalty stop, 2.4e-6 / 2.7e-5
+    # with the unilateral one, whose error converges from further away)
+    assert true <= red.reduction_error
+    assert red.reduction_error <= REDUCTION_TOL or red.n_modes + 1 > model.n_dofs // 4
+    assert red.reduction_error < 5e-5
+    # same leading exponent family (up to the conjugate)
+    s_w, s_r = whole.exponents[0], red.exponents[0]
+    assert min(abs(s_r - s_w), abs(s_r - np.conj(s_w))) < 1e-3 * sol.omega
+    # the expanded eigenvector solves the whole model's Hill problem up to the truncation error:
+    # relative residual of the central member, measured 1e-6 .. 1e-5 here
+    J0, J1, J2 = hill_matrices(system, y, sol.omega)
+    s, v = red.central[0], red.vectors[:, 0]
+    assert v.shape == (system.size,)
+    r = (J0 + s * J1 + s * s * J2) @ v
+    scale = (abs(J0) + abs(s) * abs(J1) + abs(s) ** 2 * abs(J2)) @ np.abs(v)
+    assert np.linalg.norm(r) / np.linalg.norm(scale) < 1e-4
+
+
+def test_reduced_hill_reuses_its_reduction_along_a_branch(deepest):
+    """A second point of the same system starts from the cut-off that sufficed: no new
+    eigen-solve, and the result is the same."""
+    model, sol, system, y, _ = deepest
+    first = hill_exponents(system, y, sol.omega)
+    full = system._cache["hill_reduction"].full
+    again = hill_exponents(system, y, sol.omega)
+    assert system._cache["hill_reduction"].full is full
+    assert again.n_modes == first.n_modes
+    # ARPACK starts from a random vector: the leading modulus agrees to its tolerance (~1e-8)
+    assert abs(again.multipliers[0]) == pytest.approx(abs(first.multipliers[0]), abs=1e-7)
+
+
+def test_truncation_error_falls_at_least_as_fast_as_the_estimate_assumes(deepest, monkeypatch):
+    """The estimate divides the change between cut-offs in the ratio r by r^RATE - 1 (RATE = 2.3):
+    the measured error must fall by at least 2^RATE per doubling of the cut-off (measured ~8)."""
+    model, sol, system, y, whole = deepest
+    whole = abs(whole.multipliers[0])
+    monkeypatch.setattr(hill_mod, "REDUCTION_TOL", np.inf)  # take the first cut-off as it is
+    errors = []
+    for alpha in (2.0, 4.0, 8.0):
+        monkeypatch.setattr(hill_mod, "ALPHA", alpha)
+        fresh = HBMSystem(model, sol.harmonics)
+        errors.append(abs(abs(hill_exponents(fresh, y, sol.omega).multipliers[0]) - whole))
+    assert errors[0] > 1e-7  # the coarse one is visibly off (else the rates below mean nothing)
+    for coarse, fine in zip(errors, errors[1:]):
+        assert fine <= coarse / 2.0 ** hill_mod.RATE
+
+
+def test_small_models_and_free_structures_use_the_whole_model():
+    """No reduction below REDUCE_MIN_DOFS; a structure that is free once the contact DOF is
+    held (singular interior stiffness) falls back to the whole model."""
+    # a free-free beam held at its tip's deflection still rotates about the tip
+    mesh = fm.line_mesh(length=1.0, n_elements=101, boundaries={"left": 0.0, "tip": 1.0})
+    free = (fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1e-2))
+            .with_contact(fm.PenaltyContact(at="tip", gap=0.05, stiffness=5.0), contact_mass=fm.ConsistentMass()))
+    assert free.n_dofs > hill_mod.REDUCE_MIN_DOFS
+    h = fm.Harmonics(2)
+    system = HBMSystem(free, h)
+    y = np.zeros(system.size)
+    r = hill_exponents(system, y, 1.0, xi=0.0)
+    assert r.n_modes is None and r.reduction_error == 0.0
+    assert hill_mod.REDUCE_MIN_DOFS >= 100
+    mesh = fm.line_mesh(length=1.0, n_elements=100, boundaries={"clamp": 0.0, "tip": 1.0})
+    small = (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
+             .with_damping(beta=0.01))
+    system = HBMSystem(small, fm.Harmonics(2))
+    assert hill_exponents(system, np.zeros(system.size), 1.0).n_modes is None
