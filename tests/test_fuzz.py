@@ -826,6 +826,7 @@ harmonics = 5
 BASES = {
     "oscillator_frc.toml": ((CASES / "oscillator_frc.toml").read_text(), CASES / "oscillator_frc.toml"),
     "cantilever_nnm.toml": ((CASES / "cantilever_nnm.toml").read_text(), CASES / "cantilever_nnm.toml"),
+    "oscillator_stability.toml": ((CASES / "oscillator_stability.toml").read_text(), CASES / "oscillator_stability.toml"),
     "line_mesh.toml": (LINE_MESH_CASE, CASES / "line_mesh.toml"),
     "discrete.toml": (DISCRETE_CASE, CASES / "discrete.toml"),
 }
@@ -869,6 +870,7 @@ _BY_TYPE = {
     "matrix": ['"x"', '[["a"]]', "[[nan]]", "true", "[[1.0, inf]]"],
     "location": ["1.5", "true", "[]", '["tip"]', "{}", '["tip", "w", "x"]', "-1.0"],
     "string or false": ["true", "1"],
+    "boolean or method": ["1", "0.5", "[]", '["hill"]', "{}", "nan"],
 }
 
 # invalid values of the right type (the domain is wrong, or the name does not exist)
@@ -906,6 +908,7 @@ _BY_KEY = {
     ("analysis", "omega"): ["[0.0, 1.0]", "[-1.0, 1.0]", "[2.0, 2.0]"],
     ("analysis", "harmonics"): ["0", "-1", "1000000000"],
     ("analysis", "max_points"): ["1", "0", "-5"],
+    ("analysis", "stability"): ['"shoot"', '""', '"Hill"', '"true"', '"floquet"'],
     ("outputs", "branch"): ['""', "true"],
     ("outputs", "response_dof"): ['"nowhere"', "1000000", '"clamp"'],
 }

@@ -2,6 +2,7 @@
 
 import csv
 import json
+import math
 
 import numpy as np
 import pytest
@@ -231,3 +232,27 @@ def test_cli_elements_for_a_discrete_case_exit_2(tmp_path, capsys):
     assert "femodes scaling: elements: cannot vary the number of elements: the case is a discrete model" in err
     assert main(["scaling", str(tmp_path / "missing.toml")]) == 2
     assert "case file not found" in capsys.readouterr().err
+
+
+def test_stability_of_a_case_is_timed_apart(tmp_path):
+    """A case with ``stability`` gets its branch's stability timed per point, with the methods
+    used; a case without it reports none (``-``)."""
+    p = tmp_path / "stab.toml"
+    p.write_text(BAR.format(harmonic=1).replace("harmonics = 3", 'harmonics = 3\nstability = "hill"'))
+    res = sc.scaling_study(p, elements=[20], harmonics=[3], repeat=1, points=4, out=tmp_path / "s")
+    (r,) = res.records
+    assert r.ok, r.error
+    assert r.stability_s > 0 and r.stability_method == "hill"
+    assert f"({r.stability_method})" in res.table().splitlines()[2]
+    doc = json.loads((tmp_path / "s" / "scaling.json").read_text())
+    assert doc["records"][0]["stability_method"] == "hill"
+    plain = sc.scaling_study(_plain(tmp_path), elements=[20], harmonics=[3],
+                             repeat=1, points=2, out=tmp_path / "p")
+    assert math.isnan(plain.records[0].stability_s) and plain.records[0].stability_method == ""
+    assert "| 2 | - |" in plain.table().splitlines()[2]
+
+
+def _plain(tmp_path):
+    q = tmp_path / "plain.toml"
+    q.write_text(BAR.format(harmonic=1))
+    return q

@@ -23,6 +23,10 @@ What is measured in the child process of one ``(N, H)`` case
    largest amplitude over 5 parameter values of the span, moved by one Newton step so that the
    contacts it violates become active (``contact_active`` in the record says whether the state
    has nonzero complementarity contact forces).
+   With ``stability`` in the case's ``[analysis]`` (true or a method), the stability of the
+   branch of step 2 is timed apart (``stability per point``: :func:`femodes.floquet.annotate_branch`
+   with that method, multipliers at every point and bifurcations located between them, divided
+   by the points; ``stability_method`` says which methods it used).
 4. ``peak MiB``: ``resource.getrusage(RUSAGE_SELF).ru_maxrss`` of the child at the end, i.e. the
    peak resident memory of the whole case (interpreter and imports included; their share,
    measured before the model is built, is ``baseline MiB``). Every case has its own process, so
@@ -52,6 +56,7 @@ import numpy as np
 import femodes as fm
 
 from ...analyses import frequency_response_options, nonlinear_mode_options
+from ...floquet import annotate_branch
 from ...solvers import newton
 from ..cases import Case, CaseError, analysis_span, build_model
 
@@ -215,10 +220,26 @@ def _time_points(setup: _Setup, points: int, rec: dict) -> list[tuple[np.ndarray
         rec["newton_iterations"] = int(np.sum(branch.nit))
         rec["point_s"] = wall / len(branch) if len(branch) else math.nan
         rec["continuation"] = ("" if branch.success else "failed: ") + str(branch.message)
+        _time_stability(setup, branch, rec)
     except Exception as exc:  # the study goes on; the iteration is still measured
         rec["continuation"] = f"failed: {type(exc).__name__}: {exc}"
         states.clear()
     return states
+
+
+def _time_stability(setup: _Setup, branch: fm.Branch, rec: dict) -> None:
+    """The stability of the branch, when the case asks for it (timed apart from the points)."""
+    method = setup.analysis.get("stability", False)
+    if method is False or not len(branch):
+        return
+    method = "auto" if method is True else str(method)
+    try:
+        t = time.perf_counter()
+        annotate_branch(branch, setup.problem(), setup.model, method=method)
+        rec["stability_s"] = (time.perf_counter() - t) / len(branch)
+        rec["stability_method"] = "+".join(sorted(set(branch.stability_method)))
+    except Exception as exc:  # reported; the rest of the case is still measured
+        rec["stability_method"] = f"failed: {type(exc).__name__}: {exc}"
 
 
 def _analysis_options(setup: _Setup, points: int, callback):

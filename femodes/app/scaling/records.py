@@ -15,7 +15,8 @@ __all__ = ["CSV_COLUMNS", "ScalingRecord", "ScalingFit", "ScalingResult"]
 
 CSV_COLUMNS = (
     "n_elements", "N", "n_reduced", "H", "unknowns", "nnz_J", "iteration_median_s", "iteration_min_s",
-    "residual_median_s", "solve_median_s", "point_s", "points", "newton_iterations", "peak_mib",
+    "residual_median_s", "solve_median_s", "point_s", "points", "newton_iterations", "stability_s",
+    "stability_method", "peak_mib",
     "baseline_mib", "setup_s", "wall_s", "jacobian", "contact_active", "state", "continuation", "error",
 )
 
@@ -32,7 +33,9 @@ class ScalingRecord:
     model the analysis runs on (None without reduction), ``unknowns`` the size of the HBM
     problem, ``jacobian`` the type of the Jacobian its ``residual`` returns and ``nnz_J`` the
     number of stored entries of that Jacobian (of its assembled sparse form for a structured
-    operator). ``error`` is empty for a measured case.
+    operator). ``stability_s`` is the cost of the branch's stability per point (NaN when the
+    case asks for none) and ``stability_method`` the methods it used. ``error`` is empty for a
+    measured case.
     """
 
     n_elements: int | None
@@ -48,6 +51,8 @@ class ScalingRecord:
     point_s: float = math.nan
     points: int = 0
     newton_iterations: int = 0
+    stability_s: float = math.nan
+    stability_method: str = ""
     peak_mib: float = math.nan
     baseline_mib: float = math.nan
     setup_s: float = math.nan
@@ -109,7 +114,7 @@ class ScalingResult:
     def table(self) -> str:
         """Markdown table of the records."""
         head = ("| N | reduced | H | unknowns | nnz(J) | iteration median [ms] | min [ms] | residual [ms] | "
-                "solve [ms] | per point [s] | points | setup [s] | peak [MiB] | note |")
+                "solve [ms] | per point [s] | points | stability per point [s] | setup [s] | peak [MiB] | note |")
         lines = [head, "|" + "---|" * (head.count("|") - 1)]
         lines += ["| " + " | ".join(_row(r)) + " |" for r in self.records]
         return "\n".join(lines)
@@ -130,8 +135,17 @@ def _row(r: ScalingRecord) -> list[str]:
     """The cells of one record in :meth:`ScalingResult.table`."""
     return [_cell(r.N), _cell(r.n_reduced), str(r.H), _cell(r.unknowns), _cell(r.nnz_J),
             _ms(r.iteration_median_s), _ms(r.iteration_min_s), _ms(r.residual_median_s),
-            _ms(r.solve_median_s), _num(r.point_s, "{:.3g}"), str(r.points),
+            _ms(r.solve_median_s), _num(r.point_s, "{:.3g}"), str(r.points), _stability(r),
             _num(r.setup_s, "{:.3g}"), _num(r.peak_mib, "{:.0f}"), _short(_note(r))]
+
+
+def _stability(r: ScalingRecord) -> str:
+    """Stability cost per point and the methods used (``-`` when the case computes none)."""
+    if r.stability_method.startswith("failed"):
+        return _short(r.stability_method, 40)
+    if math.isnan(r.stability_s):
+        return "-"
+    return f"{r.stability_s:.3g} ({r.stability_method})"
 
 
 def _note(r: ScalingRecord) -> str:
