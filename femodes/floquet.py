@@ -323,7 +323,7 @@ class _Annotator:
         z, r = ends[th]
         u = self.problem.unpack(z[:-1], z[-1])
         crossing = self.crossing(r.multipliers, k)
-        kind = _kind(crossing, r.multipliers) if smooth else "nonsmooth"
+        kind = _kind(crossing, r.multipliers, not self.forced) if smooth else "nonsmooth"
         energy = float(self.system.energy(u.y, u.omega)[0])
         return Bifurcation(kind=kind, index=int(i), omega=float(u.omega), energy=energy, parameter=float(z[-1]),
                            multiplier=complex(crossing), Q=np.array(u.Q), P=np.array(u.P), xi=float(u.xi))
@@ -346,12 +346,23 @@ def solve_on_secant(problem, za: np.ndarray, zb: np.ndarray, theta: float, newto
     return res.x if res.success else None
 
 
-def _kind(mu: complex, all_mu: np.ndarray) -> str:
+#: On a free (conservative) orbit, a crossing multiplier within this distance of +1 or -1 is a
+#: pair colliding there and leaving the circle as a real pair (a branch point, e.g. where an
+#: internal-resonance tongue leaves a backbone, or a period doubling); the test function
+#: ``|mu| - 1`` is flat on the circle, so the crossing is found on the side where the pair is
+#: still complex (measured 0.999 +- 0.045j at a 2:1 tongue).
+COLLISION = 0.1
+
+
+def _kind(mu: complex, all_mu: np.ndarray, free: bool = False) -> str:
     """Bifurcation kind from the crossing multiplier: a complex one whose conjugate is also a
-    multiplier crosses as a pair (Neimark-Sacker); otherwise it is real (Hill's multipliers of a
-    contact orbit carry an imaginary error that breaks the conjugate symmetry) and its sign tells
-    period doubling (-1) from a branch point (+1)."""
+    multiplier crosses as a pair (Neimark-Sacker) unless, on a free orbit, it is within
+    :data:`COLLISION` of +-1; otherwise it is real (Hill's multipliers of a contact orbit carry an
+    imaginary error that breaks the conjugate symmetry) and its sign tells period doubling (-1)
+    from a branch point (+1)."""
     scale = max(abs(mu), 1.0)
+    if free and min(abs(mu - 1.0), abs(mu + 1.0)) <= COLLISION:
+        return "period_doubling" if mu.real < 0 else "branch_point"
     if abs(mu.imag) > 1e-8 * scale:
         partner = np.min(np.abs(all_mu[np.isfinite(all_mu)] - np.conj(mu)))
         if partner <= 1e-6 * scale:

@@ -1,0 +1,258 @@
+"""fm.switch_branch at branch points: forced responses and backbones (issue 13).
+
+Test cases with genuine (symmetry-breaking) branch points, each checked against references that
+do not use the HBM:
+
+* forced: two identical Duffing oscillators (unit mass and stiffness, cubic springs k3 = 1, weak
+  coupling spring kc = 0.05, damping 0.02) forced in anti-phase. The anti-phase response
+  ``x1 = -x2 = x`` is the single Duffing ``x'' + c x' + (1 + 2 kc) x + k3 x^3 = F cos wt``; its
+  in-phase perturbation ``s'' + c s' + (1 + 3 k3 x(t)^2) s = 0`` (a damped Hill equation) gets
+  the multiplier +1 where the symmetric branch loses stability to localised orbits (x1 != x2).
+  (Forced in phase with hardening springs, the in-phase response has no such point for weak
+  coupling: to first order its out-of-phase perturbation is detuned by 2 kc, Vakakis' localisation
+  is on the out-of-phase mode.) Reference: that multiplier by time integration (scipy).
+* backbone: the same pair undamped with kc = 1.7 (linear frequencies 1 and sqrt(4.4)): the
+  in-phase backbone ``x1 = x2`` is invariant and its out-of-phase perturbation
+  ``a'' + (1 + 2 kc + 3 k3 x(t)^2) a = 0`` is pumped at 2w; where its frequency reaches 2w (a 2:1
+  internal resonance) a pair of multipliers collides at +1 and the 2:1 tongue branches off.
+  Reference: the trace of that Hill equation's monodromy = 2, by time integration of the free
+  Duffing orbit. (With kc chosen for 3:1 instead, kc = 4.25, the collision is a third-order
+  parametric resonance: the pair passes +1 with an instability interval below the HBM's
+  resolution (max nontrivial |mu| - 1 < 1e-12 over a sweep with energy steps of 4e-6 around it),
+  so no crossing is reported there at all; 2:1 is the lowest-order tongue that shows.)
+"""
+
+import copy
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+import femodes as fm
+from femodes import switching
+from femodes.hbm.problems import ForcedResponseProblem
+
+KC_F, K3, C, F = 0.05, 1.0, 0.02, 0.05
+KC_B = 1.7
+
+
+def pair(kc, c=0.0, force=None):
+    K = np.array([[1 + kc, -kc], [-kc, 1 + kc]])
+    m = fm.StructuralModel(M=np.eye(2), K=K, C=c * np.eye(2))
+    m = m.with_nonlinearity(fm.CubicSpring(at=0, k3=K3), fm.CubicSpring(at=1, k3=K3))
+    if force is not None:
+        m = m.with_forcing(fm.HarmonicForce(at=0, amplitude=force), fm.HarmonicForce(at=1, amplitude=-force))
+    return m
+
+
+@pytest.fixture(scope="module")
+def forced():
+    model = pair(KC_F, C, F)
+    b = fm.frequency_response(model, (0.9, 1.7), 7, stability="hill")
+    return model, b
+
+
+@pytest.fixture(scope="module")
+def backbone():
+    model = pair(KC_B)
+    # max_step 0.05 (decades of energy): the tongue's instability interval (|mu| - 1 <= 7e-3)
+    # must hold no more than a few points for the multipliers to show it at all
+    opts = fm.ContinuationOptions(step=0.05, max_step=0.05, p_scale=1.0, newton=fm.NewtonOptions(atol=1e-9, max_iter=20))
+    b = fm.nonlinear_mode(model, 1, (0.1, 1.0), 8, stability="hill", options=opts)
+    return model, b
+
+
+def _state(sol, t):
+    return np.concatenate([sol.displacement([t])[0], sol.velocity([t])[0]])
+
+
+# ------------------------------------------------------------------------------------------------
+# forced: the symmetry-breaking pitchfork of the anti-phase response
+# ------------------------------------------------------------------------------------------------
+def _duffing_inphase_multiplier(w, x_guess):
+    """Largest real multiplier of ``s'' + c s' + (1 + 3 k3 x^2) s = 0`` along the anti-phase
+    Duffing orbit at ``w`` (orbit by shooting the 1-DOF model, monodromy by DOP853)."""
+    one = (fm.StructuralModel(M=np.eye(1), K=(1 + 2 * KC_F) * np.eye(1), C=C * np.eye(1))
+           .with_nonlinearity(fm.CubicSpring(at=0, k3=K3)).with_forcing(fm.HarmonicForce(at=0, amplitude=F)))
+    r = fm.time.shoot(one, w, x_guess)
+    assert r.success
+    T = 2 * np.pi / w
+
+    def rhs(t, y):
+        x, v, s1, s2, r1, r2 = y
+        k = 1 + 3 * K3 * x * x
+        return [v, F * math.cos(w * t) - C * v - (1 + 2 * KC_F) * x - K3 * x ** 3, s2, -C * s2 - k * s1, r2, -C * r2 - k * r1]
+
+    y = solve_ivp(rhs, (0, T), [r.x[0], r.x[1], 1, 0, 0, 1], method="DOP853", rtol=1e-12, atol=1e-13).y[:, -1]
+    mu = np.linalg.eigvals(np.array([[y[2], y[4]], [y[3], y[5]]]))
+    return float(np.max(mu.real)), r.x
+
+
+def test_forced_pitchfork_located_and_switched_onto_the_localised_branch(forced):
+    model, b = forced
+    bp = next(z for z in b.bifurcations if z.kind == "branch_point")
+    # the reported branch point is on the symmetric branch (x1 = -x2, the forcing's symmetry)
+    assert np.max(np.abs(bp.Q[:, 0] + bp.Q[:, 1])) < 1e-10
+    new = fm.switch_branch(b, bp, omega=(0.9, 1.7))
+    info = new.meta["switched_from"]
+    # the HBM's own branch point (test function det[r_x, r_p; c^T]) and the Floquet crossing
+    # (|mu| - 1, regula falsi to 1e-7 of the segment) are the same singularity: measured
+    # 1.0889484324434 both, 1e-15 apart
+    assert info["omega_hbm"] == pytest.approx(bp.omega, rel=1e-7)
+    # [r_x, r_p] drops rank by one (measured 1.7e-14), not two (1.8e-3): a simple branch point
+    assert info["smallest_singular_value"] < 1e-10 < 1e-4 < info["second_singular_value"]
+    # independent reference: the in-phase Hill equation's multiplier reaches +1 there. Its root
+    # by time integration at rtol 1e-12 (measured 1.08894843...); the H = 7 HBM of this smooth
+    # orbit (amplitude 0.5) is converged far below the 1e-6 asserted
+    x0 = _state(b[bp.index], 0.0)[[0, 2]]
+    w_ref = brentq(lambda w: _duffing_inphase_multiplier(w, x0)[0] - 1.0, bp.omega - 0.01, bp.omega + 0.01, xtol=1e-12)
+    assert info["omega_hbm"] == pytest.approx(w_ref, abs=1e-6)
+
+    # the new branch: born symmetric, grows asymmetric, closes on itself (an isola through both
+    # branch points of the symmetric branch); every point solves the HBM equations
+    asym = np.max(np.abs(new.Q[:, :, 0] + new.Q[:, :, 1]), axis=1)
+    assert asym[0] < 1e-8 and asym.max() > 1.0            # measured 1.47 (x1 and x2 by O(1) apart)
+    assert new.success and np.all(new.residual_norm < 1e-8)
+    assert new.omega[-1] == pytest.approx(info["omega_hbm"], abs=1e-3)  # back where it started
+    problem = ForcedResponseProblem(model, new.harmonics)
+    k = int(np.argmax(asym))
+    r = problem.residual(problem.pack(new.Q[k], new.P[k], new.omega[k]), new.omega[k])[0]
+    assert np.max(np.abs(r)) < 1e-8
+
+    # an independent check of one localised orbit: shooting from its HBM state converges onto a
+    # true periodic orbit within 1e-7 (measured ~1e-10: smooth orbit, H = 7), still asymmetric
+    k = int(np.flatnonzero(asym > 0.5)[0])
+    sol = new[k]
+    xs = _state(sol, 0.0)
+    rs = fm.time.shoot(model, sol.omega, xs)
+    assert rs.success
+    assert np.max(np.abs(rs.x - xs)) < 1e-7 * np.max(np.abs(xs))
+    assert abs(rs.x[0] + rs.x[1]) > 0.2 or abs(rs.x[2] + rs.x[3]) > 0.2
+
+
+# ------------------------------------------------------------------------------------------------
+# backbone: onto the 2:1 internal-resonance tongue and off it again
+# ------------------------------------------------------------------------------------------------
+def _tongue_trace(A):
+    """``(trace(Phi_a) - 2, w)`` of ``a'' + (1 + 2 kc + 3 k3 x^2) a = 0`` along the free Duffing
+    orbit ``x'' + x + k3 x^3 = 0`` from ``x(0) = A`` (its period by the time of the return)."""
+
+    def rhs(t, y):
+        x, v, a1, b1, a2, b2 = y
+        k = 1 + 2 * KC_B + 3 * K3 * x * x
+        return [v, -x - K3 * x ** 3, b1, -k * a1, b2, -k * a2]
+
+    def back(t, y):  # v crosses zero downwards: the return to x = A after a full period
+        return y[1]
+
+    back.direction = -1.0
+    sol = solve_ivp(rhs, (0, 8), [A, 0, 1, 0, 0, 1], method="DOP853", rtol=1e-12, atol=1e-13,
+                    events=back, dense_output=True)
+    T = sol.t_events[0][sol.t_events[0] > 1e-6][0]
+    y = sol.sol(T)
+    return float(y[2] + y[5] - 2.0), 2 * np.pi / T
+
+
+def _mode2_h2(br):
+    """Out-of-phase (mode 2) content of the displacement at harmonic 2."""
+    h = br.harmonics
+    d = (br.Q[:, :, 0] - br.Q[:, :, 1]) / math.sqrt(2.0)
+    return np.hypot(d[:, h.cos_index(2)], d[:, h.sin_index(2)])
+
+
+def _tongue_point(b):
+    # the pair collides at +1 and leaves the circle: floquet finds |mu| - 1 crossing on the side
+    # where it is still complex (exp(+-i theta), theta small) and classifies it by its distance to
+    # +1 (floquet.COLLISION) as a branch point
+    return next(z for z in b.bifurcations if z.kind == "branch_point" and abs(z.multiplier - 1) < 0.1)
+
+
+def test_backbone_onto_the_tongue_and_off_again(backbone):
+    model, b = backbone
+    z = _tongue_point(b)
+    tongue = fm.switch_branch(b, z, omega=(0.9, 1.5), stability="hill")
+    info = tongue.meta["switched_from"]
+    assert info["kind"] == "branch_point" and info["smallest_singular_value"] < 1e-10
+    # reference: the out-of-phase Hill equation's trace reaches 2 at the tongue's edge; scipy
+    # roots over the free-orbit amplitude, two edges (measured w = 1.092428 and 1.09488): the HBM
+    # branch point (H = 8, measured 1.0924279) is at the nearer one within 1e-6
+    amps = np.linspace(0.50, 0.52, 41)
+    tr = [_tongue_trace(A)[0] for A in amps]
+    edges = [_tongue_trace(brentq(lambda A: _tongue_trace(A)[0], amps[j], amps[j + 1], xtol=1e-13))[1]
+             for j in range(len(amps) - 1) if tr[j] * tr[j + 1] < 0]
+    assert len(edges) == 2
+    assert min(abs(info["omega_hbm"] - w) for w in edges) < 1e-6
+
+    # onto: the tongue grows mode-2 content at harmonic 2 (none on the backbone), conservative
+    a2 = _mode2_h2(tongue)
+    assert np.max(_mode2_h2(b)) < 1e-8 and a2[0] < 1e-8
+    assert a2.max() > 0.3                                     # measured 0.388
+    assert np.all(tongue.residual_norm < 1e-8) and np.max(np.abs(tongue.xi)) < 1e-10
+    # one tongue orbit is a true free periodic orbit: shooting (period unknown, pinned at a
+    # turning point of DOF 0) from its HBM state converges and moves it by < 1e-5 of its size
+    # (measured 2e-6: the H = 8 truncation of an orbit with harmonics 1..8 in both modes) and its
+    # period by < 1e-6 (measured 7e-8). The point is the first with a2 > 0.2, on the way up the
+    # tongue: at the tongue's energy fold (a2 = 0.388) the family's turning point makes the
+    # amplitude-pinned shooting Newton singular
+    k = int(np.flatnonzero(a2 > 0.2)[0])
+    sol = tongue[k]
+    t = np.linspace(0, sol.period, 2048, endpoint=False)
+    j = int(np.argmax(sol.displacement(t)[:, 0]))
+    t0 = brentq(lambda s: sol.velocity([s])[0, 0], t[j] - sol.period / 100, t[j] + sol.period / 100, xtol=1e-14)
+    xs = _state(sol, t0)
+    rs = fm.time.shoot(model, sol.omega, xs, period=sol.period, t0=t0, phase_dof=0)
+    assert rs.success
+    assert np.max(np.abs(rs.x - xs)) < 1e-5 * np.max(np.abs(xs))
+    assert rs.period == pytest.approx(sol.period, rel=1e-6)
+
+    # off: the tongue starts at its own branch point (reported as its first bifurcation);
+    # switching there leads back onto the in-phase backbone x1 = x2
+    own = tongue.bifurcations[0]
+    assert own.kind == "branch_point" and own.index == 0
+    back = fm.switch_branch(tongue, own, omega=(0.9, 1.5))
+    assert back.meta["switched_from"]["omega_hbm"] == pytest.approx(info["omega_hbm"], abs=1e-9)
+    assert len(back) > 5 and np.max(np.abs(back.Q[:, :, 0] - back.Q[:, :, 1])) < 1e-8
+    # on the backbone: w(E) of the free Duffing x'' + x + k3 x^3 = 0 that x1 = x2 = x obeys
+    # (coupling spring unstretched), E = A^2 + k3 A^4 / 2 at its turning point A; period by
+    # time integration: within 1e-6 (measured ~1e-8)
+    for k in (1, len(back) // 2, len(back) - 1):
+        E = back.energy[k]
+        A = math.sqrt((math.sqrt(1 + 2 * K3 * E) - 1) / K3)
+        assert back.omega[k] == pytest.approx(_tongue_trace(A)[1], abs=1e-6)
+
+
+# ------------------------------------------------------------------------------------------------
+# errors
+# ------------------------------------------------------------------------------------------------
+def test_errors_say_what_is_wrong(forced, backbone, monkeypatch):
+    model, b = forced
+    bp = next(z for z in b.bifurcations if z.kind == "branch_point")
+    fold = next(z for z in b.bifurcations if z.kind == "fold")
+    with pytest.raises(NotImplementedError, match="fold, not a branch point"):
+        fm.switch_branch(b, fold, omega=(0.9, 1.7))
+    with pytest.raises(NotImplementedError, match="neimark_sacker"):
+        fm.switch_branch(b, dataclasses.replace(bp, kind="neimark_sacker", multiplier=0.5 + 0.5j), omega=(0.9, 1.7))
+    with pytest.raises(TypeError, match="bifurcation must be"):
+        fm.switch_branch(b, bp.omega, omega=(0.9, 1.7))
+    with pytest.raises(ValueError, match="must contain the branch point"):
+        fm.switch_branch(b, bp, omega=(1.2, 1.7))
+    orphan = copy.copy(b)
+    orphan.model = None
+    with pytest.raises(ValueError, match="attach"):
+        fm.switch_branch(orphan, bp, omega=(0.9, 1.7))
+    monkeypatch.setattr(switching, "DENSE_LIMIT", 10)
+    with pytest.raises(NotImplementedError, match="craig_bampton"):
+        fm.switch_branch(b, bp, omega=(0.9, 1.7))
+    monkeypatch.undo()
+    # a "branch point" where the branch is regular (an imperfect connection would look like
+    # this): no sign change of the test function, no rank drop -> said so, no pretending
+    i = 30
+    fake = dataclasses.replace(bp, index=i, omega=float(b.omega[i]), parameter=float(b.parameter[i]), Q=b.Q[i], P=b.P[i])
+    with pytest.raises(RuntimeError, match="not a crossing of two branches"):
+        fm.switch_branch(b, fake, omega=(0.9, 1.7), window=2)
+    _, bb = backbone
+    with pytest.raises(NotImplementedError, match="period doubling is supported on forced responses only"):
+        fm.switch_branch(bb, dataclasses.replace(_tongue_point(bb), kind="period_doubling"), omega=(0.9, 1.5))
