@@ -25,6 +25,7 @@ from .results import Branch, ContactInfo
 from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
+from .solvers.threads import limit_blas_threads
 from .floquet import METHODS, annotate_branch
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
@@ -88,6 +89,7 @@ def branch_from_continuation(problem, result, *, kind: str, model: StructuralMod
     )
 
 
+@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def frequency_response(
     model: StructuralModel,
     omega: tuple[float, float],
@@ -263,6 +265,7 @@ def nonlinear_mode_options(problem: NonlinearModeProblem, x0: np.ndarray,
     return options
 
 
+@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def nonlinear_mode(
     model: StructuralModel,
     mode: int = 1,
@@ -366,6 +369,7 @@ class StaticContactResult:
         return float(max(0.0, np.max(-self.gap))) if self.gap.size else 0.0
 
 
+@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def static_contact(model: StructuralModel, force: np.ndarray | None = None, *, x0: np.ndarray | None = None,
                    options: NewtonOptions | None = None) -> StaticContactResult:
     """Static equilibrium with contact: ``K q + f_nl(q) = f - W p``, ``p - max(0, p - c g_N) = 0``.

@@ -46,6 +46,7 @@ from .model import StructuralModel
 from .results import Bifurcation, Branch, PeriodicSolution
 from .solvers import NewtonOptions, semismooth_newton
 from .solvers.roots import illinois
+from .solvers.threads import limit_blas_threads
 from .time.shooting import shoot, unsupported
 
 __all__ = ["stability", "StabilityResult", "ShootingError", "annotate_branch", "solve_on_secant", "METHODS"]
@@ -197,6 +198,7 @@ def _point_stability(model, system, y, Q, omega, xi, method, tol, forced) -> Sta
         return _by_hill(system, y, omega, xi, tol, not forced, message=f"shooting failed ({exc}); Hill's method used")
 
 
+@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def stability(solution: PeriodicSolution, method: str = "auto", *, tol: float = TOL) -> StabilityResult:
     """Floquet multipliers and stability of one periodic solution (module docstring).
 

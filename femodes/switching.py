@@ -79,6 +79,7 @@ from .floquet import METHODS, annotate_branch, solve_on_secant
 from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState, NewtonOptions, continuation,
                       semismooth_newton)
 from .solvers.roots import illinois
+from .solvers.threads import limit_blas_threads
 
 __all__ = ["switch_branch", "DENSE_LIMIT"]
 
@@ -176,6 +177,7 @@ def _locate_hbm_doubling(branch: Branch, bif: Bifurcation, dbl: _Doubled, newton
     return u, i
 
 
+@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def switch_branch(branch: Branch, bifurcation: Bifurcation, omega: tuple[float, float], *,
                   amplitude: float | None = None, options: ContinuationOptions | None = None,
                   stability: bool | str = False, window: int = 10) -> Branch:

@@ -14,11 +14,13 @@ tracer), ``continuation_types`` (options, points, states, results),
 ``arclength`` (the problem's evaluation, scaled geometry, tangent and corrector
 solves), ``bordered`` (bordered matrices and their solver), ``roots`` (a bracketed
 scalar root by Illinois regula falsi: folds, stability changes), ``checks`` (the
-argument validators shared by the solvers and the layers above).
+argument validators shared by the solvers and the layers above), ``threads`` (how many BLAS
+threads the analyses' loops use: :func:`limit_blas_threads`, ``FEMODES_BLAS_THREADS``).
 """
 
 from .continuation import ContinuationOptions, ContinuationPoint, ContinuationResult, ContinuationState, continuation
 from .newton import NewtonOptions, NewtonResult, semismooth_newton
+from .threads import limit_blas_threads
 
 __all__ = [
     "NewtonOptions",
@@ -29,4 +31,5 @@ __all__ = [
     "ContinuationResult",
     "ContinuationState",
     "continuation",
+    "limit_blas_threads",
 ]

@@ -18,6 +18,7 @@ import numpy as np
 from ..model import StructuralModel
 from ..solvers import NewtonOptions
 from ..solvers.checks import check_finite, check_in_range, check_int, check_positive
+from ..solvers.threads import limit_blas_threads
 from .results import SteadyState, TimeHistory
 from .stepper import Segment, Stepper, integrate
 
@@ -158,6 +159,7 @@ def _options(options: Any, owner: str) -> TimeSteppingOptions:
     return options
 
 
+@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def simulate(
     model: StructuralModel,
     t_end: float,
@@ -250,6 +252,7 @@ def simulate(
                        success=status == 0, status=status, message=message)
 
 
+@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def steady_state(
     model: StructuralModel,
     omega: float,
