@@ -26,7 +26,12 @@ multipliers outside the circle between two points is a bifurcation; unless a loc
 there, it is located by regula falsi on the test function ``|mu_(k)| - 1`` (the ``k``-th largest
 modulus, ``k`` the larger count) over solutions corrected on the secant between the points, and
 classified by the crossing multiplier: ``+1`` a branch point, ``-1`` period doubling, a complex
-pair a Neimark-Sacker bifurcation.
+pair a Neimark-Sacker bifurcation. On a free (conservative) orbit a pair that collides at
+``+-1`` and leaves the circle as a real pair is a branch point (period doubling at ``-1``) even
+when it is found on its still-complex side (:data:`COLLISION`); ``|mu| - 1`` is flat there, so a
+branch point of a backbone is then located by the sign change of ``det [r_x, r_p; c^T]``
+(:func:`branch_point_test`, shared with :func:`femodes.switch_branch`), where the augmented
+Jacobian drops rank.
 """
 
 from __future__ import annotations
@@ -326,6 +331,14 @@ class _Annotator:
         u = self.problem.unpack(z[:-1], z[-1])
         crossing = self.crossing(r.multipliers, k)
         kind = _kind(crossing, r.multipliers, not self.forced) if smooth else "nonsmooth"
+        if kind == "branch_point" and not self.forced and za.size <= BRANCH_POINT_DENSE_LIMIT:
+            # a conservative pair colliding at +1: |mu| - 1 is flat on the side where it is still
+            # complex, so its crossing is anywhere there; the branch point itself is where the
+            # augmented Jacobian drops rank
+            zbp = refine_branch_point(self.problem, za, zb, self.newton)
+            if zbp is not None:
+                z = zbp
+                u = self.problem.unpack(z[:-1], z[-1])
         energy = float(self.system.energy(u.y, u.omega)[0])
         return Bifurcation(kind=kind, index=int(i), omega=float(u.omega), energy=energy, parameter=float(z[-1]),
                            multiplier=complex(crossing), Q=np.array(u.Q), P=np.array(u.P), xi=float(u.xi))
@@ -354,6 +367,50 @@ def solve_on_secant(problem, za: np.ndarray, zb: np.ndarray, theta: float, newto
 #: ``|mu| - 1`` is flat on the circle, so the crossing is found on the side where the pair is
 #: still complex (measured 0.999 +- 0.045j at a 2:1 tongue).
 COLLISION = 0.1
+
+
+
+#: Largest augmented Jacobian ``[r_x, r_p]`` (unknowns) whose determinant test locates a branch
+#: point (dense; beyond it the crossing of the multipliers' test function is kept).
+BRANCH_POINT_DENSE_LIMIT = 4000
+
+
+def augmented_jacobian(problem, z: np.ndarray) -> np.ndarray:
+    """``A = [r_x, r_p]`` of ``problem`` at ``z = [x; p]`` (dense, ``n x (n + 1)``)."""
+    _, J, dr_dp = problem.residual(z[:-1], z[-1])
+    return np.hstack([J.toarray(), np.asarray(dr_dp, dtype=float)[:, None]])
+
+
+def branch_point_test(problem, z: np.ndarray, c: np.ndarray) -> tuple[float, float]:
+    """``(sign, log|det|)`` of ``[A(z); c^T]``: ``c . a(z)``, with ``a`` the signed maximal minors of
+    ``A = [r_x, r_p]``, which span its null space on a regular branch. It vanishes at a simple
+    branch point and changes sign there; at a fold ``A`` keeps full rank and the test its sign
+    (Keller 1977; Allgower and Georg 2003, sec. 8.1)."""
+    return np.linalg.slogdet(np.vstack([augmented_jacobian(problem, z), c[None, :]]))
+
+
+def refine_branch_point(problem, za: np.ndarray, zb: np.ndarray, newton: NewtonOptions) -> np.ndarray | None:
+    """The branch point between the branch points ``za`` and ``zb``: regula falsi on
+    ``det [A(z); c^T] / |det [A(za); c^T]|`` (``c`` the secant) over solutions on the secant; None
+    when the test has the same sign at both ends."""
+    c = zb - za
+    c = c / (np.linalg.norm(c) or 1.0)
+    s0, l0 = branch_point_test(problem, za, c)
+    s1, l1 = branch_point_test(problem, zb, c)
+    if s0 != 0 and s1 != 0 and s0 == s1:
+        return None
+    points = {0.0: za, 1.0: zb}
+
+    def test(theta: float) -> float | None:
+        z = solve_on_secant(problem, za, zb, theta, newton)
+        if z is None:
+            return None
+        points[theta] = z
+        sg, ld = branch_point_test(problem, z, c)
+        return float(sg * math.exp(ld - l0))  # linear in theta near a simple branch point
+
+    br = illinois(test, 0.0, 1.0, float(s0), float(s1 * math.exp(l1 - l0)), max_iter=60, ftol=1e-12, xtol=1e-13)
+    return points[br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi]
 
 
 def _kind(mu: complex, all_mu: np.ndarray, free: bool = False) -> str:

@@ -75,7 +75,8 @@ from .analyses import branch_from_continuation, frequency_response, frequency_re
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .results import Bifurcation, Branch
-from .floquet import METHODS, annotate_branch, solve_on_secant
+from .floquet import (METHODS, annotate_branch, augmented_jacobian, branch_point_test, refine_branch_point,
+                      solve_on_secant)
 from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState, NewtonOptions, continuation,
                       semismooth_newton)
 from .solvers.roots import illinois
@@ -335,8 +336,7 @@ class _Augmented:
 
     def matrix(self, z: np.ndarray) -> np.ndarray:
         """``A = [r_x, r_p]`` at ``z`` (dense, ``n x (n + 1)``)."""
-        _, J, dr_dp = self.problem.residual(z[:-1], z[-1])
-        return np.hstack([J.toarray(), np.asarray(dr_dp, dtype=float)[:, None]])
+        return augmented_jacobian(self.problem, z)
 
     def scales(self, z: np.ndarray, options: ContinuationOptions) -> tuple[np.ndarray, float | None]:
         """The continuation's arclength scales ``(x_scale, p_scale)`` for the new branch, as its
@@ -352,8 +352,8 @@ class _Augmented:
         return xs, None if options.p_scale is None else float(options.p_scale)
 
     def test(self, z: np.ndarray, c: np.ndarray) -> tuple[float, float]:
-        """``(sign, log|det|)`` of ``[A(z); c^T]``: ``c . a(z)``, ``a`` the signed maximal minors of A."""
-        return np.linalg.slogdet(np.vstack([self.matrix(z), c[None, :]]))
+        """``(sign, log|det|)`` of ``[A(z); c^T]`` (:func:`~femodes.floquet.branch_point_test`)."""
+        return branch_point_test(self.problem, z, c)
 
 
 def _smallest_sv(aug: _Augmented, z: np.ndarray, D: np.ndarray) -> float:
@@ -373,23 +373,10 @@ def _sign_changes(aug: _Augmented, Z: dict, segments) -> list[int]:
 
 
 def _refine(aug: _Augmented, za: np.ndarray, zb: np.ndarray, newton: NewtonOptions) -> np.ndarray:
-    """Regula falsi on ``det [A(z); c^T] / |det [A(za); c^T]|`` over solutions on the secant."""
-    c = zb - za
-    c = c / (np.linalg.norm(c) or 1.0)
-    s0, l0 = aug.test(za, c)
-    s1, l1 = aug.test(zb, c)
-    points = {0.0: za, 1.0: zb}
-
-    def test(theta: float) -> float | None:
-        z = solve_on_secant(aug.problem, za, zb, theta, newton)
-        if z is None:
-            return None
-        points[theta] = z
-        s, ld = aug.test(z, c)
-        return float(s * math.exp(ld - l0))  # linear in theta near a simple branch point
-
-    br = illinois(test, 0.0, 1.0, float(s0), float(s1 * math.exp(l1 - l0)), max_iter=60, ftol=1e-12, xtol=1e-13)
-    return points[br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi]
+    """The branch point between ``za`` and ``zb`` (:func:`~femodes.floquet.refine_branch_point`;
+    the caller found the sign change)."""
+    z = refine_branch_point(aug.problem, za, zb, newton)
+    return za if z is None else z
 
 
 def _locate_branch_point(aug: _Augmented, bif: Bifurcation, newton: NewtonOptions, window: int, D: np.ndarray):

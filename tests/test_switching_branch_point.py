@@ -165,8 +165,8 @@ def _mode2_h2(br):
 
 def _tongue_point(b):
     # the pair collides at +1 and leaves the circle: floquet finds |mu| - 1 crossing on the side
-    # where it is still complex (exp(+-i theta), theta small) and classifies it by its distance to
-    # +1 (floquet.COLLISION) as a branch point
+    # where it is still complex (exp(+-i theta), theta small), classifies it by its distance to
+    # +1 (floquet.COLLISION) as a branch point and locates it by the rank drop of [r_x, r_p]
     return next(z for z in b.bifurcations if z.kind == "branch_point" and abs(z.multiplier - 1) < 0.1)
 
 
@@ -176,6 +176,9 @@ def test_backbone_onto_the_tongue_and_off_again(backbone):
     tongue = fm.switch_branch(b, z, omega=(0.9, 1.5), stability="hill")
     info = tongue.meta["switched_from"]
     assert info["kind"] == "branch_point" and info["smallest_singular_value"] < 1e-10
+    # floquet located the collision where the augmented Jacobian drops rank, not where |mu| - 1
+    # happened to cross zero on the flat side (1.0861 before that refinement)
+    assert z.omega == pytest.approx(info["omega_hbm"], rel=1e-8)
     # reference: the out-of-phase Hill equation's trace reaches 2 at the tongue's edge; scipy
     # roots over the free-orbit amplitude, two edges (measured w = 1.092428 and 1.09488): the HBM
     # branch point (H = 8, measured 1.0924279) is at the nearer one within 1e-6
