@@ -9,10 +9,11 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .eigen import IllConditionedWarning, normal_modes
-from .model import StructuralModel
+from .model import StructuralModel, low_rank_solver
 from .solvers.checks import check_int
 
 __all__ = ["LinearModes", "LinearResponse", "linear_modes", "linear_response", "IllConditionedWarning"]
@@ -104,6 +105,20 @@ class LinearResponse:
         return a if dof is None else a[:, dof]
 
 
+def _solve_lowrank(Z, lr, w: float, F: np.ndarray) -> np.ndarray:
+    """``(Z + i w U diag(d) U^T) q = F`` by Woodbury on the LU of the sparse part ``Z``; if ``Z``
+    alone is singular (an undamped resonance of the sparse part that the modal damping damps),
+    SuperLU on the sparse augmented system ``[[Z, i w U diag(d)], [U^T, -I]] [q; y] = [F; 0]``."""
+    try:
+        lu = spla.splu(Z)
+    except RuntimeError:
+        m = lr.rank
+        A = sp.bmat([[Z, sp.csr_matrix(lr.U * (1j * w * lr.d))], [sp.csr_matrix(lr.U.T), -sp.identity(m)]],
+                    format="csc")
+        return spla.splu(A).solve(np.concatenate([np.asarray(F, dtype=complex), np.zeros(m, dtype=complex)]))[: Z.shape[0]]
+    return low_rank_solver(lu.solve, lr.U, 1j * w * lr.d, lr.U, matvec=lambda x: Z @ x)(F)
+
+
 def linear_response(model: StructuralModel, omega, *, force=None) -> LinearResponse:
     """Linear forced response ``(K - w^2 M + i w C) Q = F`` at the frequencies ``omega``.
 
@@ -133,10 +148,14 @@ def linear_response(model: StructuralModel, omega, *, force=None) -> LinearRespo
             raise ValueError(f"linear_response: force must be a finite vector of length {model.n_dofs}, got shape {F.shape}")
     out = np.empty((w.size, model.n_dofs), dtype=complex)
     K, M, C = model.K.tocsc(), model.M.tocsc(), model.C.tocsc()
+    lr = model.C_lowrank  # modal damping U diag(d) U^T: Woodbury on the sparse part (StructuralModel)
     for i, wi in enumerate(w):
         Z = (K - wi**2 * M + 1j * wi * C).tocsc()
         try:
-            out[i] = spla.splu(Z).solve(F)
+            if lr is None:
+                out[i] = spla.splu(Z).solve(F)
+            else:
+                out[i] = _solve_lowrank(Z, lr, wi, F)
         except RuntimeError as exc:
             raise ValueError(
                 f"linear_response: the dynamic stiffness is singular at omega={wi:g} (undamped resonance); "

@@ -75,6 +75,7 @@ class ReducedModel(StructuralModel):
         dofmap = self.parent.dofmap.restrict(self.kept).extended([f"cb mode {j + 1}" for j in range(n_modes)])
         return dataclasses.replace(
             self, M=self.M[:k][:, :k], K=self.K[:k][:, :k], C=self.C[:k][:, :k], dofmap=dofmap,
+            C_lowrank=None if self.C_lowrank is None else self.C_lowrank.restrict(slice(0, k)),
             basis=self.basis[:, :k], interface_omega=np.asarray(self.interface_omega)[:n_modes])
 
     def expand(self, q: np.ndarray) -> np.ndarray:
@@ -233,13 +234,15 @@ def _fixed_interface_modes(KII, MII, lu: Any, n_modes: int) -> tuple[np.ndarray,
     return phi, omega
 
 
-def _project(A, T: np.ndarray) -> sp.csr_matrix:
+def _project(A, T: np.ndarray, AT: np.ndarray | None = None) -> sp.csr_matrix:
     """``T^T A T``, symmetrized to round-off, as a sparse matrix without the round-off of its exact
     zeros: the fixed-interface modes are orthogonal, so the modal block of ``M`` and ``K`` (and of
     Rayleigh ``C``) is diagonal and only the kept DOFs' rows couple to the modes; entries below
     ``ZERO x sqrt(|R_ii R_jj|)`` are that round-off. Keeping them would make every reduced
-    matrix dense (a Hill or harmonic balance problem on 100 modes: 30x the fill)."""
-    AT = A @ T
+    matrix dense (a Hill or harmonic balance problem on 100 modes: 30x the fill). ``AT``: the
+    product ``A T`` if already formed (a damping with a low-rank part)."""
+    if AT is None:
+        AT = A @ T
     R = T.T @ AT
     R = 0.5 * (R + R.T)
     d = np.sqrt(np.abs(np.diag(R)))
@@ -253,6 +256,18 @@ def _project(A, T: np.ndarray) -> sp.csr_matrix:
 ZERO = 1e-12
 
 
+def _project_damping(model: StructuralModel, T: np.ndarray) -> sp.csr_matrix | None:
+    """``T^T C T`` of the whole damping. A modal (low-rank) part ``U diag(d) U^T`` is projected
+    through ``C T = C_sparse T + U diag(d) (U^T T)`` (no ``n x n`` matrix); the reduced damping
+    is small and generally dense (the fixed-interface modes are not the model's modes), so it is
+    stored as an ordinary matrix with the clean-up of :func:`_project`."""
+    lr = model.C_lowrank
+    if lr is None:
+        return _project(model.C.tocsr(), T) if model.C.nnz else None
+    AT = model.C.tocsr() @ T + lr.U @ (lr.d[:, None] * (lr.U.T @ T))
+    return _project(None, T, AT)
+
+
 def _reduced_model(model: StructuralModel, kept: np.ndarray, T: np.ndarray, omega_i: np.ndarray, n_modes: int) -> ReducedModel:
     """The projected model, its declarations re-indexed to the reduced DOFs."""
     pos = {int(d): i for i, d in enumerate(kept)}
@@ -264,7 +279,7 @@ def _reduced_model(model: StructuralModel, kept: np.ndarray, T: np.ndarray, omeg
     return ReducedModel(
         M=_project(model.M.tocsr(), T),
         K=_project(model.K.tocsr(), T),
-        C=_project(model.C.tocsr(), T) if model.C.nnz else None,
+        C=_project_damping(model, T),
         dofmap=dofmap,
         forces=reindex(model.forces),
         contacts=reindex(model.contacts),

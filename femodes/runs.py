@@ -88,10 +88,12 @@ def model_fingerprint(model: StructuralModel) -> dict:
     refused with a message saying which part differs.
     """
     forces = model.force_vectors()
+    lr = model.C_lowrank  # modal damping's low-rank part (hashed only when present: older digests hold)
+    lr_bytes = [] if lr is None else [np.asarray(lr.U.shape, dtype=np.int64).tobytes(), lr.U.tobytes(), lr.d.tobytes()]
     force_bytes = [np.int64(k).tobytes() + np.asarray(forces[k], dtype=complex).tobytes() for k in sorted(forces)]
     return {
         "n_dofs": int(model.n_dofs),
-        "matrices": _digest(*_matrix_bytes(model.M), *_matrix_bytes(model.K), *_matrix_bytes(model.C)),
+        "matrices": _digest(*_matrix_bytes(model.M), *_matrix_bytes(model.K), *_matrix_bytes(model.C), *lr_bytes),
         "forcing": _digest(*force_bytes),
         "contacts": _digest(_declarations(model.contacts)),
         "nonlinearities": _digest(_declarations(model.nonlinearities)),

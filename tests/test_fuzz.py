@@ -396,7 +396,7 @@ def test_modal_damping_rejects_bad_n_modes(n_modes):
 def test_damping_valid(alpha, beta, zeta):
     C = DISCRETE.with_damping(alpha=alpha, beta=beta).C.toarray()
     np.testing.assert_allclose(C, alpha * np.eye(3) + beta * np.diag([2.0, 3.0, 4.0]))
-    Cm = DISCRETE.with_damping(modal=zeta).C.toarray()
+    Cm = DISCRETE.with_damping(modal=zeta).damping_matrix().toarray()
     assert np.all(np.isfinite(Cm)) and np.allclose(Cm, Cm.T)
     # modal damping: Phi^T C Phi = diag(2 zeta_j w_j) on the damped modes, 0 on the others
     # (DISCRETE: M = I, K = diag(2, 3, 4), so Phi = I and w = sqrt(2), sqrt(3), 2)

@@ -194,7 +194,7 @@ def test_linear_response_single_dof_and_modal_damping():
     np.testing.assert_allclose(resp.magnitude(0), expect, rtol=1e-12)
     # modal damping ratio 0.05 on a 1-DOF system is c = 2 zeta w = 0.1
     md = fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_damping(modal=0.05)
-    np.testing.assert_allclose(md.C.toarray(), [[0.1]], rtol=1e-12)
+    np.testing.assert_allclose(md.damping_matrix().toarray(), [[0.1]], rtol=1e-12)
 
 
 def test_rayleigh_damping_matrix():

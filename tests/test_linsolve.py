@@ -23,19 +23,33 @@ from femodes.solvers.continuation import bordered_matrix, bordered_solver
 
 @pytest.fixture(autouse=True)
 def always_structured(monkeypatch):
-    """Small systems normally go to SuperLU (STRUCTURED_MIN_SIZE); test the structure at any size."""
+    """Small systems normally go to LAPACK (DENSE_MAX_SIZE) or SuperLU (STRUCTURED_MIN_SIZE); test
+    the structure at any size."""
     import femodes.hbm.linsolve as ls
 
     monkeypatch.setattr(ls, "STRUCTURED_MIN_SIZE", 0)
+    monkeypatch.setattr(ls, "DENSE_MAX_SIZE", 0)
 
 
-def test_small_systems_use_superlu(monkeypatch):
+def test_small_systems_use_lapack_then_superlu(monkeypatch):
     import femodes.hbm.linsolve as ls
 
     monkeypatch.setattr(ls, "STRUCTURED_MIN_SIZE", 2000)
     model, h = CASES["chain"]()
     pr = ForcedResponseProblem(model, h)
-    _, J, _ = pr.residual(state(pr, 1, 0.5), 1.1)
+    x = state(pr, 1, 0.5)
+    _, J, _ = pr.residual(x, 1.1)
+    assert J.shape[0] <= 500
+    monkeypatch.setattr(ls, "DENSE_MAX_SIZE", 500)
+    F = J.factorize()
+    assert isinstance(F, ls._Dense)
+    # the dense assembly is the sparse one, entry for entry (bordered too)
+    Jb = J.bordered(np.ones((J.shape[0], 1)), np.ones((1, J.shape[0])), np.array([[2.0]]))
+    for A in (J, 2.5 * J, Jb):
+        np.testing.assert_array_equal(A.toarray(), A.tocsr().toarray())
+    b = np.linspace(-1.0, 1.0, J.shape[0])
+    assert backward_error(J, F.solve(b), b) < 1e3 * np.finfo(float).eps
+    monkeypatch.setattr(ls, "DENSE_MAX_SIZE", 10)
     assert isinstance(J.factorize(), _Generic)
 
 

@@ -321,7 +321,7 @@ class _Flow:
         Minv = sla.cho_solve(chol, np.eye(self.n))
         self.Minv = 0.5 * (Minv + Minv.T)
         self.MinvK = self.Minv @ model.K.toarray()
-        self.MinvC = self.Minv @ model.C.toarray()
+        self.MinvC = self.Minv @ model.damping_matrix().toarray()  # with a modal damping part (dense here)
 
     def _forcing(self, model) -> None:
         """Forcing ``Re sum_k (M^-1 F_k) e^{i k w t}``."""

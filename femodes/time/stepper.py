@@ -32,7 +32,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..laws import CubicSpring, PenaltyContact, UnilateralContact
-from ..model import StructuralModel
+from ..model import StructuralModel, low_rank_solver
 from ..solvers import NewtonOptions, semismooth_newton
 from .impact import ImpactLaw, fischer_burmeister, solve_lcp
 
@@ -122,6 +122,11 @@ class Stepper:
         self.n, self.h, self.theta, self.e = model.n_dofs, h, theta, restitution
         self.newton = LOCAL_NEWTON if newton is None else newton
         M, K, C = model.M.tocsr(), model.K.tocsr(), model.C.tocsr()
+        # modal damping: the low-rank part U diag(d) U^T of the damping (StructuralModel); the
+        # dense path of small models takes the assembled matrix, the sparse one Woodbury
+        self.C_lr = model.C_lowrank
+        if self.C_lr is not None and self.n <= DENSE_LIMIT:
+            C, self.C_lr = model.damping_matrix().tocsr(), None
         self.massless = _massless_dofs(M)
         # massless rows are algebraic: theta = 1 there (the trapezoidal rule would carry (-1)^k)
         self.th = np.where(self.massless, 1.0, theta)
@@ -143,12 +148,13 @@ class Stepper:
     # -- construction, step by step ---------------------------------------------------------------
     def _factorize(self, M, K, C) -> None:
         """The iteration matrix ``A = M + h Theta C + h^2 Theta K Theta``: dense inverse (small
-        models) or sparse LU; ``self.solve(r) = A^{-1} r``."""
+        models) or sparse LU; ``self.solve(r) = A^{-1} r``. A low-rank damping part adds
+        ``(h Theta U) diag(d) U^T`` to the sparse ``A``: Woodbury (:func:`low_rank_solver`)."""
         h, n = self.h, self.n
         Th = sp.diags(self.th)
         A = (M + h * (Th @ C) + h * h * (Th @ K @ Th)).tocsc()
         self.dense = n <= DENSE_LIMIT
-        self.has_C = C.nnz > 0
+        self.has_C = C.nnz > 0 or self.C_lr is not None
         if self.dense:
             self.M, self.K, self.C = M.toarray(), K.toarray(), C.toarray()
             Ad = A.toarray()
@@ -166,6 +172,9 @@ class Stepper:
             except RuntimeError as exc:
                 raise ValueError(f"{_SINGULAR} (a massless DOF without stiffness?)") from exc
             self.solve = lu.solve
+            if self.C_lr is not None:
+                U = self.C_lr.U
+                self.solve = low_rank_solver(lu.solve, h * self.th[:, None] * U, self.C_lr.d, U)
 
     def _forcing(self, model: StructuralModel, omega: float | None) -> None:
         """Harmonic forcing ``f0 + Re sum_k F_k e^{i k omega t}`` restricted to the forced DOFs."""
@@ -410,6 +419,8 @@ class Stepper:
         r = -h * Kq0 - (h * h) * th * Kv0
         if self.has_C:
             r -= h * (self.C @ v0)
+            if self.C_lr is not None:
+                r -= h * self.C_lr.matmul(v0)
         if self.fidx.size:
             r[self.fidx] += h * (self.thf * f1 + (1.0 - self.thf) * f0)
         S = self.S

@@ -356,6 +356,8 @@ def _nnz(J) -> int | None:
         return int(J.nnz)
     if isinstance(J, np.ndarray):
         return int(J.size)
+    if isinstance(getattr(type(J), "nnz", None), property):  # structured: its own count (low-rank parts
+        return int(J.nnz)                                    # stay factors, never assembled dense)
     try:
         return int(J.tocsr().nnz)
     except Exception:  # an operator without an assembled form: nnz is not defined

@@ -25,6 +25,12 @@ _WHAT = {"iteration": "time per Newton iteration", "point": "time per continuati
          "memory": "peak memory above baseline"}
 
 
+#: A case's Jacobian counts as dense when it stores more than this fraction of unknowns^2 entries
+#: (the HBM Jacobian of an FE model stores O(unknowns); an assembled modal damping or a dense
+#: reduced model makes it O(unknowns^2), and every solve then costs O(unknowns^3)).
+DENSE_JACOBIAN_FRACTION = 0.1
+
+
 @dataclass(frozen=True)
 class ScalingRecord:
     """Measurements of one ``(N, H)`` case; times in seconds, memory in MiB (NaN: not measured).
@@ -67,6 +73,19 @@ class ScalingRecord:
     def ok(self) -> bool:
         """True when the per-iteration time was measured."""
         return not self.error and math.isfinite(self.iteration_median_s)
+
+    @property
+    def dense_jacobian(self) -> bool:
+        """``nnz(J) > DENSE_JACOBIAN_FRACTION * unknowns^2``: the case's Jacobian is dense."""
+        return (self.nnz_J is not None and bool(self.unknowns)
+                and self.nnz_J > DENSE_JACOBIAN_FRACTION * float(self.unknowns) ** 2)
+
+    def dense_note(self) -> str:
+        """The warning for a dense Jacobian (empty otherwise)."""
+        if not self.dense_jacobian:
+            return ""
+        return (f"dense Jacobian: nnz(J) = {self.nnz_J / float(self.unknowns) ** 2:.0%} of unknowns^2 "
+                f"(> {DENSE_JACOBIAN_FRACTION:.0%})")
 
     def to_dict(self) -> dict:
         return {k: getattr(self, k) for k in CSV_COLUMNS}
@@ -153,6 +172,8 @@ def _note(r: ScalingRecord) -> str:
     note = r.error or ("" if r.contact_active is not False else "no active contact")
     if r.continuation.startswith("failed") and not r.error:
         note = (note + "; " if note else "") + r.continuation
+    if r.dense_jacobian:
+        note = r.dense_note() + ("; " + note if note else "")
     return note
 
 

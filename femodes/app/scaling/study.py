@@ -137,6 +137,9 @@ def _measure_cases(specs: list, timeout: float | None, progress: bool, out: Path
 
 
 def _log_record(label: str, rec: ScalingRecord) -> None:
+    if rec.dense_jacobian:
+        log.warning("scaling %s: %s; its solves cost O(unknowns^3) (modal damping is kept sparse; "
+                    "a dense matrix C or a dense reduced model is not)", label, rec.dense_note())
     if rec.ok:
         log.info("scaling %s: N=%s, %.3g ms per iteration, %.3g s per point, peak %.0f MiB", label, rec.N,
                  1e3 * rec.iteration_median_s, rec.point_s, rec.peak_mib)
