@@ -167,7 +167,7 @@ def frequency_response(
             run_options = dataclasses.replace(run_options, x_scale=_response_scale(problem, span, xs))
         return xs, run_options
 
-    method = _stability_method(stability, "frequency_response")
+    method = stability_method(stability, "frequency_response")
 
     def wrap(res, meta) -> Branch:
         branch = branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span), **meta})
@@ -309,7 +309,7 @@ def nonlinear_mode(
     span = (math.log10(e0), math.log10(e1))
     x0 = problem.linear_guess(e0)
     options = nonlinear_mode_options(problem, x0, options)
-    method = _stability_method(stability, "nonlinear_mode")
+    method = stability_method(stability, "nonlinear_mode")
 
     def wrap(res, meta) -> Branch:
         if res.status == 5:  # the start failed: say it in the user's terms, not as p = log10(E)
@@ -329,7 +329,7 @@ def nonlinear_mode(
     return _with_stability(branch, problem, model, method, options)
 
 
-def _stability_method(stability: Any, owner: str) -> str | None:
+def stability_method(stability: Any, owner: str) -> str | None:
     """``stability=`` of the analyses: False (none), True (``"auto"``) or a method name."""
     if stability is False or stability is None:
         return None

@@ -399,17 +399,31 @@ def refine_branch_point(problem, za: np.ndarray, zb: np.ndarray, newton: NewtonO
     s1, l1 = branch_point_test(problem, zb, c)
     if s0 != 0 and s1 != 0 and s0 == s1:
         return None
+
+    def test(z: np.ndarray) -> float:
+        sg, ld = branch_point_test(problem, z, c)
+        return float(sg * math.exp(ld - l0))  # linear in theta near a simple branch point
+
+    return root_on_secant(problem, za, zb, test, float(s0), float(s1 * math.exp(l1 - l0)), newton,
+                          max_iter=60, ftol=1e-12, xtol=1e-13)
+
+
+def root_on_secant(problem, za: np.ndarray, zb: np.ndarray, test, fa: float, fb: float, newton: NewtonOptions,
+                   **illinois_options) -> np.ndarray:
+    """The solution between the branch points ``za`` and ``zb`` where ``test(z)`` changes sign:
+    Illinois regula falsi (:func:`~femodes.solvers.roots.illinois`, ``illinois_options``) on
+    ``theta`` over the solutions on the secant (:func:`solve_on_secant`), ``fa``, ``fb`` the
+    values at the ends; the end of the final bracket with the smaller ``|test|``."""
     points = {0.0: za, 1.0: zb}
 
-    def test(theta: float) -> float | None:
+    def f(theta: float) -> float | None:
         z = solve_on_secant(problem, za, zb, theta, newton)
         if z is None:
             return None
         points[theta] = z
-        sg, ld = branch_point_test(problem, z, c)
-        return float(sg * math.exp(ld - l0))  # linear in theta near a simple branch point
+        return test(z)
 
-    br = illinois(test, 0.0, 1.0, float(s0), float(s1 * math.exp(l1 - l0)), max_iter=60, ftol=1e-12, xtol=1e-13)
+    br = illinois(f, 0.0, 1.0, fa, fb, **illinois_options)
     return points[br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi]
 
 

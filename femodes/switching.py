@@ -71,15 +71,15 @@ import math
 import numpy as np
 import scipy.linalg as sla
 
-from .analyses import branch_from_continuation, frequency_response, frequency_response_options, nonlinear_mode_options
+from .analyses import (branch_from_continuation, frequency_response, frequency_response_options, nonlinear_mode_options,
+                       stability_method)
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .results import Bifurcation, Branch
-from .floquet import (METHODS, annotate_branch, augmented_jacobian, branch_point_test, refine_branch_point,
+from .floquet import (annotate_branch, augmented_jacobian, branch_point_test, refine_branch_point, root_on_secant,
                       solve_on_secant)
 from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState, NewtonOptions, continuation,
                       semismooth_newton)
-from .solvers.roots import illinois
 from .solvers.threads import limit_blas_threads
 
 __all__ = ["switch_branch", "DENSE_LIMIT"]
@@ -162,20 +162,13 @@ def _locate_hbm_doubling(branch: Branch, bif: Bifurcation, dbl: _Doubled, newton
     i = min(changes, key=lambda j: abs(j + 0.5 - (bif.index + 0.5)))
     za = np.append(p1.pack(branch.Q[i], branch.P[i], branch.omega[i]), branch.omega[i])
     zb = np.append(p1.pack(branch.Q[i + 1], branch.P[i + 1], branch.omega[i + 1]), branch.omega[i + 1])
-    points = {0.0: za, 1.0: zb}
 
-    def test(theta: float) -> float | None:
-        z = solve_on_secant(p1, za, zb, theta, newton)
-        if z is None:
-            return None
-        points[theta] = z
+    def test(z: np.ndarray) -> float:
         u = p1.unpack(z[:-1], z[-1])
         return dbl.test(dbl.point(u.Q, u.P), u.omega)
 
-    br = illinois(test, 0.0, 1.0, vals[i], vals[i + 1], max_iter=60, ftol=1e-13, xtol=1e-12)
-    best = points[br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi]
-    u = p1.unpack(best[:-1], best[-1])
-    return u, i
+    best = root_on_secant(p1, za, zb, test, vals[i], vals[i + 1], newton, max_iter=60, ftol=1e-13, xtol=1e-12)
+    return p1.unpack(best[:-1], best[-1]), i
 
 
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
@@ -442,7 +435,7 @@ def _null_directions(aug: _Augmented, z_bp: np.ndarray, za: np.ndarray, zb: np.n
 
 def _switch_at_branch_point(branch: Branch, bif: Bifurcation, span: tuple[float, float], amplitude, options,
                             stability, window: int) -> Branch:
-    method = _stability_method(stability)  # a bad value is refused before the work
+    method = stability_method(stability, "switch_branch")  # a bad value is refused before the work
     aug = _Augmented(branch)
     w_lo, w_hi = min(span), max(span)
     if not w_lo < bif.omega < w_hi:
@@ -582,17 +575,6 @@ def _trace(aug: _Augmented, z_bp: np.ndarray, z1: np.ndarray, phi: np.ndarray, D
         nit=np.concatenate([[0, 0], res.nit]), residual_norm=np.concatenate([rn, res.residual_norm]),
         step=np.concatenate([[0.0, float(np.sqrt(np.sum(((z1 - z_bp) / D) ** 2)))], res.step]),
         folds=tuple(f + 1 for f in res.folds), tangents=tangents, first_index=0)
-
-
-def _stability_method(stability) -> str | None:
-    if stability is False or stability is None:
-        return None
-    if stability is True:
-        return "auto"
-    if stability in METHODS:
-        return stability
-    raise ValueError(f"switch_branch: stability must be True, False or one of {', '.join(map(repr, METHODS))}, "
-                     f"got {stability!r}")
 
 
 # ------------------------------------------------------------------------------------------------

@@ -547,16 +547,7 @@ class HarmonicBlockJacobian:
 
     def tocsr(self) -> sp.csr_matrix:
         """The assembled sparse matrix (generic fallback and checks)."""
-        s = self.system
-        S = s.linear_operator(self.omega)
-        if self.xi:
-            S = S - (self.xi * self.omega) * s.AM
-        if s.np:
-            S = sp.block_diag([S, sp.csr_matrix((s.np, s.np))], format="csr")
-        core = (self.scale * (S + self.N)).tocsr()
-        if not self.n_border:
-            return core
-        return sp.bmat([[core, sp.csr_matrix(self.U)], [sp.csr_matrix(self.V), sp.csr_matrix(self.D)]], format="csr")
+        return self._assemble(self.system.linear_operator(self.omega))
 
     def tocsc(self) -> sp.csc_matrix:
         return self.tocsr().tocsc()
@@ -564,7 +555,12 @@ class HarmonicBlockJacobian:
     def _sparse_core(self) -> sp.csr_matrix:
         """``J`` (with its borders) without the low-rank damping: the sparse part of ``S(w)``."""
         s = self.system
-        S = (self.omega * self.omega) * s.A2 + self.omega * s._kron("A1s", s.D1, s.C) + s.A0
+        return self._assemble((self.omega * self.omega) * s.A2 + self.omega * s._kron("A1s", s.D1, s.C) + s.A0)
+
+    def _assemble(self, S: sp.spmatrix) -> sp.csr_matrix:
+        """``J`` with the linear operator ``S`` (its artificial damping, contact-force rows, scale,
+        nonlinear part and borders added)."""
+        s = self.system
         if self.xi:
             S = S - (self.xi * self.omega) * s.AM
         if s.np:
