@@ -143,7 +143,7 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
     """
     if not isinstance(model, StructuralModel):
         raise TypeError(f"craig_bampton: model must be a StructuralModel, got {type(model).__name__}")
-    kept = _kept_dofs(model, keep)
+    kept = kept_dofs(model, keep)
     n = model.n_dofs
     interior = np.setdiff1d(np.arange(n), kept)
     n_modes = _check_n_modes(n_modes, interior.size)
@@ -153,7 +153,7 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
     return reduced
 
 
-def _kept_dofs(model: StructuralModel, keep: Sequence | None) -> np.ndarray:
+def kept_dofs(model: StructuralModel, keep: Sequence | None = None) -> np.ndarray:
     """Sorted parent DOFs kept physical: contact, forcing and nonlinear DOFs plus those of ``keep``."""
     declared = [a.dof for a in model.contacts + model.forces + model.nonlinearities]
     extra = []

@@ -72,7 +72,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..reduction import craig_bampton
+from ..reduction import craig_bampton, kept_dofs
 from .system import HBMSystem
 
 __all__ = ["HillResult", "hill_matrices", "hill_exponents", "DENSE_LIMIT", "REDUCE_MIN_DOFS"]
@@ -429,7 +429,10 @@ class _Reduction:
         self.systems: dict = {}     # n_modes -> HBMSystem of the truncated reduction
         self.alpha = ALPHA          # cut-off (in (H + 1/2) w / nu) that sufficed at the last point
         model = system.model
-        self.n_kept = len({a.dof for a in model.contacts + model.forces + model.nonlinearities})
+        try:  # the DOFs craig_bampton keeps (ValueError: none declared, it cannot reduce either)
+            self.n_kept = kept_dofs(model).size
+        except ValueError:
+            self.n_kept = 0
         self.n_interior = model.n_dofs - self.n_kept
 
     def modes_up_to(self, cutoff: float) -> int | None:
@@ -523,8 +526,8 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
 #: Truncation error estimate: the change ``delta`` of the leading multipliers' moduli from a coarse
 #: to a fine reduction (the coarse exponent nearest to each of the fine one's four leading ones),
 #: cut-offs in the ratio ``r``, gives the fine one's error ``delta / (r^RATE - 1)`` if the error
-#: falls like ``omega_c^-RATE``; RATE is set below the measured 3 (5 to 13 per doubling of the cut-off) so that the estimate errs on the safe side
-#: (``|delta| / 3`` for ``r = 2``).
+#: falls like ``omega_c^-RATE``; RATE is set below the measured 3 (5 to 13 per doubling of the
+#: cut-off) so that the estimate errs on the safe side (``|delta| / 3`` for ``r = 2``).
 RATE = 2.0
 
 
