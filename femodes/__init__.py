@@ -14,9 +14,10 @@ from .reduction import ReducedModel, craig_bampton
 from .hbm import ForcedResponseProblem, Harmonics, NonlinearModeProblem
 from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState, NewtonOptions, NewtonResult,
                       continuation, semismooth_newton)
-from .results import Bifurcation, Branch, PeriodicSolution, load_branch
+from .results import Bifurcation, Branch, ErrorEstimate, PeriodicSolution, load_branch
 from .analyses import StaticContactResult, frequency_response, nonlinear_mode, static_contact
 from .floquet import StabilityResult, stability
+from .accuracy import estimate_error
 from .switching import switch_branch
 from .store import Checkpoint
 from .time import SteadyState, TimeHistory, TimeSteppingOptions, simulate, steady_state
@@ -61,6 +62,8 @@ __all__ = [
     "continuation",
     "semismooth_newton",
     "Branch",
+    "ErrorEstimate",
+    "estimate_error",
     "PeriodicSolution",
     "load_branch",
     "Checkpoint",

@@ -21,7 +21,7 @@ from .hbm.harmonics import Harmonics
 from .laws import PenaltyContact, UnilateralContact
 from .store import RECORD_SUFFIXES, read_record, write_record
 
-__all__ = ["PeriodicSolution", "Branch", "Bifurcation", "load_branch", "FORMAT_VERSION", "BIFURCATION_KINDS"]
+__all__ = ["PeriodicSolution", "Branch", "Bifurcation", "ErrorEstimate", "load_branch", "FORMAT_VERSION", "BIFURCATION_KINDS"]
 
 FORMAT_VERSION = 1
 
@@ -72,6 +72,68 @@ class Bifurcation:
     def __repr__(self) -> str:
         return (f"Bifurcation({self.kind!r}, index={self.index}, omega={self.omega:.8g}, "
                 f"multiplier={complex(self.multiplier):.4g})")
+
+
+#: How the error of a point was estimated (:attr:`ErrorEstimate.method`): from the change between
+#: levels of harmonics (``"doubling"``), or not at all (``"failed"``: a level had no solution near
+#: the point, e.g. next to a fold that moves by more than the branch's curvature allows).
+ERROR_METHODS = ("doubling", "failed")
+
+
+@dataclass(frozen=True, eq=False)
+class ErrorEstimate:
+    """Estimated error of every point of a branch with respect to the converged (``H -> inf``)
+    answer (:mod:`femodes.accuracy`).
+
+    Attributes (arrays over the points)
+    -----------------------------------
+    omega : ndarray
+        Relative error of the frequency.
+    amplitude : ndarray
+        Relative error of the displacement: ``|Q - Q_inf| / |Q|`` over all Fourier coefficients
+        (the RMS over the period and the DOFs).
+    penetration, tension : ndarray
+        Contact quality of the point as stored: max penetration over the largest contact-DOF
+        displacement, max tension over the largest contact force (0 without contacts).
+    harmonics : ndarray of int
+        Harmonics of the point as stored.
+    rate : ndarray
+        Observed contraction of the error per doubling of H (``inf``: unchanged to round-off).
+    method : ndarray of str
+        One of :data:`ERROR_METHODS` per point.
+    rtol : float or None
+        The requested tolerance (``None``: estimate only).
+    """
+
+    omega: np.ndarray
+    amplitude: np.ndarray
+    penetration: np.ndarray
+    tension: np.ndarray
+    harmonics: np.ndarray
+    rate: np.ndarray
+    method: np.ndarray
+    rtol: float | None = None
+
+    def __post_init__(self):
+        n = np.asarray(self.omega).shape
+        for name in ("omega", "amplitude", "penetration", "tension", "harmonics", "rate", "method"):
+            if np.asarray(getattr(self, name)).shape != n:
+                raise ValueError(f"ErrorEstimate: {name} must have one value per point ({n}), "
+                                 f"got shape {np.asarray(getattr(self, name)).shape}")
+        bad = set(np.asarray(self.method, dtype=str).tolist()) - set(ERROR_METHODS)
+        if bad:
+            raise ValueError(f"ErrorEstimate: method must be one of {ERROR_METHODS}, got {sorted(bad)}")
+
+    @property
+    def value(self) -> np.ndarray:
+        """The estimated relative error per point: the larger of frequency and amplitude (NaN
+        where it could not be estimated)."""
+        return np.fmax(np.asarray(self.omega, float), np.asarray(self.amplitude, float))
+
+    def arrays(self) -> dict:
+        return {"omega": np.asarray(self.omega, float), "amplitude": np.asarray(self.amplitude, float),
+                "penetration": np.asarray(self.penetration, float), "tension": np.asarray(self.tension, float),
+                "harmonics": np.asarray(self.harmonics, int), "rate": np.asarray(self.rate, float)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -173,6 +235,11 @@ class PeriodicSolution:
     multipliers, stable : ndarray (complex) and bool, or None
         Floquet multipliers (largest modulus first) and stability, when the branch has them
         (``stability=True``); ``None`` otherwise.
+    error_estimate : float or None
+        Estimated relative error of frequency and amplitude with respect to the converged
+        (``H -> inf``) answer, when the branch has one (``rtol=`` of the analyses, or
+        :func:`femodes.estimate_error`); ``None`` otherwise. ``harmonics`` is the point's own
+        (error control may use more harmonics at some points than at others).
     """
 
     omega: float
@@ -188,6 +255,7 @@ class PeriodicSolution:
     kind: str = "forced"
     multipliers: np.ndarray | None = None
     stable: bool | None = None
+    error_estimate: float | None = None
 
     @property
     def period(self) -> float:
@@ -301,6 +369,35 @@ class Branch:
         self.multipliers: np.ndarray | None = None
         self.stability_method: np.ndarray | None = None
         self.bifurcations: tuple = ()
+        self.accuracy: ErrorEstimate | None = None
+
+    def set_accuracy(self, accuracy: ErrorEstimate) -> "Branch":
+        """Attach the error estimate of every point (used by :mod:`femodes.accuracy`)."""
+        if not isinstance(accuracy, ErrorEstimate):
+            raise TypeError(f"set_accuracy: expected an ErrorEstimate, got {type(accuracy).__name__}")
+        if np.asarray(accuracy.omega).shape != (len(self),):
+            raise ValueError(f"set_accuracy: one value per point ({len(self)}) expected")
+        if np.any(np.asarray(accuracy.harmonics) > self.harmonics.n_harmonics):
+            raise ValueError("set_accuracy: a point uses more harmonics than the branch stores")
+        self.accuracy = accuracy
+        return self
+
+    @property
+    def error_estimate(self) -> np.ndarray | None:
+        """Estimated relative error (frequency and amplitude, the larger) of every point with
+        respect to the converged (``H -> inf``) answer; ``None`` unless computed (``rtol=`` of
+        the analyses, or :func:`femodes.estimate_error`). Details: :attr:`accuracy`."""
+        return None if self.accuracy is None else self.accuracy.value
+
+    def point_harmonics(self, i: int) -> Harmonics:
+        """The harmonics of point ``i`` (error control may refine some points more than others;
+        the branch stores every point on its largest ``harmonics``, zero-padded)."""
+        if self.accuracy is None:
+            return self.harmonics
+        H = int(self.accuracy.harmonics[i])
+        if H == self.harmonics.n_harmonics:
+            return self.harmonics
+        return Harmonics(H, subharmonic=self.harmonics.subharmonic)
 
     def set_stability(self, *, stable, multipliers, bifurcations, methods, tol: float) -> "Branch":
         """Attach the stability of every point (used by :mod:`femodes.floquet`)."""
@@ -334,12 +431,16 @@ class Branch:
         except IndexError:
             raise IndexError(f"branch index {i} is out of range for a branch of {len(self)} points "
                              f"(valid: 0 .. {len(self) - 1}, or negative from the end)") from None
+        h = self.point_harmonics(i)
+        Q, P = (self.Q[i], self.P[i]) if h is self.harmonics else (
+            self.harmonics.convert(self.Q[i], h), self.harmonics.convert(self.P[i], h))
         return PeriodicSolution(
-            omega=float(self.omega[i]), Q=self.Q[i], P=self.P[i], harmonics=self.harmonics, contacts=self.contacts,
+            omega=float(self.omega[i]), Q=Q, P=P, harmonics=h, contacts=self.contacts,
             energy=float(self.energy[i]), xi=float(self.xi[i]), residual_norm=float(self.residual_norm[i]),
             nit=int(self.nit[i]), model=self.model, kind=self.kind,
             multipliers=None if self.multipliers is None else self.multipliers[i][np.isfinite(self.multipliers[i])],
             stable=None if self.stable is None else bool(self.stable[i]),
+            error_estimate=None if self.accuracy is None else float(self.accuracy.value[i]),
         )
 
     def __iter__(self):
@@ -386,6 +487,8 @@ class Branch:
             "residual_norm": self.residual_norm, "nit": self.nit, "parameter": self.parameter,
             "folds": np.asarray(self.folds, dtype=int),
         }
+        if self.accuracy is not None:
+            out.update({f"accuracy_{k}": v for k, v in self.accuracy.arrays().items()})
         if self.stable is not None:
             bifs = self.bifurcations
             out.update({
@@ -405,6 +508,8 @@ class Branch:
             "harmonics": [self.harmonics.n_harmonics, self.harmonics.n_time, self.harmonics.subharmonic],
             "contacts": self.contacts.to_json(), "success": self.success, "status": self.status,
             "message": self.message, "meta": self.meta,
+            "accuracy": None if self.accuracy is None else {
+                "method": [str(m) for m in self.accuracy.method], "rtol": self.accuracy.rtol},
             "stability": None if self.stable is None else {
                 "methods": [str(m) for m in self.stability_method], "kinds": [b.kind for b in self.bifurcations]},
         }
@@ -443,6 +548,11 @@ def load_branch(path, model=None) -> Branch:
         folds=arrays["folds"].tolist(), success=header["success"], status=header["status"], message=header["message"],
         meta=header.get("meta"),
     )
+    acc = header.get("accuracy")
+    if acc is not None:
+        br.set_accuracy(ErrorEstimate(**{k: arrays[f"accuracy_{k}"] for k in ("omega", "amplitude", "penetration",
+                                                                                "tension", "harmonics", "rate")},
+                                      method=np.asarray(acc["method"], dtype=str), rtol=acc["rtol"]))
     stab = header.get("stability")
     if stab is not None:
         bifs = [Bifurcation(kind=k, index=int(i), omega=float(r[0]), energy=float(r[1]), parameter=float(r[2]),

@@ -32,6 +32,7 @@ LAYERS = {
     "femodes.analyses": 5,
     "femodes.runs": 5,
     "femodes.floquet": 5,
+    "femodes.accuracy": 5,
     "femodes.switching": 5,
     "femodes.fields": 6,
     "femodes.plot": 6,

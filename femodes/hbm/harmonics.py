@@ -289,6 +289,19 @@ class Harmonics:
         self.check_coef(Q, "Q")
         return np.ascontiguousarray(Q).reshape(-1)
 
+    def convert(self, Q, to: "Harmonics") -> np.ndarray:
+        """Coefficients ``Q`` (shape ``(n_coef, ...)``) of this basis on the basis ``to`` (same
+        subharmonic index): harmonics up to ``min(H, H_to)`` copied, missing ones zero, the
+        ones beyond ``H_to`` dropped (the L2-best truncation)."""
+        if not isinstance(to, Harmonics) or to.subharmonic != self._nu:
+            raise ValueError(f"convert: target must be a Harmonics with subharmonic={self._nu}, got {to!r}")
+        Q = np.asarray(Q, dtype=float)
+        self.check_coef(Q, "Q")
+        out = np.zeros((to.n_coef,) + Q.shape[1:])
+        m = 2 * min(self._H, to.n_harmonics) + 1  # rows [c0; c1; s1; ...; c_m; s_m] of both layouts
+        out[:m] = Q[:m]
+        return out
+
     def check_coef(self, Q, name, allow_1d=True):
         if Q.ndim not in ((1, 2) if allow_1d else (2,)) or Q.shape[0] != self.n_coef:
             raise ValueError(

@@ -1,0 +1,427 @@
+r"""Analyses layer: how far a harmonic balance branch is from the converged (``H -> inf``) answer.
+
+Harmonic balance with ``H`` harmonics converges exponentially for smooth laws (Duffing) and
+only algebraically for impacts: the velocity jumps at an impact, the displacement spectrum decays
+like ``k^-2``, and the upper fold of a forced impact oscillator moves by ``~C/H`` (first order in
+``1/H``: 4.4 %, 2.4 %, 1.2 %, 0.67 % at H = 10, 20, 40, 80 against the event-driven reference
+of ``tests/impact_reference.py``). This module states that error for every point of a branch.
+
+**Levels.** A point ``y_H = (x_H, p)`` of a branch is solved again with other harmonic counts
+(the *levels* ``H/2`` and ``2H``) *on the hyperplane through the point normal to the branch*
+(normal in the arclength norm of the branch; the new harmonics enter with zero normal
+component), so the difference of two levels is the change of the curve, not a slide along it.
+Nonlinear modes are compared at the same energy instead (the backbone's abscissa).
+Newton cannot jump between levels from the branch's own point (the truncated or padded contact
+forces are outside its basin), so each level is traced along the branch, point after point
+(:func:`_trace_level`). A located fold is located again on each level by a short continuation,
+so fold frequencies of the levels are compared directly.
+
+**Rate and estimate.** With the distances ``d_j = |X_j - X_{j-1}|`` of successive levels (``X``:
+frequency and displacement coefficients, each relative), the observed contraction per doubling
+is ``r = d_{j-1} / d_j``; if the error contracts geometrically with that ratio, the error of level
+``j - 1`` is ``d_j r / (r - 1)``. The contraction observed at coarse levels is *smaller* than the
+asymptotic one for impacts (fold of the seed's forced case: 1.62 at H = 10, 1.74 at H = 20,
+-> 2), which makes the estimate err on the safe side (1.1-1.3x the true error there); a ratio
+below :data:`RATE_MIN` (not yet in the asymptotic range, or not converging) is replaced by
+``RATE_MIN``. Smooth laws give ratios of 10^2 - 10^6: the estimate is then the last difference.
+
+Contact quality (penetration, tension) of every point is part of the estimate record
+(:class:`femodes.results.ErrorEstimate`), relative to the displacement and contact-force levels.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from .hbm.harmonics import Harmonics
+from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
+from .results import Branch, ErrorEstimate
+from .solvers import ContinuationOptions, NewtonOptions, continuation
+from .solvers.threads import limit_blas_threads
+from .solvers.arclength import ArclengthSystem
+from .solvers.bordered import bordered_solver
+
+__all__ = ["estimate_error", "RATE_MIN"]
+
+log = logging.getLogger(__name__)
+
+#: Smallest contraction ratio per doubling of H used in the estimate: a ratio below it means the
+#: levels are not yet in the asymptotic range (or diverge); ``r / (r - 1)`` is then at most 3.
+RATE_MIN = 1.5
+
+
+@dataclass
+class _State:
+    """One solution at one level: the parts of the unknowns by name."""
+
+    H: int
+    Q: np.ndarray
+    P: np.ndarray
+    omega: float
+    xi: float
+    p: float
+    nit: int = 0
+    residual_norm: float = math.nan
+
+
+class _Ladder:
+    """The branch's HBM problem at any number of harmonics, and hyperplane solves on it."""
+
+    def __init__(self, branch: Branch, projection=None, newton: NewtonOptions | None = None):
+        if branch.model is None:
+            raise ValueError("estimate_error: the branch has no model (loaded from a file?); attach it first with "
+                             "branch.attach(model)")
+        self.branch = branch
+        self.model = branch.model
+        self.h0 = branch.harmonics
+        self.projection = projection
+        self.newton = newton or NewtonOptions(atol=1e-9, max_iter=20)
+        self.forced = branch.kind == "forced"
+        self._problems: dict[int, object] = {}
+        meta = branch.meta
+        if not self.forced:
+            span = meta.get("energy_span")
+            if span is None or "mode" not in meta:
+                raise ValueError("estimate_error: a nonlinear-mode branch needs its 'mode' and 'energy_span' "
+                                 "(branch.meta, set by femodes.nonlinear_mode)")
+            self.mode = int(meta["mode"])
+            self.reference_energy = math.sqrt(float(span[0]) * float(span[1]))
+        # arclength geometry of the branch (weights of the parts; the same for every level)
+        Q, P = branch.Q, branch.P
+        self.sQ = float(np.sqrt(np.mean(Q ** 2))) or 1.0
+        self.sP = float(np.sqrt(np.mean(P ** 2))) if P.size else 1.0
+        self.sP = self.sP or 1.0
+        w = branch.omega
+        if self.forced:  # the parameter is w: scaled by the width of the branch, as the continuation does
+            self.sp = self.sw = float(np.ptp(w)) or 0.1 * float(np.mean(np.abs(w))) or 1.0
+        else:  # p = log10(E) by 1; w (and xi) by a tenth of the mean frequency
+            self.sp = 1.0
+            self.sw = 0.1 * float(np.mean(np.abs(w))) or 1.0
+
+    # -- levels -------------------------------------------------------------
+    def harmonics(self, H: int) -> Harmonics:
+        h0 = self.h0
+        default = Harmonics(H, subharmonic=h0.subharmonic)
+        if h0.n_time == Harmonics(h0.n_harmonics, subharmonic=h0.subharmonic).n_time:
+            return default  # the branch used the default sampling: so does every level
+        return Harmonics(H, max(default.n_time, -(-h0.n_time * H // h0.n_harmonics)), h0.subharmonic)
+
+    def problem(self, H: int):
+        if H not in self._problems:
+            h = self.harmonics(H)
+            if self.forced:
+                self._problems[H] = ForcedResponseProblem(self.model, h, projection=self.projection)
+            else:
+                self._problems[H] = NonlinearModeProblem(self.model, h, self.mode,
+                                                         reference_energy=self.reference_energy,
+                                                         projection=self.projection)
+        return self._problems[H]
+
+    def vector(self, H: int, Q, P, omega, xi, p) -> np.ndarray:
+        """``y = (x, p)`` of level ``H`` from parts given on the branch's harmonics or level ``H``."""
+        h = self.harmonics(H)
+        Q = self._on(Q, h)
+        P = self._on(P, h)
+        x = self.problem(H).pack(Q, P, omega, xi)
+        return np.append(x, omega if self.forced else p)
+
+    def _on(self, A, h: Harmonics) -> np.ndarray:
+        A = np.asarray(A, dtype=float)
+        n_coef = A.shape[0]
+        H = (n_coef - 1) // 2
+        return self.harmonics(H).convert(A, h) if H != h.n_harmonics else A
+
+    def state(self, H: int, y: np.ndarray) -> _State:
+        u = self.problem(H).unpack(y[:-1], y[-1])
+        return _State(H, u.Q.copy(), u.P.copy(), float(u.omega), float(u.xi), float(y[-1]))
+
+    def weights(self, H: int) -> np.ndarray:
+        """Weights of the branch's arclength norm, laid out on level ``H`` (1/n of level H0)."""
+        h0 = self.h0
+        nq = h0.n_coef * self.branch.Q.shape[2]
+        npc = max(h0.n_coef * self.branch.P.shape[2], 1)
+        h = self.harmonics(H)
+        Qw = np.full((h.n_coef, self.branch.Q.shape[2]), 1.0 / (nq * self.sQ ** 2))
+        Pw = np.full((h.n_coef, self.branch.P.shape[2]), 1.0 / (npc * self.sP ** 2))
+        x = self.problem(H).pack(Qw, Pw, 1.0 / self.sw ** 2, 1.0 / self.sw ** 2)
+        return np.append(x, 1.0 / self.sp ** 2)
+
+    def solve(self, H: int, anchor: _State, normal: _State, guess: _State | None = None) -> _State | None:
+        """The level-``H`` solution on the hyperplane through ``anchor`` normal to ``normal``
+        (both on the branch's harmonics), Newton from ``guess`` (default: the anchor)."""
+        prob = self.problem(H)
+        a = self.vector(H, anchor.Q, anchor.P, anchor.omega, anchor.xi, anchor.p)
+        c = self.weights(H) * self.vector(H, normal.Q, normal.P, normal.omega, normal.xi, normal.p)
+        if guess is None:
+            g = a
+        else:
+            g = self.vector(H, guess.Q, guess.P, guess.omega, guess.xi, guess.p)
+            g = g - (c @ (g - a)) / (c @ c) * c  # onto the hyperplane
+        sysa = ArclengthSystem(prob, prob.size, self.newton, bordered_solver)
+        with np.errstate(all="ignore"):
+            res = sysa.correct(g, c)
+        if not res.success:
+            log.debug("level H=%d: no solution on the hyperplane (%s)", H, res.message)
+            return None
+        st = self.state(H, res.x)
+        st.nit, st.residual_norm = int(res.nit), float(res.residual_norm)
+        return st
+
+    @cached_property
+    def tangents(self) -> list:
+        """Normals of the hyperplanes of the points: the branch direction for forced responses
+        (so that folds in w are crossed), the parameter for nonlinear modes (levels compared at
+        the same energy, the backbone's own abscissa)."""
+        if self.forced:
+            return _tangents(self.branch)
+        b = self.branch
+        zero = _State(b.harmonics.n_harmonics, np.zeros_like(b.Q[0]), np.zeros_like(b.P[0]), 0.0, 0.0, 1.0)
+        return [zero] * len(b)
+
+    def Q_norm(self, i: int) -> float:
+        return float(np.linalg.norm(self.branch.Q[i])) or 1.0
+
+    def omega_ref(self, i: int) -> float:
+        return abs(float(self.branch.omega[i])) or 1.0
+
+    def moved(self, H: int, state: _State, a_from: _State, a_to: _State) -> _State:
+        """The level-``H`` ``state`` moved by the branch's step from ``a_from`` to ``a_to``."""
+        h = self.harmonics(H)
+        return _State(H, self._on(state.Q, h) + self._on(a_to.Q - a_from.Q, h),
+                      self._on(state.P, h) + self._on(a_to.P - a_from.P, h), state.omega + a_to.omega - a_from.omega,
+                      state.xi + a_to.xi - a_from.xi, state.p + a_to.p - a_from.p)
+
+    @staticmethod
+    def blend(a: _State, b: _State, theta: float) -> _State:
+        """``(1 - theta) a + theta b`` of two states on the same harmonics."""
+        u = 1.0 - theta
+        return _State(a.H, u * a.Q + theta * b.Q, u * a.P + theta * b.P, u * a.omega + theta * b.omega,
+                      u * a.xi + theta * b.xi, u * a.p + theta * b.p)
+
+    def locate_fold(self, H: int, states: list, f: int) -> _State | None:
+        """The fold of level ``H`` that corresponds to the branch's fold ``f``.
+
+        Normal hyperplanes cannot find it: the level's fold lies off the branch's by the error
+        being measured (the H = 40 curve of the seed's forced case peaks below the amplitude of the
+        H = 20 fold, so the hyperplane through that fold misses it). It is traced instead: a
+        continuation of level ``H`` from the level's solution a few points before the fold, in
+        the branch's direction, with the fold located by the continuation (regula falsi on dp/ds).
+        """
+        branch = self.branch
+        j = next((j for j in range(f - 2, max(f - 60, -1), -1) if states[j] is not None), None)
+        if j is None:
+            return None
+        st = states[j]
+        dp = float(branch.parameter[f] - branch.parameter[j])
+        width = max(4.0 * abs(dp), 0.1 * abs(float(branch.parameter[f])) if self.forced else 0.5)
+        prob = self.problem(H)
+        x0 = self.vector(H, st.Q, st.P, st.omega, st.xi, st.p)[:-1]
+        span = (st.p, st.p + math.copysign(width, dp or 1.0))
+        rms = float(np.sqrt(np.mean(x0 ** 2))) or 1.0
+        opts = ContinuationOptions(step=0.02, max_step=0.1, max_points=300, x_scale=rms, p_scale=width,
+                                   newton=self.newton)
+        with np.errstate(all="ignore"):
+            res = continuation(prob, span, x0=x0, options=opts)
+        if not res.folds:
+            log.info("accuracy: the fold near point %d was not found with H = %d (%s)", f, H, res.message)
+            return None
+        k = res.folds[0]
+        out = self.state(H, np.append(res.x[k], res.p[k]))
+        out.nit, out.residual_norm = int(res.nit[k]), float(res.residual_norm[k])
+        return out
+
+
+def _tangents(branch: Branch) -> list[_State]:
+    """Branch directions at every point from its neighbours (central, one-sided at the ends);
+    at a located fold the direction along the displacement (dp/ds = 0 there)."""
+    n = len(branch)
+    out = []
+    for i in range(n):
+        a, b = max(i - 1, 0), min(i + 1, n - 1)
+        if a == b:
+            raise ValueError("estimate_error: a branch of one point has no direction; it needs >= 2 points")
+        out.append(_State(branch.harmonics.n_harmonics, branch.Q[b] - branch.Q[a], branch.P[b] - branch.P[a],
+                          float(branch.omega[b] - branch.omega[a]), float(branch.xi[b] - branch.xi[a]),
+                          float(branch.parameter[b] - branch.parameter[a])))
+    return out
+
+
+def _anchor(branch: Branch, i: int) -> _State:
+    return _State(branch.harmonics.n_harmonics, branch.Q[i], branch.P[i], float(branch.omega[i]), float(branch.xi[i]),
+                  float(branch.parameter[i]), int(branch.nit[i]), float(branch.residual_norm[i]))
+
+
+@dataclass
+class _Levels:
+    """Solutions of one point at successive levels (doubling H), and what they say."""
+
+    states: list
+    Q_norm: float
+    omega_ref: float
+
+    def diffs(self, j: int) -> tuple[float, float]:
+        """Relative changes (frequency, displacement) from level ``j - 1`` to level ``j``."""
+        a, b = self.states[j - 1], self.states[j]
+        h = Harmonics(max(a.H, b.H))
+        dQ = Harmonics(b.H).convert(b.Q, h) - Harmonics(a.H).convert(a.Q, h) if a.H != b.H else b.Q - a.Q
+        return abs(b.omega - a.omega) / self.omega_ref, float(np.linalg.norm(dQ)) / self.Q_norm
+
+    def distance(self, j: int) -> float:
+        dw, dq = self.diffs(j)
+        return math.hypot(dw, dq)
+
+    def rate(self, j: int) -> float:
+        """Observed contraction per doubling at level ``j`` (needs ``j >= 2``), clamped below."""
+        d1, d2 = self.distance(j - 1), self.distance(j)
+        if d2 <= 1e-14 or not math.isfinite(d1 / d2):
+            return math.inf if d1 <= 1e-14 or d2 <= 1e-14 else RATE_MIN
+        return max(d1 / d2, RATE_MIN)
+
+    def error(self, j: int, of: int) -> tuple[float, float, float]:
+        """Estimated relative error (frequency, displacement) of level ``of`` (``j`` or ``j - 1``)
+        from levels ``j - 2, j - 1, j``; and the ratio used."""
+        r = self.rate(j)
+        dw, dq = self.diffs(j)
+        if not math.isfinite(r):
+            return dw, dq, r
+        f = 1.0 / (r - 1.0) if of == j else r / (r - 1.0)
+        return dw * f, dq * f, r
+
+
+def _relative_quality(branch: Branch) -> tuple[np.ndarray, np.ndarray]:
+    """Penetration over the largest contact-DOF displacement, tension over the largest contact
+    force, per point (0 without contacts)."""
+    n = len(branch)
+    pen, ten = np.zeros(n), np.zeros(n)
+    if not branch.contacts.kinds or not n:
+        return pen, ten
+    for i, sol in enumerate(branch):
+        t = sol._fine_t()
+        u = sol.displacement(t)[:, list(branch.contacts.dofs)]
+        f = sol.contact_force(t)
+        amp = float(np.max(np.abs(u))) or 1.0
+        fmax = float(np.max(f)) if f.size else 0.0
+        pen[i] = sol.penetration / amp
+        ten[i] = sol.tension / fmax if fmax > 0 else 0.0
+    return pen, ten
+
+
+@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
+def estimate_error(branch: Branch, *, projection=None, newton: NewtonOptions | None = None) -> Branch:
+    """Attach the estimated error of every point of ``branch`` (``branch.error_estimate``).
+
+    Each point is solved again with ``H // 2`` and ``2 H`` harmonics on the hyperplane normal to
+    the branch (located folds: the fold of each level), and the error of the branch's level ``H``
+    is ``|X_2H - X_H| r / (r - 1)`` with the observed ratio ``r`` (module docstring). With ``H < 4``
+    the third level is ``4 H`` instead of ``H // 2``. Cost: one corrector solve per point and
+    level, the one at ``2 H`` dominating.
+
+    Parameters
+    ----------
+    branch : Branch
+        From :func:`femodes.frequency_response` or :func:`femodes.nonlinear_mode`, with its model
+        attached.
+    projection : ExactProjection or SampledProjection, optional
+        The projection the branch was computed with (default exact).
+    newton : NewtonOptions, optional
+
+    Returns
+    -------
+    Branch
+        The same branch, with :attr:`~femodes.Branch.accuracy` (an
+        :class:`~femodes.results.ErrorEstimate`) set.
+    """
+    lad = _ladder(branch, projection, newton, "estimate_error")
+    H = branch.harmonics.n_harmonics
+    levels = [H // 2, H, 2 * H] if H >= 4 else [H, 2 * H, 4 * H]
+    of = 1 if H >= 4 else 0
+    traced = [_trace_level(lad, H_l) for H_l in levels]
+    n = len(branch)
+    ew, eq, rates = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    for i in range(n):
+        sts = [t[i] for t in traced]
+        if any(st is None for st in sts):
+            continue
+        lv = _Levels(sts, lad.Q_norm(i), lad.omega_ref(i))
+        ew[i], eq[i], rates[i] = lv.error(2, of=of)
+    pen, ten = _relative_quality(branch)
+    method = np.where(np.isfinite(ew), "doubling", "failed")
+    branch.set_accuracy(ErrorEstimate(omega=ew, amplitude=eq, penetration=pen, tension=ten,
+                                      harmonics=np.full(n, H), rate=rates, method=method, rtol=None))
+    return branch
+
+
+def _ladder(branch, projection, newton, owner: str) -> _Ladder:
+    if not isinstance(branch, Branch):
+        raise TypeError(f"{owner}: branch must be a femodes.Branch, got {type(branch).__name__}")
+    if len(branch) < 2:
+        raise ValueError(f"{owner}: the branch has {len(branch)} point(s); at least 2 are needed (its direction)")
+    return _Ladder(branch, projection, newton)
+
+
+#: Smallest fraction of a branch step the tracing of a level takes (after halvings).
+MIN_FRACTION = 1.0 / 16.0
+
+
+def _walk(lad: _Ladder, H: int, prev: tuple, anchor: _State, t0: _State, t1: _State) -> _State | None:
+    """The level-``H`` point of ``anchor`` from the level's point ``prev = (anchor0, state0)`` of
+    the previous branch point: in one step, or in fractions of it (halved down to
+    :data:`MIN_FRACTION`) through intermediate anchors on the segment between the two branch
+    points (tangents interpolated)."""
+    a0, s0 = prev
+    done, frac = 0.0, 1.0
+    while done < 1.0:
+        frac = min(frac, 1.0 - done)
+        theta = done + frac
+        target = anchor if theta >= 1.0 else lad.blend(a0, anchor, theta)
+        tangent = t1 if theta >= 1.0 else lad.blend(t0, t1, theta)
+        st = lad.solve(H, target, tangent, lad.moved(H, s0, lad.blend(a0, anchor, done), target))
+        if st is None:
+            if frac <= MIN_FRACTION:
+                return None
+            frac *= 0.5
+            continue
+        s0, done = st, theta
+        frac *= 2.0
+    return s0
+
+
+def _trace_level(lad: _Ladder, H: int) -> list:
+    """Every point of the branch at level ``H``, in branch order.
+
+    A level cannot be solved from the branch's own point by Newton alone (measured: from the
+    H = 20 point of the seed's forced case, semismooth Newton stalls at residual 1e-2 at H = 10
+    and H = 40, the truncated or padded contact forces being too far from the level's). So the
+    level is traced along the branch: the guess at point ``i`` is the level's solution at
+    ``i - 1`` moved by the branch's own step from ``i - 1`` to ``i``, projected on the hyperplane
+    of ``i``; a failed step is halved (:func:`_walk`). Located folds are then
+    located on the level (:meth:`_Ladder.solve_fold`).
+    """
+    branch = lad.branch
+    n = len(branch)
+    tangents = lad.tangents
+    out: list = [None] * n
+    if H == branch.harmonics.n_harmonics:
+        for i in range(n):
+            out[i] = _anchor(branch, i)
+    else:
+        prev = None  # (branch anchor, level state) of the last solved point
+        for i in range(n):
+            anchor = _anchor(branch, i)
+            st = None
+            if prev is not None:
+                st = _walk(lad, H, prev, anchor, tangents[i - 1], tangents[i])
+            if st is None:
+                st = lad.solve(H, anchor, tangents[i], None)
+            if st is None:
+                log.info("accuracy: point %d has no solution with H = %d near it", i, H)
+            out[i] = st
+            prev = None if st is None else (anchor, st)
+    for f in branch.folds if H != branch.harmonics.n_harmonics else ():  # the branch's own are located
+        out[f] = lad.locate_fold(H, out, f)
+    return out
