@@ -15,9 +15,9 @@ from scipy.fft import next_fast_len
 from scipy.optimize import brentq
 
 from femodes.hbm.harmonics import Harmonics
-from femodes.hbm import ColleagueRoots, CompanionRoots, ExactProjection, SampledProjection
+from femodes.hbm import ColleagueRoots, CompanionRoots, ExactProjection, GridRoots, SampledProjection
 
-ROOTS = {"colleague": ColleagueRoots(), "companion": CompanionRoots()}
+ROOTS = {"colleague": ColleagueRoots(), "companion": CompanionRoots(), "grid": GridRoots()}
 
 TWO_PI = 2.0 * np.pi
 
@@ -670,3 +670,31 @@ def test_input_validation_of_phi():
         h.to_time(np.zeros((6, 2)))
     with pytest.raises(ValueError):
         h.from_time(np.zeros(h.n_time + 1))
+
+
+def test_grid_roots_equal_colleague_roots():
+    """GridRoots (the default) against the colleague matrix: random signals with flat, 1/k and
+    1/k^2 spectra (contact forces and displacements) and offsets that make 0 to 2H sign changes;
+    and tangencies ``cos t - 1 + eps``: Gram matrices equal to round-off (100 eps of their scale)."""
+    from femodes.hbm.positive_part import positive_gram
+
+    rng = np.random.default_rng(0)
+    for H in (1, 2, 3, 5, 10, 20, 40, 80):
+        h = Harmonics(H)
+        k = np.maximum(h.harmonic_of, 1)
+        for decay in (0, 1, 2):
+            Phi = rng.standard_normal((100, h.n_coef)) / k ** decay
+            Phi[:, 0] += rng.uniform(-2, 2, 100) * np.abs(Phi).max(axis=1)
+            G1 = positive_gram(h, Phi, ColleagueRoots())[0]
+            G2 = positive_gram(h, Phi, GridRoots())[0]
+            np.testing.assert_allclose(G2, G1, atol=100 * np.finfo(float).eps * H)
+    h = Harmonics(10)
+    for eps in (1e-2, 1e-4, 1e-6, 1e-8):
+        phi = np.zeros(h.n_coef)
+        phi[0], phi[1] = eps - 1.0, 1.0
+        G1 = positive_gram(h, phi[None], ColleagueRoots())[0]
+        G2 = positive_gram(h, phi[None], GridRoots())[0]
+        # the positive interval has width ~2 sqrt(2 eps): its roots are conditioned like 1/sqrt(eps)
+        np.testing.assert_allclose(G2, G1, atol=1e-15 / np.sqrt(eps))
+    with pytest.raises(ValueError, match="per_harmonic"):
+        GridRoots(per_harmonic=2)

@@ -248,7 +248,7 @@ def test_damaged_or_other_version_header(model, journal, change, pattern):
     (dict(omega=(0.8, 1.7)), r"omega: \[0.8, 1.6\] in the checkpoint, \[0.8, 1.7\] in this call"),
     (dict(model=contact_oscillator(gap=0.9)), r"model.contacts"),
     (dict(model=contact_oscillator().with_damping(alpha=0.2)), r"model.matrices"),
-    (dict(projection=fm.hbm.SampledProjection()), r"projection: 'ExactProjection\(roots=ColleagueRoots\(\)\)' in the checkpoint"),
+    (dict(projection=fm.hbm.SampledProjection()), r"projection: 'ExactProjection\(roots=GridRoots\(per_harmonic=16\)\)' in the checkpoint"),
 ])
 def test_resume_refuses_a_different_run(model, journal, call, pattern):
     kw = {**dict(model=model, omega=SPAN, harmonics=H), **call}

@@ -5,8 +5,8 @@ from .linsolve import AssembledSolver, BlockSolver, HarmonicBlockJacobian
 from .positive_part import ExactProjection, SampledProjection
 from .problems import ForcedResponseProblem, HBMUnknowns, NonlinearModeProblem
 from .system import HBMSystem, default_contact_parameter
-from .trigroots import ColleagueRoots, CompanionRoots
+from .trigroots import ColleagueRoots, CompanionRoots, GridRoots
 
 __all__ = ["Harmonics", "HarmonicBlockJacobian", "ForcedResponseProblem", "NonlinearModeProblem", "HBMUnknowns",
            "HBMSystem", "default_contact_parameter", "ExactProjection", "SampledProjection", "BlockSolver",
-           "AssembledSolver", "ColleagueRoots", "CompanionRoots"]
+           "AssembledSolver", "ColleagueRoots", "CompanionRoots", "GridRoots"]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..solvers.checks import check_int
-from .trigroots import DEGREE_TOL, ColleagueRoots, candidates, sign_changes
+from .trigroots import DEGREE_TOL, GridRoots, candidates, sign_changes
 
 __all__ = ["positive_part", "positive_intervals", "positive_part_sampled", "ExactProjection", "SampledProjection"]
 
@@ -51,9 +51,14 @@ def positive_part(h, phi, *, roots=None):
 
     Algorithm (no quadrature):
 
-    1. Candidate sign changes: roots of a polynomial whose zeros contain
-       the real zeros of ``phi``.  :class:`~femodes.hbm.trigroots.ColleagueRoots` (default)
-       takes the even trigonometric polynomial
+    1. Candidate sign changes. :class:`~femodes.hbm.trigroots.GridRoots` (default) samples
+       ``phi`` and ``phi'`` by FFT on 16 points per period of the highest harmonic and takes
+       the interpolated zeros of both (sign changes, and extrema that may dip across zero
+       between samples); ``O(H log H)``, 24x cheaper than the colleague matrix at H = 80
+       (0.8 vs 19.6 ms per signal) and equal to it to 3e-14 on 4800 random signals and on
+       tangencies down to depth 1e-8 (``tests/test_harmonics.py``). Or roots of a polynomial
+       whose zeros contain the real zeros of ``phi``:
+       :class:`~femodes.hbm.trigroots.ColleagueRoots` takes the even trigonometric polynomial
        ``g(θ) = phi(α+θ) phi(α-θ)`` of degree ``2H``, whose cosine
        coefficients are the Chebyshev coefficients of ``g`` in
        ``x = cos θ``, and computes the eigenvalues of the (real) colleague
@@ -90,8 +95,8 @@ def positive_part(h, phi, *, roots=None):
     ----------
     phi : array_like, shape ``(n_coef,)``
         Coefficients of one signal (many signals at once: :class:`ExactProjection`).
-    roots : ColleagueRoots or CompanionRoots, optional
-        Candidate root finder (see above); default ``ColleagueRoots()``.
+    roots : GridRoots, ColleagueRoots or CompanionRoots, optional
+        Candidate root finder (see above); default ``GridRoots()``.
 
     Returns
     -------
@@ -119,8 +124,8 @@ def positive_intervals(h, phi, *, roots=None):
     Parameters
     ----------
     phi : array_like, shape ``(n_coef,)``
-    roots : ColleagueRoots or CompanionRoots, optional
-        Root finder (default :class:`~femodes.hbm.trigroots.ColleagueRoots`).
+    roots : GridRoots, ColleagueRoots or CompanionRoots, optional
+        Root finder (default :class:`~femodes.hbm.trigroots.GridRoots`).
 
     Returns
     -------
@@ -181,9 +186,9 @@ class ExactProjection:
     """
 
     def __init__(self, roots=None):
-        self.roots = ColleagueRoots() if roots is None else roots
+        self.roots = GridRoots() if roots is None else roots
         if not callable(getattr(self.roots, "angles", None)):
-            raise TypeError(f"ExactProjection: roots must be ColleagueRoots() or CompanionRoots(), got {roots!r}")
+            raise TypeError(f"ExactProjection: roots must be GridRoots(), ColleagueRoots() or CompanionRoots(), got {roots!r}")
 
     def __call__(self, h, Phi):
         Phi = check_phi(h, Phi, single=False)
@@ -246,7 +251,7 @@ def positive_gram(h, Phi, roots=None):
     ``wrap`` marks signals positive at the start of the sweep (the last
     interval crosses the cut), ``full`` those positive everywhere.
     """
-    roots = ColleagueRoots() if roots is None else roots
+    roots = GridRoots() if roots is None else roots
     H = h.n_harmonics
     L = 2 * H + 1
     m = Phi.shape[0]

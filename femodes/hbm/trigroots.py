@@ -12,7 +12,7 @@ import functools
 
 import numpy as np
 
-__all__ = ["DEGREE_TOL", "ColleagueRoots", "CompanionRoots", "candidates", "sign_changes", "trig_eval"]
+__all__ = ["DEGREE_TOL", "ColleagueRoots", "CompanionRoots", "GridRoots", "candidates", "sign_changes", "trig_eval"]
 
 _TWO_PI = 2.0 * np.pi
 _EPS = np.finfo(float).eps
@@ -144,6 +144,63 @@ class ColleagueRoots:
 
     def __repr__(self) -> str:
         return "ColleagueRoots()"
+
+
+class GridRoots:
+    """Candidate sign changes from samples: the signal and its derivative on ``per_harmonic``
+    equidistant points per period of its highest harmonic (one FFT each), giving
+
+    * the linearly interpolated zero of every cell where the signal changes sign, and
+    * the linearly interpolated zero of the derivative in every cell where *it* changes sign
+      (an extremum), so that a pair of sign changes inside one cell (a dip across zero between
+      two samples) is seen too: the polishing of :func:`sign_changes` brackets each change
+      between the extremum and its neighbours.
+
+    A trigonometric polynomial of degree ``h`` has at most ``2h`` zeros and ``2h`` extrema, so
+    ``4h`` candidates suffice. What it can miss: a sign change pair whose extremum lies in a cell
+    together with another extremum (two derivative sign changes in one cell cancel); the missed
+    interval is then narrower than a cell (``2 pi / (per_harmonic h)``) and its contribution
+    to ``max(0, .)`` below ``(cell / 2)^3 max|phi''| / 3``. Cost ``O(h log h)`` per signal
+    against ``O(h^3)`` for the matrix eigenvalues (4-18 ms at h = 40-80, measured).
+    """
+
+    per_degree = 4
+
+    def __init__(self, per_harmonic: int = 16):
+        if isinstance(per_harmonic, bool) or not isinstance(per_harmonic, (int, np.integer)) or per_harmonic < 4:
+            raise ValueError(f"GridRoots: per_harmonic must be an integer >= 4, got {per_harmonic!r}")
+        self.per_harmonic = int(per_harmonic)
+
+    def angles(self, a: np.ndarray, h: int) -> np.ndarray:
+        """As :meth:`CompanionRoots.angles`; shape ``(rows, 4h)``."""
+        rows = a.shape[0]
+        N = max(64, self.per_harmonic * int(h))
+        k = np.arange(-h, h + 1)
+        spec = np.zeros((rows, N), dtype=complex)
+        spec[:, k % N] = a
+        f = (np.fft.ifft(spec, axis=1) * N).real
+        spec[:, k % N] = a * (1j * k)
+        fp = (np.fft.ifft(spec, axis=1) * N).real
+        cell = _TWO_PI / N
+        out = np.full((rows, 4 * int(h)), np.inf)
+        for vals in (f, fp):
+            nxt = np.roll(vals, -1, axis=1)
+            r, j = np.nonzero((np.sign(vals) != np.sign(nxt)) & (nxt != 0.0))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                frac = vals[r, j] / (vals[r, j] - nxt[r, j])
+            x = (j + np.clip(np.nan_to_num(frac, nan=0.5), 0.0, 1.0)) * cell
+            # place each row's candidates after those already there
+            count = np.zeros(rows, dtype=int) if vals is f else np.sum(np.isfinite(out), axis=1)
+            order = np.argsort(r, kind="stable")
+            r, x = r[order], x[order]
+            first = np.searchsorted(r, np.arange(rows))
+            slot = count[r] + np.arange(r.size) - first[r]
+            keep = slot < out.shape[1]
+            out[r[keep], slot[keep]] = np.mod(x[keep], _TWO_PI)
+        return out
+
+    def __repr__(self) -> str:
+        return f"GridRoots(per_harmonic={self.per_harmonic})"
 
 
 def candidates(A, heff, roots):
