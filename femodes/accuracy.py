@@ -283,10 +283,13 @@ class _Levels:
         return max(d1 / d2, RATE_MIN)
 
     def error(self, j: int, of: int) -> tuple[float, float, float]:
-        """Estimated relative error (frequency, displacement) of level ``of`` (``j`` or ``j - 1``)
-        from levels ``j - 2, j - 1, j``; and the ratio used."""
+        """Estimated relative error (frequency, displacement) of level ``of`` (``j - 2``,
+        ``j - 1`` or ``j``) from levels ``j - 2, j - 1, j``; and the ratio used: the change to the
+        next level times ``r / (r - 1)``, or for the finest level its last change over ``r - 1``."""
+        if of not in (j - 2, j - 1, j):
+            raise ValueError(f"error: level {of} is not one of {j - 2}, {j - 1}, {j}")
         r = self.rate(j)
-        dw, dq = self.diffs(j)
+        dw, dq = self.diffs(j if of == j else of + 1)
         if not math.isfinite(r):
             return dw, dq, r
         f = 1.0 / (r - 1.0) if of == j else r / (r - 1.0)
@@ -318,7 +321,7 @@ def estimate_error(branch: Branch, *, projection=None, newton: NewtonOptions | N
     Each point is solved again with ``H // 2`` and ``2 H`` harmonics on the hyperplane normal to
     the branch (located folds: the fold of each level), and the error of the branch's level ``H``
     is ``|X_2H - X_H| r / (r - 1)`` with the observed ratio ``r`` (module docstring). With ``H < 4``
-    the third level is ``4 H`` instead of ``H // 2``. Cost: one corrector solve per point and
+    the levels are ``H, 2H + 1, 4H + 2``. Cost: one corrector solve per point and
     level, the one at ``2 H`` dominating.
 
     Parameters
@@ -338,7 +341,9 @@ def estimate_error(branch: Branch, *, projection=None, newton: NewtonOptions | N
     """
     lad = _ladder(branch, projection, newton, "estimate_error")
     H = branch.harmonics.n_harmonics
-    levels = [H // 2, H, 2 * H] if H >= 4 else [H, 2 * H, 4 * H]
+    # H < 4: H, 2H + 1, 4H + 2 (from H = 1, 2H = 2 adds only an even harmonic, zero for a symmetric
+    # law such as Duffing's, which would estimate no error at all)
+    levels = [H // 2, H, 2 * H] if H >= 4 else [H, 2 * H + 1, 4 * H + 2]
     of = 1 if H >= 4 else 0
     traced = [_trace_level(lad, H_l) for H_l in levels]
     n = len(branch)

@@ -103,6 +103,19 @@ def test_duffing_estimate_tiny_and_safe():
     assert np.all(est[big] >= 0.5 * true[big])
 
 
+def test_few_harmonics_use_levels_h_2h_4h():
+    """H < 4: the levels are H, 2H + 1, 4H + 2 and the estimate is that of H itself (Duffing at H = 1:
+    the one-harmonic error w^2 = 1 + 3/4 A^2 against the exact frequency, ~1e-3 at A ~ 0.6)."""
+    m = fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_nonlinearity(fm.CubicSpring(at=0, k3=1.0))
+    b = estimate_error(fm.nonlinear_mode(m, 1, energy=(0.05, 0.3), harmonics=1))
+    A = np.sqrt(np.sqrt(1.0 + 4.0 * b.energy) - 1.0)
+    mm = A ** 2 / (2.0 * (1.0 + A ** 2))
+    true = np.abs(b.omega / (np.pi * np.sqrt(1.0 + A ** 2) / (2.0 * ellipk(mm))) - 1.0)
+    assert np.all(true > 1e-5)
+    np.testing.assert_array_less(0.9 * true, b.accuracy.omega)
+    np.testing.assert_array_less(b.accuracy.omega, 1.5 * true)
+
+
 def test_bad_input():
     with pytest.raises(TypeError, match="femodes.Branch"):
         estimate_error("branch")
