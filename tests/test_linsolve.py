@@ -12,6 +12,7 @@ import warnings
 
 import numpy as np
 import pytest
+import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
 import femodes as fm
@@ -298,3 +299,145 @@ def test_continuation_structured_equals_assembled():
     assert a.n_points == b.n_points >= 10
     np.testing.assert_allclose(a.p, b.p, rtol=1e-9)
     np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9 * np.abs(b.x).max())
+
+
+# --------------------------------------------------------------------------------------------
+# reuse of the per-harmonic factors of a nearby frequency (BlockSolver(reuse=True))
+# --------------------------------------------------------------------------------------------
+def _reused_pair(model, h, w0, w, solver, seed=1, amp=1e-3, bordered=True, x=None):
+    """The Jacobian at ``w`` (bordered like a corrector's) at the state ``x`` (default random),
+    factorised by ``solver`` after it factorised the one at ``w0``: returns (J, its
+    factorisation, the assembled J)."""
+    pr = ForcedResponseProblem(model, h, solver=solver)
+    pg = ForcedResponseProblem(model, h, solver=AssembledSolver())
+    x = state(pr, seed, amp) if x is None else x
+    _, J0, _ = pr.residual(x, w0)
+    J0.factorize()                                   # the base factors at w0
+    _, J, rp = pr.residual(x, w)
+    _, Jg, rpg = pg.residual(x, w)
+    if bordered:
+        c = np.random.default_rng(seed + 1).standard_normal(pr.size + 1)
+        J, Jg = bordered_matrix(J, rp, c), bordered_matrix(Jg, rpg, c)
+    return J, J.factorize(), Jg
+
+
+@pytest.mark.parametrize("dw", [1e-7, 1e-5, 1e-3])
+@pytest.mark.parametrize("bordered", [False, True])
+def test_reused_factors_solve_like_a_fresh_factorisation(dw, bordered):
+    """Solves with the factors of w0 (refined against J(w)) agree with SuperLU on J(w) within
+    the forward error its conditioning allows, at the backward error of a fresh factorisation."""
+    model, h = CASES["bar"]()
+    solver = BlockSolver(reuse=True, max_passes=60)  # no cost budget: the refinement itself is tested
+    J, fac, Jg = _reused_pair(model, h, 1.3, 1.3 * (1 + dw), solver, bordered=bordered)
+    assert not fac.exact and fac.F.omega == 1.3
+    b = np.random.default_rng(2).standard_normal(J.shape[0])
+    xs = fac.solve(b)
+    assert solver.stats["refactorized"] == 0 and solver.stats["passes"] >= 2
+    xg = spla.splu(Jg.tocsc()).solve(b)
+    assert backward_error(J, xs, b) < 1e-13
+    assert np.max(np.abs(xs - xg)) <= forward_tol(Jg) * np.max(np.abs(xg))
+    # the fresh factorisation at w agrees with it to the same tolerance
+    xf = BlockSolver(reuse=False).factorize(J).solve(b)
+    assert np.max(np.abs(xs - xf)) <= forward_tol(Jg) * np.max(np.abs(xg))
+
+
+def test_reuse_refactorises_across_an_interior_eigenfrequency(caplog):
+    """The tip stop closed all period holds the tip: the interior is a fixed-fixed bar and the
+    Jacobian is that of the held bar. From w0 just below its first eigenfrequency to w just
+    above, P(w0)^-1 J(w) is far from the identity: the refinement cannot contract (q >= 1/2), the
+    safeguard factorises at w, and the solution is the exact one."""
+    mesh = fm.line_mesh(length=1.0, n_elements=200, boundaries={"clamp": 0.0, "tip": 1.0})
+    model = (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
+             .with_damping(alpha=1e-3)
+             .with_forcing(fm.HarmonicForce(at="tip", amplitude=1.0))
+             .with_contact(fm.UnilateralContact(at="tip", gap=1e-3)))
+    h = fm.Harmonics(3)
+    pat = ForcedResponseProblem(model, h).system.block_pattern()
+    M, K = model.M.tocsr(), model.K.tocsr()
+    I = pat.interior
+    lam1 = sla.eigh(K[I][:, I].toarray(), M[I][:, I].toarray(), eigvals_only=True, subset_by_index=[0, 0])[0]
+    w1 = np.sqrt(lam1)                               # first interior eigenfrequency (~ pi)
+    s = ForcedResponseProblem(model, h).system
+    P = np.zeros((s.h.n_coef, 1))
+    P[0] = 10.0                                      # contact force > 0 all period: stop closed
+    x = s.join(np.zeros((s.h.n_coef, s.n)), P)
+    solver = BlockSolver(reuse=True, max_passes=60)  # no cost budget: only the contraction decides
+    J, fac, Jg = _reused_pair(model, h, w1 * (1 - 2e-3), w1 * (1 + 2e-3), solver, x=x)
+    assert not fac.exact
+    b = np.random.default_rng(3).standard_normal(J.shape[0])
+    with caplog.at_level("DEBUG", logger="femodes.hbm.linsolve"):
+        xs = fac.solve(b)
+    assert solver.stats["refactorized"] == 1 and solver.stats["passes"] <= 3
+    assert "refactorising" in caplog.text
+    assert fac.refactored is not None and fac.refactored.exact
+    xg = spla.splu(Jg.tocsc()).solve(b)
+    assert backward_error(J, xs, b) < 1e-13
+    assert np.max(np.abs(xs - xg)) <= forward_tol(Jg) * np.max(np.abs(xg))
+    # the factors at w are the new base: a Jacobian at w is factorised exactly, without a pass
+    assert J.factorize().exact and solver.stats["factorizations"] == 2
+
+
+def test_reuse_switch_and_options():
+    model, h = CASES["bar"]()
+    solver = BlockSolver(reuse=False)
+    J, fac, _ = _reused_pair(model, h, 1.3, 1.3 * (1 + 1e-6), solver)
+    assert fac.exact and fac.F.omega == J.omega and solver.stats["reused"] == 0
+    assert solver.stats["factorizations"] == 2
+    assert repr(solver) == "BlockSolver()" and repr(BlockSolver(reuse=True)) == "BlockSolver(reuse=True)"
+    assert BlockSolver().reuse is False  # measured slower on the bars of benchmarks/README_corrector.md
+    # beyond the window: factorised afresh
+    solver = BlockSolver(reuse=True, reuse_window=1e-3)
+    _, fac, _ = _reused_pair(model, h, 1.3, 1.3 * (1 + 2e-3), solver)
+    assert fac.exact
+    with pytest.raises(TypeError):
+        BlockSolver(reuse=1)
+    with pytest.raises(ValueError):
+        BlockSolver(reuse_window=-0.1)
+    with pytest.raises(ValueError):
+        BlockSolver(max_passes=0)
+
+
+def test_kept_condensation_columns_change_nothing_but_round_off(monkeypatch):
+    """W = Z_II^-1 Z_Ib kept (back substitution by products) or not (a second band solve)."""
+    import femodes.hbm.linsolve as ls
+
+    model, h = CASES["bar"]()
+    out = []
+    for keep in (True, False):
+        if not keep:
+            monkeypatch.setattr(ls, "KEEP_W_MAX_BYTES", 0)
+        pr = ForcedResponseProblem(model, h, solver=BlockSolver(reuse=False))
+        _, J, rp = pr.residual(state(pr, 1, 1e-3), 1.3)
+        Jb = bordered_matrix(J, rp, np.random.default_rng(4).standard_normal(pr.size + 1))
+        fac = Jb.factorize()
+        assert (fac.F.blocks[1].W is not None) == keep
+        b = np.random.default_rng(5).standard_normal(pr.size + 1)
+        out.append(fac.solve(b))
+        assert backward_error(Jb, out[-1], b) < 1e-13
+    Jg = ForcedResponseProblem(model, h, solver=AssembledSolver())
+    tol = forward_tol(bordered_matrix(Jg.residual(state(pr, 1, 1e-3), 1.3)[1], rp,
+                                      np.random.default_rng(4).standard_normal(pr.size + 1)))
+    assert np.max(np.abs(out[0] - out[1])) <= tol * np.max(np.abs(out[1]))
+
+
+def test_continuation_same_branch_with_and_without_reuse():
+    """A forced-response branch of a 500-DOF bar with two stops: the same points (to the Newton
+    tolerance) whether the corrector reuses factors or factorises at every iteration, and the
+    reuse did serve some solves (a generous pass budget, so that it is tried on most of them)."""
+    model = bar_model(n_el=500, n_contacts=2).with_damping(alpha=0.1)
+    h = fm.Harmonics(5)
+    opts = fm.ContinuationOptions(step=0.05, max_step=0.2, max_points=30,
+                                  newton=fm.NewtonOptions(atol=1e-10, max_iter=20))
+    out, solvers = [], []
+    for reuse in (False, True):
+        solver = BlockSolver(reuse=reuse, max_passes=8)
+        out.append(fm.continuation(ForcedResponseProblem(model, h, solver=solver), (1.0, 2.5), options=opts))
+        solvers.append(solver)
+    a, b = out
+    assert a.n_points == b.n_points >= 10 and a.n_newton == b.n_newton
+    np.testing.assert_allclose(b.p, a.p, rtol=1e-9)
+    np.testing.assert_allclose(b.x, a.x, rtol=0, atol=1e-9 * np.abs(a.x).max())
+    st = solvers[1].stats
+    assert solvers[0].stats["reused"] == 0
+    assert st["solves_reused"] - st["refactorized"] > 0
+    assert st["factorizations"] < solvers[0].stats["factorizations"]
