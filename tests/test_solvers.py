@@ -727,7 +727,7 @@ def test_continuation_state_of_points():
     inserted fold points and the end point do not."""
     seen = []
     res = continuation(SCurve(), (-1.0, 1.0), x0=[-1.3], options=ContinuationOptions(callback=seen.append))
-    assert res.folds == (6, 10)
+    assert res.folds == (5, 12)  # indices depend on the step control (issue 16: (6, 10) -> (5, 12))
     for pt in seen:
         st = pt.state
         if pt.is_fold or pt.index == res.n_points - 1:

@@ -95,7 +95,9 @@ def test_forced_pitchfork_located_and_switched_onto_the_localised_branch(forced)
     model, b = forced
     bp = next(z for z in b.bifurcations if z.kind == "branch_point")
     # the reported branch point is on the symmetric branch (x1 = -x2, the forcing's symmetry)
-    assert np.max(np.abs(bp.Q[:, 0] + bp.Q[:, 1])) < 1e-10
+    # (to the corrector's atol 1e-9 over the small singular value near the branch point: measured
+    # 2.0e-8 with the step control of issue 16, 1.5e-10 with the smaller steps before it)
+    assert np.max(np.abs(bp.Q[:, 0] + bp.Q[:, 1])) < 1e-7
     new = fm.switch_branch(b, bp, omega=(0.9, 1.7))
     info = new.meta["switched_from"]
     # the HBM's own branch point (test function det[r_x, r_p; c^T]) and the Floquet crossing
@@ -193,7 +195,8 @@ def test_backbone_onto_the_tongue_and_off_again(backbone):
     a2 = _mode2_h2(tongue)
     assert np.max(_mode2_h2(b)) < 1e-8 and a2[0] < 1e-8
     assert a2.max() > 0.3                                     # measured 0.388
-    assert np.all(tongue.residual_norm < 1e-8) and np.max(np.abs(tongue.xi)) < 1e-10
+    # xi to the corrector's atol 1e-9 (measured 2.5e-10 with the step control of issue 16)
+    assert np.all(tongue.residual_norm < 1e-8) and np.max(np.abs(tongue.xi)) < 1e-9
     # one tongue orbit is a true free periodic orbit: shooting (period unknown, pinned at a
     # turning point of DOF 0) from its HBM state converges and moves it by < 1e-5 of its size
     # (measured 2e-6: the H = 8 truncation of an orbit with harmonics 1..8 in both modes) and its

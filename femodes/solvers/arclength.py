@@ -29,6 +29,9 @@ from .newton import NewtonOptions, NewtonResult, semismooth_newton
 
 __all__ = ["ArclengthSystem"]
 
+#: A corrector past its deadline must have reduced the residual of the predictor by this factor.
+_DEADLINE_CONTRACTION = 0.5
+
 logger = logging.getLogger(__name__)
 
 
@@ -146,8 +149,13 @@ class ArclengthSystem:
         self.n_newton += res.nit
         return res
 
-    def correct(self, y_pred: np.ndarray, c: np.ndarray) -> NewtonResult:
-        """Corrector on the hyperplane ``c^T (y - y_pred) = 0``."""
+    def correct(self, y_pred: np.ndarray, c: np.ndarray, deadline: int | None = None) -> NewtonResult:
+        """Corrector on the hyperplane ``c^T (y - y_pred) = 0``.
+
+        ``deadline``: abandon the corrector (a failed result, status 2) when the residual after
+        that many iterations, or more, is above half the residual at the predictor (see
+        ``ContinuationOptions.corrector_deadline``); ``None``: run to ``max_iter``.
+        """
         n = self.n
 
         def fun(y: np.ndarray) -> tuple[np.ndarray, Any]:
@@ -157,6 +165,47 @@ class ArclengthSystem:
             rb[n] = float(c @ (y - y_pred))
             return rb, self.border(J, rp, c)
 
-        res = semismooth_newton(fun, y_pred, options=self.bordered_newton)
+        options = self.bordered_newton
+        if deadline is not None:
+            options = dataclasses.replace(options, callback=_Deadline(deadline, options.callback))
+        try:
+            res = semismooth_newton(fun, y_pred, options=options)
+        except _Abandoned as stop:
+            res = stop.result()
         self.n_newton += res.nit
         return res
+
+
+class _Abandoned(Exception):
+    """Raised from the corrector's Newton callback to abandon a corrector that does not contract."""
+
+    def __init__(self, it: int, x: np.ndarray, history: list[float]) -> None:
+        super().__init__(it)
+        self.it, self.x, self.history = it, x, history
+
+    def result(self) -> NewtonResult:
+        """The failed :class:`NewtonResult` of the abandoned corrector: its last iterate, whose
+        residual vector is not kept (``fun`` is NaN; the tracer only reads the message)."""
+        r0, rk = self.history[0], self.history[-1]
+        return NewtonResult(
+            x=self.x, success=False, status=2,
+            message=f"abandoned: residual {rk:.3e} after {self.it} iterations above half of {r0:.3e} at the predictor",
+            nit=self.it, fun=np.full(self.x.size, np.nan), residual_norm=rk, nfev=self.it + 1,
+            history=tuple(self.history), jac=None,
+        )
+
+
+class _Deadline:
+    """Newton callback: raise :class:`_Abandoned` when ``|r_k| > |r_0| / 2`` at an iteration
+    ``k >= deadline`` (after calling the user's callback, if any)."""
+
+    def __init__(self, deadline: int, user: Callable | None) -> None:
+        self.deadline, self.user = deadline, user
+        self.history: list[float] = []
+
+    def __call__(self, it: int, x: np.ndarray, rnorm: float) -> Any:
+        if self.user is not None:
+            self.user(it, x, rnorm)
+        self.history.append(rnorm)
+        if it >= self.deadline and not rnorm <= _DEADLINE_CONTRACTION * self.history[0]:
+            raise _Abandoned(it, x, self.history)

@@ -53,6 +53,8 @@ References
 ----------
 .. [AG03] E. L. Allgower and K. Georg, *Introduction to Numerical
    Continuation Methods*, SIAM Classics in Applied Mathematics 45 (2003).
+.. [D04] P. Deuflhard, *Newton Methods for Nonlinear Problems: Affine
+   Invariance and Adaptive Algorithms*, Springer (2004), sec. 5.1.
 .. [K77] H. B. Keller, "Numerical solution of bifurcation and nonlinear
    eigenvalue problems", in *Applications of Bifurcation Theory*, Academic
    Press (1977) 359-384.
@@ -117,6 +119,21 @@ class _Pt:
     nit: int
     rnorm: float
     step: float
+    #: what the step that produced the point measured (step control): turn of the tangent
+    #: [degrees], predictor-corrector distance, contraction of the first corrector iteration
+    angle: float = math.nan
+    dist: float = math.nan
+    theta: float = math.nan
+
+
+def _contraction(history: tuple[float, ...]) -> float:
+    """Contraction ``|r_1| / |r_0|`` of the first corrector iteration (NaN without an iteration)."""
+    if len(history) < 2:
+        return math.nan
+    r0, r1 = history[0], history[1]
+    if not r0 > 0:
+        return 0.0
+    return r1 / r0
 
 
 def _validate_span(p_span: Any) -> tuple[float, float]:
@@ -158,7 +175,10 @@ def continuation(
     3. Predictor ``y + ds t``; corrector: semismooth Newton on the bordered
        system ``[r(x, p); t^T S (y - y_pred)] = 0`` (sparse ``bmat`` if
        ``r_x`` is sparse, dense otherwise).
-    4. Step control from the corrector iteration count; on corrector failure
+    4. Step control from the geometry of the branch (turn of the tangent)
+       and the corrector (contraction of its first iteration, iteration
+       count), see ``target_angle`` in :class:`ContinuationOptions`; on
+       corrector failure (or a corrector abandoned at ``corrector_deadline``)
        the step is halved and retried from the same point.  A converged
        point farther than ``max_corrector_distance * ds`` from the predictor,
        or whose tangent turns by more than ``max_turn_angle``, is also
@@ -398,14 +418,14 @@ class _Tracer:
                         failure=f"end point at p={bound:g} could not be computed")
         is_fold_b = self.detect_fold(a, b)
         # step control before emitting b: its state carries the next step
-        self.control_step(b.nit)
+        self.control_step(b)
         if not self.emit(b, is_fold_b, self.ds):
             raise _Stop(3)
 
     def correct(self, a: _Pt, y_pred: np.ndarray) -> _Pt:
         """Corrector from ``y_pred`` on the hyperplane orthogonal to ``a.t``, and the new tangent."""
         n = self.n
-        res = self.sys.correct(y_pred, self.sys.w * a.t)
+        res = self.sys.correct(y_pred, self.sys.w * a.t, self.opt.corrector_deadline)
         if not res.success:
             self.prev_geo = None
             self.reject(a, f"corrector failed: {res.message}",
@@ -416,12 +436,14 @@ class _Tracer:
             self.reject(a, "singular bordered system at the new point",
                         failure=f"at p={a.y[n]:g} (singular bordered system)")
         y_b = np.array(res.x)
-        self.guard(a, y_pred, y_b, t_b)
-        return _Pt(y=y_b, t=t_b, nit=res.nit, rnorm=float(np.max(np.abs(res.fun[:n]))), step=self.ds)
+        angle, dist = self.guard(a, y_pred, y_b, t_b)
+        return _Pt(y=y_b, t=t_b, nit=res.nit, rnorm=float(np.max(np.abs(res.fun[:n]))), step=self.ds,
+                   angle=angle, dist=dist, theta=_contraction(res.history))
 
-    def guard(self, a: _Pt, y_pred: np.ndarray, y_b: np.ndarray, t_b: np.ndarray) -> None:
+    def guard(self, a: _Pt, y_pred: np.ndarray, y_b: np.ndarray, t_b: np.ndarray) -> tuple[float, float]:
         """Branch-jumping guard: reject a corrected point too far from the predictor or whose
-        tangent turned too much, unless it is a kink of the branch or the step is minimal."""
+        tangent turned too much, unless it is a kink of the branch or the step is minimal.
+        Returns the turn angle (degrees) and the predictor-corrector distance of an accepted step."""
         opt = self.opt
         dist = self.sys.norm(y_b - y_pred)
         angle = math.degrees(math.acos(max(-1.0, min(1.0, self.sys.dot(a.t, t_b)))))
@@ -449,6 +471,7 @@ class _Tracer:
             else:
                 logger.info("accepting step at minimal step size despite: %s (kink of the branch?)", geometric)
         self.prev_geo = None
+        return angle, dist
 
     def reject(self, a: _Pt, reason: str, *, failure: str) -> None:
         """Halve the step and retry from ``a`` (raises :class:`_Retry`); below ``min_step`` the run
@@ -461,19 +484,34 @@ class _Tracer:
             raise _Stop(4, failure)
         raise _Retry
 
-    def control_step(self, nit: int) -> None:
-        """Next step from the corrector iterations: ``ds * target/nit`` clipped to ``[0.5, max_growth]``
-        (no growth right after a rejection) and to ``[min_step, max_step]``."""
+    def control_step(self, b: _Pt) -> None:
+        """Next step from what the accepted step to ``b`` measured (see
+        :class:`ContinuationOptions`, ``target_angle``): ``ds / f`` with ``f`` the largest of the
+        deceleration factors ``nit / target_iterations``, ``angle / target_angle`` and
+        ``sqrt(theta / target_contraction)``, ``1/f`` clipped to ``[0.5, max_growth]`` (no growth
+        right after a rejection) and ``ds`` to ``[min_step, max_step]``."""
         opt = self.opt
-        if nit < opt.target_iterations:
-            factor = min(opt.max_growth, opt.target_iterations / max(nit, 1))
-        elif nit > opt.target_iterations:
-            factor = max(0.5, opt.target_iterations / nit)
-        else:
-            factor = 1.0
+        # Allgower & Georg [AG03] sec. 6.1: each measure m of a step h behaves like m ~ c h^q
+        # (angle between tangents q = 1, contraction of the first corrector iteration q = 2 for a
+        # tangent predictor, Deuflhard [D04] sec. 5.1), so the step that gives the nominal value
+        # m~ is h (m~/m)^(1/q); the most restrictive measure wins.
+        f = max(b.nit, 1) / opt.target_iterations
+        if opt.target_contraction is not None and f < 1:
+            # the contraction decides the growth; few iterations do not ask for more (a larger
+            # step costs a few more iterations but fewer points: fewer evaluations in all)
+            f = 0.0
+        f_angle = f_theta = 0.0
+        if opt.target_angle is not None and math.isfinite(b.angle):
+            f_angle = b.angle / opt.target_angle
+        if opt.target_contraction is not None and math.isfinite(b.theta):
+            f_theta = math.sqrt(b.theta / opt.target_contraction)
+        f = max(f, f_angle, f_theta)
+        factor = min(max(1.0 / f, 0.5), opt.max_growth) if f > 0 else opt.max_growth
         if self.just_rejected:
             factor = min(factor, 1.0)
         self.just_rejected = False
+        logger.debug("step control at p=%.6g: ds=%.3g nit=%d angle=%.2f deg dist=%.3g theta=%.3g -> x%.3g",
+                     b.y[self.n], self.ds, b.nit, b.angle, b.dist, b.theta, factor)
         self.ds = min(max(self.ds * factor, opt.min_step), opt.max_step)
 
     # -- folds ------------------------------------------------------------- #

@@ -1,0 +1,121 @@
+"""Step control of the continuation (issue 16 item 1): the points a curve needs.
+
+Bounds are measured counts (deterministic on one machine, benchmarks/README_steps.md) times 1.3,
+a margin for round-off differences between machines that can move a step past a kink or a
+rejection; fold frequencies are located by a root finder and compared with the code before the
+change (commit 816b139) to 1e-6 relative.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import pytest
+
+import femodes as fm
+from femodes.analyses import frequency_response_options
+
+#: Upper fold of seed case 1 at H = 20 by the step control before issue 16 (commit 816b139,
+#: 305 points): the fold is located by regula falsi on dp/ds, so it does not depend on the steps.
+FOLD_H20 = 1.3849781277943227
+#: Same at H = 40 (687 points before).
+FOLD_H40 = 1.400964504
+
+
+def seed_case1(law: str = "signorini") -> fm.StructuralModel:
+    """u'' + 0.1 u' + u = 0.2 cos(w t) - p, rigid stop at u = 1 (or penalty k = 100)."""
+    contact = (fm.UnilateralContact(at=0, gap=1.0) if law == "signorini"
+               else fm.PenaltyContact(at=0, gap=1.0, stiffness=100.0))
+    return (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]]).with_contact(contact)
+            .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
+
+
+def duffing() -> fm.StructuralModel:
+    """u'' + 0.02 u' + u + 0.5 u^3 = 0.1 cos(w t): a smooth branch with two folds."""
+    return (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.02]]).with_nonlinearity(fm.CubicSpring(at=0, k3=0.5))
+            .with_forcing(fm.HarmonicForce(at=0, amplitude=0.1)))
+
+
+@functools.lru_cache(maxsize=None)
+def seed_branch(H: int, law: str = "signorini"):
+    return fm.frequency_response(seed_case1(law), (0.5, 2.0), fm.Harmonics(H))
+
+
+def upper_fold(branch) -> float:
+    return max(float(branch.omega[i]) for i in branch.folds)
+
+
+@pytest.mark.parametrize("H, bound, fold", [(20, 233, FOLD_H20), (40, 380, FOLD_H40)])
+def test_seed_case1_points_and_fold(H, bound, fold):
+    """Measured 179 points at H = 20 (305 before) and 292 at H = 40 (687 before); x 1.3 margin.
+    Both folds are located, the upper one equal to the reference."""
+    br = seed_branch(H)
+    assert br.success and br.omega[-1] == 2.0, br.message
+    assert len(br) <= bound, len(br)
+    assert len(br.folds) == 2
+    assert upper_fold(br) == pytest.approx(fold, rel=1e-6)
+
+
+def test_seed_case1_penalty_points():
+    """Penalty k = 100 at H = 20: 66 points measured (63 before, but 287 Newton iterations instead
+    of 346); x 1.3; same upper fold as the old code (1.34830083)."""
+    br = seed_branch(20, "penalty")
+    assert br.success and len(br) <= 86, len(br)
+    assert upper_fold(br) == pytest.approx(1.3483008315, rel=1e-6)
+
+
+def test_duffing_not_more_points_than_before():
+    """Smooth branch: 47 points at H = 3 and 9 (142 before with the iteration-count control);
+    the bound 61 is 47 x 1.3, well below the old count; folds equal to the old ones."""
+    for H, folds in ((3, (1.904064889, 1.136924557)), (9, (1.904069256, 1.136924564))):
+        br = fm.frequency_response(duffing(), (0.5, 2.5), fm.Harmonics(H))
+        assert br.success and len(br) <= 61, (H, len(br))
+        assert sorted((float(br.omega[i]) for i in br.folds), reverse=True) == pytest.approx(folds, rel=1e-8)
+
+
+def test_iteration_count_control_is_the_old_rule():
+    """Without the geometric and contraction targets and the deadline, the step control is the
+    rule before issue 16: the old 142 points of the Duffing branch with max_step 0.5."""
+    opts = frequency_response_options(max_step=0.5, target_angle=None, target_contraction=None,
+                                      corrector_deadline=None)
+    br = fm.frequency_response(duffing(), (0.5, 2.5), fm.Harmonics(3), options=opts)
+    assert br.success and len(br) == 142
+
+
+def test_step_control_recorded_and_resumable():
+    """The step after each point depends only on the last step: a run resumed from any state
+    computes the same points as the full run."""
+    seen = []
+    opts = frequency_response_options(callback=seen.append)
+    full = fm.frequency_response(duffing(), (0.5, 2.5), fm.Harmonics(3), options=opts)
+    state = seen[20].state
+    problem = fm.ForcedResponseProblem(duffing(), fm.Harmonics(3))
+    rest = fm.continuation(problem, (0.5, 2.5), start=state, options=frequency_response_options(
+        x_scale=state.x_scale, p_scale=state.p_scale))
+    assert rest.first_index == 21
+    assert rest.p == pytest.approx(full.omega[21:], rel=1e-12, abs=1e-12)
+
+
+@pytest.mark.parametrize("kwargs, error, match", [
+    ({"target_angle": 0.0}, ValueError, r"target_angle must be a positive finite number, got 0\.0"),
+    ({"target_angle": 60.0}, ValueError, r"target_angle must be in \(0, max_turn_angle=60\.0\) degrees or None, "
+                                         r"got 60\.0"),
+    ({"target_angle": 20.0, "max_turn_angle": 15.0}, ValueError, r"max_turn_angle=15\.0.*got 20\.0"),
+    ({"target_angle": float("nan")}, ValueError, r"target_angle .* got nan"),
+    ({"target_contraction": 1.0}, ValueError, r"target_contraction must be in \(0, 1\) or None, got 1\.0"),
+    ({"target_contraction": -0.1}, ValueError, r"target_contraction must be a positive finite number, got -0\.1"),
+    ({"corrector_deadline": 0}, ValueError, r"corrector_deadline must be an integer >= 1, got 0"),
+    ({"corrector_deadline": 2.0}, TypeError, r"corrector_deadline must be an integer >= 1, got 2\.0"),
+    ({"corrector_deadline": True}, TypeError, r"corrector_deadline must be an integer >= 1, got True"),
+])
+def test_option_validation(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        fm.ContinuationOptions(**kwargs)
+
+
+def test_options_disable_and_defaults():
+    opts = fm.ContinuationOptions(target_angle=None, target_contraction=None, corrector_deadline=None)
+    assert opts.target_angle is None and opts.target_contraction is None and opts.corrector_deadline is None
+    d = fm.ContinuationOptions()
+    assert (d.target_angle, d.target_contraction, d.corrector_deadline) == (10.0, 0.25, 3)
+    assert frequency_response_options().max_step == 2.0
