@@ -5,7 +5,7 @@ reduction, linear, eigen), discretise (hbm, time), results (results, store), ana
 (fields, plot, io, viz), application (app); README "How the code is organised".
 """
 
-from .fe import Material, Section, bar, beam, line_mesh, load_mesh
+from .fe import Material, Section, bar, beam, box_mesh, line_mesh, load_mesh, rectangle_mesh, solid
 from .fe.redistribution import ConsistentMass, RedistributeMass
 from .laws import CubicSpring, PenaltyContact, UnilateralContact
 from .linear import IllConditionedWarning, LinearModes, LinearResponse, linear_modes, linear_response
@@ -30,8 +30,11 @@ __all__ = [
     "Section",
     "bar",
     "beam",
+    "solid",
     "line_mesh",
     "load_mesh",
+    "rectangle_mesh",
+    "box_mesh",
     "RedistributeMass",
     "ConsistentMass",
     "CubicSpring",

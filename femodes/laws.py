@@ -24,6 +24,11 @@ which, in ours, is ``p - max(0, p - c g_N) = 0`` for any constant ``c > 0``. (Ch
 
 The penalty law is ``p = k_p max(0, -g_N)`` and the cubic spring ``f = k3 q_i^3``.
 
+Contact on a boundary of a meshed solid: a law declared with a boundary name (``at="right"``), a
+``direction`` (the normal ``w_c``, along +x, +y or +z) or a callable ``gap`` is a template;
+``StructuralModel.with_contact`` turns it into one law per boundary node, each on a single DOF
+with a number as gap and no direction, so every formula below still acts on one DOF.
+
 Generalized derivatives: ``d max(0, s)/ds = 1 if s > 0 else 0``, i.e. at a kink (``s = 0``)
 the inactive side is taken (Clarke's generalized gradient contains both one-sided values).
 
@@ -105,6 +110,31 @@ def _finite(value: Any, name: str, owner: str) -> float:
     return v
 
 
+def _direction(value: Any, owner: str):
+    """``None`` or a unit vector (tuple of 1 to 3 floats) from ``direction=``."""
+    if value is None:
+        return None
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)):
+        raise TypeError(f"{owner}: direction must be a vector like (1.0, 0.0), got {value!r}")
+    try:
+        d = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise TypeError(f"{owner}: direction must be a vector of real numbers like (1.0, 0.0), got {value!r}") from None
+    if not 1 <= d.size <= 3 or not np.all(np.isfinite(d)):
+        raise ValueError(f"{owner}: direction must have 1 to 3 finite components, got {value!r}")
+    norm = float(np.linalg.norm(d))
+    if norm == 0.0:
+        raise ValueError(f"{owner}: direction must not be the zero vector, got {value!r}")
+    return tuple(float(v) for v in d / norm)
+
+
+def _gap(value: Any, owner: str):
+    """A non-negative gap, or a callable of node coordinates (evaluated by ``with_contact``)."""
+    if callable(value):
+        return value
+    return _positive(value, "gap", owner, allow_zero=True)
+
+
 def _normal_gap(gap, u):
     """``g_N = gap - u`` (the one kinematic relation of every contact law)."""
     return gap - np.asarray(u, dtype=float)
@@ -130,7 +160,7 @@ class _Stackable:
         out = object.__new__(cls)
         for f in fields(cls):
             vals = [getattr(law, f.name) for law in laws]
-            if f.name == "at":
+            if f.name == "at" or f.name == "direction":
                 object.__setattr__(out, f.name, tuple(vals))
             else:
                 object.__setattr__(out, f.name, np.array([math.nan if v is None else v for v in vals], dtype=float))
@@ -149,8 +179,17 @@ class UnilateralContact(_Stackable):
     at : str, (str, str) or int
         Contact DOF: a location name (default component), a (location, component) pair or an
         index into the model's DOFs. Must not be a constrained DOF.
-    gap : float
-        Initial gap ``g0 >= 0`` (the obstacle sits at ``q[at] = gap``).
+    gap : float or callable
+        Initial gap ``g0 >= 0`` (the obstacle sits at ``q[at] = gap``). On a meshed solid, a
+        function of the node coordinates (a casing of any shape): called once as ``gap(x)``
+        with ``x`` of shape ``(dim, n_nodes)`` (``x[0]``, ``x[1]`` the coordinates, as in
+        scikit-fem) returning ``n_nodes`` gaps, or, if that fails or returns a scalar, once
+        per node with ``x`` of shape ``(dim,)``.
+    direction : tuple of float, optional
+        Contact normal ``w_c`` of a meshed solid, e.g. ``(1.0, 0.0)``: the contact acts on the
+        displacement component along it (normalised; must be along +x, +y or +z). With a
+        boundary name ``at="right"`` the law is expanded to one contact per node of that
+        boundary by :meth:`femodes.StructuralModel.with_contact`.
     c : float, optional
         Complementarity parameter (force per length). With a truncated Fourier basis the weak
         (Galerkin) solution depends on it: for ``u'' + 0.1 u' + u = 0.2 cos(w t)`` against a stop at 1
@@ -163,12 +202,14 @@ class UnilateralContact(_Stackable):
     """
 
     at: Location
-    gap: float
+    gap: Any
     c: float | None = None
+    direction: tuple | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "at", check_location(self.at, "UnilateralContact"))
-        object.__setattr__(self, "gap", _positive(self.gap, "gap", "UnilateralContact", allow_zero=True))
+        object.__setattr__(self, "gap", _gap(self.gap, "UnilateralContact"))
+        object.__setattr__(self, "direction", _direction(self.direction, "UnilateralContact"))
         if self.c is not None:
             object.__setattr__(self, "c", _positive(self.c, "c", "UnilateralContact"))
 
@@ -205,16 +246,20 @@ class PenaltyContact(_Stackable):
 
     The classic alternative to complementarity; it allows a penetration of order
     ``p / stiffness`` and approaches the Signorini solution as ``stiffness -> inf``.
+    ``gap`` (a number or a function of node coordinates) and ``direction`` as for
+    :class:`UnilateralContact`; on a boundary each node gets the full ``stiffness``.
     """
 
     at: Location
-    gap: float
+    gap: Any
     stiffness: float
+    direction: tuple | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "at", check_location(self.at, "PenaltyContact"))
-        object.__setattr__(self, "gap", _positive(self.gap, "gap", "PenaltyContact", allow_zero=True))
+        object.__setattr__(self, "gap", _gap(self.gap, "PenaltyContact"))
         object.__setattr__(self, "stiffness", _positive(self.stiffness, "stiffness", "PenaltyContact"))
+        object.__setattr__(self, "direction", _direction(self.direction, "PenaltyContact"))
 
     def gap_function(self, u):
         """Normal gap ``g_N = gap - u`` (negative: penetration)."""

@@ -56,6 +56,19 @@ class DofMap:
         Names of individual DOFs for discrete models (``StructuralModel(dof_names=...)``).
     labels : tuple of str
         Human-readable label per DOF (for messages and plots).
+    groups : mapping str -> ndarray of int
+        Named boundaries of meshed solids -> their nodes (every Lagrange node on the boundary).
+        A group is not one DOF: contacts expand to one law per node
+        (:meth:`StructuralModel.with_contact`), a force is distributed over it
+        (:meth:`StructuralModel.with_forcing`); anything else asks for a named point.
+    group_weights : mapping str -> ndarray of float
+        Consistent weight of each node of a group, ``int_boundary N_k ds / int_boundary ds`` (sums
+        to 1): how a resultant force on the boundary is shared by its nodes.
+    node_coordinates : ndarray, shape (dim, n_nodes), optional
+        Coordinates of the nodes (FE models).
+    displacement : tuple of str
+        The components along the coordinate axes x, y(, z) (``("u_x", "u_y")`` for 2-D solids;
+        empty for bars, beams and discrete models): what a contact ``direction`` selects.
     """
 
     n_dofs: int
@@ -66,6 +79,10 @@ class DofMap:
     aliases: Mapping[str, str] = field(default_factory=dict)
     dof_names: tuple = ()
     labels: tuple = ()
+    groups: Mapping[str, np.ndarray] = field(default_factory=dict)
+    group_weights: Mapping[str, np.ndarray] = field(default_factory=dict)
+    node_coordinates: Any = None
+    displacement: tuple = ()
 
     @classmethod
     def discrete(cls, n_dofs: int, dof_names: Sequence[str] | None = None) -> "DofMap":
@@ -122,8 +139,14 @@ class DofMap:
             loc, comp = at, (self.components[0] if self.components else None)
         else:
             loc, comp = at
+        if loc in self.groups and loc not in self.locations:
+            raise ValueError(
+                f"{where}: {loc!r} is a boundary with {len(self.groups[loc])} nodes, not one DOF; contact laws "
+                f"and forces accept boundaries, for anything else name a point (gmsh physical point, or "
+                f"points={{...}} of femodes.solid)"
+            )
         if loc not in self.locations:
-            known = sorted(self.locations) + list(self.dof_names)
+            known = sorted(set(self.locations) | set(self.groups)) + list(self.dof_names)
             raise ValueError(f"{where}: unknown location {loc!r}; known names are {known}")
         if comp is None:
             raise ValueError(f"{where}: location {loc!r} has no components in this model")
@@ -609,32 +632,170 @@ class StructuralModel:
                              damping_info=f"modal zeta={ratios} on {nm} modes")
 
     def with_forcing(self, *forces: HarmonicForce) -> "StructuralModel":
-        """Return a copy with these harmonic point forces added."""
+        """Return a copy with these harmonic point forces added.
+
+        On a named boundary of a meshed solid (``at=("tip", "u_y")``, or ``at="tip"`` for the
+        first component) the amplitude is the *resultant* force, shared by the boundary's nodes
+        with the consistent weights ``int N_k ds / int ds`` (a uniform traction of that
+        resultant; ``DofMap.group_weights``). The share of supported nodes goes to the support
+        (logged).
+        """
         if not forces:
             raise ValueError("with_forcing: give at least one HarmonicForce")
         new = list(self.forces)
         for f in forces:
             if not isinstance(f, HarmonicForce):
                 raise TypeError(f"with_forcing: expected HarmonicForce, got {type(f).__name__}")
-            new.append(Attached(f, self.dof(f.at, "with_forcing: HarmonicForce")))
+            group = self._group_of(f.at)
+            if group is None:
+                new.append(Attached(f, self.dof(f.at, "with_forcing: HarmonicForce")))
+                continue
+            name, c = group
+            dofs = self.dofmap.node_dof[self.dofmap.groups[name], c]
+            weights = np.asarray(self.dofmap.group_weights[name], dtype=float)
+            if np.any(dofs == -2):
+                raise ValueError(f"with_forcing: HarmonicForce(at={f.at!r}): boundary {name!r} is not kept in this "
+                                 f"reduced model; attach the force before reducing")
+            lost = float(weights[dofs < 0].sum())
+            if lost > 0:
+                log.info("with_forcing: %.3g %% of the force on %r acts on supported nodes", 100 * lost, name)
+            for d, w in zip(dofs, weights):
+                if d >= 0 and w != 0.0:
+                    new.append(Attached(dataclasses.replace(f, at=int(d), amplitude=f.amplitude * float(w)), int(d)))
         return self._replace(forces=tuple(new))
+
+    def _group_of(self, at: Location) -> tuple[str, int] | None:
+        """``(boundary name, component index)`` if ``at`` names a boundary of a solid, else None."""
+        dm = self.dofmap
+        if isinstance(at, str) and at in dm.groups and at not in dm.locations and at not in dm.dof_names:
+            return at, 0
+        if isinstance(at, tuple) and len(at) == 2 and at[0] in dm.groups and at[0] not in dm.locations:
+            try:
+                return at[0], dm._component(at[1])
+            except ValueError as exc:
+                raise ValueError(f"at={at!r}: {exc}") from None
+        return None
 
     def without_forcing(self) -> "StructuralModel":
         """Return a copy with no forcing (the autonomous system, for nonlinear modes)."""
         return self._replace(forces=())
 
+    def _expand_contact(self, law) -> list:
+        """``[(law on one DOF, dof)]`` of a contact law: one per node of a boundary, with its
+        direction resolved to a component and a callable gap evaluated at the node."""
+        dm = self.dofmap
+        owner = f"with_contact: {type(law).__name__}(at={law.at!r})"
+        at = law.at
+        if law.direction is not None:
+            comp = self._direction_component(law.direction, owner)
+            if isinstance(at, tuple):
+                if dm._component(at[1]) != comp:
+                    raise ValueError(f"{owner}: direction={law.direction} selects {dm.displacement[comp]!r} but at= names "
+                                     f"component {at[1]!r}; give one of them")
+                at = at[0]
+            if not isinstance(at, str):
+                raise ValueError(f"{owner}: direction= needs a named location (boundary or point), not a DOF index")
+            at = (at, dm.components[comp])
+        group = self._group_of(at)
+        if group is None:
+            dof = self.dof(at, owner)
+            nodes, dofs = None, np.array([dof])
+        else:
+            name, c = group
+            nodes = np.asarray(dm.groups[name])
+            dofs = dm.node_dof[nodes, c]
+            if np.any(dofs == -2):
+                raise ValueError(f"{owner}: boundary {name!r} is not kept in this reduced model; attach the contact "
+                                 "before reducing (craig_bampton keeps contact DOFs)")
+            held = dofs < 0
+            if held.all():
+                support = dm.constrained_by.get((int(nodes[0]), c), "a support")
+                raise ValueError(f"{owner}: every node of {name!r} is constrained ({support!r}) in {dm.components[c]!r}; "
+                                 "contact cannot act on a constrained DOF")
+            if held.any():
+                log.info("with_contact: %d of %d nodes of %r are constrained in %r and get no contact",
+                         int(held.sum()), held.size, name, dm.components[c])
+            nodes, dofs = nodes[~held], dofs[~held]
+        gaps = self._contact_gaps(law.gap, nodes, dofs, owner)
+        return [(dataclasses.replace(law, at=int(d), gap=float(g), direction=None), int(d)) for d, g in zip(dofs, gaps)]
+
+    def _direction_component(self, direction: tuple, owner: str) -> int:
+        dm = self.dofmap
+        if not dm.displacement:
+            raise ValueError(f"{owner}: direction= needs a meshed solid (femodes.solid); for bars, beams and discrete "
+                             "models give the DOF with at=(name, component)")
+        dim = len(dm.displacement)
+        if len(direction) != dim:
+            raise ValueError(f"{owner}: direction={direction} has {len(direction)} components, this model is {dim}-D "
+                             f"(give {dim} components, e.g. {tuple([1.0] + [0.0] * (dim - 1))})")
+        d = np.asarray(direction)
+        axis = int(np.argmax(np.abs(d)))
+        if abs(d[axis]) < 1.0 - 1e-12 or d[axis] < 0:
+            raise ValueError(
+                f"{owner}: direction={direction} is not along +x, +y or +z: contacts act on one displacement DOF "
+                f"along its positive axis (g_N = gap - u), and inclined or negative normals (a nodal rotation of "
+                f"the DOFs) are not implemented yet; orient the mesh so that the obstacle lies along a positive axis"
+            )
+        return dm._component(dm.displacement[axis])
+
+    def _contact_gaps(self, gap, nodes, dofs, owner: str) -> np.ndarray:
+        """The gap of each contact DOF: the number, or the callable at the nodes' coordinates."""
+        n = len(dofs)
+        if not callable(gap):
+            return np.full(n, float(gap))
+        X = self.dofmap.node_coordinates
+        if X is None:
+            raise ValueError(f"{owner}: a callable gap needs a meshed model with node coordinates; give a number")
+        X = np.asarray(X, dtype=float)
+        if nodes is None:  # a named point or a (point, component) pair
+            loc = self.dofmap.node_dof
+            nodes = np.array([int(np.argwhere(loc == dofs[0])[0, 0])])
+        x = X[:, nodes]
+        g = None
+        try:
+            with np.errstate(all="ignore"):
+                v = np.asarray(gap(x), dtype=float)
+            if v.shape in ((n,), (1, n)):
+                g = v.reshape(n)
+        except Exception:  # noqa: BLE001 - a pointwise function may fail on arrays; it is called per node below
+            g = None
+        if g is None:
+            try:
+                g = np.array([float(gap(x[:, k])) for k in range(n)])
+            except Exception as exc:  # noqa: BLE001 - report any error of the user's function
+                raise ValueError(f"{owner}: the gap function failed at node {tuple(x[:, 0])}: {exc!r}; it must map "
+                                 "coordinates of shape (dim,) or (dim, n) to gaps") from exc
+        bad = np.flatnonzero(~np.isfinite(g) | (g < 0))
+        if bad.size:
+            k = int(bad[0])
+            raise ValueError(f"{owner}: the gap function gives {g[k]!r} at node {tuple(float(v) for v in x[:, k])}; "
+                             "gaps must be finite and >= 0")
+        return g
+
     def with_contact(self, *laws, contact_mass=None) -> "StructuralModel":
         """Return a copy with these contact laws (UnilateralContact or PenaltyContact) added.
+
+        A law on a named boundary of a meshed solid (``at="right"`` with ``direction=(1.0, 0.0)``,
+        or ``at=("right", "u_x")``) becomes one law per node of that boundary (every Lagrange
+        node: the P2 mid-side nodes carry contact too, so that no part of the discrete boundary
+        can pass through the obstacle unchecked), on the component along ``direction``, with its
+        gap evaluated at the node when ``gap`` is callable (``at="right"`` without a direction
+        uses the first component, ``u_x``). Nodes where that component is supported are skipped
+        (logged count); ``direction`` must be along +x, +y or +z (inclined or negative normals
+        would need a rotation of the nodal DOFs, not implemented: ValueError). ``model.contacts`` holds one
+        ``Attached(law, dof)`` per contact DOF.
 
         Parameters
         ----------
         contact_mass : RedistributeMass or ConsistentMass, optional
             What happens to the mass of each new contact DOF. ``fm.RedistributeMass()`` moves it
             to the neighbours (zero mass at the contact node, total mass and centre of mass
-            conserved; Khenous, Laborde & Renard 2008); ``fm.ConsistentMass()`` keeps it. Default:
-            ``RedistributeMass()`` for complementarity contacts of FE models, where a massful
-            contact node makes the nonsmooth modes ill-posed under mesh refinement (Thorin &
-            Legrand 2018), ``ConsistentMass()`` for penalty contacts and discrete models.
+            conserved; Khenous, Laborde & Renard 2008; for solids see
+            :func:`femodes.fe.redistribution.redistribute_surface_mass`); ``fm.ConsistentMass()``
+            keeps it. Default: ``RedistributeMass()`` for complementarity contacts of FE models,
+            where a massful contact node makes the nonsmooth modes ill-posed under mesh
+            refinement (Thorin & Legrand 2018), ``ConsistentMass()`` for penalty contacts and
+            discrete models.
         """
         if contact_mass is not None and not callable(getattr(contact_mass, "apply", None)):
             raise TypeError(f"with_contact: contact_mass must be fm.RedistributeMass() or fm.ConsistentMass(), "
@@ -649,24 +810,36 @@ class StructuralModel:
                     f"with_contact: expected UnilateralContact or PenaltyContact, got {type(law).__name__}"
                     + (" (use with_nonlinearity for smooth springs)" if isinstance(law, SMOOTH_LAWS) else "")
                 )
-            dof = self.dof(law.at, f"with_contact: {type(law).__name__}")
-            if dof in used:
-                raise ValueError(
-                    f"with_contact: {type(law).__name__}(at={law.at!r}): DOF {self.dofmap.label(dof)!r} already has a "
-                    "contact law (one contact per DOF)"
-                )
-            used.add(dof)
-            new.append(Attached(law, dof))
+            if law.direction is None and not callable(law.gap) and self._group_of(law.at) is None:
+                pairs = [(law, self.dof(law.at, f"with_contact: {type(law).__name__}"))]
+            else:
+                pairs = self._expand_contact(law)
+            for item, dof in pairs:
+                if dof in used:
+                    raise ValueError(
+                        f"with_contact: {type(law).__name__}(at={law.at!r}): DOF {self.dofmap.label(dof)!r} already has a "
+                        "contact law (one contact per DOF)"
+                    )
+                used.add(dof)
+                new.append(Attached(item, dof))
         M = self.M
         reports = list(self.mass_redistribution)
+        batches: dict = {}
         for a in new[len(self.contacts):]:
             strategy = contact_mass
             if strategy is None:
                 auto = self.fe is not None and isinstance(a.item, UnilateralContact)
                 strategy = RedistributeMass() if auto else ConsistentMass()
-            M, rep = strategy.apply(self.fe, M, a.dof)
-            if rep is not None:
-                reports.append(rep)
+            batches.setdefault(id(strategy) if contact_mass is not None else type(strategy), (strategy, []))[1].append(a.dof)
+        for strategy, dofs in batches.values():
+            if callable(getattr(strategy, "apply_all", None)):
+                M, reps = strategy.apply_all(self.fe, M, dofs)
+                reports.extend(reps)
+                continue
+            for dof in dofs:
+                M, rep = strategy.apply(self.fe, M, dof)
+                if rep is not None:
+                    reports.append(rep)
         if any(isinstance(a.item, UnilateralContact) for a in new) and any(isinstance(a.item, PenaltyContact) for a in new):
             log.info("model mixes complementarity and penalty contacts")
         return self._replace(contacts=tuple(new), M=M, mass_redistribution=tuple(reports))

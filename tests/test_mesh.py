@@ -557,15 +557,17 @@ def test_path_type(bad):
         load_mesh(bad)
 
 
-def test_triangle_mesh_has_no_lines(tmp_path):
+def test_triangle_mesh_loads_as_a_2d_mesh(tmp_path):
+    """A surface mesh is no longer refused as "not a beam": it is a 2D mesh for fm.solid (issue
+    15); its boundary lines (without physical names) add nothing."""
     path = write(tmp_path / "tri.msh", [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]],
                  [("triangle", [[0, 1, 2], [1, 3, 2]])])
-    msg = raises_naming(path, ValueError, "no line cells")
-    assert "2 triangle" in msg
-    # a surface mesh with its boundary lines is not a beam either
+    mesh = load_mesh(path)
+    assert mesh.dim() == 2 and mesh.t.shape == (3, 2) and mesh.p.shape == (2, 4)
     path = write(tmp_path / "tri_lines.msh", [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
                  [("triangle", [[0, 1, 2]]), ("line", [[0, 1], [1, 2], [2, 0]])])
-    raises_naming(path, ValueError, r"closed loop.*ignored.*1 triangle")
+    mesh = load_mesh(path)
+    assert mesh.dim() == 2 and mesh.t.shape == (3, 1)
 
 
 def test_branching_t_shape(tmp_path):

@@ -1,7 +1,14 @@
 """Models layer: shared FE model building (supports, point masses, springs, DOF naming).
 
-``bar.py`` and ``beam.py`` hold only their weak forms; this module turns assembled full
-matrices into a :class:`~femodes.model.StructuralModel` on the free DOFs.
+``bar.py``, ``beam.py`` and ``solid.py`` hold only their weak forms; this module turns assembled
+full matrices into a :class:`~femodes.model.StructuralModel` on the free DOFs.
+
+*Nodes.* A node is a column of ``nodal`` (the full FE DOF of each component there). For bars and
+beams these are the mesh vertices (``basis.nodal_dofs``; P2 interior DOFs are unnamed); for
+solids every Lagrange node: the vertices first, then the edge, facet and interior nodes of P2/Q2
+elements, so that a support or a contact on a boundary reaches every DOF on it.
+*Locations.* A named point is one node (``DofMap.locations``); a named boundary of a solid is a
+group of nodes (``DofMap.groups``).
 """
 
 from __future__ import annotations
@@ -26,16 +33,24 @@ class FEInfo:
     Attributes
     ----------
     kind : str
-        ``"bar"`` (axial displacement along the axis) or ``"beam"`` (transverse displacement).
-    mesh : skfem.MeshLine
+        ``"bar"`` (axial displacement along the axis), ``"beam"`` (transverse displacement) or
+        ``"solid"`` (displacement vector ``u_x, u_y(, u_z)`` of a 2-D/3-D mesh).
+    mesh : skfem.Mesh
     basis : skfem.Basis
     free : ndarray
         Full FE DOF index of each model DOF.
     n_full : int
         Number of FE DOFs before eliminating supports.
     nodal : ndarray, shape (n_components, n_nodes)
-        Full FE DOF index of each nodal component (``basis.nodal_dofs``).
+        Full FE DOF index of each nodal component (``basis.nodal_dofs`` for bars and beams;
+        every Lagrange node of a solid, vertices first, see the module docstring).
     components : tuple of str
+    node_coordinates : ndarray, shape (dim, n_nodes), optional
+        Coordinates of the nodes (default: the mesh vertices).
+    thickness : float
+        Out-of-plane thickness of a 2-D solid (1 otherwise).
+    plane : str or None
+        ``"stress"`` or ``"strain"`` for 2-D solids, None otherwise.
     """
 
     kind: str
@@ -45,11 +60,23 @@ class FEInfo:
     n_full: int
     nodal: np.ndarray
     components: tuple
+    node_coordinates: Any = None
+    thickness: float = 1.0
+    plane: Any = None
+
+    def __post_init__(self):
+        if self.node_coordinates is None:
+            object.__setattr__(self, "node_coordinates", np.asarray(self.mesh.p))
 
     @property
     def coordinates(self) -> np.ndarray:
-        """Node coordinates along the axis."""
-        return np.asarray(self.mesh.p[0])
+        """Node coordinates along the axis (1-D models); the first coordinate of the nodes."""
+        return np.asarray(self.node_coordinates[0])
+
+    @property
+    def dim(self) -> int:
+        """Spatial dimension of the mesh."""
+        return int(np.asarray(self.node_coordinates).shape[0])
 
 
 def check_mesh(mesh: Any, owner: str) -> None:
@@ -75,11 +102,16 @@ def checked_basis(mesh: Any, element: Any, owner: str) -> Any:
 
 def _check_assembled(owner: str, mesh: Any, M: sp.spmatrix, K: sp.spmatrix) -> None:
     """Overflow/underflow of the assembled matrices, reported against the inputs that cause it."""
-    h = np.diff(np.asarray(mesh.p[0]))
-    scales = (
-        f"element lengths {h.min():.3g}..{h.max():.3g}; rescale the units of the mesh length, the material "
-        "(E, rho) and the section (area, inertia)"
-    )
+    if np.asarray(mesh.p).shape[0] == 1:
+        h = np.diff(np.asarray(mesh.p[0]))
+        scales = (
+            f"element lengths {h.min():.3g}..{h.max():.3g}; rescale the units of the mesh length, the material "
+            "(E, rho) and the section (area, inertia)"
+        )
+    else:
+        size = np.ptp(np.asarray(mesh.p), axis=1)
+        scales = (f"mesh extent {', '.join(f'{v:.3g}' for v in size)}; rescale the units of the mesh length, the "
+                  "material (E, rho) and the thickness")
     for name, A in (("mass", M), ("stiffness", K)):
         if not np.all(np.isfinite(A.data)):
             raise ValueError(f"{owner}: the {name} matrix has non-finite entries (overflow) for the given material, section and {scales}")
@@ -151,18 +183,35 @@ def build_fe_model(
     constraints: Sequence[tuple[str, Sequence[str], str]],
     point_masses: Mapping | None,
     springs: Mapping | None,
+    nodal: np.ndarray | None = None,
+    locations: Mapping[str, int] | None = None,
+    groups: Mapping[str, np.ndarray] | None = None,
+    group_weights: Mapping[str, np.ndarray] | None = None,
+    node_coordinates: np.ndarray | None = None,
+    displacement: tuple = (),
+    fe_options: Mapping | None = None,
 ) -> StructuralModel:
     """Apply supports, point masses and springs, then return the model on the free DOFs.
 
-    ``constraints`` is a list of ``(argument name, location names, components fixed)``.
+    ``constraints`` is a list of ``(argument name, location names, components fixed)``. The
+    optional arguments describe meshes whose locations are not single vertices (solids):
+    ``nodal`` (default ``basis.nodal_dofs``), ``locations`` (named points -> node; default: every
+    mesh boundary of a line mesh), ``groups`` (named boundaries -> nodes), ``group_weights``
+    (consistent weights of the nodes of each group, summing to 1), ``node_coordinates``
+    (``(dim, n_nodes)``), ``displacement`` (the components along x, y(, z)) and ``fe_options``
+    (extra :class:`FEInfo` fields).
     """
-    nodal = np.asarray(basis.nodal_dofs)  # (n_components, n_nodes)
+    nodal = np.asarray(basis.nodal_dofs if nodal is None else nodal)  # (n_components, n_nodes)
     n_full = basis.N
     M = sp.csr_matrix(M)
     K = sp.csr_matrix(K)
     _check_assembled(owner, mesh, M, K)
-    locations = {name: _location_node(mesh, name, owner, "mesh boundaries") for name in (mesh.boundaries or {})}
-    dofs = _NodalDofs(owner=owner, mesh=mesh, nodal=nodal, components=tuple(components), aliases=aliases)
+    if locations is None:
+        locations = {name: _location_node(mesh, name, owner, "mesh boundaries") for name in (mesh.boundaries or {})}
+    groups = {} if groups is None else {k: np.asarray(v, dtype=int) for k, v in groups.items()}
+    coords = np.asarray(mesh.p if node_coordinates is None else node_coordinates, dtype=float)
+    dofs = _NodalDofs(owner=owner, mesh=mesh, nodal=nodal, components=tuple(components), aliases=aliases,
+                      locations=dict(locations), groups=groups)
     constrained = _constrained_dofs(dofs, constraints)
     added_mass = _lumped_values(dofs, "point_masses", point_masses)
     added_stiffness = _lumped_values(dofs, "springs", springs)
@@ -176,9 +225,14 @@ def build_fe_model(
         locations=locations,
         constrained_by=constrained,
         aliases=dict(aliases),
-        labels=tuple(_dof_labels(mesh, components, free, node_dof, locations)),
+        labels=tuple(_dof_labels(coords, components, free, node_dof, locations)),
+        groups=groups,
+        group_weights=dict(group_weights or {}),
+        node_coordinates=coords,
+        displacement=tuple(displacement),
     )
-    fe = FEInfo(kind=kind, mesh=mesh, basis=basis, free=free, n_full=n_full, nodal=nodal, components=tuple(components))
+    fe = FEInfo(kind=kind, mesh=mesh, basis=basis, free=free, n_full=n_full, nodal=nodal, components=tuple(components),
+                node_coordinates=coords, **dict(fe_options or {}))
     return StructuralModel(M=_on_free_dofs(M, free), K=_on_free_dofs(K, free), dofmap=dofmap, fe=fe)
 
 
@@ -191,6 +245,8 @@ class _NodalDofs:
     nodal: np.ndarray
     components: tuple
     aliases: Mapping[str, str]
+    locations: Mapping[str, int]
+    groups: Mapping[str, np.ndarray]
 
     def component(self, comp: str, arg: str) -> int:
         """Index of component ``comp`` (or its alias), else ValueError naming ``arg``."""
@@ -201,7 +257,21 @@ class _NodalDofs:
 
     def node(self, name: str, arg: str) -> int:
         """Node of the named point ``name``."""
-        return _location_node(self.mesh, name, self.owner, arg)
+        if name in self.locations:
+            return int(self.locations[name])
+        if name in self.groups:
+            raise ValueError(
+                f"{self.owner}: {arg} names boundary {name!r} with {len(self.groups[name])} nodes; this needs one "
+                f"point: name it (gmsh physical point, or points={{...}} of femodes.solid)"
+            )
+        known = sorted(set(self.locations) | set(self.groups))
+        raise ValueError(f"{self.owner}: {arg} names location {name!r}, but the mesh has the named locations {known}")
+
+    def nodes(self, name: str, arg: str) -> np.ndarray:
+        """Nodes of a named point or boundary."""
+        if name in self.groups:
+            return np.asarray(self.groups[name], dtype=int)
+        return np.array([self.node(name, arg)])
 
     def resolve(self, at: Any, arg: str) -> tuple[int, int]:
         """``(node, component index)`` of a location name or a ``(name, component)`` pair."""
@@ -219,9 +289,9 @@ def _constrained_dofs(dofs: _NodalDofs, constraints: Sequence[tuple[str, Sequenc
     constrained: dict = {}
     for arg, names, comps in constraints:
         for name in names:
-            node = dofs.node(name, arg)
-            for comp in comps:
-                constrained[(node, dofs.component(comp, arg))] = f"{arg}={name!r}"
+            for node in dofs.nodes(name, arg):
+                for comp in comps:
+                    constrained[(int(node), dofs.component(comp, arg))] = f"{arg}={name!r}"
     return constrained
 
 
@@ -268,15 +338,17 @@ def _on_free_dofs(A: sp.spmatrix, free: np.ndarray) -> sp.csr_matrix:
     return (0.5 * (A + A.T)).tocsr()
 
 
-def _dof_labels(mesh: Any, components: tuple, free: np.ndarray, node_dof: np.ndarray, locations: dict) -> list:
-    """``"name.comp"`` at named points, ``"comp@x=..."`` at other nodes, ``"interior dof i"`` elsewhere."""
-    x = np.asarray(mesh.p[0])
+def _dof_labels(coords: np.ndarray, components: tuple, free: np.ndarray, node_dof: np.ndarray, locations: dict) -> list:
+    """``"name.comp"`` at named points, ``"comp@x=..."`` (``"comp@(x, y)"`` in 2-D/3-D) at other nodes,
+    ``"interior dof i"`` elsewhere."""
     labels = [""] * free.size
     for node in range(node_dof.shape[0]):
+        where = f"x={coords[0, node]:.6g}" if coords.shape[0] == 1 else \
+            "(" + ", ".join(f"{v:.6g}" for v in coords[:, node]) + ")"
         for c, comp in enumerate(components):
             i = node_dof[node, c]
             if i >= 0:
-                labels[i] = f"{comp}@x={x[node]:.6g}"
+                labels[i] = f"{comp}@{where}"
     for i in range(free.size):
         if not labels[i]:
             labels[i] = f"interior dof {free[i]}"

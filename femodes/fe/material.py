@@ -1,4 +1,4 @@
-"""Models layer: material and cross-section data of 1-D structural members."""
+"""Models layer: material data (bars, beams, solids) and cross-section data of 1-D members."""
 
 from __future__ import annotations
 
@@ -23,14 +23,36 @@ def _pos(owner: str, name: str, v, *, allow_none: bool = False):
 
 @dataclass(frozen=True)
 class Material:
-    """Linear elastic material: Young's modulus ``E`` and density ``rho`` (consistent units)."""
+    """Linear elastic isotropic material: Young's modulus ``E``, density ``rho`` (consistent units)
+    and Poisson's ratio ``nu``.
+
+    ``nu`` (``-1 < nu < 0.5``, default 0.3) is used by meshed solids (:func:`femodes.solid`);
+    bars and beams ignore it.
+    """
 
     E: float
     rho: float
+    nu: float = 0.3
 
     def __post_init__(self):
         object.__setattr__(self, "E", _pos("Material", "E", self.E))
         object.__setattr__(self, "rho", _pos("Material", "rho", self.rho))
+        nu = self.nu
+        if isinstance(nu, bool) or not isinstance(nu, (int, float, np.integer, np.floating)):
+            raise TypeError(f"Material: nu must be a real number in (-1, 0.5), got {nu!r}")
+        nu = float(nu)
+        if not -1.0 < nu < 0.5:
+            raise ValueError(
+                f"Material: nu must satisfy -1 < nu < 0.5 (positive definite isotropic elasticity), got {self.nu!r}; "
+                "for a nearly incompressible material use e.g. nu=0.49"
+            )
+        object.__setattr__(self, "nu", nu)
+
+    @property
+    def lame(self) -> tuple[float, float]:
+        """Lame parameters ``(lambda, mu)`` of 3-D (and plane-strain) elasticity:
+        ``lambda = E nu / ((1 + nu)(1 - 2 nu))``, ``mu = E / (2 (1 + nu))``."""
+        return self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu)), self.E / (2.0 * (1.0 + self.nu))
 
     @property
     def wave_speed(self) -> float:

@@ -59,6 +59,7 @@ import io
 import math
 import numbers
 import os
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -69,7 +70,8 @@ import skfem
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["line_mesh", "load_mesh", "POINT_RTOL", "COLLINEAR_RTOL", "MAX_ELEMENTS"]
+__all__ = ["line_mesh", "load_mesh", "rectangle_mesh", "box_mesh", "named_points", "POINT_RTOL", "COLLINEAR_RTOL",
+           "MAX_ELEMENTS"]
 
 #: Relative tolerance (times the mesh length) for a named point of
 #: :func:`line_mesh` to coincide with a vertex.
@@ -421,8 +423,11 @@ def _is_line_type(cell_type: str) -> bool:
     )
 
 
-def load_mesh(path) -> skfem.MeshLine:
-    """Read a straight 1-D mesh (bar or beam) from a file.
+def load_mesh(path) -> skfem.Mesh:
+    """Read a straight 1-D mesh (bar or beam), or a 2-D/3-D solid mesh, from a file.
+
+    A file with triangle/quadrilateral (2-D) or tetrahedron/hexahedron (3-D) cells is read as
+    a solid mesh (see "Solid meshes" in the notes); any other file as a line mesh.
 
     Parameters
     ----------
@@ -432,10 +437,12 @@ def load_mesh(path) -> skfem.MeshLine:
 
     Returns
     -------
-    skfem.MeshLine
+    skfem.MeshLine, or skfem.MeshTri/MeshQuad/MeshTet/MeshHex
         Canonical line mesh (see the module docstring) with the coordinate
         ``s`` along the line; named points in ``mesh.boundaries`` and
-        subdomains in ``mesh.subdomains``.
+        subdomains in ``mesh.subdomains``.  For a solid mesh: named boundaries
+        (facet sets) in ``mesh.boundaries``, subdomains in ``mesh.subdomains``
+        and named points from :func:`named_points`.
 
     Raises
     ------
@@ -481,6 +488,17 @@ def load_mesh(path) -> skfem.MeshLine:
     physical group) is ignored.  ``.vtu``/``.xdmf`` files written by meshio
     keep the tags but not the names, so they load with the fallback names.
     ``"left"`` and ``"right"`` are always added, as in :func:`line_mesh`.
+
+    *Solid meshes.*  The cells of the highest dimension (``triangle``, ``quad``,
+    ``tetra``, ``hexahedron`` and their quadratic variants ``triangle6``, ``quad9``,
+    ``tetra10``, ``hexahedron27``) make a scikit-fem ``MeshTri``/``MeshQuad``/``MeshTet``/
+    ``MeshHex`` (``skfem.io.meshio.from_meshio``; a 2-D mesh must lie in a plane
+    ``z = const``).  Quadratic cells (``triangle6``, ``tetra10``, ...; gmsh
+    ``SetOrder 2``) are read by their corner nodes: the geometry becomes straight-sided and the
+    mid-side nodes are dropped (use ``femodes.solid(..., order=2)`` for quadratic fields).  Named physical groups of facets (lines in 2-D, triangles/quads in
+    3-D) become ``mesh.boundaries``, of cells ``mesh.subdomains`` and of points (``vertex``
+    cells) named points, read back with :func:`named_points`.  Nodes used by no cell are
+    dropped.  Unnamed tags (``.vtu`` files) are not turned into names for solid meshes.
     """
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(
@@ -496,6 +514,8 @@ def load_mesh(path) -> skfem.MeshLine:
         raise ValueError(f"load_mesh: {fname!r} is a directory, not a mesh file")
 
     raw = _read_meshio(fname)
+    if any(block.type in _SOLID_TYPES for block in raw.cells):
+        return _from_meshio_solid(raw, fname)
     return _from_meshio(raw, fname)
 
 
@@ -711,3 +731,205 @@ def _named_points(point_groups: dict, old_to_vertex: np.ndarray, pts: np.ndarray
             )
         points[name] = verts
     return points
+
+
+# ---------------------------------------------------------------------------
+# 2-D and 3-D meshes for solids
+# ---------------------------------------------------------------------------
+# meshio cell types of solid cells; their dimension
+_SOLID_TYPES = {"triangle": 2, "triangle6": 2, "quad": 2, "quad8": 2, "quad9": 2,
+                "tetra": 3, "tetra10": 3, "hexahedron": 3, "hexahedron20": 3, "hexahedron27": 3}
+
+# quadratic cells -> (linear type, number of corners; meshio stores the corners first)
+_QUADRATIC = {"line3": ("line", 2), "triangle6": ("triangle", 3), "quad8": ("quad", 4), "quad9": ("quad", 4),
+              "tetra10": ("tetra", 4), "hexahedron20": ("hexahedron", 8), "hexahedron27": ("hexahedron", 8)}
+
+# named points of 2-D/3-D meshes: scikit-fem meshes hold named facet sets (boundaries) and cell
+# sets (subdomains) but no point sets, so load_mesh keeps them here, keyed by the id of the mesh
+# object (entries are removed when the mesh is garbage-collected)
+_NAMED_POINTS: dict[int, dict[str, np.ndarray]] = {}
+
+
+def named_points(mesh) -> dict[str, np.ndarray]:
+    """Named points of a mesh: ``{name: vertex indices}``.
+
+    For a line mesh these are its named points (``mesh.boundaries``: facets are vertices). For
+    a 2-D/3-D mesh read by :func:`load_mesh` they are the gmsh physical points (``vertex``
+    cells) of the file. A mesh derived from it (``with_boundaries``, ``refined``, ...) is a new
+    object without them: pass ``points=`` to :func:`femodes.solid` instead.
+    """
+    if isinstance(mesh, skfem.MeshLine):
+        return {k: np.asarray(v, dtype=np.int64) for k, v in (mesh.boundaries or {}).items()}
+    return {k: v.copy() for k, v in _NAMED_POINTS.get(id(mesh), {}).items()}
+
+
+def _remember_points(mesh, points: dict[str, np.ndarray]) -> None:
+    if not points:
+        return
+    key = id(mesh)
+    _NAMED_POINTS[key] = points
+    weakref.finalize(mesh, _NAMED_POINTS.pop, key, None)
+
+
+def _count(func: str, what: str, value) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{func}: argument {what!r} must be an int >= 1, got {value!r} of type {type(value).__name__}")
+    if not 1 <= int(value) <= 100_000:
+        raise ValueError(f"{func}: argument {what!r} must be an int in [1, 100000], got {value!r}")
+    return int(value)
+
+
+def _faces(mesh, spec: dict[str, tuple[int, float]]):
+    """``mesh.with_boundaries`` from ``{name: (axis, coordinate)}`` (facets in that plane)."""
+    span = np.ptp(mesh.p, axis=1).max()
+    sel = {name: (lambda x, a=axis, c=coord: np.abs(x[a] - c) <= 1e-9 * span) for name, (axis, coord) in spec.items()}
+    return mesh.with_boundaries(sel)
+
+
+def rectangle_mesh(length: float = 1.0, height: float = 0.1, nx: int = 20, ny: int = 2, *,
+                   quad: bool = False) -> skfem.Mesh:
+    """Structured mesh of the rectangle ``[0, length] x [0, height]`` (x: length, y: height).
+
+    Parameters
+    ----------
+    length, height : float
+        Sides, finite and > 0.
+    nx, ny : int
+        Number of element divisions along x and y (>= 1).
+    quad : bool
+        Bilinear quadrilaterals (``skfem.MeshQuad``) instead of triangles (``skfem.MeshTri``,
+        each cell of the grid split in two).
+
+    Returns
+    -------
+    skfem.MeshTri or skfem.MeshQuad
+        With the boundaries ``"left"`` (x = 0), ``"right"`` (x = length), ``"bottom"``
+        (y = 0) and ``"top"`` (y = height) as facet sets.
+    """
+    f = "rectangle_mesh"
+    length = _real(f, "argument 'length'", length, positive=True)
+    height = _real(f, "argument 'height'", height, positive=True)
+    nx, ny = _count(f, "nx", nx), _count(f, "ny", ny)
+    if not isinstance(quad, (bool, np.bool_)):
+        raise TypeError(f"{f}: argument 'quad' must be True or False, got {quad!r}")
+    x, y = np.linspace(0.0, length, nx + 1), np.linspace(0.0, height, ny + 1)
+    mesh = (skfem.MeshQuad if quad else skfem.MeshTri).init_tensor(x, y)
+    return _faces(mesh, {"left": (0, 0.0), "right": (0, length), "bottom": (1, 0.0), "top": (1, height)})
+
+
+def box_mesh(length: float = 1.0, width: float = 0.1, height: float = 0.1, nx: int = 10, ny: int = 1,
+             nz: int = 1, *, hexahedra: bool = False) -> skfem.Mesh:
+    """Structured mesh of the box ``[0, length] x [0, width] x [0, height]``.
+
+    The x axis is the length, y the width and z the height.
+
+    Parameters
+    ----------
+    length, width, height : float
+        Sides, finite and > 0.
+    nx, ny, nz : int
+        Number of element divisions along x, y and z (>= 1).
+    hexahedra : bool
+        Trilinear hexahedra (``skfem.MeshHex``) instead of tetrahedra (``skfem.MeshTet``, each
+        cell of the grid split in several).
+
+    Returns
+    -------
+    skfem.MeshTet or skfem.MeshHex
+        With the boundaries ``"left"`` (x = 0), ``"right"`` (x = length), ``"front"``
+        (y = 0), ``"back"`` (y = width), ``"bottom"`` (z = 0) and ``"top"`` (z = height).
+    """
+    f = "box_mesh"
+    length = _real(f, "argument 'length'", length, positive=True)
+    width = _real(f, "argument 'width'", width, positive=True)
+    height = _real(f, "argument 'height'", height, positive=True)
+    nx, ny, nz = _count(f, "nx", nx), _count(f, "ny", ny), _count(f, "nz", nz)
+    if not isinstance(hexahedra, (bool, np.bool_)):
+        raise TypeError(f"{f}: argument 'hexahedra' must be True or False, got {hexahedra!r}")
+    axes = (np.linspace(0.0, length, nx + 1), np.linspace(0.0, width, ny + 1), np.linspace(0.0, height, nz + 1))
+    mesh = (skfem.MeshHex if hexahedra else skfem.MeshTet).init_tensor(*axes)
+    return _faces(mesh, {"left": (0, 0.0), "right": (0, length), "front": (1, 0.0), "back": (1, width),
+                         "bottom": (2, 0.0), "top": (2, height)})
+
+
+def _from_meshio_solid(raw: meshio.Mesh, fname: str):
+    """A 2-D/3-D scikit-fem mesh with named boundaries, subdomains and points (see load_mesh)."""
+    from skfem.io.meshio import from_meshio
+
+    pts = np.asarray(raw.points, dtype=np.float64)
+    if pts.ndim != 2 or not np.all(np.isfinite(pts)):
+        raise ValueError(f"load_mesh: {fname!r}: point coordinates are not finite numbers")
+    dim = max(_SOLID_TYPES[b.type] for b in raw.cells if b.type in _SOLID_TYPES)
+    kinds = sorted({b.type for b in raw.cells if _SOLID_TYPES.get(b.type) == dim})
+    if len(kinds) > 1:
+        raise ValueError(
+            f"load_mesh: {fname!r}: mixed {dim}-D cell types {kinds}; femodes solids need one cell type "
+            "(in gmsh, mesh with only triangles/quadrilaterals or only tetrahedra/hexahedra)"
+        )
+    cell_type = _QUADRATIC.get(kinds[0], (kinds[0], 0))[0]
+    linear = []  # (type, connectivity) of every block, quadratic cells by their corners
+    for block in raw.cells:
+        conn = np.asarray(block.data)
+        if block.type in _QUADRATIC:
+            ctype, corners = _QUADRATIC[block.type]
+            linear.append((ctype, conn[:, :corners]))
+        else:
+            linear.append((block.type, conn))
+    if dim == 2 and pts.shape[1] > 2 and np.ptp(pts[:, 2]) > 1e-9 * max(np.ptp(pts[:, :2]), 1e-300):
+        raise ValueError(
+            f"load_mesh: {fname!r}: a 2-D mesh ({cell_type} cells) must lie in a plane z = const, "
+            f"but z ranges over {pts[:, 2].min():.6g}..{pts[:, 2].max():.6g}"
+        )
+    # drop nodes used by no solid cell (they would carry DOFs without stiffness or mass)
+    used = np.unique(np.concatenate([conn.ravel() for ctype, conn in linear if ctype == cell_type]))
+    new = np.full(pts.shape[0], -1, dtype=np.int64)
+    new[used] = np.arange(used.size)
+    point_groups: dict[str, list] = {}
+    names = _field_names(raw.field_data or {})
+    key = _tag_key(raw.cell_data)
+    blocks, data = [], {}
+    for ib, (ctype, conn) in enumerate(linear):
+        if ctype == "vertex":
+            if key is not None:
+                tags = _int_tags(fname, key, raw.cell_data[key][ib], len(conn))
+                for tag in np.unique(tags):
+                    name = names.get((0, int(tag)))
+                    if name is not None:
+                        point_groups.setdefault(name, []).append(conn[tags == tag, 0])
+            continue
+        if np.any(new[conn] < 0):
+            continue  # facets/lines not on the solid cells
+        blocks.append(meshio.CellBlock(ctype, new[conn]))
+        for k, arrays in raw.cell_data.items():
+            data.setdefault(k, []).append(np.asarray(arrays[ib]))
+    clean = meshio.Mesh(pts[used], blocks, cell_data=data, field_data=raw.field_data)
+    # meshio builds the named cell sets from gmsh:physical and field_data
+    try:
+        clean.cell_sets = {}
+        if key == "gmsh:physical" and names:
+            sets: dict[str, list] = {}
+            for ib, block in enumerate(clean.cells):
+                tags = np.asarray(clean.cell_data[key][ib]).reshape(-1)
+                d = 1 if _is_line_type(block.type) else _SOLID_TYPES.get(block.type, -1)
+                for (ndim, tag), name in names.items():
+                    sets.setdefault(name, [np.zeros(0, dtype=np.int64) for _ in clean.cells])
+                    if ndim == d:
+                        sets[name][ib] = np.nonzero(tags == tag)[0]
+            clean.cell_sets = {k: v for k, v in sets.items() if any(a.size for a in v)}
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            mesh = from_meshio(clean, ignore_orientation=True)
+    except (ValueError, IndexError, KeyError, NotImplementedError) as exc:
+        raise ValueError(f"load_mesh: {fname!r}: cannot build a {cell_type} mesh: {exc}") from exc
+    boundaries = {k: np.asarray(v, dtype=np.int32) for k, v in (mesh.boundaries or {}).items()}
+    subdomains = {k: np.asarray(v, dtype=np.int32) for k, v in (mesh.subdomains or {}).items()
+                  if not k.startswith("gmsh:")}
+    mesh = mesh.with_boundaries(boundaries, boundaries_only=False) if boundaries else mesh
+    mesh = mesh.with_subdomains(subdomains) if subdomains else mesh
+    points = {}
+    for name, chunks in point_groups.items():
+        nodes = new[np.unique(np.concatenate(chunks))]
+        if np.any(nodes < 0):
+            raise ValueError(f"load_mesh: {fname!r}: named point {name!r} is not a node of any {cell_type} cell")
+        points[name] = nodes
+    _remember_points(mesh, points)
+    return mesh

@@ -1,0 +1,260 @@
+"""Models layer: linear elasticity of 2-D (plane stress/strain) and 3-D solids, scikit-fem assembly.
+
+``rho u_tt - div sigma(u) = f`` with ``sigma = lambda tr(eps) I + 2 mu eps``, ``eps = sym grad u``,
+discretised with vector Lagrange elements (P1/P2 triangles and tetrahedra, Q1/Q2 quadrilaterals
+and hexahedra) and a consistent mass matrix.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+import skfem
+from skfem.helpers import ddot, dot, sym_grad, trace
+
+from ..model import StructuralModel
+from .assembly import build_fe_model, checked_basis, element_property, quad_field, support_names
+from .material import Material
+from .mesh import named_points
+
+__all__ = ["solid", "POINT_RTOL"]
+
+#: Relative tolerance (times the mesh extent) for a point of ``solid(points=...)`` to be a node.
+POINT_RTOL = 1e-6
+
+_COMPONENTS = {2: ("u_x", "u_y"), 3: ("u_x", "u_y", "u_z")}
+
+
+@skfem.BilinearForm
+def _stiffness(u, v, w):
+    # t (lambda tr eps(u) tr eps(v) + 2 mu eps(u):eps(v))
+    eu, ev = sym_grad(u), sym_grad(v)
+    return w["t"] * (w["lam"] * trace(eu) * trace(ev) + 2.0 * w["mu"] * ddot(eu, ev))
+
+
+@skfem.BilinearForm
+def _mass(u, v, w):
+    # t rho u . v
+    return w["t"] * w["rho"] * dot(u, v)
+
+
+@skfem.LinearForm
+def _boundary_measure(v, w):
+    # int N_k ds: consistent weights of a boundary (first component only)
+    return v[0]
+
+
+def _elements(mesh: Any, order: int) -> tuple[int, Any]:
+    """Spatial dimension and scalar Lagrange element of ``order`` for the cell type of ``mesh``."""
+    table = (
+        (skfem.MeshTri1, 2, (skfem.ElementTriP1, skfem.ElementTriP2)),
+        (skfem.MeshQuad1, 2, (skfem.ElementQuad1, skfem.ElementQuad2)),
+        (skfem.MeshTet1, 3, (skfem.ElementTetP1, skfem.ElementTetP2)),
+        (skfem.MeshHex1, 3, (skfem.ElementHex1, skfem.ElementHex2)),
+    )
+    for cls, dim, elems in table:
+        if isinstance(mesh, cls):
+            return dim, elems[order - 1]()
+    raise TypeError(
+        f"solid: mesh must be a scikit-fem triangle, quadrilateral, tetrahedron or hexahedron mesh "
+        f"(femodes.rectangle_mesh, femodes.box_mesh or femodes.load_mesh), got {type(mesh).__name__}"
+    )
+
+
+def _lagrange_nodes(basis: Any, dim: int) -> np.ndarray:
+    """``(dim, n_nodes)`` full DOF of each component at every Lagrange node, vertices first."""
+    blocks = [np.asarray(basis.nodal_dofs)]
+    for dofs in (basis.edge_dofs if dim == 3 else None, basis.facet_dofs, basis.interior_dofs):
+        if dofs is None:
+            continue
+        dofs = np.asarray(dofs)
+        if dofs.size:
+            # a Lagrange vector element has one DOF per component at each node of an entity;
+            # entities with several nodes come as consecutive groups of dim rows
+            blocks.extend(dofs[k:k + dim] for k in range(0, dofs.shape[0], dim))
+    nodal = np.hstack(blocks)
+    if nodal.shape[0] != dim or np.unique(nodal).size != basis.N or nodal.size != basis.N:
+        raise RuntimeError(f"solid: unexpected DOF layout of {type(basis.elem).__name__}")  # pragma: no cover
+    return nodal
+
+
+def _groups(mesh: Any, basis: Any, nodal: np.ndarray, node_of_full: np.ndarray) -> tuple[dict, dict]:
+    """Nodes of every named boundary and their consistent weights ``int N_k ds / int ds``."""
+    groups, weights = {}, {}
+    for name, facets in (mesh.boundaries or {}).items():
+        facets = np.asarray(facets, dtype=np.int64)
+        if facets.size == 0:
+            continue
+        nodes = np.unique(node_of_full[np.asarray(basis.get_dofs(facets).all())])
+        b = _boundary_measure.assemble(skfem.FacetBasis(mesh, basis.elem, facets=facets))
+        w = b[nodal[0, nodes]]
+        total = w.sum()
+        groups[name] = nodes
+        weights[name] = w / total if total > 0 else np.full(nodes.size, 1.0 / nodes.size)
+    return groups, weights
+
+
+def _points(mesh: Any, coords: np.ndarray, points: Mapping | None, groups: Mapping) -> dict:
+    """Named points: gmsh physical points of the mesh and ``points={name: coordinates}``."""
+    located = {name: int(v[0]) for name, v in named_points(mesh).items() if len(v) == 1}
+    if points is None:
+        return located
+    if not isinstance(points, Mapping):
+        raise TypeError(f"solid: points must be a mapping {{name: coordinates}}, got {type(points).__name__}")
+    dim = coords.shape[0]
+    tol = POINT_RTOL * float(np.ptp(coords, axis=1).max())
+    for name, xy in points.items():
+        if not isinstance(name, str) or not name:
+            raise TypeError(f"solid: names in points must be non-empty strings, got {name!r}")
+        if name in groups:
+            raise ValueError(f"solid: points[{name!r}]: the name is a boundary of the mesh; choose another name")
+        try:
+            x = np.asarray(xy, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            x = np.zeros(0)
+        if x.size != dim or not np.all(np.isfinite(x)):
+            raise ValueError(f"solid: points[{name!r}] must be {dim} finite coordinates, got {xy!r}")
+        d = np.linalg.norm(coords - x[:, None], axis=0)
+        k = int(np.argmin(d))
+        if d[k] > tol:
+            raise ValueError(
+                f"solid: points[{name!r}] = {xy!r} is not a node of the mesh: the nearest node is at "
+                f"{tuple(float(v) for v in coords[:, k])} (distance {d[k]:.3g} > {tol:.3g})"
+            )
+        located[name] = k
+    return located
+
+
+def _plane_options(dim: int, plane: Any, thickness: Any) -> tuple[str | None, float]:
+    if dim == 3:
+        if plane is not None or thickness is not None:
+            raise ValueError(
+                f"solid: plane={plane!r} and thickness={thickness!r} apply to 2-D meshes only; this mesh is 3-D "
+                "(leave them out)"
+            )
+        return None, 1.0
+    plane = "stress" if plane is None else plane
+    if plane not in ("stress", "strain"):
+        raise ValueError(f"solid: plane must be 'stress' or 'strain' (2-D meshes), got {plane!r}")
+    t = 1.0 if thickness is None else thickness
+    if isinstance(t, bool) or not isinstance(t, (int, float, np.integer, np.floating)) or not math.isfinite(t) or t <= 0:
+        raise ValueError(f"solid: thickness must be a finite positive number, got {thickness!r}")
+    return plane, float(t)
+
+
+def _supports(clamped: Any, supports: Any, components: tuple) -> list:
+    """``[(argument, names, components)]`` for :func:`build_fe_model`."""
+    out = [("clamped", support_names(clamped, "solid", "clamped"), components)]
+    if supports is None:
+        return out
+    if not isinstance(supports, Mapping):
+        raise TypeError(
+            f"solid: supports must be a mapping {{location: components}}, e.g. {{'bottom': ('u_y',)}}, got {supports!r}"
+        )
+    for name, comps in supports.items():
+        if not isinstance(name, str):
+            raise TypeError(f"solid: supports keys must be location names, got {name!r}")
+        comps = (comps,) if isinstance(comps, str) else comps
+        if not isinstance(comps, (tuple, list)) or not comps or not all(isinstance(c, str) for c in comps):
+            raise TypeError(
+                f"solid: supports[{name!r}] must be a component name or a tuple of them (of {list(components)}), "
+                f"got {comps!r}"
+            )
+        out.append(("supports", [name], tuple(comps)))
+    return out
+
+
+def solid(
+    mesh: Any,
+    material: Material | Mapping[str, Material],
+    *,
+    clamped: Any = None,
+    supports: Mapping[str, Any] | None = None,
+    plane: str | None = None,
+    thickness: float | None = None,
+    order: int = 1,
+    points: Mapping[str, Any] | None = None,
+) -> StructuralModel:
+    """Linear elastic solid: ``int t rho u.v`` (mass) and ``int t sigma(u):eps(v)`` (stiffness).
+
+    ``sigma = lambda tr(eps) I + 2 mu eps``, ``eps = (grad u + grad u^T) / 2``, with
+    ``mu = E / (2 (1 + nu))`` and ``lambda = E nu / ((1 + nu)(1 - 2 nu))`` in 3-D and plane
+    strain, ``lambda = E nu / (1 - nu^2)`` in plane stress; ``t`` is the thickness of a 2-D
+    solid (1 in 3-D). Consistent mass.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshTri, MeshQuad, MeshTet or MeshHex
+        From :func:`femodes.rectangle_mesh`, :func:`femodes.box_mesh` or :func:`femodes.load_mesh`;
+        its named boundaries (``mesh.boundaries``) are the locations of supports, contacts and
+        forces.
+    material : Material or mapping {subdomain: Material}
+        ``E``, ``rho`` and ``nu`` (one material, or one per named subdomain covering the mesh).
+    clamped : str or list of str, optional
+        Boundaries or named points where every displacement component is fixed (all their
+        nodes, P2 mid-side nodes included).
+    supports : mapping {location: component or tuple of components}, optional
+        Per-component supports, e.g. ``{"bottom": ("u_y",)}`` (a roller on the bottom edge).
+    plane : {"stress", "strain"}, optional
+        2-D only (default ``"stress"``); a 3-D mesh with ``plane`` or ``thickness`` is an error.
+    thickness : float, optional
+        2-D only (default 1): multiplies M and K.
+    order : {1, 2}
+        Lagrange order: P1/P2 on simplices, Q1/Q2 on quadrilaterals and hexahedra. P1
+        triangles and tetrahedra lock in bending (a slender strip needs many elements through
+        the height); prefer quadrilaterals or ``order=2`` for bending.
+    points : mapping {name: coordinates}, optional
+        Extra named points: each must be a node (a vertex, or a P2 node) within
+        ``POINT_RTOL`` times the mesh extent. gmsh physical points of :func:`femodes.load_mesh`
+        are named points too.
+
+    Returns
+    -------
+    StructuralModel
+        DOF components ``"u_x", "u_y"(, "u_z")`` at every node; ``model.fe.kind == "solid"``.
+        ``at=("tip_top", "u_y")`` selects one DOF of a named point; ``at="right"`` names a
+        boundary: contact laws expand to one contact per node and forces are distributed over it
+        (see :meth:`femodes.StructuralModel.with_contact` and ``with_forcing``).
+    """
+    if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer)) or order not in (1, 2):
+        raise ValueError(f"solid: order must be 1 or 2, got {order!r}")
+    dim, scalar = _elements(mesh, int(order))
+    plane, t = _plane_options(dim, plane, thickness)
+    components = _COMPONENTS[dim]
+    mats = element_property(mesh, material, Material, "solid", "material")
+    basis = checked_basis(mesh, skfem.ElementVector(scalar), "solid")
+    E = np.array([m.E for m in mats])
+    nu = np.array([m.nu for m in mats])
+    mu = E / (2.0 * (1.0 + nu))
+    lam = E * nu / (1.0 - nu**2) if plane == "stress" else E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
+        K = _stiffness.assemble(basis, lam=quad_field(basis, lam), mu=quad_field(basis, mu), t=t)
+        M = _mass.assemble(basis, rho=quad_field(basis, [m.rho for m in mats]), t=t)
+    nodal = _lagrange_nodes(basis, dim)
+    node_of_full = np.empty(basis.N, dtype=int)
+    node_of_full[nodal] = np.arange(nodal.shape[1])[None, :]
+    coords = np.asarray(basis.doflocs)[:, nodal[0]]
+    groups, weights = _groups(mesh, basis, nodal, node_of_full)
+    locations = _points(mesh, coords, points, groups)
+    return build_fe_model(
+        owner="solid",
+        kind="solid",
+        mesh=mesh,
+        basis=basis,
+        M=M,
+        K=K,
+        components=components,
+        aliases={},
+        constraints=_supports(clamped, supports, components),
+        point_masses=None,
+        springs=None,
+        nodal=nodal,
+        locations=locations,
+        groups=groups,
+        group_weights=weights,
+        node_coordinates=coords,
+        displacement=components,
+        fe_options={"thickness": t, "plane": plane},
+    )
