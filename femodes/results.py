@@ -103,6 +103,11 @@ class ErrorEstimate:
         One of :data:`ERROR_METHODS` per point.
     rtol : float or None
         The requested tolerance (``None``: estimate only).
+    omega_limit, omega_limit_error : ndarray or None
+        Frequency extrapolated to ``H -> inf`` and the relative half-width of the interval that
+        contains the limit, for branches with complementarity contacts (rigid impacts converge to
+        first order in ``1/H``: :func:`femodes.estimate_error`); NaN where the levels do not
+        bracket the limit (non-monotone changes, or an observed ratio outside ``(1, 2]``).
     """
 
     omega: np.ndarray
@@ -113,9 +118,16 @@ class ErrorEstimate:
     rate: np.ndarray
     method: np.ndarray
     rtol: float | None = None
+    omega_limit: np.ndarray | None = None
+    omega_limit_error: np.ndarray | None = None
 
     def __post_init__(self):
         n = np.asarray(self.omega).shape
+        for name in ("omega_limit", "omega_limit_error"):
+            v = getattr(self, name)
+            if v is not None and np.asarray(v).shape != n:
+                raise ValueError(f"ErrorEstimate: {name} must have one value per point ({n}), "
+                                 f"got shape {np.asarray(v).shape}")
         for name in ("omega", "amplitude", "penetration", "tension", "harmonics", "rate", "method"):
             if np.asarray(getattr(self, name)).shape != n:
                 raise ValueError(f"ErrorEstimate: {name} must have one value per point ({n}), "
@@ -133,7 +145,9 @@ class ErrorEstimate:
     def arrays(self) -> dict:
         return {"omega": np.asarray(self.omega, float), "amplitude": np.asarray(self.amplitude, float),
                 "penetration": np.asarray(self.penetration, float), "tension": np.asarray(self.tension, float),
-                "harmonics": np.asarray(self.harmonics, int), "rate": np.asarray(self.rate, float)}
+                "harmonics": np.asarray(self.harmonics, int), "rate": np.asarray(self.rate, float),
+                **{k: np.asarray(getattr(self, k), float) for k in ("omega_limit", "omega_limit_error")
+                   if getattr(self, k) is not None}}
 
 
 @dataclass(frozen=True, eq=False)
@@ -552,7 +566,9 @@ def load_branch(path, model=None) -> Branch:
     if acc is not None:
         br.set_accuracy(ErrorEstimate(**{k: arrays[f"accuracy_{k}"] for k in ("omega", "amplitude", "penetration",
                                                                                 "tension", "harmonics", "rate")},
-                                      method=np.asarray(acc["method"], dtype=str), rtol=acc["rtol"]))
+                                      method=np.asarray(acc["method"], dtype=str), rtol=acc["rtol"],
+                                      **{k: arrays[f"accuracy_{k}"] for k in ("omega_limit", "omega_limit_error")
+                                         if f"accuracy_{k}" in arrays}))
     stab = header.get("stability")
     if stab is not None:
         bifs = [Bifurcation(kind=k, index=int(i), omega=float(r[0]), energy=float(r[1]), parameter=float(r[2]),

@@ -41,6 +41,23 @@ def test_fold_estimate_bounds_true_error(forced10):
     assert b.accuracy.method[f] == "doubling" and b.accuracy.rate[f] >= RATE_MIN
 
 
+def test_fold_frequency_bracketed_by_first_order_extrapolation(forced10):
+    """Levels 5, 10, 20 (observed ratio 1.69 < 2): the fold's limit frequency lies in the bracket
+    [X_20 + d, X_20 + d / (r - 1)] (measured [1.41389, 1.42706] around the reference 1.419158)."""
+    b = forced10
+    f = b.folds[0]
+    ref = upper_fold(0.1, 0.2, 1.0).w
+    mid, half = b.accuracy.omega_limit[f], b.accuracy.omega_limit_error[f]
+    assert abs(mid / ref - 1.0) <= half                      # the reference is inside the bracket
+    assert half < 0.006 and abs(mid / ref - 1.0) < 0.002     # measured 0.46 % and 0.09 %
+    assert abs(mid / ref - 1.0) < 0.1 * b.accuracy.omega[f]  # 20x better than the H = 10 point itself
+    # below contact the limit is the point itself (the levels solve the same linear response:
+    # equal to round-off of the hyperplane solve, well-conditioned away from resonance)
+    free = (b.omega < 0.8) & (b.penetration == 0)
+    np.testing.assert_allclose(b.accuracy.omega_limit[free], b.omega[free], rtol=1e-10)
+    assert np.all(b.accuracy.omega_limit_error[free] == 0.0)
+
+
 def test_points_without_contact_are_exact(forced10):
     """Below first contact the response is linear: every level gives the same point."""
     b = forced10
@@ -85,6 +102,13 @@ def test_free_impact_backbone_estimate():
     ok = np.isfinite(est)
     assert ok.mean() > 0.9
     assert np.all(est[ok] >= true[ok]) and np.all(est[ok] <= 3.0 * true[ok])
+    # first-order extrapolation from levels 5, 10, 20: the exact frequency inside every bracket
+    mid = b.accuracy.omega_limit[impacting]
+    half = b.accuracy.omega_limit_error[impacting]
+    fin = np.isfinite(mid)
+    assert fin.mean() > 0.9
+    assert np.all(np.abs(mid[fin] / exact[impacting][fin] - 1.0) <= half[fin])
+    assert np.all(half[fin] < 0.5 * est[fin])
 
 
 def test_duffing_estimate_tiny_and_safe():
