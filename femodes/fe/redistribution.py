@@ -20,7 +20,6 @@ __all__ = ["redistribute_contact_mass", "redistribute_surface_mass", "Redistribu
 log = logging.getLogger(__name__)
 
 
-
 def redistribute_contact_mass(fe, M: sp.spmatrix, dof: int) -> tuple[sp.csr_matrix, dict]:
     """Mass redistribution at a contact DOF (Khenous, Laborde & Renard 2008).
 

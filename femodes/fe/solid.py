@@ -225,10 +225,9 @@ def solid(
     components = _COMPONENTS[dim]
     mats = element_property(mesh, material, Material, "solid", "material")
     basis = checked_basis(mesh, skfem.ElementVector(scalar), "solid")
-    E = np.array([m.E for m in mats])
-    nu = np.array([m.nu for m in mats])
-    mu = E / (2.0 * (1.0 + nu))
-    lam = E * nu / (1.0 - nu**2) if plane == "stress" else E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    lam, mu = np.array([m.lame for m in mats]).T
+    if plane == "stress":  # sigma_zz = 0 eliminates eps_zz: lambda* = 2 lambda mu / (lambda + 2 mu) = E nu / (1 - nu^2)
+        lam = 2.0 * lam * mu / (lam + 2.0 * mu)
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
         K = _stiffness.assemble(basis, lam=quad_field(basis, lam), mu=quad_field(basis, mu), t=t)
         M = _mass.assemble(basis, rho=quad_field(basis, [m.rho for m in mats]), t=t)
