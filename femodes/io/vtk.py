@@ -3,9 +3,17 @@
 One period of a :class:`~femodes.results.PeriodicSolution` (or of a linear mode,
 ``q(t) = phi cos(w t)``) is sampled at ``t_j = j T / n_frames`` and written with meshio as one
 ``.vtu`` file per frame, listed with its physical time in a ``.pvd`` collection that ParaView
-opens as an animation. Points are the mesh nodes in 3-D (``x`` along the axis); displacements
-are 3-vectors (bars: axial ``u`` along ``x``; beams: transverse ``w`` along ``y``) so that
-ParaView's *Warp By Vector* shows the deformed structure.
+opens as an animation. Points are the mesh nodes in 3-D (``x`` along the axis of bars and
+beams); displacements are 3-vectors (bars: axial ``u`` along ``x``; beams: transverse ``w``
+along ``y``; solids: ``u_x, u_y(, u_z)``) so that ParaView's *Warp By Vector* shows the
+deformed structure.
+
+Meshed solids (:func:`femodes.solid`) are written with their cells (triangle, quad, tetra,
+hexahedron; for ``order=2`` the quadratic VTK cells triangle6, quad9, tetra10, hexahedron27,
+whose every node, the mid-side contact nodes included, carries the point data: ParaView and
+pyvista draw them with curved edges, and *Warp By Vector* moves the mid-side nodes too; vertex
+cells would drop the data of the P2 nodes from the picture) and the contact fields
+``"contact_force"`` (vector) and ``"contact_pressure"`` (scalar).
 
 The nodal fields come from :func:`femodes.fields.mesh_fields` (shared with :mod:`femodes.plot`
 and :mod:`femodes.viz`).
@@ -55,11 +63,15 @@ def _add_field_data(path: Path, field_data: dict) -> None:
     arrays = []
     for name, values in field_data.items():
         values = np.atleast_1d(np.asarray(values))
+        # a 2-D array is one tuple per row (e.g. contact directions, 3 components each)
+        n_tuples, n_comp = (values.shape[0], values.shape[1]) if values.ndim == 2 else (values.size, 1)
+        values = values.ravel()
         if np.issubdtype(values.dtype, np.integer):
             vtype, text = "Int64", " ".join(str(int(v)) for v in values)
         else:
             vtype, text = "Float64", " ".join(repr(float(v)) for v in values)
-        arrays.append(f'<DataArray type="{vtype}" Name={quoteattr(name)} NumberOfTuples="{values.size}" '
+        comp = f' NumberOfComponents="{n_comp}"' if n_comp > 1 else ""
+        arrays.append(f'<DataArray type="{vtype}" Name={quoteattr(name)} NumberOfTuples="{n_tuples}"{comp} '
                       f'format="ascii">{text}</DataArray>')
     block = "<FieldData>\n" + "\n".join(arrays) + "\n</FieldData>\n"
     text = path.read_text(encoding="utf-8")
@@ -74,6 +86,41 @@ def _add_field_data(path: Path, field_data: dict) -> None:
     path.write_text(text[:i] + block + text[i:], encoding="utf-8")
 
 
+def _frame_data(fields: MeshFields, scale: float | None) -> tuple[list, dict, list]:
+    """Cells, field data common to every frame, and the point data of each frame."""
+    field_base = {"period": np.array([fields.period]), "omega": np.array([fields.omega])}
+    if fields.contact_nodes.size:
+        field_base["contact_node"] = fields.contact_nodes.astype(np.int64)
+        field_base["contact_gap"] = fields.contact_gaps
+    if scale is not None:
+        field_base["scale"] = np.array([scale])
+    n = fields.t.size
+    if fields.dim == 1:  # bars and beams: the files as they always were
+        disp, vel = fields.vector(fields.displacement), fields.vector(fields.velocity)
+        fnode = fields.nodal_contact_force()
+        frames = []
+        for j in range(n):
+            pd = {"displacement": disp[j], "velocity": vel[j], "contact_force": fnode[j]}
+            if fields.rotation is not None:
+                pd["rotation"] = fields.rotation[j]
+            if scale is not None:
+                pd["displacement_scaled"] = scale * disp[j]
+            frames.append(pd)
+        return [("line", fields.cells)], field_base, frames
+    if fields.contact_nodes.size:
+        field_base["contact_direction"] = fields.contact_direction
+        field_base["contact_measure"] = fields.contact_measure
+    force, pressure = fields.contact_force_vectors(), fields.contact_pressure()
+    frames = []
+    for j in range(n):
+        pd = {"displacement": fields.displacement[j], "velocity": fields.velocity[j], "contact_force": force[j],
+              "contact_pressure": pressure[j]}
+        if scale is not None:
+            pd["displacement_scaled"] = scale * fields.displacement[j]
+        frames.append(pd)
+    return [(fields.cell_type, fields.cells)], field_base, frames
+
+
 def _write_series(fields: MeshFields, stem: Path, scale: float | None, owner: str, extra: dict | None = None) -> Path:
     import meshio
 
@@ -81,23 +128,10 @@ def _write_series(fields: MeshFields, stem: Path, scale: float | None, owner: st
     n = fields.t.size
     width = max(4, len(str(n - 1)))
     points = fields.points()
-    cells = [("line", fields.cells)]
-    disp, vel = fields.vector(fields.displacement), fields.vector(fields.velocity)
-    fnode = fields.nodal_contact_force()
-    field_base = {"period": np.array([fields.period]), "omega": np.array([fields.omega])}
-    if fields.contact_nodes.size:
-        field_base["contact_node"] = fields.contact_nodes.astype(np.int64)
-        field_base["contact_gap"] = fields.contact_gaps
-    if scale is not None:
-        field_base["scale"] = np.array([scale])
+    cells, field_base, frames = _frame_data(fields, scale)
     field_base.update(extra or {})
     entries = []
-    for j in range(n):
-        pd = {"displacement": disp[j], "velocity": vel[j], "contact_force": fnode[j]}
-        if fields.rotation is not None:
-            pd["rotation"] = fields.rotation[j]
-        if scale is not None:
-            pd["displacement_scaled"] = scale * disp[j]
+    for j, pd in enumerate(frames):
         fd = dict(field_base, TimeValue=np.array([fields.t[j]]))
         name = f"{stem.name}_{j:0{width}d}.vtu"
         meshio.write(stem.parent / name, meshio.Mesh(points, cells, point_data=pd), file_format="vtu")
@@ -142,10 +176,18 @@ def write_animation(solution: PeriodicSolution, model: StructuralModel | None, p
     Notes
     -----
     Point data per frame: ``"displacement"`` and ``"velocity"`` (3-vectors: bars along ``x``,
-    beams along ``y``), ``"rotation"`` (beams: ``theta``), ``"contact_force"`` (nonzero only at
-    contact nodes, compression positive). Field data: ``"TimeValue"``, ``"period"``,
+    beams along ``y``, solids ``u_x, u_y(, u_z)``), ``"rotation"`` (beams: ``theta``),
+    ``"contact_force"``: bars and beams the scalar ``p`` (nonzero only at contact nodes,
+    compression positive); solids the vector ``-p d`` (``d`` the contact direction): the force
+    of the obstacle on the structure, pointing into the body, of length ``p``;
+    ``"contact_pressure"`` (solids): ``p / a`` with ``a`` the tributary measure of the node on
+    its contact boundary (length times thickness in 2-D, area in 3-D;
+    :func:`femodes.fields.tributary_measure`), so that ``sum_k pressure_k a_k`` is the total
+    contact force; zero off the contact boundaries. Field data: ``"TimeValue"``, ``"period"``,
     ``"omega"``, and with contacts ``"contact_node"`` and ``"contact_gap"`` (the obstacle is at
-    ``displacement = gap`` in the motion direction); for a solution of a branch computed with
+    ``displacement = gap`` in the motion direction), for solids also ``"contact_direction"``
+    (one 3-vector per contact: the obstacle point is ``x_node + gap * direction``) and
+    ``"contact_measure"`` (``a`` per contact); for a solution of a branch computed with
     ``stability=True`` also ``"floquet_multipliers_real"``, ``"floquet_multipliers_imag"``
     (largest modulus first) and ``"stable"`` (1 or 0).
 
