@@ -36,7 +36,7 @@ from .harmonics import Harmonics
 from .linsolve import BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure, build_pattern
 from .positive_part import ExactProjection
 
-__all__ = ["HBMSystem", "default_contact_parameter"]
+__all__ = ["HBMSystem", "default_contact_parameter", "default_contact_parameters"]
 
 log = logging.getLogger(__name__)
 
@@ -54,19 +54,33 @@ def default_contact_parameter(model: StructuralModel, dof: int) -> float:
     so ``p`` and ``c g_N`` have comparable magnitudes whatever the units. For a structure that is
     free (singular ``K``) the diagonal ``K_dd`` is used instead.
     """
+    return float(default_contact_parameters(model, [dof])[0])
+
+
+def default_contact_parameters(model: StructuralModel, dofs) -> np.ndarray:
+    """:func:`default_contact_parameter` of every DOF of ``dofs`` with one factorisation of ``K``
+    (a boundary of a meshed solid has hundreds of contact DOFs)."""
+    dofs = np.asarray(dofs, dtype=int).reshape(-1)
+    out = np.full(dofs.size, np.nan)
+    if not dofs.size:
+        return out
     K = model.K.tocsc()
-    e = np.zeros(model.n_dofs)
-    e[dof] = 1.0
     try:
-        flex = spla.splu(K).solve(e)[dof]
-        if np.isfinite(flex) and flex > 0:
-            return float(1.0 / flex)
-    except RuntimeError:
-        pass
-    kd = float(K[dof, dof])
-    if kd > 0:
-        return kd
-    return float(max(model.M.diagonal().max(), 1.0))
+        lu = spla.splu(K)
+    except RuntimeError:  # singular K: a free structure
+        lu = None
+    if lu is not None:
+        for start in range(0, dofs.size, 256):  # blocks of right-hand sides: bounded memory
+            block = dofs[start:start + 256]
+            E = np.zeros((model.n_dofs, block.size))
+            E[block, np.arange(block.size)] = 1.0
+            flex = lu.solve(E)[block, np.arange(block.size)]
+            good = np.isfinite(flex) & (flex > 0)
+            out[start:start + block.size][good] = 1.0 / flex[good]
+    for k in np.flatnonzero(~np.isfinite(out)):
+        kd = float(K[dofs[k], dofs[k]])
+        out[k] = kd if kd > 0 else float(max(model.M.diagonal().max(), 1.0))
+    return out
 
 
 @dataclass(frozen=True)
@@ -138,9 +152,11 @@ class HBMSystem:
         self.n = n
         self.unilateral: list[_Contact] = []
         self.penalty: list = []
+        needs = [a.dof for a in model.contacts if isinstance(a.item, UnilateralContact) and a.item.c is None]
+        defaults = dict(zip(needs, default_contact_parameters(model, needs)))
         for a in model.contacts:
             if isinstance(a.item, UnilateralContact):
-                c = a.item.c if a.item.c is not None else default_contact_parameter(model, a.dof)
+                c = a.item.c if a.item.c is not None else float(defaults[a.dof])
                 self.unilateral.append(_Contact(a.item, a.dof, c, len(self.unilateral)))
             elif isinstance(a.item, PenaltyContact):
                 self.penalty.append((a.item, a.dof))
