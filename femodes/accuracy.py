@@ -59,7 +59,7 @@ from .solvers.threads import limit_blas_threads
 from .solvers.arclength import ArclengthSystem
 from .solvers.bordered import bordered_solver
 
-__all__ = ["estimate_error", "RATE_MIN", "BRACKET_RATE_MAX"]
+__all__ = ["estimate_error", "meet_tolerance", "refinement_options", "RATE_MIN", "BRACKET_RATE_MAX"]
 
 log = logging.getLogger(__name__)
 
@@ -350,7 +350,8 @@ def _relative_quality(branch: Branch) -> tuple[np.ndarray, np.ndarray]:
 
 
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
-def estimate_error(branch: Branch, *, projection=None, newton: NewtonOptions | None = None) -> Branch:
+def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: int | None = None, projection=None,
+                   newton: NewtonOptions | None = None) -> Branch:
     """Attach the estimated error of every point of ``branch`` (``branch.error_estimate``).
 
     Each point is solved again with ``H // 2`` and ``2 H`` harmonics on the hyperplane normal to
@@ -359,11 +360,23 @@ def estimate_error(branch: Branch, *, projection=None, newton: NewtonOptions | N
     the levels are ``H, 2H + 1, 4H + 2``. Cost: one corrector solve per point and
     level, the one at ``2 H`` dominating.
 
+    With ``rtol`` (branches with complementarity contacts), the frequency bracket of every
+    point whose half-width exceeds ``rtol`` (or that has none) is refined by a further level
+    ``4 H``, ``8 H``... up to ``max_harmonics``: the level is traced only over the part of the
+    branch that needs it, from the last point without contact before it (module docstring,
+    "Refinement"). Smooth branches have no extrapolation; their estimate is that of the
+    branch's own ``H`` (:func:`femodes.frequency_response` with ``rtol`` raises ``H`` instead).
+
     Parameters
     ----------
     branch : Branch
         From :func:`femodes.frequency_response` or :func:`femodes.nonlinear_mode`, with its model
         attached.
+    rtol : float, optional
+        Requested relative accuracy of the frequency (``0 < rtol < 0.5``);
+        :attr:`~femodes.results.ErrorEstimate.met` tells which points meet it.
+    max_harmonics : int, optional
+        Largest level ``rtol`` may add (default ``8 H``; at least ``2 H``).
     projection : ExactProjection or SampledProjection, optional
         The projection the branch was computed with (default exact).
     newton : NewtonOptions, optional
@@ -376,6 +389,7 @@ def estimate_error(branch: Branch, *, projection=None, newton: NewtonOptions | N
     """
     lad = _ladder(branch, projection, newton, "estimate_error")
     H = branch.harmonics.n_harmonics
+    rtol, max_harmonics = refinement_options(rtol, max_harmonics, H)
     # H < 4: H, 2H + 1, 4H + 2 (from H = 1, 2H = 2 adds only an even harmonic, zero for a symmetric
     # law such as Duffing's, which would estimate no error at all)
     levels = [H // 2, H, 2 * H] if H >= 4 else [H, 2 * H + 1, 4 * H + 2]
@@ -393,12 +407,76 @@ def estimate_error(branch: Branch, *, projection=None, newton: NewtonOptions | N
         ew[i], eq[i], rates[i] = lv.error(2, of=of)
         if impacts:
             w_lim[i], w_lim_err[i] = lv.frequency_bracket()
+    finest = np.full(n, levels[-1])
+    if rtol is not None and impacts:
+        chains = [[t[i] for t in traced] for i in range(n)]
+        top = levels[-1]
+        while 2 * top <= max_harmonics:
+            err = np.where(np.isfinite(w_lim_err), w_lim_err, ew)
+            need = ~(np.isfinite(err) & (err <= rtol)) & (finest == top)
+            if not need.any():
+                break
+            top *= 2
+            log.info("accuracy: %d point(s) above rtol = %g; level H = %d", int(need.sum()), rtol, top)
+            states = _trace_by_continuation(lad, top, need)
+            for i in np.flatnonzero(need):
+                if states[i] is None or any(st is None for st in chains[i][-2:]):
+                    continue
+                chains[i] = chains[i][-2:] + [states[i]]
+                lv = _Levels(chains[i], lad.Q_norm(i), lad.omega_ref(i))
+                w_lim[i], w_lim_err[i] = lv.frequency_bracket()
+                finest[i] = top
     pen, ten = _relative_quality(branch)
     method = np.where(np.isfinite(ew), "doubling", "failed")
     branch.set_accuracy(ErrorEstimate(omega=ew, amplitude=eq, penetration=pen, tension=ten,
-                                      harmonics=np.full(n, H), rate=rates, method=method, rtol=None,
-                                      omega_limit=w_lim, omega_limit_error=w_lim_err))
+                                      harmonics=np.full(n, H), rate=rates, method=method, rtol=rtol,
+                                      omega_limit=w_lim, omega_limit_error=w_lim_err, finest=finest))
     return branch
+
+
+def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun, *, projection=None,
+                   newton: NewtonOptions | None = None) -> Branch:
+    """``rtol=`` of :func:`femodes.frequency_response` and :func:`femodes.nonlinear_mode`.
+
+    With complementarity contacts (algebraic convergence): :func:`estimate_error` with ``rtol``,
+    which brackets the converged frequency by extrapolation and adds levels where the bracket is
+    too wide. Smooth branches (exponential convergence): the estimate of the branch's own ``H``;
+    while some point misses ``rtol`` the whole branch is computed again with ``2 H``
+    (``rerun(H)``), up to ``max_harmonics``.
+    """
+    H = branch.harmonics.n_harmonics
+    rtol, max_harmonics = refinement_options(rtol, max_harmonics, H)
+    if rtol is None:
+        raise ValueError("meet_tolerance: rtol must be given")
+    if len(branch) < 2:
+        log.warning("accuracy: the branch has %d point(s) (%s); no error estimate for rtol", len(branch),
+                    branch.message)
+        return branch
+    if "complementarity" in branch.contacts.kinds:
+        return estimate_error(branch, rtol=rtol, max_harmonics=max_harmonics, projection=projection, newton=newton)
+    while True:
+        estimate_error(branch, rtol=rtol, projection=projection, newton=newton)
+        H = branch.harmonics.n_harmonics
+        if branch.accuracy.met.all() or 4 * H > max_harmonics:  # the estimate of 2 H needs level 4 H
+            return branch
+        log.info("accuracy: %d point(s) above rtol = %g with H = %d; again with H = %d",
+                 int((~branch.accuracy.met).sum()), rtol, H, 2 * H)
+        branch = rerun(2 * H)
+
+
+def refinement_options(rtol, max_harmonics, H: int, owner: str = "estimate_error") -> tuple[float | None, int]:
+    """Checked ``(rtol, max_harmonics)`` (default ``8 H``) for a branch with ``H`` harmonics."""
+    if rtol is not None:
+        if isinstance(rtol, bool) or not isinstance(rtol, (int, float, np.floating, np.integer)) \
+                or not 0.0 < float(rtol) < 0.5:
+            raise ValueError(f"{owner}: rtol must be a relative tolerance in (0, 0.5), e.g. 1e-3; got {rtol!r}")
+        rtol = float(rtol)
+    if max_harmonics is None:
+        return rtol, 8 * H
+    if isinstance(max_harmonics, bool) or not isinstance(max_harmonics, (int, np.integer)) or max_harmonics < 2 * H:
+        raise ValueError(f"{owner}: max_harmonics must be an integer >= 2 H = {2 * H} (the estimate's own "
+                         f"finest level); got {max_harmonics!r}")
+    return rtol, int(max_harmonics)
 
 
 def _ladder(branch, projection, newton, owner: str) -> _Ladder:
@@ -470,3 +548,75 @@ def _trace_level(lad: _Ladder, H: int) -> list:
     for f in branch.folds if H != branch.harmonics.n_harmonics else ():  # the branch's own are located
         out[f] = lad.locate_fold(H, out, f)
     return out
+
+
+def _trace_by_continuation(lad: _Ladder, H: int, need: np.ndarray) -> list:
+    """The points ``need`` of the branch at level ``H``, from a continuation of level ``H`` itself.
+
+    Walking a fine level along the branch's own points (:func:`_trace_level`) fails often once the
+    levels are far apart (seed's forced case from H = 10: 376 hyperplane solves for 111 points at
+    H = 40, 604 at H = 80, 8 minutes in all). Here level ``H`` is traced by the continuation with
+    its own step control, from the last point without contact before the first needed point (where
+    every level is the branch's point) to the end of the branch; each needed point is then the
+    crossing of that curve with the point's hyperplane nearest to the point (linear interpolation
+    between two level points), polished by Newton on the hyperplane. A fold of the branch is the
+    nearest fold of the level's continuation.
+    """
+    branch = lad.branch
+    n = len(branch)
+    out: list = [None] * n
+    idx = np.flatnonzero(need)
+    first = _free_before(branch, int(idx[0]))
+    a0 = _anchor(branch, first)
+    prob = lad.problem(H)
+    x0 = lad.vector(H, a0.Q, a0.P, a0.omega, a0.xi, a0.p)[:-1]
+    span = (a0.p, float(branch.parameter[-1]))
+    if span[1] == span[0]:
+        return out
+    w = lad.weights(H)
+    x_scale = 1.0 / np.sqrt(w[:-1] * x0.size)  # the branch's arclength metric on level H
+    opts = ContinuationOptions(step=0.05, max_step=2.0, newton=lad.newton, x_scale=x_scale,
+                               p_scale=float(1.0 / math.sqrt(w[-1])), max_points=20 * max(n, 50))
+    with np.errstate(all="ignore"):
+        res = continuation(prob, span, x0=x0, options=opts)
+    log.info("accuracy: level H = %d traced by continuation: %d points (%s)", H, len(res.p), res.message)
+    Y = np.column_stack([res.x, res.p])
+    tangents = lad.tangents
+    # nearness in displacements and frequency only: contact forces of two levels differ by far
+    # more than their displacements (their harmonics are where the truncation error sits)
+    h = lad.harmonics(H)
+    near = w.copy()
+    near[:-1][prob.pack(np.zeros((h.n_coef, branch.Q.shape[2])), np.ones((h.n_coef, branch.P.shape[2])), 0.0,
+                        0.0) != 0] = 0.0
+    for i in idx:
+        anchor = _anchor(branch, int(i))
+        a = lad.vector(H, anchor.Q, anchor.P, anchor.omega, anchor.xi, anchor.p)
+        t = tangents[i]
+        c = w * lad.vector(H, t.Q, t.P, t.omega, t.xi, t.p)
+        sd = (Y - a) @ c
+        k = np.flatnonzero(sd[:-1] * sd[1:] <= 0.0)
+        if not k.size:
+            continue
+        theta = sd[k] / np.where(sd[k] == sd[k + 1], 1.0, sd[k] - sd[k + 1])
+        cand = Y[k] + theta[:, None] * (Y[k + 1] - Y[k])
+        best = cand[int(np.argmin(((cand - a) ** 2) @ near))]
+        out[i] = lad.solve(H, anchor, t, lad.state(H, best))
+    for f in branch.folds:
+        if need[f] and res.folds:
+            a = lad.vector(H, branch.Q[f], branch.P[f], float(branch.omega[f]), float(branch.xi[f]),
+                           float(branch.parameter[f]))
+            k = min(res.folds, key=lambda j: float(((Y[j] - a) ** 2) @ near))
+            out[f] = lad.state(H, Y[k])
+    return out
+
+
+def _free_before(branch: Branch, i: int) -> int:
+    """The last point at or before ``i`` without contact force (every level agrees there), else 0."""
+    P = np.abs(branch.P)
+    if not P.size:
+        return i
+    small = 1e-12 * float(P.max())  # the complementarity force below contact is zero to round-off
+    for j in range(i, -1, -1):
+        if float(P[j].max()) <= small:
+            return j
+    return 0

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
-from .hbm.system import default_contact_parameter
+from .hbm.system import default_contact_parameters
 from .laws import PenaltyContact, UnilateralContact
 from .model import StructuralModel
 from .results import Branch, ContactInfo
@@ -26,6 +26,7 @@ from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.threads import limit_blas_threads
+from .accuracy import meet_tolerance, refinement_options
 from .floquet import METHODS, annotate_branch
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
@@ -101,6 +102,8 @@ def frequency_response(
     progress: bool | Callable = False,
     checkpoint: str | os.PathLike | Checkpoint | None = None,
     stability: bool | str = False,
+    rtol: float | None = None,
+    max_harmonics: int | None = None,
 ) -> Branch:
     """Forced frequency-response curve by HBM and pseudo-arclength continuation.
 
@@ -140,6 +143,17 @@ def frequency_response(
         (step bounds, ``max_points``...), the arclength scaling of the run is kept.  Damaged
         files or another format version give a ``ValueError`` naming the file.
 
+    rtol : float, optional
+        Requested relative accuracy of the frequency with respect to the converged (``H -> inf``)
+        answer (e.g. ``1e-3``). The branch then carries :attr:`~femodes.Branch.accuracy`: with
+        complementarity contacts, ``accuracy.omega_limit`` is the frequency extrapolated in
+        ``H`` (first order in ``1/H`` for rigid impacts), refined by further levels where its
+        bracket is wider than ``rtol``; smooth systems are recomputed with ``2 H`` until the
+        estimate meets ``rtol``. ``accuracy.met`` says which points meet it (those near grazing
+        may not: their levels do not bracket the limit). :mod:`femodes.accuracy`.
+    max_harmonics : int, optional
+        Largest number of harmonics ``rtol`` may use (default ``8 H``).
+
     Returns
     -------
     Branch
@@ -149,6 +163,7 @@ def frequency_response(
     checkpoint = checkpoint_spec(checkpoint, "frequency_response")
     h = _harmonics(harmonics, "frequency_response")
     _options(options, "frequency_response")
+    refinement_options(rtol, max_harmonics, h.n_harmonics, "frequency_response")
     span = _span(omega, "omega", "frequency_response", positive=True)
     problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
@@ -178,7 +193,15 @@ def frequency_response(
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
     branch = run_continuation(problem, span, opts, "frequency_response", progress, x0=start, wrap=wrap, model=model,
                               checkpoint=checkpoint, description=description)
-    return _with_stability(branch, problem, model, method, opts)  # a finished checkpoint saved without it
+    branch = _with_stability(branch, problem, model, method, opts)  # a finished checkpoint saved without it
+    if rtol is None:
+        return branch
+
+    def rerun(H: int) -> Branch:
+        return frequency_response(model, omega, Harmonics(H, subharmonic=h.subharmonic), options=options,
+                                  projection=projection, progress=progress, stability=stability)
+
+    return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection)
 
 
 def frequency_response_options(**changes) -> ContinuationOptions:
@@ -282,6 +305,8 @@ def nonlinear_mode(
     progress: bool | Callable = False,
     checkpoint: str | os.PathLike | Checkpoint | None = None,
     stability: bool | str = False,
+    rtol: float | None = None,
+    max_harmonics: int | None = None,
 ) -> Branch:
     """Nonlinear mode (frequency-energy backbone) by the extended periodic motion concept.
 
@@ -294,6 +319,8 @@ def nonlinear_mode(
     ``femodes.Checkpoint(path, resume=True)`` to continue a killed run) are as for
     :func:`frequency_response`: every converged point is written to a journal as it is found; the
     checkpoint must come from the same model, ``mode``, energy span, harmonics and ``projection``.
+    ``rtol`` and ``max_harmonics`` are as for :func:`frequency_response` (levels compared at equal
+    energy).
 
     Returns
     -------
@@ -304,6 +331,7 @@ def nonlinear_mode(
     checkpoint = checkpoint_spec(checkpoint, "nonlinear_mode")
     h = _harmonics(harmonics, "nonlinear_mode")
     _options(options, "nonlinear_mode")
+    refinement_options(rtol, max_harmonics, h.n_harmonics, "nonlinear_mode")
     e0, e1 = _span(energy, "energy", "nonlinear_mode", positive=True)
     if e1 < e0:
         raise ValueError(f"nonlinear_mode: energy must increase, got energy={tuple(energy)!r}: the backbone starts "
@@ -313,6 +341,7 @@ def nonlinear_mode(
                                    projection=projection)
     span = (math.log10(e0), math.log10(e1))
     x0 = problem.linear_guess(e0)
+    user_options = options
     options = nonlinear_mode_options(problem, x0, options)
     method = stability_method(stability, "nonlinear_mode")
 
@@ -331,7 +360,15 @@ def nonlinear_mode(
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
     branch = run_continuation(problem, span, options, "nonlinear_mode", progress, x0=lambda o: (x0, o), wrap=wrap,
                               model=model, checkpoint=checkpoint, description=description)
-    return _with_stability(branch, problem, model, method, options)
+    branch = _with_stability(branch, problem, model, method, options)
+    if rtol is None:
+        return branch
+
+    def rerun(H: int) -> Branch:
+        return nonlinear_mode(model, mode, energy, Harmonics(H, subharmonic=h.subharmonic), options=user_options,
+                              projection=projection, progress=progress, stability=stability)
+
+    return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection)
 
 
 def stability_method(stability: Any, owner: str) -> str | None:
@@ -393,7 +430,9 @@ def static_contact(model: StructuralModel, force: np.ndarray | None = None, *, x
         if f.shape != (n,) or not np.all(np.isfinite(f)):
             raise ValueError(f"static_contact: force must be a finite vector of length {n}, got shape {f.shape}")
     uc = [(a.item, a.dof) for a in model.contacts if isinstance(a.item, UnilateralContact)]
-    cs = [law.c if law.c is not None else default_contact_parameter(model, dof) for law, dof in uc]
+    defaults = default_contact_parameters(model, [dof for law, dof in uc if law.c is None])
+    it = iter(defaults)
+    cs = [law.c if law.c is not None else float(next(it)) for law, dof in uc]
     m = len(uc)
     K = model.K.tocsr()
 

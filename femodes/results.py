@@ -108,6 +108,9 @@ class ErrorEstimate:
         contains the limit, for branches with complementarity contacts (rigid impacts converge to
         first order in ``1/H``: :func:`femodes.estimate_error`); NaN where the levels do not
         bracket the limit (non-monotone changes, or an observed ratio outside ``(1, 2]``).
+    finest : ndarray of int or None
+        The largest number of harmonics whose solution entered the point's estimate (``2 H``, or
+        more where ``rtol`` added levels).
     """
 
     omega: np.ndarray
@@ -120,10 +123,11 @@ class ErrorEstimate:
     rtol: float | None = None
     omega_limit: np.ndarray | None = None
     omega_limit_error: np.ndarray | None = None
+    finest: np.ndarray | None = None
 
     def __post_init__(self):
         n = np.asarray(self.omega).shape
-        for name in ("omega_limit", "omega_limit_error"):
+        for name in ("omega_limit", "omega_limit_error", "finest"):
             v = getattr(self, name)
             if v is not None and np.asarray(v).shape != n:
                 raise ValueError(f"ErrorEstimate: {name} must have one value per point ({n}), "
@@ -142,12 +146,32 @@ class ErrorEstimate:
         where it could not be estimated)."""
         return np.fmax(np.asarray(self.omega, float), np.asarray(self.amplitude, float))
 
+    @property
+    def frequency_error(self) -> np.ndarray:
+        """The relative error of the best frequency the estimate gives per point: the half-width
+        of the extrapolation bracket where there is one (branches with complementarity
+        contacts), else the estimated error of the branch's own frequency (NaN: unknown)."""
+        plain = np.asarray(self.omega, float)
+        if self.omega_limit_error is None:
+            return plain
+        lim = np.asarray(self.omega_limit_error, float)
+        return np.where(np.isfinite(lim), lim, plain)
+
+    @property
+    def met(self) -> np.ndarray:
+        """Per point: does :attr:`frequency_error` meet ``rtol``? (all False without ``rtol``)."""
+        if self.rtol is None:
+            return np.zeros(np.asarray(self.omega).shape, dtype=bool)
+        err = self.frequency_error
+        return np.isfinite(err) & (err <= self.rtol)
+
     def arrays(self) -> dict:
         return {"omega": np.asarray(self.omega, float), "amplitude": np.asarray(self.amplitude, float),
                 "penetration": np.asarray(self.penetration, float), "tension": np.asarray(self.tension, float),
                 "harmonics": np.asarray(self.harmonics, int), "rate": np.asarray(self.rate, float),
                 **{k: np.asarray(getattr(self, k), float) for k in ("omega_limit", "omega_limit_error")
-                   if getattr(self, k) is not None}}
+                   if getattr(self, k) is not None},
+                **({"finest": np.asarray(self.finest, int)} if self.finest is not None else {})}
 
 
 @dataclass(frozen=True, eq=False)
@@ -567,8 +591,8 @@ def load_branch(path, model=None) -> Branch:
         br.set_accuracy(ErrorEstimate(**{k: arrays[f"accuracy_{k}"] for k in ("omega", "amplitude", "penetration",
                                                                                 "tension", "harmonics", "rate")},
                                       method=np.asarray(acc["method"], dtype=str), rtol=acc["rtol"],
-                                      **{k: arrays[f"accuracy_{k}"] for k in ("omega_limit", "omega_limit_error")
-                                         if f"accuracy_{k}" in arrays}))
+                                      **{k: arrays[f"accuracy_{k}"] for k in ("omega_limit", "omega_limit_error",
+                                                                              "finest") if f"accuracy_{k}" in arrays}))
     stab = header.get("stability")
     if stab is not None:
         bifs = [Bifurcation(kind=k, index=int(i), omega=float(r[0]), energy=float(r[1]), parameter=float(r[2]),
