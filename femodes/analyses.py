@@ -213,19 +213,27 @@ def frequency_response_options(**changes) -> ContinuationOptions:
     return dataclasses.replace(base, **changes) if changes else base
 
 
-def _response_scale(problem: ForcedResponseProblem, span: tuple[float, float], x_start: np.ndarray) -> float:
-    """Arclength scale of the unknowns: the larger RMS of the start point and of the linear
-    response at the other end of the span.
+def _response_scale(problem: ForcedResponseProblem, span: tuple[float, float], x_start: np.ndarray) -> np.ndarray:
+    """Arclength scales of the unknowns: displacement coefficients by the larger RMS of the start
+    point and of the linear response at the other end of the span; contact-force coefficients by
+    that times the largest complementarity parameter (a contact stiffness), as
+    :meth:`NonlinearModeProblem.arclength_scale` does.
 
     The continuation's own default (the RMS of the start point alone) makes the step sizes depend
     on the direction of travel: above a resonance the response is small, and the same curve
     traced downwards took 1146 points instead of 305 (1-DOF contact case, w 2.0 -> 0.5, H = 20).
+    One scale for displacements and forces fails in SI units: a steel blade's contact forces (N)
+    are ~1e8 times its displacements (m), the arclength became all contact force from the first
+    touch and the curve crawled at grazing (2000 points without passing it).
     """
     x_start = np.asarray(x_start, dtype=float)
     with np.errstate(all="ignore"):
         rms = [float(np.sqrt(np.mean(x_start ** 2))), float(np.sqrt(np.mean(problem.linear_guess(span[1]) ** 2)))]
     good = [r for r in rms if math.isfinite(r) and r > 0]
-    return max(good) if good else 1.0
+    sq = max(good) if good else 1.0
+    s = problem.system
+    cmax = max([ct.c for ct in s.unilateral] or [1.0])
+    return s.join(np.full((s.h.n_coef, s.n), sq), np.full((s.h.n_coef, s.n_uc), cmax * sq))
 
 
 def _harmonics_key(h: Harmonics) -> list:

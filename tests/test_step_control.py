@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 
+import numpy as np
 import pytest
 
 import femodes as fm
@@ -119,3 +120,20 @@ def test_options_disable_and_defaults():
     d = fm.ContinuationOptions()
     assert (d.target_angle, d.target_contraction, d.corrector_deadline) == (10.0, 0.25, 3)
     assert frequency_response_options().max_step == 2.0
+
+
+def test_force_unit_does_not_change_the_curve():
+    """The seed contact case written with a force unit 1e8 times smaller (M, C, K, F all x 1e8:
+    same displacements, contact forces x 1e8, as a steel structure in N and m): the arclength
+    scales the contact-force unknowns by the contact stiffness, so the same curve is traced with
+    the same steps (with one scale for all unknowns it crawled at grazing: the force harmonics
+    were the whole arclength). Same points; folds equal to the corrector's tolerance."""
+    def case(a):
+        return (fm.StructuralModel(M=[[a]], K=[[a]], C=[[0.1 * a]]).with_contact(fm.UnilateralContact(at=0, gap=1.0))
+                .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2 * a)))
+
+    ref = fm.frequency_response(case(1.0), (0.5, 2.0), 10)
+    si = fm.frequency_response(case(1e8), (0.5, 2.0), 10)
+    assert si.success and len(si) == len(ref)
+    np.testing.assert_allclose(si.omega[list(si.folds)], ref.omega[list(ref.folds)], rtol=1e-8)
+    np.testing.assert_allclose(si.P, 1e8 * ref.P, rtol=1e-6, atol=1e-6 * 1e8 * np.abs(ref.P).max())
