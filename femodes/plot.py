@@ -529,7 +529,12 @@ def contact_pressure(solution: PeriodicSolution, model: Any = None, *, boundary:
     side = fig.add_axes([box.x0 + 0.69 * box.width, box.y0, 0.2 * box.width, box.height], sharey=ax)
     cax = fig.add_axes([box.x0 + 0.93 * box.width, box.y0, 0.025 * box.width, box.height])
     top = float(values.max())
-    mesh = ax.pcolormesh(s, tau, values, shading="gouraud", cmap=cmap, vmin=0.0, vmax=top if top > 0 else 1.0)
+    # one band per node and frame (edges half-way between nodes and frames, the row of t = 0 split
+    # between both ends of the period): interpolating between nodes draws saw-teeth where the
+    # pressure drops to zero from one node to the next
+    s_edges = np.concatenate([[s[0]], 0.5 * (s[:-1] + s[1:]), [s[-1]]]) if s.size > 1 else np.array([s[0] - 0.5, s[0] + 0.5])
+    t_edges = np.concatenate([[0.0], (np.arange(n_frames) + 0.5) / n_frames, [1.0]])
+    mesh = ax.pcolormesh(s_edges, t_edges, values, shading="flat", cmap=cmap, vmin=0.0, vmax=top if top > 0 else 1.0)
     ax.set_xlabel(f"s: arc length along {boundary!r}" if f.dim == 2
                   else f"s: along the principal axis of {boundary!r} (max over the width)")
     ax.set_ylabel("t / T")
