@@ -157,7 +157,9 @@ def frequency_response(
     Returns
     -------
     Branch
-        ``success`` False (with ``message``) if the continuation could not finish the span.
+        ``success`` False (with ``message``) if the continuation failed (start point, corrector
+        at the smallest step); ``status == 2`` if it stopped at ``options.max_points`` before the
+        end of the span (valid points, ``success`` True, a warning in the log).
     """
     model = _check_model(model, "frequency_response")
     checkpoint = checkpoint_spec(checkpoint, "frequency_response")

@@ -681,7 +681,7 @@ class _Tracer:
             if a is not None:
                 a.flags.writeable = False
         success = status <= 3
-        (logger.info if success else logger.warning)(
+        (logger.info if success and status != 2 else logger.warning)(  # max_points: the span is not done
             "continuation finished: %s (%d points, %d folds, %d Newton iterations, %d rejected steps)",
             msg, self.i0 + len(self.pts), len(self.folds), self.sys.n_newton, self.n_rejected,
         )
