@@ -290,3 +290,149 @@ def test_progress_bar_fraction_clipped():
     assert s.getvalue().endswith("\n")
     down = ProgressBar((2.0, 0.5), "w", stream=io.StringIO())
     assert down.fraction(1.25) == pytest.approx(0.5)
+
+
+# --------------------------------------------------------------------------------- meshed solids
+STRIP = CASES / "strip2d_contact.toml"
+
+
+def _strip(**subs):
+    t = STRIP.read_text()
+    for a, b in subs.items():
+        assert a in t, a
+        t = t.replace(a, b)
+    return t
+
+
+def test_strip2d_contact_case_builds_the_api_model_and_runs(tmp_path):
+    """examples/cases/strip2d_contact.toml: the model is the one fm.solid builds, and a few points
+    of its forced response run; the first point (w = 1, tip amplitude 0.006 < gap 0.01) is the
+    linear response."""
+    text = _strip(**{"harmonics = 5": "harmonics = 5\nmax_points = 4", "plot = true": "plot = false",
+                     "animation = true": "animation = false"})
+    case = cases.parse_case(text, tmp_path / "strip.toml")
+    model, full = cases.build_model(case)
+    assert model is full and model.fe.kind == "solid" and model.n_dofs == 2 * 21 * 3 - 2 * 3
+    ref = (fm.solid(fm.rectangle_mesh(1.0, 0.1, 20, 2, quad=True), fm.Material(E=1.0, rho=1.0, nu=0.3),
+                    clamped="left", plane="stress", thickness=1.0)
+           .with_damping(beta=0.02)
+           .with_contact(fm.UnilateralContact(at="right", gap=0.01, direction=(1.0, 0.0)))
+           .with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=0.0004)))
+    for a, b in ((model.K, ref.K), (model.M, ref.M), (model.C, ref.C)):
+        assert abs(a - b).max() == 0.0
+    assert [c.dof for c in model.contacts] == [c.dof for c in ref.contacts] and model.n_contacts == 3
+    assert np.array_equal(model.force_vectors()[1], ref.force_vectors()[1])
+    res = cases.run_case(case, tmp_path / "out")
+    br = res.branch
+    assert len(br) == 4 and np.all(br.converged) and br.omega[0] == pytest.approx(1.0)
+    sol = br[0]
+    t = np.linspace(0.0, 2 * np.pi, 9)
+    lin = fm.linear_response(model, 1.0).amplitude[0]
+    expect = (lin[None, :] * np.exp(1j * t)[:, None]).real
+    assert np.max(np.abs(sol.displacement(t) - expect)) < 1e-8 * np.max(np.abs(expect))
+    assert np.max(np.abs(sol.contact_force(t))) == 0.0
+    assert (tmp_path / "out" / "summary.txt").is_file() and any("solid" in line for line in res.lines)
+
+
+def test_box_case_with_hexahedra_and_craig_bampton(tmp_path):
+    text = """
+[mesh]
+length = 1.0
+width = 0.2
+height = 0.1
+nx = 6
+ny = 2
+nz = 1
+hexahedra = true
+[model]
+kind = "solid"
+E = 1.0
+rho = 1.0
+clamped = ["left"]
+order = 1
+supports = { bottom = ["u_z"] }
+[[contact]]
+at = "right"
+direction = [1.0, 0.0, 0.0]
+gap = 0.01
+law = "penalty"
+stiffness = 10.0
+[[force]]
+at = ["right", "u_x"]
+amplitude = 0.001
+[reduction]
+craig_bampton = 5
+[analysis]
+type = "frequency_response"
+omega = [1.0, 2.0]
+harmonics = 2
+"""
+    model, full = cases.build_model(cases.parse_case(text, tmp_path / "box.toml"))
+    ref = fm.solid(fm.box_mesh(1.0, 0.2, 0.1, 6, 2, 1, hexahedra=True), fm.Material(E=1.0, rho=1.0), clamped="left",
+                   supports={"bottom": ("u_z",)})
+    # 42 nodes: the 6 of the clamped face fixed, u_z of the other 18 bottom nodes fixed
+    assert full.n_dofs == ref.n_dofs == 3 * 42 - 3 * 6 - 18
+    assert full.n_contacts == 6 and model.is_reduced and model.n_dofs == 6 + 5
+
+
+@pytest.mark.parametrize("subs, line_of, message", [
+    ({"ny = 2": "ny = 2\nnz = 2"}, "quad", "[mesh] quad is for rectangles (2-D); a box (nz) takes hexahedra = true"),
+    ({"ny = 2": "ny = 2\nn_elements = 20"}, "n_elements", "[mesh] n_elements is for line meshes (beam, bar)"),
+    ({"ny = 2\n": ""}, "[mesh]", "[mesh] a generated solid mesh needs nx and ny (and nz for a box), or file = \"...\"; "
+                                 "ny is missing"),
+    ({"nx = 20": "nx = 0"}, "nx", "[mesh] nx must be >= 1, got 0"),
+    ({"height = 0.1": "height = -0.1"}, "height", "[mesh] height must be > 0, got -0.1"),
+    ({"ny = 2": "ny = 2\nwidth = 0.1"}, "width", "[mesh] width is for boxes (3-D): give nz too"),
+    ({"quad = true": "hexahedra = true\nnz = 1"}, "plane", "[model] plane applies to 2-D solids; [mesh] with nz is a "
+                                                        "3-D box"),
+    ({'plane = "stress"': 'plane = "stres"'}, "plane", "[model] plane must be \"stress\" or \"strain\", got 'stres' "
+                                                      "(did you mean 'stress'?)"),
+    ({"thickness = 1.0": "thickness = 0.0"}, "thickness", "[model] thickness must be > 0, got 0.0"),
+    ({"order = 1": "order = 3"}, "order", "[model] order must be 1 or 2, got 3"),
+    ({"nu = 0.3\n": "nu = 0.3\narea = 0.1\n"}, "area", "[model] area is not used by a solid model (a 2-D solid takes "
+                                                   "thickness = ...)"),
+    ({"nu = 0.3\n": 'nu = 0.3\nsupports = { bottom = 1 }\n'}, "supports", "[model] supports must be a table like"),
+    ({"direction = [1.0, 0.0]": "direction = [1.0, 0.0, 0.0, 0.0]"}, "direction",
+     "[contact] direction must be a vector of 1 to 3 numbers like [1.0, 0.0], got [1.0, 0.0, 0.0, 0.0]"),
+    ({"E = 1.0\n": ""}, "[model]", "[model] a solid model needs E = ..."),
+])
+def test_bad_solid_case_names_the_key(tmp_path, subs, line_of, message):
+    text = _strip(**subs)
+    with pytest.raises(cases.CaseError) as ei:
+        cases.parse_case(text, tmp_path / "bad.toml")
+    assert message in str(ei.value)
+    assert ei.value.line == (_line(text, line_of) if not line_of.startswith("[") else _line(text, line_of))
+
+
+@pytest.mark.parametrize("subs, key, message", [
+    ({"direction = [1.0, 0.0]": "direction = [1.0, 1.0]"}, "direction", "orient the mesh so that the obstacle"),
+    ({'clamped = "left"': 'clamped = "lft"'}, "clamped", "'lft'"),
+    ({"nu = 0.3\n": "nu = 0.5\n"}, "nu", "nu must satisfy -1 < nu < 0.5"),
+    ({'at = "right"': 'at = "tip"'}, "at", "unknown location 'tip'"),
+])
+def test_library_errors_of_a_solid_case_point_at_the_key(tmp_path, subs, key, message):
+    text = _strip(**subs)
+    case = cases.parse_case(text, tmp_path / "bad.toml")
+    with pytest.raises(cases.CaseError) as ei:
+        cases.build_model(case)
+    assert message in str(ei.value) and ei.value.line == _line(text, f"{key} =")
+
+
+def test_solid_keys_on_a_beam_and_beam_keys_on_a_solid_are_errors():
+    nnm = _nnm()
+    for subs, message in (({'kind = "beam"': 'kind = "beam"\nnu = 0.3'}, "nu is used by solid models only"),
+                          ({"gap = 0.01": "gap = 0.01\ndirection = [1.0, 0.0]"},
+                           "direction is for contacts on the boundaries of solids")):
+        with pytest.raises(cases.CaseError, match=re.escape(message)):
+            cases.parse_case(_nnm(**subs), "x.toml")
+    line = FRC.read_text()  # a discrete model: no mesh keys at all; a beam with nx:
+    text = """[mesh]\nlength = 1.0\nn_elements = 4\nnx = 4\n[model]\nkind = "bar"\nE = 1.0\nrho = 1.0\narea = 1.0
+[analysis]\ntype = "nonlinear_mode"\nenergy = [1e-3, 1e-2]\n"""
+    with pytest.raises(cases.CaseError) as ei:
+        cases.parse_case(text, "x.toml")
+    assert ei.value.line == 4 and 'nx is for the meshes of solids (kind = "solid"); a bar takes a line mesh' in str(ei.value)
+    assert "kind" in line and nnm
+    # order reaches fm.bar too: a P2 bar of 4 elements clamped at one end has 8 DOFs
+    bar = text.replace("nx = 4\n", "").replace('area = 1.0\n', 'area = 1.0\norder = 2\nclamped = "left"\n')
+    model, _ = cases.build_model(cases.parse_case(bar, "x.toml"))
+    assert model.n_dofs == 8

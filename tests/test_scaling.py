@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from femodes.app.cases import load_case, parse_case
 from femodes.app.cli import main
 from femodes.app.scaling import study as sc  # scaling_study, the names it uses, its _run_child
 
@@ -256,3 +257,113 @@ def _plain(tmp_path):
     q = tmp_path / "plain.toml"
     q.write_text(BAR.format(harmonic=1))
     return q
+
+
+# --------------------------------------------------------------------------------- meshed solids
+STRIP = """
+[mesh]
+length = 1.0
+height = 0.1
+nx = 4
+ny = 1
+quad = true
+
+[model]
+kind = "solid"
+E = 1.0
+rho = 1.0
+clamped = "left"
+
+[damping]
+beta = 0.02
+
+[[contact]]
+at = "right"
+direction = [1.0, 0.0]
+gap = 0.01
+
+[[force]]
+at = ["right", "u_x"]
+amplitude = 0.0004
+
+[analysis]
+type = "frequency_response"
+omega = [1.3, 1.9]
+harmonics = 2
+"""
+
+
+@pytest.fixture
+def strip_case(tmp_path):
+    p = tmp_path / "strip.toml"
+    p.write_text(STRIP)
+    return p
+
+
+def test_refine_a_solid_keeps_the_aspect_and_fits_against_N(strip_case, tmp_path):
+    """--refine 3,1 on a 4 x 1 Q1 strip: nx, ny scaled together, N = 2 nx (ny + 1) (left edge
+    clamped), one contact per node of the tip edge; exponents fitted against N."""
+    out = tmp_path / "s"
+    res = sc.scaling_study(strip_case, refine=[3, 1], harmonics=[2], repeat=1, points=0, out=out)
+    assert res.success, [r.error for r in res.records]
+    assert [(r.refine, r.mesh) for r in res.records] == [(1.0, "nx=4 ny=1"), (3.0, "nx=12 ny=3")]
+    assert [r.N for r in res.records] == [2 * 4 * 2, 2 * 12 * 4]
+    for r in res.records:
+        assert r.n_elements is None and r.ok and r.points == 0
+        ny = int(r.mesh.split("ny=")[1])
+        # unknowns: (2H+1) coefficients of every DOF and of every contact force (ny + 1 contacts)
+        assert r.unknowns == 5 * (r.N + ny + 1)
+    f = next(f for f in res.fits if f.quantity == "iteration" and f.against == "N")
+    assert f.sizes == (16, 96) and f.fixed_value == 2
+    rows = list(csv.DictReader(open(out / "scaling.csv")))
+    assert [row["mesh"] for row in rows] == ["nx=4 ny=1", "nx=12 ny=3"] and rows[0]["refine"] == "1.0"
+    doc = json.loads((out / "scaling.json").read_text())
+    assert doc["settings"]["refine"] == [1.0, 3.0] and doc["settings"]["elements"] is None
+    assert doc["settings"]["meshes"] == [{"nx": 4, "ny": 1}, {"nx": 12, "ny": 3}]
+    assert res.table().splitlines()[2].endswith("| nx=4 ny=1 |")
+
+
+def test_refined_divisions_round_and_stay_positive(strip_case, bar_case):
+    case = load_case(strip_case)
+    assert sc.refined_divisions(case, 1.5) == {"nx": 6, "ny": 2}  # 1.5 rounds to 2 (half to even)
+    assert sc.refined_divisions(case, 0.1) == {"nx": 1, "ny": 1}
+    box = parse_case(STRIP.replace("quad = true", "nz = 2\nhexahedra = true"), "box.toml")
+    assert sc.refined_divisions(box, 2.5) == {"nx": 10, "ny": 2, "nz": 5}
+    assert sc.refined_divisions(load_case(bar_case), 2.5) == {"n_elements": 50}
+
+
+def test_refine_of_a_line_mesh_scales_n_elements(bar_case, tmp_path):
+    res = sc.scaling_study(bar_case, refine=[0.5], harmonics=[3], repeat=1, points=0, out=tmp_path / "o")
+    assert [(r.n_elements, r.refine, r.N, r.mesh) for r in res.records] == [(10, 0.5, 10, "")]
+
+
+@pytest.mark.parametrize("text, kw, match", [
+    (STRIP, {"elements": [10, 20]}, r"elements: a solid's mesh is refined with refine"),
+    (STRIP, {"elements": [10], "refine": [2]}, r"give either elements .* or refine .*, not both"),
+    (STRIP, {"refine": [0.0, 1.0]}, r"refine must be positive numbers, got 0\.0"),
+    (STRIP, {"refine": []}, r"refine must not be empty"),
+    (STRIP, {"refine": ["2"]}, r"refine must be positive numbers, got '2'"),
+    (STRIP.replace("length = 1.0\nheight = 0.1\nnx = 4\nny = 1\nquad = true", 'file = "blade.msh"'), {"refine": [2]},
+     r"refine: cannot refine the mesh: the mesh is read from a file .*blade\.msh"),
+    (DISCRETE, {"refine": [2]}, r"refine: cannot refine the mesh: the case is a discrete model"),
+])
+def test_bad_refine_is_a_clear_error(tmp_path, text, kw, match):
+    p = tmp_path / "c.toml"
+    p.write_text(text)
+    with pytest.raises((ValueError, TypeError), match=match):
+        sc.scaling_study(p, out=tmp_path / "o", **kw)
+    assert not (tmp_path / "o").exists()
+
+
+def test_cli_refine(strip_case, tmp_path, capsys):
+    rc = main(["scaling", str(strip_case), "--refine", "2", "--harmonics", "2", "--repeat", "1", "--points", "0",
+               "--out", str(tmp_path / "cli"), "--no-progress"])
+    text = capsys.readouterr().out
+    assert rc == 0 and "| 48 | - | 2 |" in text and "| nx=8 ny=2 |" in text
+    for args, message in ((["--refine", "0"], "argument --refine: values must be positive numbers"),
+                          (["--refine", "2", "--elements", "10"], "not allowed with argument")):
+        with pytest.raises(SystemExit) as exc:
+            main(["scaling", str(strip_case), *args])
+        assert exc.value.code == 2 and message in capsys.readouterr().err
+    assert main(["scaling", str(strip_case), "--elements", "10", "--out", str(tmp_path / "o")]) == 2
+    assert "femodes scaling: elements: a solid's mesh is refined with refine" in capsys.readouterr().err

@@ -9,34 +9,52 @@ key when it can be found, else of its table).
 Schema (see ``examples/cases/*.toml`` for commented examples)::
 
     [mesh]                      # FE models only; either a file ...
-    file = "../../meshes/cantilever.msh"   # relative to the case file (gmsh, vtu, ... via meshio)
-    # ... or a straight line mesh:
+    file = "../../meshes/cantilever.msh"   # relative to the case file (gmsh, vtu, ... via meshio;
+                                # line meshes for beams and bars, 2-D/3-D meshes for solids)
+    # ... or a straight line mesh (beam, bar):
     # length = 1.0
     # n_elements = 40
     # boundaries = { clamp = 0.0, tip = 1.0 }   # named points (x coordinates)
     # grading = 1.0
+    # ... or a structured solid mesh (kind = "solid"): a rectangle [0, length] x [0, height]
+    # (boundaries "left", "right", "bottom", "top") or, with nz, a box [0, length] x [0, width]
+    # x [0, height] (also "front", "back"); see femodes.rectangle_mesh and femodes.box_mesh
+    # length = 1.0
+    # height = 0.1
+    # width = 0.1               # box only
+    # nx = 40                   # element divisions along x, y (and z for a box)
+    # ny = 4
+    # nz = 2                    # makes it a box
+    # quad = true               # rectangle: quadrilaterals instead of triangles (default false)
+    # hexahedra = true          # box: hexahedra instead of tetrahedra (default false)
 
     [model]
-    kind = "beam"               # "beam" | "bar" | "discrete"
-    E = 1.0                     # beam, bar
-    rho = 1.0                   # beam, bar
+    kind = "beam"               # "beam" | "bar" | "solid" | "discrete"
+    E = 1.0                     # beam, bar, solid
+    rho = 1.0                   # beam, bar, solid
     area = 1.0                  # beam, bar
     inertia = 1.0               # beam (required)
-    clamped = ["clamp"]         # beam, bar: named points (a string or a list)
+    clamped = ["clamp"]         # beam, bar: named points; solid: named boundaries (a string or a list)
     pinned = []                 # beam only
+    # order = 1                 # bar, solid: Lagrange order 1 or 2 (P1/P2, Q1/Q2)
+    # nu = 0.3                  # solid: Poisson's ratio
+    # plane = "stress"          # solid, 2-D meshes: "stress" or "strain"
+    # thickness = 1.0           # solid, 2-D meshes
+    # supports = { bottom = "u_y" }   # solid: per-component supports (a component or a list)
     # discrete: M = [[1.0]], K = [[1.0]], C = [[0.1]] (C optional), dof_names = ["x"]
 
     [damping]                   # optional: Rayleigh alpha, beta  or  modal = 0.02
     alpha = 0.02
 
     [[contact]]                 # 0..n tables
-    at = "tip"                  # a name, ["tip", "w"] or a DOF index
+    at = "tip"                  # a name, ["tip", "w"] or a DOF index; solids: a boundary name
     gap = 0.01                  # >= 0
+    # direction = [1.0, 0.0]    # solids: contact normal along +x, +y or +z (one contact per node)
     law = "complementarity"     # or "penalty" (then stiffness = ... is required)
     # c = 10.0                  # complementarity parameter (optional)
 
     [[force]]                   # 0..n harmonic point forces
-    at = "tip"
+    at = "tip"                  # solids: ["right", "u_x"] spreads the force over a boundary
     amplitude = 0.004
     # harmonic = 1
     # phase = 0.0
@@ -82,12 +100,15 @@ __all__ = ["CaseError", "Case", "SCHEMA", "load_case", "parse_case", "build_mode
 # table -> {key: description of the expected type}; ARRAY_TABLES are [[...]] tables.
 SCHEMA: dict[str, dict[str, str]] = {
     "mesh": {"file": "string", "length": "number", "n_elements": "integer", "boundaries": "table",
-             "grading": "number"},
+             "grading": "number", "height": "number", "width": "number", "nx": "integer", "ny": "integer",
+             "nz": "integer", "quad": "boolean", "hexahedra": "boolean"},
     "model": {"kind": "string", "E": "number", "rho": "number", "area": "number", "inertia": "number",
               "clamped": "string or list", "pinned": "string or list", "M": "matrix", "K": "matrix",
-              "C": "matrix", "dof_names": "list"},
+              "C": "matrix", "dof_names": "list", "nu": "number", "plane": "string", "thickness": "number",
+              "order": "integer", "supports": "table"},
     "damping": {"alpha": "number", "beta": "number", "modal": "number or list"},
-    "contact": {"at": "location", "gap": "number", "law": "string", "c": "number", "stiffness": "number"},
+    "contact": {"at": "location", "gap": "number", "law": "string", "c": "number", "stiffness": "number",
+                "direction": "vector"},
     "force": {"at": "location", "amplitude": "number", "harmonic": "integer", "phase": "number"},
     "cubic": {"at": "location", "k3": "number"},
     "reduction": {"craig_bampton": "integer"},
@@ -97,7 +118,12 @@ SCHEMA: dict[str, dict[str, str]] = {
                 "response_dof": "location"},
 }
 ARRAY_TABLES = ("contact", "force", "cubic")
-MODEL_KINDS = ("beam", "bar", "discrete")
+MODEL_KINDS = ("beam", "bar", "solid", "discrete")
+#: [mesh] keys of a line mesh (beam, bar) and of a generated solid mesh (rectangle, or box with nz).
+LINE_MESH_KEYS = ("length", "n_elements", "boundaries", "grading")
+SOLID_MESH_KEYS = ("length", "height", "width", "nx", "ny", "nz", "quad", "hexahedra")
+#: Element divisions of a generated solid mesh (what ``femodes scaling --refine`` multiplies).
+SOLID_DIVISIONS = ("nx", "ny", "nz")
 ANALYSES = ("nonlinear_mode", "frequency_response")
 
 
@@ -204,6 +230,8 @@ def _check_type(v: Any, kind: str) -> bool:
         return isinstance(v, dict)
     if kind == "pair":
         return isinstance(v, list) and len(v) == 2 and all(_is_num(x) for x in v)
+    if kind == "vector":
+        return isinstance(v, list) and 1 <= len(v) <= 3 and all(_is_num(x) for x in v)
     if kind == "string or list":
         return isinstance(v, str) or (isinstance(v, list) and all(isinstance(x, str) for x in v))
     if kind == "string or false":
@@ -236,6 +264,7 @@ _TYPE_TEXT = {
     "number": "a number", "integer": "an integer", "string": "a string", "boolean": "true or false",
     "boolean or method": "true, false or a method name (\"auto\", \"hill\", \"shooting\")",
     "table": "a table like { name = value }", "pair": "a pair [start, end] of numbers",
+    "vector": "a vector of 1 to 3 numbers like [1.0, 0.0]",
     "string or list": "a name or a list of names", "string or false": "a file name or false",
     "number or list": "a number or a list of numbers", "list": "a list",
     "matrix": "a matrix like [[1.0, 0.0], [0.0, 1.0]]",
@@ -304,7 +333,8 @@ def _check_values(case: Case) -> None:
 
 def _check_required_tables(case: Case) -> None:
     if "model" not in case.data:
-        raise CaseError("missing table [model] (kind = \"beam\" | \"bar\" | \"discrete\", ...)", case.name, 1)
+        raise CaseError("missing table [model] (kind = \"beam\" | \"bar\" | \"solid\" | \"discrete\", ...)",
+                        case.name, 1)
     if "analysis" not in case.data:
         raise CaseError("missing table [analysis] (type = \"nonlinear_mode\" or \"frequency_response\", ...)",
                         case.name, 1)
@@ -315,15 +345,20 @@ def _check_model(case: Case) -> str:
     model = case.data["model"]
     kind = model.get("kind")
     if kind is None:
-        raise case.error("model", None, "missing key kind (\"beam\", \"bar\" or \"discrete\")")
+        raise case.error("model", None, "missing key kind (\"beam\", \"bar\", \"solid\" or \"discrete\")")
     if kind not in MODEL_KINDS:
         raise case.error("model", "kind", f"kind must be one of {', '.join(map(repr, MODEL_KINDS))}, got {kind!r}"
                          f"{_suggest(kind, MODEL_KINDS)}")
     if kind == "discrete":
         _check_discrete_model(case, model)
+    elif kind == "solid":
+        _check_solid_model(case, model)
+        _check_solid_mesh(case, model)
     else:
         _check_fe_model(case, kind, model)
         _check_mesh(case, kind)
+    if "order" in model and model["order"] not in (1, 2):
+        raise case.error("model", "order", f"order must be 1 or 2, got {model['order']}")
     return kind
 
 
@@ -331,7 +366,7 @@ def _check_discrete_model(case: Case, model: dict) -> None:
     for k in ("M", "K"):
         if k not in model:
             raise case.error("model", None, f"a discrete model needs {k} = [[...]]")
-    for k in ("E", "rho", "area", "inertia", "clamped", "pinned"):
+    for k in ("E", "rho", "area", "inertia", "clamped", "pinned", "nu", "plane", "thickness", "order", "supports"):
         if k in model:
             raise case.error("model", k, f"{k} is not used by a discrete model (give M, K, C)")
     if "mesh" in case.data:
@@ -342,9 +377,71 @@ def _check_fe_model(case: Case, kind: str, model: dict) -> None:
     for k in ("E", "rho", "area") + (("inertia",) if kind == "beam" else ()):
         if k not in model:
             raise case.error("model", None, f"a {kind} model needs {k} = ...")
-    for k in ("M", "K", "C", "dof_names") + (("pinned", "inertia") if kind == "bar" else ()):
+    for k in ("M", "K", "C", "dof_names") + (("pinned", "inertia") if kind == "bar" else ("order",)):
         if k in model:
             raise case.error("model", k, f"{k} is not used by a {kind} model")
+    for k in ("nu", "plane", "thickness", "supports"):
+        if k in model:
+            raise case.error("model", k, f"{k} is used by solid models only (kind = \"solid\"), not by a {kind} model")
+
+
+def _check_solid_model(case: Case, model: dict) -> None:
+    """[model] kind = "solid": material, element order, supports, plane and thickness."""
+    for k in ("E", "rho"):
+        if k not in model:
+            raise case.error("model", None, f"a solid model needs {k} = ...")
+    for k in ("area", "inertia", "pinned", "M", "K", "C", "dof_names"):
+        if k in model:
+            hint = " (a 2-D solid takes thickness = ...)" if k == "area" else ""
+            raise case.error("model", k, f"{k} is not used by a solid model{hint}")
+    plane = model.get("plane")
+    if plane is not None and plane not in ("stress", "strain"):
+        raise case.error("model", "plane", f"plane must be \"stress\" or \"strain\", got {plane!r}"
+                         f"{_suggest(plane, ('stress', 'strain'))}")
+    if "thickness" in model and not model["thickness"] > 0:
+        raise case.error("model", "thickness", f"thickness must be > 0, got {_fmt(model['thickness'])}")
+    for loc, comps in model.get("supports", {}).items():
+        if not (isinstance(comps, str) or (isinstance(comps, list) and comps
+                                           and all(isinstance(c, str) for c in comps))):
+            raise case.error("model", "supports", f"supports must be a table like {{ bottom = \"u_y\" }} (a component "
+                             f"name or a list of them per location), got {loc} = {_fmt(comps)}")
+
+
+def _check_solid_mesh(case: Case, model: dict) -> None:
+    """[mesh] of a solid: a file, or a rectangle (nx, ny) or box (nx, ny, nz) with positive sides."""
+    mesh = case.data.get("mesh")
+    if mesh is None:
+        raise CaseError("a solid model needs a [mesh] table (file = ... or nx, ny (and nz) with length, height "
+                        "(and width))", case.name, key_line(case.text, "model", "kind"))
+    for k in ("n_elements", "boundaries", "grading"):
+        if k in mesh:
+            raise case.error("mesh", k, f"{k} is for line meshes (beam, bar); a solid mesh is generated from nx, ny "
+                             "(and nz for a box) or read from a file")
+    if "file" in mesh:
+        k = next((k for k in SOLID_MESH_KEYS if k in mesh), None)
+        if k is not None:
+            raise case.error("mesh", k, f"give either file = ... or a generated mesh (nx, ny, ...), not both ({k})")
+        return
+    for k in ("nx", "ny"):
+        if k not in mesh:
+            raise case.error("mesh", None, f"a generated solid mesh needs nx and ny (and nz for a box), or "
+                             f"file = \"...\"; {k} is missing")
+    box = "nz" in mesh
+    for k in (("quad",) if box else ("width", "hexahedra")):
+        if k in mesh:
+            hint = ("quad is for rectangles (2-D); a box (nz) takes hexahedra = true" if k == "quad"
+                    else f"{k} is for boxes (3-D): give nz too, or leave {k} out for a rectangle")
+            raise case.error("mesh", k, hint)
+    for k in SOLID_DIVISIONS:
+        if k in mesh and mesh[k] < 1:
+            raise case.error("mesh", k, f"{k} must be >= 1, got {mesh[k]}")
+    for k in ("length", "height", "width"):
+        if k in mesh and not mesh[k] > 0:
+            raise case.error("mesh", k, f"{k} must be > 0, got {_fmt(mesh[k])}")
+    if box:
+        for k in ("plane", "thickness"):
+            if k in model:
+                raise case.error("model", k, f"{k} applies to 2-D solids; [mesh] with nz is a 3-D box (leave {k} out)")
 
 
 def _check_mesh(case: Case, kind: str) -> None:
@@ -352,11 +449,15 @@ def _check_mesh(case: Case, kind: str) -> None:
     if mesh is None:
         raise CaseError(f"a {kind} model needs a [mesh] table (file = ... or length/n_elements)", case.name,
                         key_line(case.text, "model", "kind"))
-    if "file" in mesh and any(k in mesh for k in ("length", "n_elements", "boundaries", "grading")):
-        k = next(k for k in ("length", "n_elements", "boundaries", "grading") if k in mesh)
+    if "file" in mesh and any(k in mesh for k in LINE_MESH_KEYS):
+        k = next(k for k in LINE_MESH_KEYS if k in mesh)
         raise case.error("mesh", k, f"give either file = ... or length/n_elements/boundaries, not both ({k})")
     if "file" not in mesh and "n_elements" not in mesh:
         raise case.error("mesh", None, "needs file = \"...\" or n_elements = ... (with length, boundaries)")
+    k = next((k for k in SOLID_MESH_KEYS if k in mesh and k != "length"), None)
+    if k is not None:
+        raise case.error("mesh", k, f"{k} is for the meshes of solids (kind = \"solid\"); a {kind} takes a line mesh "
+                         "(length, n_elements, boundaries)")
 
 
 def _check_contacts(case: Case) -> None:
@@ -376,6 +477,9 @@ def _check_contacts(case: Case) -> None:
             raise case.error("contact", "c", "c is the complementarity parameter; a penalty contact uses stiffness", i)
         if law == "complementarity" and "stiffness" in c:
             raise case.error("contact", "stiffness", "stiffness is for law = \"penalty\"", i)
+        if "direction" in c and case.data["model"].get("kind") != "solid":
+            raise case.error("contact", "direction", "direction is for contacts on the boundaries of solids "
+                             "(kind = \"solid\")", i)
 
 
 def _check_forces_and_springs(case: Case) -> None:
@@ -445,7 +549,7 @@ def _check_reduction(case: Case, kind: str) -> None:
     if "craig_bampton" in red and red["craig_bampton"] < 0:
         raise case.error("reduction", "craig_bampton", f"craig_bampton must be >= 0, got {red['craig_bampton']}")
     if "reduction" in case.data and kind == "discrete":
-        raise case.error("reduction", None, "Craig-Bampton reduction needs an FE model (beam or bar)")
+        raise case.error("reduction", None, "Craig-Bampton reduction needs an FE model (beam, bar or solid)")
 
 
 def load_case(path: str | Path) -> Case:
@@ -541,7 +645,7 @@ def _discrete_model(case: Case, api: _Api):
 
 
 def _mesh(case: Case, api: _Api):
-    """The mesh of [mesh]: read from ``file`` or a straight line mesh."""
+    """The mesh of [mesh]: read from ``file``, a rectangle or box (solids) or a straight line mesh."""
     import femodes as fm
 
     mesh_t = case.data["mesh"]
@@ -552,23 +656,36 @@ def _mesh(case: Case, api: _Api):
         if not f.is_file():
             raise case.error("mesh", "file", f"mesh file {str(f)!r} does not exist")
         return api("mesh", "file", fm.load_mesh, str(f))
+    if case.data["model"]["kind"] == "solid":
+        g = {k: mesh_t[k] for k in ("length", "height", "width", "nx", "ny", "nz") if k in mesh_t}
+        if "nz" in mesh_t:
+            return api("mesh", list(g) + ["hexahedra"], fm.box_mesh, **g, hexahedra=mesh_t.get("hexahedra", False))
+        return api("mesh", list(g) + ["quad"], fm.rectangle_mesh, **g, quad=mesh_t.get("quad", False))
     return api("mesh", ["boundaries", "n_elements", "length", "grading"], fm.line_mesh,
                mesh_t.get("length", 1.0), mesh_t["n_elements"], boundaries=mesh_t.get("boundaries"),
                grading=mesh_t.get("grading", 1.0))
 
 
 def _fe_model(case: Case, api: _Api):
-    """[model] kind = "beam" | "bar" on the mesh of [mesh]."""
+    """[model] kind = "beam" | "bar" | "solid" on the mesh of [mesh]."""
     import femodes as fm
 
     m = case.data["model"]
     mesh = _mesh(case, api)
+    if m["kind"] == "solid":
+        mat = api("model", ["E", "rho", "nu"], fm.Material, E=m["E"], rho=m["rho"],
+                  **({"nu": m["nu"]} if "nu" in m else {}))
+        supports = {k: tuple(v) if isinstance(v, list) else v for k, v in m["supports"].items()} \
+            if "supports" in m else None
+        return api("model", ["clamped", "supports", "plane", "thickness", "order"], fm.solid, mesh, mat,
+                   clamped=m.get("clamped"), supports=supports, plane=m.get("plane"), thickness=m.get("thickness"),
+                   order=m.get("order", 1))
     mat = api("model", ["E", "rho"], fm.Material, E=m["E"], rho=m["rho"])
     sec = api("model", ["area", "inertia"], fm.Section, area=m["area"], inertia=m.get("inertia"))
     if m["kind"] == "beam":
         return api("model", ["clamped", "pinned"], fm.beam, mesh, mat, sec, clamped=m.get("clamped"),
                    pinned=m.get("pinned"))
-    return api("model", ["clamped"], fm.bar, mesh, mat, sec, clamped=m.get("clamped"))
+    return api("model", ["clamped", "order"], fm.bar, mesh, mat, sec, clamped=m.get("clamped"), order=m.get("order", 1))
 
 
 def _add_damping(case: Case, api: _Api, model):
@@ -587,12 +704,20 @@ def _add_contacts(case: Case, api: _Api, model):
 
     for i, c in enumerate(case.tables("contact")):
         at = _location(c["at"])
+        direction = tuple(c["direction"]) if "direction" in c else None
         if c.get("law", "complementarity") == "penalty":
-            law = api("contact", ["at", "gap", "stiffness"], fm.PenaltyContact, at=at, gap=c["gap"],
-                      stiffness=c["stiffness"], index=i)
+            law = api("contact", ["at", "gap", "stiffness", "direction"], fm.PenaltyContact, at=at, gap=c["gap"],
+                      stiffness=c["stiffness"], direction=direction, index=i)
         else:
-            law = api("contact", ["at", "gap", "c"], fm.UnilateralContact, at=at, gap=c["gap"], c=c.get("c"), index=i)
-        model = api("contact", ["at", "gap"], model.with_contact, law, index=i)
+            law = api("contact", ["at", "gap", "c", "direction"], fm.UnilateralContact, at=at, gap=c["gap"],
+                      c=c.get("c"), direction=direction, index=i)
+        try:
+            model = api("contact", ["at", "gap"], model.with_contact, law, index=i)
+        except CaseError as exc:
+            if direction is None or "direction=" not in exc.message:
+                raise
+            # "UnilateralContact(at=...): direction=(...) is not along ...": about the direction
+            raise case.error("contact", "direction", re.sub(r"^\[contact[^\]]*\] ", "", exc.message), i) from None
     return model
 
 

@@ -2,8 +2,9 @@
 
 How do the cost of one Newton iteration and of one continuation point, and the peak memory,
 grow with the number of DOFs ``N`` and of harmonics ``H``? :func:`scaling_study` answers this
-for a user's own case file: it varies ``[mesh] n_elements`` (line meshes only) and
-``[analysis] harmonics``, measures every ``(N, H)`` pair in a fresh Python process and fits the
+for a user's own case file: it varies the mesh (``[mesh] n_elements`` of a line mesh, or a
+refinement factor of the case's generated mesh: ``n_elements``, or ``nx, ny, nz`` of a solid's
+rectangle or box) and ``[analysis] harmonics``, measures every ``(N, H)`` pair in a fresh Python process and fits the
 exponents ``t ~ N^a`` (at fixed ``H``) and ``t ~ H^b`` (at fixed ``N``).
 
 Outputs in ``out``: ``scaling.csv`` (one row per case), ``scaling.json`` (settings, records,
@@ -17,7 +18,8 @@ that measures one case, and what it measures), :mod:`.report` (fits, CSV/JSON fi
 from .command import SCALING_HELP, add_scaling_parser, scaling_cli
 from .records import CSV_COLUMNS, ScalingFit, ScalingRecord, ScalingResult
 from .report import fit_exponents, plot_scaling
-from .study import positive_int_list, scaling_study
+from .study import positive_float_list, positive_int_list, refined_divisions, scaling_study
 
-__all__ = ["ScalingRecord", "ScalingFit", "ScalingResult", "scaling_study", "positive_int_list", "fit_exponents",
+__all__ = ["ScalingRecord", "ScalingFit", "ScalingResult", "scaling_study", "positive_int_list",
+           "positive_float_list", "refined_divisions", "fit_exponents",
            "plot_scaling", "CSV_COLUMNS", "SCALING_HELP", "add_scaling_parser", "scaling_cli"]

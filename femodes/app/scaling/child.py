@@ -18,7 +18,11 @@ What is measured in the child process of one ``(N, H)`` case
    ``r, J, _ = problem.residual(x, p)`` followed by
    ``femodes.solvers.newton.default_linear_solver(J, r)`` (looked up at call time, so the
    timing follows whatever that solver dispatches to); median and minimum are reported, with
-   the medians of the two parts. The state is the branch point of step 2 with the largest
+   the medians of the two parts. Repeat ``i`` is at the frequency of the state times
+   ``1 + (i + 1) 1e-9`` (:data:`_SHIFT`): the per-harmonic factorisations are cached on the
+   system per frequency, and at one frequency every repeat after the first (and the first too,
+   at a branch point just computed) would only reuse them; inside a continuation the frequency
+   changes at every corrector iteration, so an iteration costs the factorisations. The state is the branch point of step 2 with the largest
    contact force if there is one; otherwise the linear guess (``problem.initial_guess``) of
    largest amplitude over 5 parameter values of the span, moved by one Newton step so that the
    contacts it violates become active (``contact_active`` in the record says whether the state
@@ -72,6 +76,10 @@ _COMMAND = f"from {__name__} import child_main; child_main()"
 
 #: Number of parameter values scanned for a large-amplitude linear guess (step 3 above).
 _N_GUESS = 5
+
+#: Relative frequency shift between the timed iterations (step 3 above): enough to miss the
+#: factor cache, far too small to change the work of an iteration.
+_SHIFT = 1e-9
 
 
 # ---------------------------------------------------------------------------------------------
@@ -320,13 +328,24 @@ def _largest_linear_guess(problem, span) -> tuple[np.ndarray, float]:
     return best[1], best[2]
 
 
+def _shifted(problem, x: np.ndarray, p: float, factor: float) -> tuple[np.ndarray, float]:
+    """``(x, p)`` with the frequency times ``factor``: the parameter of a forced response, the
+    frequency unknown of a nonlinear mode."""
+    if isinstance(problem, fm.ForcedResponseProblem):
+        return x, p * factor
+    u = problem.unpack(x, p)
+    return problem.pack(u.Q, u.P, u.omega * factor, u.xi), p
+
+
 def _time_iteration(problem, x: np.ndarray, p: float, repeat: int, rec: dict):
-    """Step 3: ``repeat`` Newton iterations (residual + linear solve) at ``(x, p)``; the last J."""
+    """Step 3: ``repeat`` Newton iterations (residual + linear solve) near ``(x, p)``, each at its
+    own frequency (:data:`_SHIFT`); the last J."""
     gc.collect()
     it, res, sol = [], [], []
-    for _ in range(repeat):
+    for i in range(repeat):
+        xi, pi = _shifted(problem, x, p, 1.0 + (i + 1) * _SHIFT)
         t0 = time.perf_counter()
-        r, J, _ = problem.residual(x, p)
+        r, J, _ = problem.residual(xi, pi)
         t1 = time.perf_counter()
         newton.default_linear_solver(J, r)  # module attribute: follows a future dispatch
         t2 = time.perf_counter()

@@ -14,19 +14,24 @@ from pathlib import Path
 
 from ..cases import CaseError, command_out_folder
 from .records import ScalingResult
-from .study import positive_int_list, scaling_study
+from .study import positive_float_list, positive_int_list, scaling_study
 
 __all__ = ["SCALING_HELP", "add_scaling_parser", "scaling_cli"]
 
 SCALING_HELP = """Scaling study of a TOML case file: for every N x H pair, in a fresh process,
   per iteration   median (and min) over --repeat of problem.residual(x, p) + default_linear_solver(J, r)
-                  at a state with active contacts when possible,
+                  at a state with active contacts when possible, each repeat at a frequency shifted by
+                  1e-9 (relative) so that the per-harmonic factorisations are recomputed, as in a
+                  continuation corrector,
   per point       wall time of the case's analysis capped at --points points / points,
   peak MiB        ru_maxrss of the case's process.
-N is varied through [mesh] n_elements (line meshes only; not for mesh files or discrete models),
-H through [analysis] harmonics. Writes scaling.csv (after every case: Ctrl-C keeps what was
-measured), scaling.json (with the fitted log-log exponents) and scaling.png to --out.
-Example:  femodes scaling case.toml --elements 100,1000,10000 --harmonics 5,10,20
+N is varied through [mesh] n_elements of a line mesh (--elements), or by refining the case's own
+generated mesh (--refine: a factor on n_elements of a line mesh, on nx, ny and nz of a solid's
+rectangle or box, which keeps the aspect of its elements); not for mesh files or discrete models.
+H is varied through [analysis] harmonics. Writes scaling.csv (after every case: Ctrl-C keeps what
+was measured), scaling.json (with the fitted log-log exponents) and scaling.png to --out.
+Examples: femodes scaling case.toml --elements 100,1000,10000 --harmonics 5,10,20
+          femodes scaling examples/cases/strip2d_contact.toml --refine 1,2,4 --harmonics 5
 """
 
 
@@ -34,9 +39,13 @@ def add_scaling_parser(sub) -> None:
     """The ``femodes scaling`` subcommand on the command line's subparsers."""
     sc = sub.add_parser("scaling", help="time and memory of a case file against N and H", description=SCALING_HELP,
                         formatter_class=argparse.RawDescriptionHelpFormatter)
-    sc.add_argument("case", type=Path, help="the case file (a line mesh [mesh] n_elements = ... to vary N)")
-    sc.add_argument("--elements", type=positive_int_list, default=None, metavar="NE,NE,...",
-                    help="values of [mesh] n_elements, e.g. 100,1000,10000 (default: the case's mesh)")
+    sc.add_argument("case", type=Path, help="the case file (a generated mesh to vary N)")
+    size = sc.add_mutually_exclusive_group()
+    size.add_argument("--elements", type=positive_int_list, default=None, metavar="NE,NE,...",
+                      help="values of [mesh] n_elements of a line mesh, e.g. 100,1000,10000 (default: the case's mesh)")
+    size.add_argument("--refine", type=positive_float_list, default=None, metavar="F,F,...",
+                      help="refinement factors of the case's mesh, e.g. 1,2,4: n_elements, or nx, ny, nz of a solid, "
+                           "times F (default: the case's mesh)")
     sc.add_argument("--harmonics", type=positive_int_list, default=None, metavar="H,H,...",
                     help="values of [analysis] harmonics, e.g. 5,10,20 (default: the case's)")
     sc.add_argument("--repeat", type=_positive_int, default=3, help="repetitions of the timed Newton iteration (3)")
@@ -84,8 +93,8 @@ def scaling_cli(args) -> int:
         return 2
     show = sys.stderr.isatty() if args.progress is None else args.progress
     try:
-        res = scaling_study(path, elements=args.elements, harmonics=args.harmonics, repeat=args.repeat,
-                            points=args.points, out=out, timeout=args.timeout, progress=show)
+        res = scaling_study(path, elements=args.elements, refine=args.refine, harmonics=args.harmonics,
+                            repeat=args.repeat, points=args.points, out=out, timeout=args.timeout, progress=show)
     except CaseError as exc:
         print(f"femodes scaling: {exc}", file=sys.stderr)
         return 2

@@ -14,7 +14,7 @@ from pathlib import Path
 __all__ = ["CSV_COLUMNS", "ScalingRecord", "ScalingFit", "ScalingResult"]
 
 CSV_COLUMNS = (
-    "n_elements", "N", "n_reduced", "H", "unknowns", "nnz_J", "iteration_median_s", "iteration_min_s",
+    "n_elements", "refine", "mesh", "N", "n_reduced", "H", "unknowns", "nnz_J", "iteration_median_s", "iteration_min_s",
     "residual_median_s", "solve_median_s", "point_s", "points", "newton_iterations", "stability_s",
     "stability_method", "peak_mib",
     "baseline_mib", "setup_s", "wall_s", "jacobian", "contact_active", "state", "continuation", "error",
@@ -41,11 +41,15 @@ class ScalingRecord:
     number of stored entries of that Jacobian (of its assembled sparse form for a structured
     operator). ``stability_s`` is the cost of the branch's stability per point (NaN when the
     case asks for none) and ``stability_method`` the methods it used. ``error`` is empty for a
-    measured case.
+    measured case. ``n_elements`` is the line mesh's number of elements, ``refine`` the
+    refinement factor of the case's mesh (``scaling_study(refine=...)``) and ``mesh`` the element
+    divisions of a refined solid (``"nx=40 ny=4"``); None/empty when not varied.
     """
 
     n_elements: int | None
     H: int
+    refine: float | None = None
+    mesh: str = ""
     N: int | None = None
     n_reduced: int | None = None
     unknowns: int | None = None
@@ -131,9 +135,9 @@ class ScalingResult:
         return not self.interrupted and all(r.ok for r in self.records)
 
     def table(self) -> str:
-        """Markdown table of the records."""
+        """Markdown table of the records (``mesh``: the divisions of a refined solid, ``-`` otherwise)."""
         head = ("| N | reduced | H | unknowns | nnz(J) | iteration median [ms] | min [ms] | residual [ms] | "
-                "solve [ms] | per point [s] | points | stability per point [s] | setup [s] | peak [MiB] | note |")
+                "solve [ms] | per point [s] | points | stability per point [s] | setup [s] | peak [MiB] | note | mesh |")
         lines = [head, "|" + "---|" * (head.count("|") - 1)]
         lines += ["| " + " | ".join(_row(r)) + " |" for r in self.records]
         return "\n".join(lines)
@@ -155,7 +159,7 @@ def _row(r: ScalingRecord) -> list[str]:
     return [_cell(r.N), _cell(r.n_reduced), str(r.H), _cell(r.unknowns), _cell(r.nnz_J),
             _ms(r.iteration_median_s), _ms(r.iteration_min_s), _ms(r.residual_median_s),
             _ms(r.solve_median_s), _num(r.point_s, "{:.3g}"), str(r.points), _stability(r),
-            _num(r.setup_s, "{:.3g}"), _num(r.peak_mib, "{:.0f}"), _short(_note(r))]
+            _num(r.setup_s, "{:.3g}"), _num(r.peak_mib, "{:.0f}"), _short(_note(r)), r.mesh or "-"]
 
 
 def _stability(r: ScalingRecord) -> str:

@@ -135,7 +135,7 @@ def _plot_against(ax, ok: list[ScalingRecord], slope: dict, against: str, fixed:
     ax.set_title(f"time against {against} at fixed {fixed}")
     ax.grid(True, which="both", alpha=0.3)
     if len(xs_all) < 2:
-        flag = "--elements" if against == "N" else "--harmonics"
+        flag = "--elements or --refine" if against == "N" else "--harmonics"
         ax.text(0.5, 0.5, f"one {against} only: give several values with {flag}", transform=ax.transAxes,
                 ha="center", va="center", color="grey")
     if ok:
