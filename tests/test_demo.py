@@ -141,7 +141,9 @@ def test_forced_folds_located(run, forced):
     assert len(forced.folds) == 2
     np.testing.assert_allclose(forced.omega[list(forced.folds)], [3.7446, 3.6871], atol=2e-3)
     assert "folds at w = 3.7446 and 3.6871 rad/s" in (run["out"] / "summary.txt").read_text()
-    assert len(forced) >= 150  # FORCED_MAX_STEP = 0.2
+    # FORCED_MAX_STEP = 0.2 bounds the steps: over 100 points on the span (117 with the contact forces
+    # scaled by the contact stiffness in the arclength, 150 before)
+    assert len(forced) >= 100
 
 
 def test_animation_frames_follow_the_spectrum(run, backbone):

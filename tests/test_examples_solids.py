@@ -8,6 +8,10 @@ import femodes as fm
 
 from .test_examples import load
 
+# The whole module runs in the slow step (make test-slow, CI): importing the two blade
+# examples costs ~40 s of CPU, and the fast suite must stay well under 10 minutes on 2 cores.
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def casing():

@@ -84,14 +84,14 @@ def test_frequency_response(study, tmp_path):
     assert len(ax.get_lines()) == 1  # no folds on this branch
     np.testing.assert_array_equal(ax.get_lines()[0].get_xdata(), forced.omega)
     np.testing.assert_array_equal(ax.get_lines()[0].get_ydata(), forced.amplitude(tip))
-    br = with_folds(forced, [5, 12])
+    br = with_folds(forced, [5, 10])
     fig, existing = plt.subplots()
     ax = plot.frequency_response(br, "tip", ax=existing)
     assert ax is existing
     lines = ax.get_lines()
     assert len(lines) == 2
-    np.testing.assert_array_equal(lines[1].get_xdata(), forced.omega[[5, 12]])
-    np.testing.assert_array_equal(lines[1].get_ydata(), forced.amplitude(tip)[[5, 12]])
+    np.testing.assert_array_equal(lines[1].get_xdata(), forced.omega[[5, 10]])
+    np.testing.assert_array_equal(lines[1].get_ydata(), forced.amplitude(tip)[[5, 10]])
     assert lines[1].get_marker() == "x"
     saved(ax, tmp_path / "fr.png")
     with pytest.raises(ValueError, match="dof"):

@@ -15,6 +15,10 @@ import pytest
 
 import femodes as fm
 
+# The whole module runs in the slow step (make test-slow, CI): the strip/bar and blade/beam
+# comparisons cost ~25 s of CPU, and the fast suite must stay well under 10 minutes on 2 cores.
+pytestmark = pytest.mark.slow
+
 GAP = 0.01
 H = fm.Harmonics(10)
 HEIGHT = 0.1  # axial strip: L = 1, thickness 1, so the bar's area is 0.1
