@@ -330,7 +330,8 @@ class MeshFields:
         Undeformed node coordinates (missing components zero).
     contact_direction : ndarray (n_contacts, 3)
         Unit vector of each contact: the displacement component the contact acts on
-        (``g_N = gap - direction . u``); ``e_x`` for bars, ``e_y`` for beams.
+        (``g_N = gap - direction . u``), its normal for a rotated node of a solid (inclined or
+        negative normals, ``model.dofmap.frames``); ``e_x`` for bars, ``e_y`` for beams.
     contact_boundary : tuple of str
         Named boundary of each contact (solids; ``""`` for a contact on a named point or a
         1-D model): among the boundaries holding the node, the one holding the most contact
@@ -615,7 +616,11 @@ def mesh_fields(source: Any, model: Any, t: Any = None, *, n_frames: int = 36, m
     disp[..., :dim] = np.moveaxis(uq[:, nodal], 1, 2)
     vel[..., :dim] = np.moveaxis(uv[:, nodal], 1, 2)
     direction = np.zeros((nodes.size, 3))
-    direction[np.arange(nodes.size), comps] = 1.0
+    for j, (node, comp) in enumerate(zip(nodes, comps)):
+        if node >= 0:  # e_comp, or the nodal-frame axis of a rotated node (inclined or negative normal)
+            direction[j, :dim] = owner_model.dofmap.axis(int(node), int(comp))
+        else:
+            direction[j, comp] = 1.0
     groups = {name: np.asarray(g, dtype=np.int64) for name, g in owner_model.dofmap.groups.items()}
     boundary = _contact_boundaries(groups, nodes, np.asarray(comps))
     measure = np.zeros(nodes.size)

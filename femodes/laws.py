@@ -25,9 +25,11 @@ which, in ours, is ``p - max(0, p - c g_N) = 0`` for any constant ``c > 0``. (Ch
 The penalty law is ``p = k_p max(0, -g_N)`` and the cubic spring ``f = k3 q_i^3``.
 
 Contact on a boundary of a meshed solid: a law declared with a boundary name (``at="right"``), a
-``direction`` (the normal ``w_c``, along +x, +y or +z) or a callable ``gap`` is a template;
+``direction`` (the normal ``w_c``) or a callable ``gap`` is a template;
 ``StructuralModel.with_contact`` turns it into one law per boundary node, each on a single DOF
-with a number as gap and no direction, so every formula below still acts on one DOF.
+with a number as gap and no direction, so every formula below still acts on one DOF. A normal
+along +x, +y or +z selects that displacement DOF; an inclined or negative one is the normal DOF
+``u_n = n . u`` of a nodal frame (the model rotates the DOFs of the contact nodes).
 
 Generalized derivatives: ``d max(0, s)/ds = 1 if s > 0 else 0``, i.e. at a kink (``s = 0``)
 the inactive side is taken (Clarke's generalized gradient contains both one-sided values).
@@ -186,10 +188,12 @@ class UnilateralContact(_Stackable):
         scikit-fem) returning ``n_nodes`` gaps, or, if that fails or returns a scalar, once
         per node with ``x`` of shape ``(dim,)``.
     direction : tuple of float, optional
-        Contact normal ``w_c`` of a meshed solid, e.g. ``(1.0, 0.0)``: the contact acts on the
-        displacement component along it (normalised; must be along +x, +y or +z). With a
-        boundary name ``at="right"`` the law is expanded to one contact per node of that
-        boundary by :meth:`femodes.StructuralModel.with_contact`.
+        Contact normal ``w_c`` of a meshed solid, e.g. ``(1.0, 0.0)`` (normalised): along +x, +y
+        or +z the contact acts on that displacement component; an inclined or negative normal
+        (``(0.8, 0.6)``, ``(-1.0, 0.0)``) acts on the normal DOF ``u_n`` of the node's rotated
+        DOFs (a nodal frame, :meth:`femodes.StructuralModel.with_contact`). With a boundary name
+        ``at="right"`` the law is expanded to one contact per node of that boundary by
+        :meth:`femodes.StructuralModel.with_contact`.
     c : float, optional
         Complementarity parameter (force per length). With a truncated Fourier basis the weak
         (Galerkin) solution depends on it: for ``u'' + 0.1 u' + u = 0.2 cos(w t)`` against a stop at 1

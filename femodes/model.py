@@ -21,12 +21,109 @@ from .eigen import normal_modes
 from .fe.redistribution import ConsistentMass, RedistributeMass
 from .laws import CubicSpring, Location, PenaltyContact, UnilateralContact, check_location
 
-__all__ = ["DofMap", "HarmonicForce", "Attached", "StructuralModel", "LowRankDamping", "as_sparse_matrix", "low_rank_solver"]
+__all__ = ["DofMap", "NodalFrame", "HarmonicForce", "Attached", "StructuralModel", "LowRankDamping", "as_sparse_matrix",
+           "low_rank_solver", "nodal_frame"]
 
 log = logging.getLogger(__name__)
 
 CONTACT_LAWS = (UnilateralContact, PenaltyContact)
 SMOOTH_LAWS = (CubicSpring,)
+
+
+# --------------------------------------------------------------------------------------------
+# Nodal frames (contacts with inclined or negative normals)
+# --------------------------------------------------------------------------------------------
+#: A contact ``direction`` whose largest component is at least ``1 - AXIS_TOL`` (unit vector) is
+#: along that positive coordinate axis: the contact acts on that displacement DOF, no rotation.
+AXIS_TOL = 1e-12
+
+
+@dataclass(frozen=True, eq=False)
+class NodalFrame:
+    """Orthonormal frame of the DOFs of one node of a meshed solid: ``u_node = rotation @ q_node``.
+
+    ``rotation`` is a proper rotation (``det = +1``, columns = the nodal axes in physical
+    coordinates); column ``slot`` is the contact normal ``n``, so that the model DOF in that
+    component slot is ``u_n = n . u`` and a contact acts on it with ``g_N = gap - u_n``. The other
+    columns are tangents (``u_t`` in 2-D; ``u_t1``, ``u_t2`` in 3-D, in slot order).
+    """
+
+    rotation: np.ndarray
+    slot: int
+
+    @property
+    def normal(self) -> np.ndarray:
+        return self.rotation[:, self.slot]
+
+    @property
+    def components(self) -> tuple:
+        """Names of the nodal-frame components, one per slot (``("u_n", "u_t")``, ...)."""
+        dim = self.rotation.shape[0]
+        tangents = iter(("u_t",) if dim == 2 else tuple(f"u_t{k + 1}" for k in range(dim - 1)))
+        return tuple("u_n" if j == self.slot else next(tangents) for j in range(dim))
+
+
+def nodal_frame(normal: Sequence[float]) -> NodalFrame:
+    """The nodal frame of a contact normal (a proper rotation whose column ``slot`` is ``normal``).
+
+    ``slot`` is the component of largest magnitude of ``normal`` (the coordinate axis nearest to
+    it, so that a normal near an axis keeps that axis' slot). 2-D: the other column is ``n``
+    turned by -90 or +90 degrees, whichever gives ``det = +1`` (``(-1, 0)`` gives the rotation by
+    180 degrees, not the reflection ``diag(-1, 1)``). 3-D: the Householder reflection
+    ``H = I - 2 v v^T / v^T v``, ``v = n + sign(n_s) e_s`` (no cancellation: ``|v|^2 >= 2``),
+    maps ``e_s`` to ``-sign(n_s) n``; its column ``s`` is rescaled to ``n`` and, where that leaves
+    ``det = -1``, the first tangent is negated.
+    """
+    n = np.asarray(normal, dtype=float).reshape(-1)
+    n = n / np.linalg.norm(n)
+    dim = n.size
+    s = int(np.argmax(np.abs(n)))
+    if dim == 2:
+        t = np.array([-n[1], n[0]])  # n turned by +90 degrees
+        R = np.column_stack([n, t]) if s == 0 else np.column_stack([-t, n])
+    elif dim == 3:
+        sigma = 1.0 if n[s] >= 0 else -1.0
+        v = n.copy()
+        v[s] += sigma
+        R = np.eye(3) - (2.0 / (v @ v)) * np.outer(v, v)
+        R[:, s] = n
+        if sigma < 0:  # det(H) = -1 and column s was multiplied by -sigma = +1
+            R[:, 0 if s != 0 else 1] *= -1.0
+    else:
+        raise ValueError(f"nodal_frame: a normal of a 2-D or 3-D solid is needed, got {tuple(normal)}")
+    R.flags.writeable = False
+    return NodalFrame(rotation=R, slot=s)
+
+
+def _same_normal(a: NodalFrame, b: NodalFrame) -> bool:
+    return a.slot == b.slot and bool(np.allclose(a.normal, b.normal, rtol=0.0, atol=1e-12))
+
+
+def _block_rotation(node_dof: np.ndarray, n: int, nodes: Sequence[int], rotations: np.ndarray) -> sp.csr_matrix:
+    """Sparse orthogonal ``n x n`` matrix: ``rotations[k]`` on the DOFs ``node_dof[nodes[k]]`` (all
+    free), the identity on every other DOF."""
+    nodes = np.asarray(nodes, dtype=int)
+    rotations = np.asarray(rotations, dtype=float).reshape(nodes.size, node_dof.shape[1], node_dof.shape[1])
+    dofs = node_dof[nodes]  # (k, dim)
+    other = np.ones(n, dtype=bool)
+    other[dofs.ravel()] = False
+    eye = np.flatnonzero(other)
+    dim = dofs.shape[1]
+    rows = np.concatenate([eye, np.repeat(dofs, dim, axis=1).ravel()])
+    cols = np.concatenate([eye, np.tile(dofs, (1, dim)).ravel()])
+    vals = np.concatenate([np.ones(eye.size), rotations.ravel()])
+    return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
+
+
+def _frame_force(f, R: np.ndarray, dofs: np.ndarray, c: int, weight: float) -> list:
+    """``weight`` times the force ``f`` along physical component ``c`` of a node with nodal frame
+    ``R`` (model DOFs ``dofs``), as forces on the node's DOFs: ``R^T e_c`` (nonzero parts only)."""
+    out = []
+    for j, d in enumerate(dofs):
+        share = float(R[c, j]) * weight
+        if share != 0.0:
+            out.append(Attached(dataclasses.replace(f, at=int(d), amplitude=f.amplitude * share), int(d)))
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -69,6 +166,12 @@ class DofMap:
     displacement : tuple of str
         The components along the coordinate axes x, y(, z) (``("u_x", "u_y")`` for 2-D solids;
         empty for bars, beams and discrete models): what a contact ``direction`` selects.
+    frames : mapping int -> NodalFrame
+        Nodes of a meshed solid whose DOFs are rotated into a nodal frame (contacts with an
+        inclined or negative normal, :meth:`StructuralModel.with_contact`). Their DOFs are named
+        ``"u_n"`` (along the normal) and ``"u_t"`` (2-D) or ``"u_t1"``, ``"u_t2"`` (3-D): ``at=``
+        with a physical component (``"u_x"``...) of such a node is an error for :meth:`index`
+        (``with_forcing`` rotates forces given in physical components itself).
     """
 
     n_dofs: int
@@ -83,6 +186,7 @@ class DofMap:
     group_weights: Mapping[str, np.ndarray] = field(default_factory=dict)
     node_coordinates: Any = None
     displacement: tuple = ()
+    frames: Mapping[int, NodalFrame] = field(default_factory=dict)
 
     @classmethod
     def discrete(cls, n_dofs: int, dof_names: Sequence[str] | None = None) -> "DofMap":
@@ -151,10 +255,21 @@ class DofMap:
         if comp is None:
             raise ValueError(f"{where}: location {loc!r} has no components in this model")
         node = self.locations[loc]
-        try:
-            c = self._component(comp)
-        except ValueError as exc:
-            raise ValueError(f"{where}: {exc}") from None
+        frame = self.frames.get(node)
+        if frame is not None and comp in frame.components:
+            c = frame.components.index(comp)
+        elif frame is not None:
+            raise ValueError(
+                f"{where}: node {node} ({loc!r}) has rotated DOFs {list(frame.components)} (the nodal frame of a contact "
+                f"with normal n={_vector(frame.normal)}), so {comp!r} is not one of this model's DOFs; use "
+                f"({loc!r}, {frame.components[frame.slot]!r}) or a tangent (forces in physical components are rotated "
+                "by with_forcing)"
+            )
+        else:
+            try:
+                c = self._component(comp)
+            except ValueError as exc:
+                raise ValueError(f"{where}: {exc}") from None
         dof = int(self.node_dof[node, c])
         if dof == -1:
             support = self.constrained_by.get((node, c), "a support")
@@ -183,6 +298,16 @@ class DofMap:
 
     def label(self, i: int) -> str:
         return self.labels[i] if i < len(self.labels) else f"dof {i}"
+
+    def axis(self, node: int, c: int) -> np.ndarray:
+        """Physical unit vector of the DOF in component slot ``c`` of ``node`` (a meshed solid):
+        ``e_c``, or column ``c`` of the node's :class:`NodalFrame` if its DOFs are rotated."""
+        frame = self.frames.get(int(node))
+        if frame is not None:
+            return np.array(frame.rotation[:, c])
+        e = np.zeros(max(len(self.displacement), len(self.components)))
+        e[c] = 1.0
+        return e
 
     def restrict(self, kept: np.ndarray) -> "DofMap":
         """DofMap of the DOFs ``kept`` (old indices in new order), followed by unnamed DOFs.
@@ -241,6 +366,10 @@ class Attached:
 
     item: Any
     dof: int
+
+
+def _vector(v) -> str:
+    return "(" + ", ".join(f"{float(x):.6g}" for x in v) + ")"
 
 
 def as_sparse_matrix(A: Any, name: str, n: int | None = None) -> sp.csr_matrix:
@@ -443,6 +572,19 @@ def low_rank_solver(solve, L: np.ndarray, g: np.ndarray, R: np.ndarray, *, matve
     return run
 
 
+def _redistribute(strategy, fe, M, dofs) -> tuple:
+    """``(M, reports)`` after the contact-mass ``strategy`` on ``dofs`` (all at once if it can)."""
+    if callable(getattr(strategy, "apply_all", None)):
+        M, reps = strategy.apply_all(fe, M, dofs)
+        return M, list(reps)
+    reports = []
+    for dof in dofs:
+        M, rep = strategy.apply(fe, M, dof)
+        if rep is not None:
+            reports.append(rep)
+    return M, reports
+
+
 # --------------------------------------------------------------------------------------------
 # The model
 # --------------------------------------------------------------------------------------------
@@ -466,6 +608,13 @@ class StructuralModel:
         ``C + U diag(d) U^T`` (see :class:`LowRankDamping`). Use :meth:`apply_damping` for
         products and :meth:`damping_matrix` for the assembled matrix (small models, checks);
         ``C`` alone is only the sparse part (zero for modal damping).
+    frame : scipy.sparse matrix, optional
+        Nodal rotations of a meshed solid (set by ``with_contact`` for inclined or negative
+        contact normals): the physical displacement on the free DOFs of the FE field is
+        ``u = frame @ q``, ``frame`` orthogonal and block diagonal (one rotation per rotated node,
+        :class:`NodalFrame` in ``dofmap.frames``; the identity elsewhere). ``M``, ``K``, ``C`` and
+        the forces are the transformed ``T^T A T``, ``T^T f``. None (the default): ``q`` is
+        physical.
 
     Notes
     -----
@@ -485,6 +634,7 @@ class StructuralModel:
     damping_info: str = "none"
     mass_redistribution: tuple = ()
     C_lowrank: LowRankDamping | None = None
+    frame: Any = None
 
     def __post_init__(self):
         M = as_sparse_matrix(self.M, "M")
@@ -517,6 +667,12 @@ class StructuralModel:
         elif dm.n_dofs != n:
             raise ValueError(f"dofmap has {dm.n_dofs} DOFs but M is {n}x{n}")
         object.__setattr__(self, "dofmap", dm)
+        if self.frame is not None:
+            if not sp.issparse(self.frame) or self.frame.shape != (n, n):
+                raise ValueError(f"frame must be a sparse {n}x{n} matrix (u = frame @ q) or None")
+            if self.fe is None:
+                raise ValueError("frame (nodal rotations) needs an FE model (fe=...)")
+            object.__setattr__(self, "frame", sp.csr_matrix(self.frame))
 
     # -- basic properties ---------------------------------------------------------------------
     @property
@@ -639,30 +795,113 @@ class StructuralModel:
         with the consistent weights ``int N_k ds / int ds`` (a uniform traction of that
         resultant; ``DofMap.group_weights``). The share of supported nodes goes to the support
         (logged).
+
+        A force given in a physical component (``"u_x"``...) on a node whose DOFs are rotated
+        (a contact with an inclined or negative normal, ``dofmap.frames``) is rotated into the
+        node's DOFs: ``f_q = R^T f`` (one force per nodal-frame component, nonzero parts only,
+        so a load along ``n`` given by its x and y parts also loads ``u_t`` with parts that
+        cancel). ``at=(point, "u_n")`` names the normal DOF of such a node directly, and
+        ``at=(boundary, "u_n")`` (or ``"u_t"``...) the normal DOFs of a boundary whose free nodes
+        are all rotated (a resultant along the normals, shared with the boundary's weights).
         """
         if not forces:
             raise ValueError("with_forcing: give at least one HarmonicForce")
         new = list(self.forces)
+        dm = self.dofmap
         for f in forces:
             if not isinstance(f, HarmonicForce):
                 raise TypeError(f"with_forcing: expected HarmonicForce, got {type(f).__name__}")
+            owner = f"with_forcing: HarmonicForce(at={f.at!r})"
+            framed = self._frame_group(f.at, owner)
+            if framed is not None:
+                dofs, weights = framed
+                new.extend(Attached(dataclasses.replace(f, at=int(d), amplitude=f.amplitude * float(w)), int(d))
+                           for d, w in zip(dofs, weights) if w != 0.0)
+                continue
             group = self._group_of(f.at)
             if group is None:
-                new.append(Attached(f, self.dof(f.at, "with_forcing: HarmonicForce")))
+                rotated = self._rotated_point(f.at)
+                if rotated is None:
+                    new.append(Attached(f, self.dof(f.at, "with_forcing: HarmonicForce")))
+                else:
+                    new.extend(self._rotated_force(f, *rotated, 1.0, owner))
                 continue
             name, c = group
-            dofs = self.dofmap.node_dof[self.dofmap.groups[name], c]
-            weights = np.asarray(self.dofmap.group_weights[name], dtype=float)
+            nodes = np.asarray(dm.groups[name])
+            dofs = dm.node_dof[nodes, c]
+            weights = np.asarray(dm.group_weights[name], dtype=float)
             if np.any(dofs == -2):
                 raise ValueError(f"with_forcing: HarmonicForce(at={f.at!r}): boundary {name!r} is not kept in this "
                                  f"reduced model; attach the force before reducing")
             lost = float(weights[dofs < 0].sum())
             if lost > 0:
                 log.info("with_forcing: %.3g %% of the force on %r acts on supported nodes", 100 * lost, name)
-            for d, w in zip(dofs, weights):
-                if d >= 0 and w != 0.0:
+            for node, d, w in zip(nodes, dofs, weights):
+                if d < 0 or w == 0.0:
+                    continue
+                if int(node) in dm.frames:
+                    new.extend(self._rotated_force(f, int(node), c, float(w), owner))
+                else:
                     new.append(Attached(dataclasses.replace(f, at=int(d), amplitude=f.amplitude * float(w)), int(d)))
         return self._replace(forces=tuple(new))
+
+    def _frame_group(self, at: Location, owner: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(dofs, weights)`` of ``at=(boundary, nodal-frame component)`` (e.g. ``("right", "u_n")``),
+        else None; every free node of the boundary must be rotated."""
+        dm = self.dofmap
+        if not (dm.frames and isinstance(at, tuple) and len(at) == 2 and at[0] in dm.groups
+                and at[0] not in dm.locations and at[1] not in dm.components and at[1] not in dm.aliases):
+            return None
+        name, comp = at
+        nodes = np.asarray(dm.groups[name])
+        weights = np.asarray(dm.group_weights[name], dtype=float)
+        dofs = np.full(nodes.size, -1, dtype=int)
+        for j, k in enumerate(nodes):
+            row = dm.node_dof[k]
+            if np.all(row == -1):
+                continue  # a supported node: its share goes to the support
+            frame = dm.frames.get(int(k))
+            if frame is None or comp not in frame.components:
+                raise ValueError(
+                    f"{owner}: node {int(k)} of {name!r} has no nodal-frame component {comp!r} (only nodes rotated "
+                    f"by a contact with an inclined or negative normal have u_n, u_t...); give a physical component "
+                    f"of {list(dm.components)}"
+                )
+            dofs[j] = row[frame.components.index(comp)]
+            if dofs[j] == -2:
+                raise ValueError(f"{owner}: boundary {name!r} is not kept in this reduced model; attach the force "
+                                 "before reducing")
+        lost = float(weights[dofs < 0].sum())
+        if lost > 0:
+            log.info("with_forcing: %.3g %% of the force on %r acts on supported nodes", 100 * lost, name)
+        return dofs[dofs >= 0], weights[dofs >= 0]
+
+    def _rotated_point(self, at: Location) -> tuple[int, int] | None:
+        """``(node, physical component)`` if ``at`` names a physical component (or only the point,
+        i.e. its first component) of a named point whose DOFs are rotated, else None."""
+        dm = self.dofmap
+        if not dm.frames:
+            return None
+        if isinstance(at, str) and at in dm.locations and at not in dm.dof_names:
+            loc, comp = at, dm.components[0]
+        elif isinstance(at, tuple) and len(at) == 2 and at[0] in dm.locations:
+            loc, comp = at
+        else:
+            return None
+        node = int(dm.locations[loc])
+        if node not in dm.frames or comp in dm.frames[node].components:
+            return None
+        return node, dm._component(comp)
+
+    def _rotated_force(self, f: HarmonicForce, node: int, c: int, weight: float, owner: str) -> list:
+        """The share ``weight`` of force ``f`` along physical component ``c`` of rotated ``node``, on
+        the node's nodal-frame DOFs (``R^T e_c``)."""
+        dm = self.dofmap
+        dofs = dm.node_dof[node]
+        if np.any(dofs < 0):
+            raise ValueError(f"{owner}: the DOFs of rotated node {node} are not all kept in this reduced model; "
+                             f"attach the force before reducing or keep the node (craig_bampton(keep=...))")
+        return _frame_force(f, dm.frames[node].rotation, dofs, c, weight)
 
     def _group_of(self, at: Location) -> tuple[str, int] | None:
         """``(boundary name, component index)`` if ``at`` names a boundary of a solid, else None."""
@@ -680,14 +919,18 @@ class StructuralModel:
         """Return a copy with no forcing (the autonomous system, for nonlinear modes)."""
         return self._replace(forces=())
 
-    def _expand_contact(self, law) -> list:
-        """``[(law on one DOF, dof)]`` of a contact law: one per node of a boundary, with its
-        direction resolved to a component and a callable gap evaluated at the node."""
+    def _expand_contact(self, law) -> tuple[list, dict]:
+        """``([(law on one DOF, dof)], {node: NodalFrame})`` of a contact law: one law per node of a
+        boundary, with its direction resolved to a component and a callable gap evaluated at the
+        node. An inclined or negative normal acts on the normal DOF of a nodal frame; the nodes to
+        rotate come second (empty for a positive axis)."""
         dm = self.dofmap
         owner = f"with_contact: {type(law).__name__}(at={law.at!r})"
         at = law.at
         if law.direction is not None:
             comp = self._direction_component(law.direction, owner)
+            if comp is None:
+                return self._expand_inclined(law, owner)
             if isinstance(at, tuple):
                 if dm._component(at[1]) != comp:
                     raise ValueError(f"{owner}: direction={law.direction} selects {dm.displacement[comp]!r} but at= names "
@@ -716,10 +959,74 @@ class StructuralModel:
                 log.info("with_contact: %d of %d nodes of %r are constrained in %r and get no contact",
                          int(held.sum()), held.size, name, dm.components[c])
             nodes, dofs = nodes[~held], dofs[~held]
+            for k in nodes:
+                if int(k) in dm.frames:
+                    raise ValueError(self._two_normals(owner, int(k), dm.frames[int(k)].normal, dm.axis(int(k), c)))
         gaps = self._contact_gaps(law.gap, nodes, dofs, owner)
-        return [(dataclasses.replace(law, at=int(d), gap=float(g), direction=None), int(d)) for d, g in zip(dofs, gaps)]
+        return [(dataclasses.replace(law, at=int(d), gap=float(g), direction=None), int(d)) for d, g in zip(dofs, gaps)], {}
 
-    def _direction_component(self, direction: tuple, owner: str) -> int:
+    def _expand_inclined(self, law, owner: str) -> tuple[list, dict]:
+        """:meth:`_expand_contact` of a law whose normal is not a positive coordinate axis: each of
+        its nodes gets the nodal frame of the normal; the law acts on the normal DOF ``u_n``."""
+        dm = self.dofmap
+        direction = law.direction
+        if self.fe is None:
+            raise ValueError(f"{owner}: direction={direction} is not along +x, +y or +z: the contact acts on the normal "
+                             "DOF of a nodal rotation, which is done on the meshed solid itself; attach the contact "
+                             "before reducing (craig_bampton keeps contact DOFs)")
+        at = law.at
+        if isinstance(at, tuple):
+            raise ValueError(f"{owner}: direction={direction} is not along +x, +y or +z: the contact acts on the normal "
+                             f"DOF 'u_n' of rotated nodes, not on a component; give at= a boundary or point name only "
+                             f"(at={at[0]!r})")
+        if not isinstance(at, str):
+            raise ValueError(f"{owner}: direction= needs a named location (boundary or point), not a DOF index")
+        if at in dm.groups and at not in dm.locations:
+            name, nodes = at, np.asarray(dm.groups[at], dtype=int)
+        elif at in dm.locations:
+            name, nodes = None, np.array([int(dm.locations[at])])
+        else:
+            self.dof(at, owner)  # raises: unknown location
+            raise AssertionError("unreachable")  # pragma: no cover
+        frame = nodal_frame(direction)
+        node_dof = dm.node_dof[nodes]  # (k, dim)
+        held = node_dof < 0
+        every = held.all(axis=1)
+        partial = held.any(axis=1) & ~every
+        if partial.any():
+            k = int(nodes[np.argmax(partial)])
+            c = int(np.argmax(dm.node_dof[k] < 0))
+            support = dm.constrained_by.get((k, c), "a support")
+            free = [dm.components[j] for j in range(dm.node_dof.shape[1]) if dm.node_dof[k, j] >= 0]
+            raise ValueError(
+                f"{owner}: node {k} at {_vector(dm.node_coordinates[:, k])} is constrained in {dm.components[c]!r} by "
+                f"{support} but free in {free}: the contact normal {_vector(frame.normal)} rotates the node's DOFs, "
+                "which would mix constrained and free DOFs; constrain that node fully (clamped=...) or not at all"
+            )
+        if every.all():
+            support = dm.constrained_by.get((int(nodes[0]), 0), "a support")
+            where = f"every node of {name!r} is" if name is not None else f"{at!r} is"
+            raise ValueError(f"{owner}: {where} constrained ({support!r}); contact cannot act on a constrained DOF")
+        if every.any():
+            log.info("with_contact: %d of %d nodes of %r are constrained and get no contact", int(every.sum()),
+                     every.size, name)
+        nodes = nodes[~every]
+        dofs = dm.node_dof[nodes, frame.slot]
+        gaps = self._contact_gaps(law.gap, nodes, dofs, owner)
+        pairs = [(dataclasses.replace(law, at=int(d), gap=float(g), direction=None), int(d)) for d, g in zip(dofs, gaps)]
+        return pairs, {int(k): frame for k in nodes}
+
+    def _two_normals(self, owner: str, node: int, old, new) -> str:
+        X = self.dofmap.node_coordinates
+        where = f" at {_vector(X[:, node])}" if X is not None else ""
+        return (f"{owner}: node {node}{where} would get two contact normals, {_vector(old)} and {_vector(new)}: a node "
+                "with an inclined or negative normal has its DOFs rotated into one nodal frame (u_n along the normal), "
+                "so all contacts of that node must share that normal (or act on its tangent DOF, at=(point, 'u_t')); "
+                "give the stops the same direction or put them on different nodes")
+
+    def _direction_component(self, direction: tuple, owner: str) -> int | None:
+        """Component of a contact ``direction`` along a positive coordinate axis, or None for an
+        inclined or negative normal (a nodal rotation, :meth:`_expand_inclined`)."""
         dm = self.dofmap
         if not dm.displacement:
             raise ValueError(f"{owner}: direction= needs a meshed solid (femodes.solid); for bars, beams and discrete "
@@ -728,15 +1035,13 @@ class StructuralModel:
         if len(direction) != dim:
             raise ValueError(f"{owner}: direction={direction} has {len(direction)} components, this model is {dim}-D "
                              f"(give {dim} components, e.g. {tuple([1.0] + [0.0] * (dim - 1))})")
-        d = np.asarray(direction)
+        d = np.asarray(direction, dtype=float)
+        if not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
+            raise ValueError(f"{owner}: direction={direction} must be a finite non-zero vector")
         axis = int(np.argmax(np.abs(d)))
-        if abs(d[axis]) < 1.0 - 1e-12 or d[axis] < 0:
-            raise ValueError(
-                f"{owner}: direction={direction} is not along +x, +y or +z: contacts act on one displacement DOF "
-                f"along its positive axis (g_N = gap - u), and inclined or negative normals (a nodal rotation of "
-                f"the DOFs) are not implemented yet; orient the mesh so that the obstacle lies along a positive axis"
-            )
-        return dm._component(dm.displacement[axis])
+        if d[axis] >= 1.0 - AXIS_TOL:
+            return dm._component(dm.displacement[axis])
+        return None
 
     def _contact_gaps(self, gap, nodes, dofs, owner: str) -> np.ndarray:
         """The gap of each contact DOF: the number, or the callable at the nodes' coordinates."""
@@ -781,9 +1086,25 @@ class StructuralModel:
         can pass through the obstacle unchecked), on the component along ``direction``, with its
         gap evaluated at the node when ``gap`` is callable (``at="right"`` without a direction
         uses the first component, ``u_x``). Nodes where that component is supported are skipped
-        (logged count); ``direction`` must be along +x, +y or +z (inclined or negative normals
-        would need a rotation of the nodal DOFs, not implemented: ValueError). ``model.contacts`` holds one
-        ``Attached(law, dof)`` per contact DOF.
+        (logged count). ``model.contacts`` holds one ``Attached(law, dof)`` per contact DOF, and
+        every law acts on one model DOF with ``g_N = gap - q_dof``.
+
+        Inclined or negative normals (``direction=(0.8, 0.6)``, ``(-1.0, 0.0)``): the DOFs of each
+        contact node are rotated into a nodal frame (:func:`nodal_frame`, a proper rotation ``R``
+        whose column ``slot`` is the normal ``n``; ``slot`` is the axis nearest to ``n``), so that
+        the model DOF in that slot is ``u_n = n . u`` and the law acts on it. With the sparse
+        orthogonal ``T`` of these rotations (identity elsewhere) the physical displacement is
+        ``u = T q``: ``K``, ``M``, ``C`` (and a modal low-rank part) become ``T^T A T`` and the
+        forces already attached ``T^T f``, before the contact mass is redistributed, so the
+        redistribution acts on ``u_n``. ``model.frame`` holds ``T`` (composed over calls) and
+        ``dofmap.frames`` the rotation of each node: :meth:`full_field` (hence every mesh output)
+        is physical, :meth:`with_forcing` rotates forces given in ``u_x, u_y(, u_z)``, and the
+        rotated DOFs are named ``"u_n"``, ``"u_t"`` (2-D) or ``"u_t1"``, ``"u_t2"`` (3-D)
+        (``at=(point, "u_n")``; ``at=(point, "u_x")`` of a rotated node is an error). A node
+        constrained in some components only, a node that would carry two different normals,
+        and an inclined normal on a reduced model (rotate before ``craig_bampton``) are errors;
+        nodes supported in every component are skipped. Positive-axis directions rotate nothing
+        (``frame`` stays None).
 
         Parameters
         ----------
@@ -795,34 +1116,63 @@ class StructuralModel:
             keeps it. Default: ``RedistributeMass()`` for complementarity contacts of FE models,
             where a massful contact node makes the nonsmooth modes ill-posed under mesh
             refinement (Thorin & Legrand 2018), ``ConsistentMass()`` for penalty contacts and
-            discrete models.
+            discrete models. For a rotated normal ``n`` the redistribution runs in the frame
+            where ``n`` is a coordinate axis (every node not rotated otherwise is turned by the
+            same ``R``, coordinates by ``R^T``): there it is the computation of a positive-axis
+            normal, so a rotated model is the rotation of the axis-aligned one. Nodes with
+            other nodal frames, partial supports or massless DOFs near the contact keep their
+            own DOFs in that frame (mass conservation along ``n`` is then approximate there).
         """
         if contact_mass is not None and not callable(getattr(contact_mass, "apply", None)):
             raise TypeError(f"with_contact: contact_mass must be fm.RedistributeMass() or fm.ConsistentMass(), "
                             f"got {contact_mass!r}")
         if not laws:
             raise ValueError("with_contact: give at least one UnilateralContact or PenaltyContact")
+        dm = self.dofmap
+        node_of, comp_of = self._dof_nodes()
         new = list(self.contacts)
         used = {a.dof for a in new}
+        frames = dict(dm.frames)
+        pending: dict = {}  # nodes rotated by this call
+        normals = {}  # node -> normal of its first contact
+        for a in self.contacts:
+            k = int(node_of[a.dof])
+            if k >= 0:
+                normals.setdefault(k, dm.axis(k, int(comp_of[a.dof])))
         for law in laws:
             if not isinstance(law, CONTACT_LAWS):
                 raise TypeError(
                     f"with_contact: expected UnilateralContact or PenaltyContact, got {type(law).__name__}"
                     + (" (use with_nonlinearity for smooth springs)" if isinstance(law, SMOOTH_LAWS) else "")
                 )
+            owner = f"with_contact: {type(law).__name__}(at={law.at!r})"
             if law.direction is None and not callable(law.gap) and self._group_of(law.at) is None:
-                pairs = [(law, self.dof(law.at, f"with_contact: {type(law).__name__}"))]
+                pairs, rot = [(law, self.dof(law.at, f"with_contact: {type(law).__name__}"))], {}
             else:
-                pairs = self._expand_contact(law)
+                pairs, rot = self._expand_contact(law)
+            for k, frame in rot.items():
+                old = frames.get(k)
+                if old is not None:
+                    if not _same_normal(old, frame):
+                        raise ValueError(self._two_normals(owner, k, old.normal, frame.normal))
+                elif k in normals:
+                    raise ValueError(self._two_normals(owner, k, normals[k], frame.normal))
+                else:
+                    pending[k] = frames[k] = frame
             for item, dof in pairs:
+                k, c = int(node_of[dof]), int(comp_of[dof])
+                if k in pending and k not in rot:  # a component of a node this call rotates
+                    raise ValueError(self._two_normals(owner, k, pending[k].normal, dm.axis(k, c)))
                 if dof in used:
-                    raise ValueError(
-                        f"with_contact: {type(law).__name__}(at={law.at!r}): DOF {self.dofmap.label(dof)!r} already has a "
-                        "contact law (one contact per DOF)"
-                    )
+                    what = f"{pending[k].components[c]!r} of node {k}" if k in pending else repr(dm.label(dof))
+                    raise ValueError(f"with_contact: {type(law).__name__}(at={law.at!r}): DOF {what} already has a "
+                                     "contact law (one contact per DOF)")
                 used.add(dof)
                 new.append(Attached(item, dof))
-        M = self.M
+                if k >= 0:
+                    normals.setdefault(k, frames[k].rotation[:, c] if k in frames else dm.axis(k, c))
+        base = self._rotated(pending, node_of, comp_of) if pending else self
+        M = base.M
         reports = list(self.mass_redistribution)
         batches: dict = {}
         for a in new[len(self.contacts):]:
@@ -830,19 +1180,102 @@ class StructuralModel:
             if strategy is None:
                 auto = self.fe is not None and isinstance(a.item, UnilateralContact)
                 strategy = RedistributeMass() if auto else ConsistentMass()
-            batches.setdefault(id(strategy) if contact_mass is not None else type(strategy), (strategy, []))[1].append(a.dof)
-        for strategy, dofs in batches.values():
-            if callable(getattr(strategy, "apply_all", None)):
-                M, reps = strategy.apply_all(self.fe, M, dofs)
-                reports.extend(reps)
-                continue
-            for dof in dofs:
-                M, rep = strategy.apply(self.fe, M, dof)
-                if rep is not None:
-                    reports.append(rep)
+            k = int(node_of[a.dof])
+            frame = base.dofmap.frames.get(k) if k >= 0 else None
+            fkey = None if frame is None else (frame.slot,) + tuple(np.round(frame.normal, 12))
+            skey = id(strategy) if contact_mass is not None else type(strategy)
+            batches.setdefault((skey, fkey), (strategy, frame, []))[2].append(a.dof)
+        for strategy, frame, dofs in batches.values():
+            if frame is None:
+                M, reps = _redistribute(strategy, self.fe, M, dofs)
+            else:
+                M, reps = base._redistribute_in_frame(strategy, M, dofs, frame)
+            reports.extend(reps)
         if any(isinstance(a.item, UnilateralContact) for a in new) and any(isinstance(a.item, PenaltyContact) for a in new):
             log.info("model mixes complementarity and penalty contacts")
-        return self._replace(contacts=tuple(new), M=M, mass_redistribution=tuple(reports))
+        return base._replace(contacts=tuple(new), M=M, mass_redistribution=tuple(reports))
+
+    def _dof_nodes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Node and component slot of every model DOF (node ``-1`` for DOFs on no node)."""
+        nd = self.dofmap.node_dof
+        node_of = np.full(self.n_dofs, -1, dtype=int)
+        comp_of = np.zeros(self.n_dofs, dtype=int)
+        if nd.size:
+            k, c = np.nonzero(nd >= 0)
+            node_of[nd[k, c]] = k
+            comp_of[nd[k, c]] = c
+        return node_of, comp_of
+
+    def _rotated(self, pending: Mapping[int, NodalFrame], node_of: np.ndarray, comp_of: np.ndarray) -> "StructuralModel":
+        """This model with the DOFs of the nodes ``pending`` rotated into their nodal frames:
+        ``q = T^T q_old``, matrices ``T^T A T``, forces ``T^T f``, ``frame`` composed, labels."""
+        dm = self.dofmap
+        for a in self.nonlinearities:
+            k = int(node_of[a.dof])
+            if k in pending:
+                raise ValueError(
+                    f"with_contact: {type(a.item).__name__}(at={a.item.at!r}) acts on DOF {dm.label(a.dof)!r} of node {k}, "
+                    f"whose DOFs the contact normal {_vector(pending[k].normal)} rotates; add the contact first and "
+                    f"attach the nonlinearity to the rotated DOFs (at=(point, 'u_n'), ...)"
+                )
+        nodes = sorted(pending)
+        T = _block_rotation(dm.node_dof, self.n_dofs, nodes, [pending[k].rotation for k in nodes])
+
+        def rotate(A):
+            B = (T.T @ A @ T).tocsr()
+            return (0.5 * (B + B.T)).tocsr()
+
+        lr = self.C_lowrank
+        if lr is not None:
+            lr = LowRankDamping(T.T @ lr.U, lr.d, modes=None if lr.modes is None else T.T @ lr.modes,
+                                eigenvalues=lr.eigenvalues)
+        forces = []
+        for a in self.forces:
+            k = int(node_of[a.dof])
+            if k in pending:
+                forces.extend(_frame_force(a.item, pending[k].rotation, dm.node_dof[k], int(comp_of[a.dof]), 1.0))
+            else:
+                forces.append(a)
+        labels = list(dm.labels)
+        for k in nodes:
+            names = pending[k].components
+            for j, d in enumerate(dm.node_dof[k]):
+                old, comp = labels[d], dm.components[j]
+                if old.startswith(comp + "@"):
+                    lab = names[j] + old[len(comp):]
+                elif old.endswith("." + comp):
+                    lab = old[: -len(comp)] + names[j]
+                else:
+                    lab = f"{old} {names[j]}"
+                labels[d] = f"{lab} (rotated node {k})"
+        dofmap = dataclasses.replace(dm, frames={**dm.frames, **pending}, labels=tuple(labels))
+        frame = T if self.frame is None else (self.frame @ T).tocsr()
+        log.info("with_contact: %d nodes rotated into the nodal frames of their contact normals", len(nodes))
+        return self._replace(M=rotate(self.M), K=rotate(self.K), C=rotate(self.C) if self.C.nnz else self.C,
+                             C_lowrank=lr, forces=tuple(forces), dofmap=dofmap, frame=frame)
+
+    def _redistribute_in_frame(self, strategy, M, dofs, frame: NodalFrame):
+        """Contact mass ``strategy`` on the normal DOFs ``dofs`` of nodes with nodal frame
+        ``frame``, run where its normal is a coordinate axis: ``q = P w`` turns every node that is
+        fully free, not rotated and not massless by ``R`` (``P`` block diagonal), and the
+        coordinates by ``R^T``; the result comes back as ``P M_w P^T``."""
+        dm = self.dofmap
+        nd = dm.node_dof
+        diag = M.diagonal()
+        turn = np.all(nd >= 0, axis=1) & np.all(diag[np.maximum(nd, 0)] > 0, axis=1)
+        turn[np.fromiter(dm.frames, dtype=int, count=len(dm.frames))] = False
+        nodes = np.flatnonzero(turn)
+        R = frame.rotation
+        P = _block_rotation(nd, self.n_dofs, nodes, np.broadcast_to(R, (len(nodes),) + R.shape))
+        Mw = (P.T @ M @ P).tocsr()
+        Mw = (0.5 * (Mw + Mw.T)).tocsr()
+        X = np.asarray(self.fe.node_coordinates, dtype=float)
+        fe = dataclasses.replace(self.fe, node_coordinates=R.T @ X)
+        Mw, reps = _redistribute(strategy, fe, Mw, dofs)
+        if not reps:
+            return M, reps
+        out = (P @ Mw @ P.T).tocsr()
+        return (0.5 * (out + out.T)).tocsr(), reps
 
     def with_nonlinearity(self, *laws) -> "StructuralModel":
         """Return a copy with these smooth nonlinear laws (e.g. CubicSpring) added."""
@@ -876,19 +1309,29 @@ class StructuralModel:
 
     def to_owner(self, q: np.ndarray) -> np.ndarray:
         """Coordinates ``(..., n_dofs)`` on the DOFs of :attr:`mesh_owner` (identity here; a
-        reduced model expands through every reduction level)."""
+        reduced model expands through every reduction level). These are the owner's model DOFs,
+        nodal-frame components at rotated nodes; :meth:`full_field` gives the physical field."""
         return np.asarray(q)
 
     def fe_dof(self, dof: int) -> int | None:
         """Index in the full FE field of a DOF of this model; None for a discrete model (and for
-        the modal coordinates of a reduced one)."""
+        the modal coordinates of a reduced one). A DOF of a rotated node (``dofmap.frames``)
+        occupies the FE DOF of its component slot; its physical direction is
+        ``dofmap.axis(node, slot)``."""
         return None if self.fe is None else int(np.asarray(self.fe.free)[dof])
 
     def full_field(self, q: np.ndarray) -> np.ndarray:
-        """FE field with constrained DOFs set to zero, ``(..., n_fe_dofs)``; identity for discrete models."""
+        """FE field with constrained DOFs set to zero, ``(..., n_fe_dofs)``; identity for discrete models.
+
+        The field is physical: the DOFs of rotated nodes (:attr:`frame`) are turned back into
+        their components along x, y(, z).
+        """
         q = np.asarray(q)
         if self.fe is None:
             return q
+        if self.frame is not None:
+            flat = q.reshape(-1, q.shape[-1])
+            q = np.asarray(self.frame @ flat.T).T.reshape(q.shape)
         out = np.zeros(q.shape[:-1] + (self.fe.n_full,), dtype=q.dtype)
         out[..., self.fe.free] = q
         return out

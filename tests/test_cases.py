@@ -405,7 +405,7 @@ def test_bad_solid_case_names_the_key(tmp_path, subs, line_of, message):
 
 
 @pytest.mark.parametrize("subs, key, message", [
-    ({"direction = [1.0, 0.0]": "direction = [1.0, 1.0]"}, "direction", "orient the mesh so that the obstacle"),
+    ({"direction = [1.0, 0.0]": "direction = [1.0, 0.0, 0.0]"}, "direction", "has 3 components, this model is 2-D"),
     ({'clamped = "left"': 'clamped = "lft"'}, "clamped", "'lft'"),
     ({"nu = 0.3\n": "nu = 0.5\n"}, "nu", "nu must satisfy -1 < nu < 0.5"),
     ({'at = "right"': 'at = "tip"'}, "at", "unknown location 'tip'"),

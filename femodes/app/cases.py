@@ -716,7 +716,7 @@ def _add_contacts(case: Case, api: _Api, model):
         except CaseError as exc:
             if direction is None or "direction=" not in exc.message:
                 raise
-            # "UnilateralContact(at=...): direction=(...) is not along ...": about the direction
+            # "UnilateralContact(at=...): direction=(...) has 3 components...": about the direction
             raise case.error("contact", "direction", re.sub(r"^\[contact[^\]]*\] ", "", exc.message), i) from None
     return model
 
