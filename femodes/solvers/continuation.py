@@ -106,6 +106,12 @@ _FOLD_TOL = 1e-9
 #: at most 2 ds.
 _KINK_RATIO = 0.75
 _KINK_MAX_DISTANCE = 2.0
+#: Retrace guard (:meth:`_Tracer.retraced`): a corrected point within this many steps ``ds`` of
+#: the branch already traced (all but the last RETRACE_SKIP points), in a direction within
+#: RETRACE_ANGLE degrees of the branch there, is a jump back onto it.
+RETRACE_DISTANCE = 0.5
+RETRACE_SKIP = 3
+RETRACE_ANGLE = 30.0
 #: Log progress at INFO level every this many accepted points.
 _LOG_EVERY = 10
 
@@ -181,8 +187,10 @@ def continuation(
        corrector failure (or a corrector abandoned at ``corrector_deadline``)
        the step is halved and retried from the same point.  A converged
        point farther than ``max_corrector_distance * ds`` from the predictor,
-       or whose tangent turns by more than ``max_turn_angle``, is also
-       rejected (branch-jumping guard) unless the step is already minimal.
+       or whose tangent turns by more than ``max_turn_angle``, or that lands
+       on the part of the branch already traced going the same way
+       (:meth:`_Tracer.retraced`), is also rejected (branch-jumping guard)
+       unless the step is already minimal.
     5. Folds: a sign change of ``dp/ds`` between consecutive points; with
        ``locate_folds`` the fold is located and inserted as a point.
     6. End: when a predictor or a converged point passes ``p_span[1]`` (or
@@ -452,6 +460,8 @@ class _Tracer:
             geometric = f"corrector moved {dist:.3g} > {opt.max_corrector_distance:g}*ds from the predictor"
         elif angle > opt.max_turn_angle:
             geometric = f"tangent turned by {angle:.1f} deg"
+        else:
+            geometric = self.retraced(y_b, t_b)
         if geometric is not None:
             # A kink of a semismooth branch turns the tangent by a fixed angle
             # however small the step, with a predictor distance ~ ds; a smooth
@@ -472,6 +482,35 @@ class _Tracer:
                 logger.info("accepting step at minimal step size despite: %s (kink of the branch?)", geometric)
         self.prev_geo = None
         return angle, dist
+
+    def retraced(self, y_b: np.ndarray, t_b: np.ndarray) -> str | None:
+        """Why the corrected point ``y_b`` (tangent ``t_b``) is on the part of the branch already
+        traced, going the same way, or None: within ``RETRACE_DISTANCE * ds`` of a segment between
+        two accepted points (all but the last :data:`RETRACE_SKIP`) whose direction is within
+        :data:`RETRACE_ANGLE` of ``t_b``. A corrector can land there after a sharp turn, and the run
+        then repeats the same loop until ``max_points`` (20-DOF cantilever with a tip stop, H = 20:
+        after the second fold of a tongue a step turned by 57 degrees, under ``max_turn_angle``,
+        back onto the branch 0.03 lower in w; 89 folds in 2000 points). The other side of a fold is
+        traced the opposite way and a crossing of the branch with itself at an angle, so neither
+        is taken for a retrace."""
+        m = len(self.pts) - RETRACE_SKIP
+        if m < 2:
+            return None
+        Y = np.array([q.y for q in self.pts[:m]])
+        w = self.sys.w
+        D = np.diff(Y, axis=0)                       # segments k -> k + 1
+        R = y_b - Y[:-1]
+        dd = np.einsum("ij,ij,j->i", D, D, w)
+        theta = np.clip(np.einsum("ij,ij,j->i", R, D, w) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+        E = R - theta[:, None] * D
+        dist = np.sqrt(np.maximum(np.einsum("ij,ij,j->i", E, E, w), 0.0))
+        cos = np.einsum("ij,j,j->i", D, t_b, w) / np.sqrt(np.where(dd > 0, dd, np.inf))
+        hit = (dist < RETRACE_DISTANCE * self.ds) & (cos > math.cos(math.radians(RETRACE_ANGLE)))
+        if not hit.any():
+            return None
+        k = int(np.flatnonzero(hit)[np.argmin(dist[hit])])
+        return (f"corrector landed on the branch already traced (between points {self.i0 + k} and {self.i0 + k + 1}, "
+                f"distance {dist[k]:.3g}, same direction)")
 
     def reject(self, a: _Pt, reason: str, *, failure: str) -> None:
         """Halve the step and retry from ``a`` (raises :class:`_Retry`); below ``min_step`` the run
