@@ -275,6 +275,74 @@ def test_superlu_interior_path(monkeypatch):
     assert backward_error(J, J.factorize().solve(b), b) < 1e-13
 
 
+def solid_model(dim):
+    """A P2 strip of triangles (2-D) or a P2 box (3-D) with a stop on the tip face: wide blocks."""
+    if dim == 2:
+        mesh, direction = fm.rectangle_mesh(1.0, 0.1, 20, 4, quad=False), [1.0, 0.0]
+        mat = fm.Material(E=1.0, rho=1.0, nu=0.3)
+    else:
+        mesh, direction = fm.box_mesh(1.0, 0.2, 0.1, 6, 2, 1), [1.0, 0.0, 0.0]
+        mat = fm.Material(E=1.0, rho=1.0)
+    model = fm.solid(mesh, mat, clamped="left", order=2).with_damping(beta=0.02)
+    model = model.with_contact(fm.UnilateralContact(at="right", direction=direction, gap=0.01))
+    return model.with_forcing(fm.HarmonicForce(at=model.contacts[0].dof, amplitude=1e-3))
+
+
+def test_band_or_superlu_from_the_pattern():
+    """Line meshes and the dense interiors of reduced models keep the band LU; 2-D/3-D meshes, whose
+    band storage is 10x their nonzeros, go to SuperLU (ls.BAND_MAX_FILL)."""
+    import femodes.hbm.linsolve as ls
+
+    def pattern(model):
+        bd = np.array(sorted({c.dof for c in model.contacts}))
+        p = ls.build_pattern(model.M, model.K, model.C, bd)
+        return p, (3 * p.kl + 1) * p.perm.size / p.rows.size
+
+    for model in (bar_model(), beam_model(), fm.craig_bampton(beam_model(), n_modes=30)):
+        p, ratio = pattern(model)
+        assert p.banded and ratio < 3.5
+    for dim in (2, 3):
+        p, ratio = pattern(solid_model(dim))
+        assert not p.banded and ratio > 8
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_superlu_interior_of_solids_matches_band_and_assembled(dim, monkeypatch):
+    """The SuperLU interior (minimum degree on Z + Z^T, diagonal pivots preferred) solves the Newton
+    system of a meshed solid to round-off, at a frequency whose harmonic blocks are indefinite (kw
+    between eigenfrequencies), and agrees with the band LU and with SuperLU on the assembled J."""
+    import femodes.hbm.linsolve as ls
+    import femodes.hbm.system
+
+    model, h, w = solid_model(dim), fm.Harmonics(4), 2.3
+    lam = np.sort(fm.linear_modes(model, 8).omega)
+    assert any(lam[0] < k * w < lam[-1] for k in range(1, 5))  # indefinite blocks
+    out = []
+    for band in (False, True):
+        real_build = ls.build_pattern
+
+        def build(*a, band=band, **k):
+            p = real_build(*a, **k)
+            p.banded = band
+            return p
+
+        monkeypatch.setattr(femodes.hbm.system, "build_pattern", build)
+        pr = ForcedResponseProblem(model, h)
+        x = state(pr, 1, 1e-3)
+        _, J, _ = pr.residual(x, w)
+        assert isinstance(J, HarmonicBlockJacobian)
+        assert pr.system.block_pattern().banded == band
+        b = np.random.default_rng(2).standard_normal(pr.size)
+        out.append(J.factorize().solve(b))
+        assert backward_error(J, out[-1], b) < 1e-13
+    Jg = J.tocsr()
+    xg = spla.splu(Jg.tocsc()).solve(b)
+    tol = forward_tol(Jg)
+    for xs in out:
+        assert np.max(np.abs(xs - xg)) <= tol * np.max(np.abs(xg))
+    assert np.max(np.abs(out[0] - out[1])) <= tol * np.max(np.abs(xg))
+
+
 def test_reduced_model_uses_structure():
     model = beam_model()
     rom = fm.craig_bampton(model, n_modes=8)

@@ -25,8 +25,11 @@ its :meth:`~HarmonicBlockJacobian.factorize` solves Newton steps by
 1. splitting the unknowns into the *interior* ``I`` (the coefficients of the linear DOFs) and the
    *boundary* ``B`` (coefficients of the nonlinear DOFs, contact forces, border unknowns);
 2. factorising ``Z_k[I, I]`` for each harmonic independently: LAPACK band LU (``?gbtrf``) after a
-   reverse Cuthill-McKee ordering when the band is narrow (line meshes: bandwidth 1-3), SuperLU
-   otherwise; the ``H + 1`` factorisations are independent and can run in threads
+   reverse Cuthill-McKee ordering when the band is narrow (its storage at most
+   :data:`BAND_MAX_FILL` times the block's nonzeros: line meshes, bandwidth 1-3, and the small
+   dense interiors of reduced models), otherwise SuperLU with a minimum-degree ordering of
+   ``Z + Z^T`` and diagonal pivoting preferred (2-D and 3-D meshes; :data:`SUPERLU_OPTIONS`);
+   the ``H + 1`` factorisations are independent and can run in threads
    (``HBMSystem(threads=...)``; LAPACK and SuperLU release the GIL). Default one thread: on the
    2-core test machine two threads were slower (1e5-DOF bar, H = 20: 1283 ms vs 1118 ms per
    Newton iteration, ``benchmarks/README.md``), the band solves being memory-bound;
@@ -168,6 +171,32 @@ REUSE_MATVEC_COST = 1.3
 #: this times ``max |x|`` (:meth:`_Factorization._solve_reused`).
 REUSE_FORWARD_TOL = 1e-12
 
+#: The interior block is factorised by LAPACK band LU when its band storage ``(3 kl + 1) n_I`` (``kl``
+#: the bandwidth after reverse Cuthill-McKee) is at most this many times its nonzeros, by SuperLU
+#: otherwise. Measured per harmonic block at ``k w = 1.5``, factorisation plus the ``n_b``
+#: condensation columns, band / SuperLU (``benchmarks/README_solids_scale.md``; ratio in brackets):
+#: line meshes (1e4 DOFs; 1.3-1.8) 1.4 / 4.6 ms (P1 bar), 2.3 / 6.5 ms (Hermite beam); 2-D Q1 strip
+#: 1.3 / 2.9 ms (4.5), 13.5 / 26 ms (6.8), 63 / 74 ms (8.8), 0.71 / 0.68 s (15.5), 15.6 / 7.0 s (29);
+#: 2-D Q2 strip 12 / 8 ms (7.8), 0.22 / 0.067 s (15.3); 3-D P1 box 2.1 / 1.9 ms (6.1), 89 / 44 ms
+#: (13.2); 3-D P2 box 2.3 / 2.2 ms (4.7), 138 / 50 ms (13.3), 2.0 / 0.53 s (29.5). Break-even is
+#: at a ratio of about 6 except on Q1 quadrilaterals (about 15), and the band also takes 1.5-4x
+#: the memory of the sparse factors there; a dense block (modal coordinates of a reduced model)
+#: has a ratio of about 3 and stays banded. The old limit (50) sent 3-D blocks with 45x their
+#: nonzeros to the band (out of 10 GiB at 1.9e4 DOFs).
+BAND_MAX_FILL = 7.0
+
+#: SuperLU options of a wide interior block. ``Z = K - a M + i b C`` is complex symmetric: a
+#: minimum-degree ordering of ``Z^T + Z`` with the diagonal pivots kept (``SymmetricMode``, a pivot
+#: is taken off the diagonal only when the diagonal is below 0.1 of the column's largest entry)
+#: gives less fill than COLAMD on the larger meshes (2-D Q1 strip, 2.6e5 DOFs: 11.9 vs 17.4 x
+#: nnz; 3-D P2 box, 6.1e4 DOFs: 14.9 vs 25.0, factorisation 26 vs 72 s; at 1.4e5 only this one
+#: ran) and a few tens of % more on mid-size 3-D blocks (5.8 vs 4.5 at 8.8e3 DOFs). Thresholds 0
+#: to 1 gave the same fill and backward errors ``|Z x - r| / (|Z| |x| + |r|)`` of 1e-16..5e-16,
+#: between eigenfrequencies and far above them (``k w`` = 0.3 to 40). Each SuperLU factorisation
+#: keeps the ~30 x nnz entries SuperLU reserved for L and U: address space, mostly untouched (a
+#: 3.3e4-DOF strip block: 656 MiB virtual, 72 MiB resident), which matters under ``ulimit -v``.
+SUPERLU_OPTIONS = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options=dict(SymmetricMode=True))
+
 #: Interior size below which the harmonic blocks are factorised in one thread: starting a pool
 #: costs ~0.1-1 ms, more than a band LU of a few thousand DOFs.
 THREAD_MIN_SIZE = 20000
@@ -242,10 +271,10 @@ def build_pattern(M: sp.spmatrix, K: sp.spmatrix, C: sp.spmatrix, bdofs: np.ndar
         return np.asarray(A[U.row, U.col]).ravel() if U.nnz else np.zeros(0)
     kv, mv, cv = vals(KII), vals(MII), vals(CII)
     kl = int(np.max(np.abs(r - c))) if U.nnz else 0
-    # band storage (3 kl + 1) x nI against the sparse factors' ~ a few x nnz: a narrow band is
-    # always cheaper (line meshes: kl = 1..3 after RCM); a wide one (reduced models with dense
-    # modal coupling, 2-D meshes) goes to SuperLU.
-    banded = nI > 0 and (3 * kl + 1) * nI <= 50 * max(U.nnz, 1)
+    # band storage (3 kl + 1) x nI against the sparse factors' ~ a few x nnz (BAND_MAX_FILL): line
+    # meshes (kl = 1..3 after RCM) and dense reduced interiors stay banded, 2-D/3-D meshes go to
+    # SuperLU
+    banded = nI > 0 and (3 * kl + 1) * nI <= BAND_MAX_FILL * max(U.nnz, 1)
     # the interior-boundary couplings touch only the neighbours of the boundary DOFs: keep them as
     # small dense blocks on those rows (sparse matrices cost ~50 us per operation in scipy)
     ib = [A[interior][:, bdofs].tocsr() for A in (K, M, C)]
@@ -292,7 +321,7 @@ class BlockLU:
         else:
             A = sp.csc_matrix((vals, (pat.rows, pat.cols)), shape=(n, n))
             try:
-                self.slu = spla.splu(A)
+                self.slu = spla.splu(A, **SUPERLU_OPTIONS)
             except RuntimeError as exc:
                 raise StructureFailure(f"interior block singular ({exc})") from None
 
