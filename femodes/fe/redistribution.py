@@ -111,8 +111,12 @@ def redistribute_surface_mass(fe, M: sp.spmatrix, dofs) -> tuple[sp.csr_matrix, 
     ``r^T M x - r^T D M D x`` (``x`` each coordinate of the nodes). Contact DOF ``i`` is
     attributed ``dm_i = 2 (M r)_i - (M_SS r_S)_i`` and ``ds_i = (M x)_i + x_i (M r)_i -
     (M_SS x_S)_i``, which sum exactly to those losses; a DOF with ``dm_i <= 0`` (vertices of P2
-    simplices, whose consistent row sums are zero or negative) is merged with its contact
-    neighbour of largest mass, so that every lump ``k`` has ``dm_k > 0``.
+    simplices, whose consistent row sums are zero or negative) gives its ``dm_i`` and ``ds_i`` to
+    its coupled contact neighbour of largest mass (split equally among neighbours whose masses
+    tie to ``1e-9`` relative, all such DOFs at once: see :func:`_lumps`), repeatedly, so that
+    every lump ``k`` has ``dm_k > 0``. The lumps, and so ``M_new``, depend neither on round-off
+    nor on the numbering of the DOFs: a rotated or mirrored mesh gets the rotated or mirrored
+    mass matrix.
 
     Each lump becomes a point mass ``dm_k`` at its centre ``ds_k / dm_k``, carried by the
     ``c`` DOFs of the surrounding non-contact nodes (the two rings of neighbours in ``M``: the
@@ -191,39 +195,125 @@ def redistribute_surface_mass(fe, M: sp.spmatrix, dofs) -> tuple[sp.csr_matrix, 
     return new, report
 
 
-def _lumps(MSS: sp.csr_matrix, dm: np.ndarray, ds: np.ndarray):
-    """``[(member indices, mass, moments)]``: contact DOFs with ``dm <= 0`` merged into the coupled
-    contact DOF of largest mass (repeatedly), so that every lump has a positive mass."""
+def _lumps(MSS: sp.csr_matrix, dm: np.ndarray, ds: np.ndarray, rtol: float = 1e-9):
+    """``[(member indices, mass, moments)]``: the contact DOFs grouped into lumps of positive mass.
+
+    A lump with ``mass <= tiny`` (P2 vertices) gives its mass and moments to its coupled lumps
+    of largest mass, repeatedly, until every lump has a positive mass. Two rules make the
+    result independent of round-off and of the DOF numbering:
+
+    * candidates within ``rtol`` (relative) of the largest mass are ties, and the mass and
+      moments are split equally among them (each tied lump gets ``dm_i / t`` and
+      ``ds_i / t`` and counts DOF ``i`` among its members, whose rings carry its mass). Picking
+      one of them (the first index, or the one round-off makes largest) conserves mass and
+      moments too, but breaks the symmetries of the mesh, and mirror-image or rotated meshes
+      would then get different mass matrices; the equal split keeps them, and the shares still
+      add up to ``dm_i`` and ``ds_i``, so the total mass and the centre of mass are conserved
+      (exactly, up to round-off, as before).
+    * all the lumps with too little mass move at once (Jacobi passes): the choices of a pass
+      are made on the masses at its start, so no lump is served first. A lump whose coupled
+      lumps all have too little mass waits for them to be absorbed; if none can move, each
+      connected group of such lumps is merged into one.
+
+    The old rule (one merge at a time in DOF order, the first of the round-off-largest
+    neighbours) gave the same lumps where no choice met a tie or an earlier merge; elsewhere its
+    result depended on the numbering. Cost: a pass costs its light lumps times their couplings
+    (set operations, no scan of all DOFs); meshes need a few passes, so near-linear in the
+    number of contact DOFs.
+    """
     n = dm.size
-    owner = np.arange(n)
-    mass, mom = dm.astype(float).copy(), ds.astype(float).copy()
-    tiny = 1e-12 * max(float(np.abs(dm).max()), 1e-300)
-    for _ in range(n):
-        bad = [i for i in range(n) if owner[i] == i and mass[i] <= tiny]
-        if not bad:
-            break
-        for i in bad:
-            members = np.flatnonzero(owner == i)
-            neigh = np.unique(np.concatenate([MSS.indices[MSS.indptr[j]:MSS.indptr[j + 1]] for j in members]))
-            roots = np.unique(owner[neigh])
-            roots = roots[roots != i]
-            if roots.size == 0:
+    mass = np.asarray(dm, dtype=float).copy()
+    mom = np.array(ds, dtype=float, copy=True)
+    tiny = 1e-12 * max(float(np.abs(mass).max(initial=0.0)), 1e-300)
+    MSS = sp.csr_matrix(MSS)
+    members = [{i} for i in range(n)]
+    adj = [set(MSS.indices[MSS.indptr[i]:MSS.indptr[i + 1]].tolist()) - {i} for i in range(n)]
+    alive = np.ones(n, dtype=bool)
+    bad = set(np.flatnonzero(mass <= tiny).tolist())
+    while bad:
+        moves = []
+        for i in sorted(bad):
+            if not adj[i]:
                 continue
-            j = int(roots[np.argmax(mass[roots])])
-            owner[members] = j
-            mass[j] += mass[i]
-            mom[:, j] += mom[:, i]
+            cand = np.fromiter(sorted(adj[i]), dtype=int, count=len(adj[i]))
+            best = float(mass[cand].max())
+            if best <= tiny:  # only lumps with too little mass around: wait for them
+                continue
+            moves.append((i, cand[mass[cand] >= best - rtol * best]))
+        if not moves:
+            if not _merge_stuck(bad, adj, members, mass, mom, alive):
+                break
+            bad = {i for i in bad if alive[i] and mass[i] <= tiny}
+            continue
+        # the senders of a pass are not targets (targets have mass > tiny): their masses, moments,
+        # members and couplings are the ones at the start of the pass, whatever the order below
+        touched = set()
+        for i, targets in moves:
+            t_set = set(targets.tolist())
+            share_m = mass[i] / targets.size
+            share_s = mom[:, i] / targets.size
+            for t in targets:
+                mass[t] += share_m
+                mom[:, t] += share_s
+                members[t] |= members[i]
+                adj[t] |= adj[i]
+            for u in adj[i]:
+                adj[u].discard(i)
+                adj[u] |= t_set
+                adj[u].discard(u)
+            alive[i] = False
             mass[i] = 0.0
             mom[:, i] = 0.0
+            adj[i] = set()
+            members[i] = set()
+            bad.discard(i)
+            touched |= t_set
+        bad |= {t for t in touched if alive[t] and mass[t] <= tiny}
     out = []
-    for i in np.unique(owner):
+    for i in np.flatnonzero(alive):
         if mass[i] <= tiny:
             raise ValueError(
                 "with_contact: the consistent mass of a contact patch is not positive (an isolated P2 vertex?); "
                 "use contact_mass=fm.ConsistentMass() or order=1"
             )
-        out.append((np.flatnonzero(owner == i), float(mass[i]), mom[:, i]))
+        out.append((np.array(sorted(members[i]), dtype=int), float(mass[i]), mom[:, i]))
     return out
+
+
+def _merge_stuck(bad, adj, members, mass, mom, alive) -> bool:
+    """Merge every connected group of lumps of ``bad`` (all of whose coupled lumps are in ``bad``)
+    into its lowest index; False if there was nothing to merge."""
+    merged = False
+    seen = set()
+    for i in sorted(bad):
+        if i in seen or not adj[i]:
+            continue
+        group, stack = {i}, [i]
+        while stack:
+            for u in adj[stack.pop()]:
+                if u not in group:
+                    group.add(u)
+                    stack.append(u)
+        seen |= group
+        root = min(group)
+        rest = sorted(group - {root})
+        for j in rest:
+            mass[root] += mass[j]
+            mom[:, root] += mom[:, j]
+            members[root] |= members[j]
+            alive[j] = False
+            mass[j] = 0.0
+            mom[:, j] = 0.0
+            members[j] = set()
+        outside = set().union(*(adj[j] for j in group)) - group
+        for j in rest:
+            adj[j] = set()
+        adj[root] = outside
+        for u in outside:
+            adj[u] -= group
+            adj[u].add(root)
+        merged = True
+    return merged
 
 
 def _rings(M: sp.csr_matrix, start: np.ndarray, comp: np.ndarray, c: int, massless: np.ndarray, n_rings: int) -> np.ndarray:
