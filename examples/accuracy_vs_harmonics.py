@@ -19,31 +19,28 @@ For each H: the true relative error of the branch's own frequency, the estimate
 the estimate. Then ``nonlinear_mode(..., rtol=2e-3)`` from H = 10 on the free backbone: it adds
 levels 40, 80 where the bracket is too wide.
 
-Measured (H = 5, 10, 20, 40):
+Measured (H = 5, 10, 20, 40; estimates at H = 5, 10, 20, odd H = 5 with the levels 5, 10, 20):
 
-* forced fold: true error 7.9, 4.4, 2.4, 1.3 % (first order in 1/H); estimate 7.5, 5.5, 2.7 %;
-  extrapolated limit off by 0.92 % (outside its half-width 0.10 %), 0.094 % (half-width 0.49 %),
-  0.022 % (0.14 %);
-* free backbone at A = 1.9: true 10.2, 6.0, 3.4, 1.9 %; estimate 9.6, 7.5, 3.8 %; limit off by
-  1.4 % (outside 0.56 %), 0.23 % (1.1 %), 0.0017 % (0.33 %); ``rtol=2e-3`` from H = 10: limit off
-  by 3.6e-5 (half-width 0.13 %, levels to 80), 4 s of CPU;
+* forced fold: true error 7.9, 4.4, 2.4, 1.3 % (first order in 1/H); estimate 9.7, 5.5, 2.7 %;
+  extrapolated limit off by 0.094 % (half-width 0.50 %), 0.094 % (0.49 %), 0.022 % (0.14 %);
+* free backbone at A = 1.9: true 10.2, 6.0, 3.4, 1.9 %; estimate 12.7, 7.7, 3.9 %; limit off by
+  0.23 % (half-width 1.1 %), 0.23 % (1.1 %), 0.0017 % (0.33 %); ``rtol=2e-3`` from H = 10: limit off
+  by 3.6e-5 (half-width 0.13 %, levels to 80), 4.4 s of CPU;
 * Duffing at H = 1, 3, 5, 7: 2.5e-3, 3.7e-6, 3.3e-9, 2.2e-12 (~700x per odd harmonic), every
   estimate within 2 % of the true error.
 
-So for even H the estimate is safe and close (1.1-1.25x the true error) and the exact value lies
-inside the bracket, whose midpoint is 20-2000x closer than the branch itself. **Odd H** (here
-H = 5) is a known failure: the levels 2, 5, 10 are not doublings, the estimate is *optimistic*
-and the exact value lies outside the bracket (``tests/test_examples_accuracy.py``, strict xfail);
-use even H.
+So the estimate is safe and close (1.1-1.3x the true error) and the exact value lies inside the
+bracket, whose midpoint is 20-2000x closer than the branch itself. Odd H costs more to estimate
+(the levels H, 2H, 4H: H // 2 would not be a doubling, and the ratio and the bracket assume
+doublings); prefer even H.
 
-Costs (CPU, one BLAS thread, quiet machine): the forced fold's plain runs take 0.7, 1.2, 2.0,
-5.3 s at H = 5, 10, 20, 40; its estimate 2.0, 6.3, 21 s at H = 5, 10, 20 (10x the plain run at
-H = 20: the 2H level is walked along all 179 points, with failed hyperplane solves halved); the
-free backbone's estimate at H = 20 takes 9 s for a 0.3 s branch (failed solves next to grazing;
-23 s with steps of 0.2 instead of 0.03). The estimate at H = 40 is not computed here: it took
-14-15 minutes and returned no value at the fold (level 80 was lost from the point before the
-fold on). ``benchmarks/bench_accuracy.py`` has the costs of ``rtol=1e-3`` and ``1e-4`` on the
-forced cases (``README_accuracy.md``). About 60 s of CPU.
+Costs (CPU, one BLAS thread, load about 2): the forced fold's plain runs take 0.7, 1.1, 2.0,
+5.5 s at H = 5, 10, 20, 40; its estimate 5.8, 5.4, 15 s at H = 5, 10, 20 (7x the plain run at
+H = 20: each level is traced by a continuation of its own, the finest costing about a plain run
+at 2H); the free backbone's estimate at H = 20 takes 2.6 s for a 0.3 s branch. The estimate at
+H = 40 (82 s) is left out to keep the example short. ``benchmarks/bench_accuracy.py`` has the
+costs of ``rtol=1e-3`` and ``1e-4`` on the forced cases (``README_accuracy.md``). About 60 s of
+CPU.
 """
 
 from __future__ import annotations
