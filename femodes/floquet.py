@@ -18,8 +18,10 @@ exactly 1, and round-off stay stable). Two independent methods give the multipli
     contact DOFs carry mass and that are small (or reduced): at most
     :data:`femodes.time.shooting.MAX_DOFS` DOFs.
 ``"auto"``
-    Shooting for forced responses of small models with complementarity contacts (falling back
-    to Hill at a point where shooting does not converge), Hill otherwise.
+    Shooting for forced responses of small models with complementarity contacts whose fastest
+    natural frequency is at most :data:`AUTO_MAX_STIFFNESS` times the orbit's (falling back to
+    Hill at a point where shooting does not converge, and for the rest of a branch after
+    :data:`AUTO_MAX_FAILURES` such points in a row), Hill otherwise.
 
 Along a branch (``frequency_response(..., stability=True)``), a change in the number of
 multipliers outside the circle between two points is a bifurcation; unless a located fold sits
@@ -63,6 +65,19 @@ METHODS = ("auto", "hill", "shooting")
 
 #: Default tolerance on ``|mu| - 1`` above which an orbit is unstable.
 TOL = 1e-4
+
+#: ``"auto"`` along a branch: after this many points in a row where shooting failed (and Hill's
+#: method was used), the rest of the branch goes to Hill directly. Each failure costs a full
+#: shooting attempt: on the Craig-Bampton blade of examples/blade_casing.py (w_max / w_1 = 3764)
+#: the branch was not done after 8 minutes, Hill takes 0.14 s per point.
+AUTO_MAX_FAILURES = 3
+
+#: ``"auto"`` shoots only when the fastest natural frequency of the model is at most this many
+#: times the orbit's frequency: the explicit integration of the variational equations needs steps
+#: of the fastest period, so its cost grows with that ratio (the Craig-Bampton blade of
+#: examples/blade_casing.py, ratio 3764: 174 s for one shooting at a point without contact,
+#: against 0.14 s for Hill's method; the 1-DOF seed cases: ratio about 1, a few ms).
+AUTO_MAX_STIFFNESS = 50.0
 
 #: Shooting that moves the HBM start state by more than this fraction of its size has found
 #: another orbit (``"auto"`` then uses Hill's method at that point).
@@ -113,9 +128,37 @@ def _check_tol(tol: Any, owner: str) -> float:
     return float(tol)
 
 
-def _prefers_shooting(model: StructuralModel, forced: bool) -> bool:
+def _prefers_shooting(model: StructuralModel, forced: bool, omega: float) -> bool:
     has_uc = any(isinstance(a.item, UnilateralContact) for a in model.contacts)
-    return forced and has_uc and not unsupported(model)
+    if not (forced and has_uc and not unsupported(model)):
+        return False
+    ratio = _fastest_frequency(model) / max(abs(omega), 1e-300)
+    if ratio > AUTO_MAX_STIFFNESS:
+        log.debug("stability: w_max / w = %.3g > %g: Hill's method instead of shooting", ratio, AUTO_MAX_STIFFNESS)
+        return False
+    return True
+
+
+_FASTEST: dict = {}
+
+
+def _fastest_frequency(model: StructuralModel) -> float:
+    """Largest undamped natural frequency ``sqrt(max eig(K, M))`` of a model shooting can take
+    (at most MAX_DOFS DOFs, nonsingular M), cached per matrix pair."""
+    key = (id(model.K), id(model.M))
+    hit = _FASTEST.get(key)
+    if hit is not None and hit[0] is model.K and hit[1] is model.M:
+        return hit[2]
+    import scipy.linalg as sla
+
+    K, M = model.K.toarray(), model.M.toarray()
+    n = K.shape[0]
+    lam = float(sla.eigh(K, M, eigvals_only=True, subset_by_index=[n - 1, n - 1])[0]) if n else 0.0
+    w = math.sqrt(max(lam, 0.0))
+    if len(_FASTEST) > 16:
+        _FASTEST.clear()
+    _FASTEST[key] = (model.K, model.M, w)  # the matrices are kept so that their ids are not reused
+    return w
 
 
 def _start_time(system: HBMSystem, Q: np.ndarray, omega: float) -> float:
@@ -186,7 +229,7 @@ def _by_hill(system: HBMSystem, y: np.ndarray, omega: float, xi: float, tol: flo
 
 
 def _point_stability(model, system, y, Q, omega, xi, method, tol, forced) -> StabilityResult:
-    if method == "hill" or (method == "auto" and not _prefers_shooting(model, forced)):
+    if method == "hill" or (method == "auto" and not _prefers_shooting(model, forced, omega)):
         return _by_hill(system, y, omega, xi, tol, not forced)
     if method == "shooting":
         why = unsupported(model)
@@ -245,11 +288,22 @@ class _Annotator:
         self.method, self.tol, self.newton = method, tol, newton
         self.forced = isinstance(problem, ForcedResponseProblem)
         self.system = problem.system
+        self.failures = 0  # consecutive points where "auto" fell back from shooting to Hill
 
     def at(self, x: np.ndarray, p: float, method: str | None = None) -> StabilityResult:
         u = self.problem.unpack(x, p)
-        return _point_stability(self.model, self.system, u.y, u.Q, u.omega, u.xi, method or self.method, self.tol,
-                                self.forced)
+        m = method or self.method
+        if m == "auto" and self.failures >= AUTO_MAX_FAILURES:
+            m = "hill"
+        r = _point_stability(self.model, self.system, u.y, u.Q, u.omega, u.xi, m, self.tol, self.forced)
+        if m == "auto" and r.method == "shooting":
+            self.failures = 0
+        elif m == "auto" and r.message:
+            self.failures += 1
+            if self.failures == AUTO_MAX_FAILURES:
+                log.info("stability: shooting failed at %d points in a row (last at w = %.6g); Hill's method for the "
+                         "rest of the branch", AUTO_MAX_FAILURES, u.omega)
+        return r
 
     def _outside(self, mu: np.ndarray) -> np.ndarray:
         return _significant(mu, not self.forced)
