@@ -20,8 +20,7 @@ exactly 1, and round-off stay stable). Two independent methods give the multipli
 ``"auto"``
     Shooting for forced responses of small models with complementarity contacts whose fastest
     natural frequency is at most :data:`AUTO_MAX_STIFFNESS` times the orbit's (falling back to
-    Hill at a point where shooting does not converge, and for the rest of a branch after
-    :data:`AUTO_MAX_FAILURES` such points in a row), Hill otherwise.
+    Hill at a point where shooting does not converge), Hill otherwise.
 
 Along a branch (``frequency_response(..., stability=True)``), a change in the number of
 multipliers outside the circle between two points is a bifurcation; unless a located fold sits
@@ -65,12 +64,6 @@ METHODS = ("auto", "hill", "shooting")
 
 #: Default tolerance on ``|mu| - 1`` above which an orbit is unstable.
 TOL = 1e-4
-
-#: ``"auto"`` along a branch: after this many points in a row where shooting failed (and Hill's
-#: method was used), the rest of the branch goes to Hill directly. Each failure costs a full
-#: shooting attempt: on the Craig-Bampton blade of examples/blade_casing.py (w_max / w_1 = 3764)
-#: the branch was not done after 8 minutes, Hill takes 0.14 s per point.
-AUTO_MAX_FAILURES = 3
 
 #: ``"auto"`` shoots only when the fastest natural frequency of the model is at most this many
 #: times the orbit's frequency: the explicit integration of the variational equations needs steps
@@ -288,22 +281,11 @@ class _Annotator:
         self.method, self.tol, self.newton = method, tol, newton
         self.forced = isinstance(problem, ForcedResponseProblem)
         self.system = problem.system
-        self.failures = 0  # consecutive points where "auto" fell back from shooting to Hill
 
     def at(self, x: np.ndarray, p: float, method: str | None = None) -> StabilityResult:
         u = self.problem.unpack(x, p)
-        m = method or self.method
-        if m == "auto" and self.failures >= AUTO_MAX_FAILURES:
-            m = "hill"
-        r = _point_stability(self.model, self.system, u.y, u.Q, u.omega, u.xi, m, self.tol, self.forced)
-        if m == "auto" and r.method == "shooting":
-            self.failures = 0
-        elif m == "auto" and r.message:
-            self.failures += 1
-            if self.failures == AUTO_MAX_FAILURES:
-                log.info("stability: shooting failed at %d points in a row (last at w = %.6g); Hill's method for the "
-                         "rest of the branch", AUTO_MAX_FAILURES, u.omega)
-        return r
+        return _point_stability(self.model, self.system, u.y, u.Q, u.omega, u.xi, method or self.method, self.tol,
+                                self.forced)
 
     def _outside(self, mu: np.ndarray) -> np.ndarray:
         return _significant(mu, not self.forced)

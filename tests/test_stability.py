@@ -243,28 +243,6 @@ def test_shooting_a_free_orbit_of_the_backbone():
         fm.stability(b[0], tol="small")
 
 
-def test_auto_stops_shooting_after_repeated_failures(monkeypatch, caplog):
-    """``"auto"`` along a branch: after AUTO_MAX_FAILURES points in a row where shooting failed,
-    Hill's method directly for the rest (each failure costs a whole shooting attempt: a stiff
-    Craig-Bampton blade was not done after 8 minutes)."""
-    floquet = importlib.import_module("femodes.floquet")
-    model = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]]).with_contact(fm.UnilateralContact(at=0, gap=1.0))
-             .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
-    b = fm.frequency_response(model, (0.5, 2.0), 10)
-    calls = []
-
-    def failing(*args, **kwargs):
-        calls.append(args[3])
-        raise ValueError("shoot: the flow cannot be followed from the final iterate")
-
-    monkeypatch.setattr(floquet, "_by_shooting", failing)
-    with caplog.at_level("INFO", logger="femodes.floquet"):
-        floquet.annotate_branch(b, fm.ForcedResponseProblem(model, b.harmonics), model, method="auto")
-    assert len(calls) == floquet.AUTO_MAX_FAILURES  # then no more attempts
-    assert set(b.stability_method) == {"hill"} and len(b.stability_method) == len(b)
-    assert "Hill's method for the rest of the branch" in caplog.text
-
-
 def test_auto_takes_hill_for_a_stiff_model(monkeypatch):
     """A fastest natural frequency far above the orbit's (here 1414 against 1: two masses joined by
     a spring of stiffness 1e6) makes shooting integrate thousands of fast periods per orbit; "auto"
