@@ -496,21 +496,32 @@ class _Tracer:
         m = len(self.pts) - RETRACE_SKIP
         if m < 2:
             return None
-        Y = np.array([q.y for q in self.pts[:m]])
         w = self.sys.w
-        D = np.diff(Y, axis=0)                       # segments k -> k + 1
-        R = y_b - Y[:-1]
+        reach = RETRACE_DISTANCE * self.ds
+        # the parameter part of the distance alone bounds it from below: only the segments whose
+        # parameter range comes within reach of y_b's are measured in full (no copy of the whole
+        # branch per step: 1e5-1e6 unknowns times hundreds of points)
+        P = np.array([q.y[self.n] for q in self.pts[:m]])
+        lo, hi = np.minimum(P[:-1], P[1:]), np.maximum(P[:-1], P[1:])
+        gap = np.maximum(np.maximum(lo - y_b[self.n], y_b[self.n] - hi), 0.0)
+        near = np.flatnonzero(math.sqrt(w[self.n]) * gap < reach)
+        if not near.size:
+            return None
+        Y0 = np.array([self.pts[k].y for k in near])
+        D = np.array([self.pts[k + 1].y for k in near]) - Y0  # segments k -> k + 1
+        R = y_b - Y0
         dd = np.einsum("ij,ij,j->i", D, D, w)
         theta = np.clip(np.einsum("ij,ij,j->i", R, D, w) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
         E = R - theta[:, None] * D
         dist = np.sqrt(np.maximum(np.einsum("ij,ij,j->i", E, E, w), 0.0))
         cos = np.einsum("ij,j,j->i", D, t_b, w) / np.sqrt(np.where(dd > 0, dd, np.inf))
-        hit = (dist < RETRACE_DISTANCE * self.ds) & (cos > math.cos(math.radians(RETRACE_ANGLE)))
+        hit = (dist < reach) & (cos > math.cos(math.radians(RETRACE_ANGLE)))
         if not hit.any():
             return None
-        k = int(np.flatnonzero(hit)[np.argmin(dist[hit])])
+        j = int(np.flatnonzero(hit)[np.argmin(dist[hit])])
+        k = int(near[j])
         return (f"corrector landed on the branch already traced (between points {self.i0 + k} and {self.i0 + k + 1}, "
-                f"distance {dist[k]:.3g}, same direction)")
+                f"distance {dist[j]:.3g}, same direction)")
 
     def reject(self, a: _Pt, reason: str, *, failure: str) -> None:
         """Halve the step and retry from ``a`` (raises :class:`_Retry`); below ``min_step`` the run
