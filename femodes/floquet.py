@@ -146,8 +146,11 @@ def _fastest_frequency(model: StructuralModel) -> float:
 
     K, M = model.K.toarray(), model.M.toarray()
     n = K.shape[0]
-    lam = float(sla.eigh(K, M, eigvals_only=True, subset_by_index=[n - 1, n - 1])[0]) if n else 0.0
-    w = math.sqrt(max(lam, 0.0))
+    try:
+        lam = float(sla.eigh(K, M, eigvals_only=True, subset_by_index=[n - 1, n - 1])[0]) if n else 0.0
+        w = math.sqrt(max(lam, 0.0))
+    except np.linalg.LinAlgError:  # M not positive definite (a massless DOF): no finite fastest mode
+        w = math.inf
     if len(_FASTEST) > 16:
         _FASTEST.clear()
     _FASTEST[key] = (model.K, model.M, w)  # the matrices are kept so that their ids are not reused
