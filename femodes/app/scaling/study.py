@@ -176,18 +176,26 @@ class _CaseBar(ProgressBar):
 # ---------------------------------------------------------------------------------------------
 # Arguments and cases
 # ---------------------------------------------------------------------------------------------
+def _comma_numbers(text: str, what: str, like: str):
+    """``(item, value)`` of every comma-separated number of ``text``; ArgumentTypeError naming
+    ``what`` is expected (``like``: an example) for an item that is not a number."""
+    import argparse
+
+    for item in str(text).split(","):
+        item = item.strip()
+        try:
+            yield item, float(item)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected {what} separated by commas (like {like}), got {text!r}") from None
+
+
 def positive_int_list(text: str) -> list[int]:
     """``"100,1e3, 10000"`` -> ``[100, 1000, 10000]``; for argparse (raises ArgumentTypeError)."""
     import argparse
 
     values = []
-    for item in str(text).split(","):
-        item = item.strip()
-        try:
-            v = float(item)
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"expected positive integers separated by commas (like 100,1000 or 1e2,1e3), got {text!r}") from None
+    for item, v in _comma_numbers(text, "positive integers", "100,1000 or 1e2,1e3"):
         if not math.isfinite(v) or v < 1 or v != int(v):
             raise argparse.ArgumentTypeError(f"values must be positive integers, got {item!r} in {text!r}")
         values.append(int(v))
@@ -199,13 +207,7 @@ def positive_float_list(text: str) -> list[float]:
     import argparse
 
     values = []
-    for item in str(text).split(","):
-        item = item.strip()
-        try:
-            v = float(item)
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"expected positive numbers separated by commas (like 1,2,4 or 1,1.5,2), got {text!r}") from None
+    for item, v in _comma_numbers(text, "positive numbers", "1,2,4 or 1,1.5,2"):
         if not (math.isfinite(v) and v > 0):
             raise argparse.ArgumentTypeError(f"values must be positive numbers, got {item!r} in {text!r}")
         values.append(v)
