@@ -557,6 +557,19 @@ def _walk(lad: _Ladder, H: int, prev: tuple, anchor: _State, t0: _State, t1: _St
     return s0
 
 
+def _level_point(lad: _Ladder, H: int, i: int, anchor: _State, prev: tuple | None) -> _State | None:
+    """Point ``i`` of the branch at level ``H``: walked from the level's point ``prev = (anchor,
+    state)`` of point ``i - 1`` if there is one (:func:`_walk`), else (or if that fails) solved on
+    its hyperplane from the branch's own point."""
+    tangents = lad.tangents
+    st = _walk(lad, H, prev, anchor, tangents[i - 1], tangents[i]) if prev is not None else None
+    if st is None:
+        st = lad.solve(H, anchor, tangents[i], None)
+    if st is None:
+        log.info("accuracy: point %d has no solution with H = %d near it", i, H)
+    return st
+
+
 def _trace_level(lad: _Ladder, H: int) -> list:
     """Every point of the branch at level ``H``, in branch order.
 
@@ -566,11 +579,10 @@ def _trace_level(lad: _Ladder, H: int) -> list:
     level is traced along the branch: the guess at point ``i`` is the level's solution at
     ``i - 1`` moved by the branch's own step from ``i - 1`` to ``i``, projected on the hyperplane
     of ``i``; a failed step is halved (:func:`_walk`). Located folds are then
-    located on the level (:meth:`_Ladder.solve_fold`).
+    located on the level (:meth:`_Ladder.locate_fold`).
     """
     branch = lad.branch
     n = len(branch)
-    tangents = lad.tangents
     out: list = [None] * n
     if H == branch.harmonics.n_harmonics:
         for i in range(n):
@@ -579,14 +591,7 @@ def _trace_level(lad: _Ladder, H: int) -> list:
         prev = None  # (branch anchor, level state) of the last solved point
         for i in range(n):
             anchor = _anchor(branch, i)
-            st = None
-            if prev is not None:
-                st = _walk(lad, H, prev, anchor, tangents[i - 1], tangents[i])
-            if st is None:
-                st = lad.solve(H, anchor, tangents[i], None)
-            if st is None:
-                log.info("accuracy: point %d has no solution with H = %d near it", i, H)
-            out[i] = st
+            out[i] = st = _level_point(lad, H, i, anchor, prev)
             prev = None if st is None else (anchor, st)
     for f in branch.folds if H != branch.harmonics.n_harmonics else ():  # the branch's own are located
         out[f] = lad.locate_fold(H, out, f)
@@ -607,22 +612,14 @@ def _trace_level_by_continuation(lad: _Ladder, H: int) -> list:
     if H == branch.harmonics.n_harmonics:
         return [_anchor(branch, i) for i in range(n)]
     out = _trace_by_continuation(lad, H, np.ones(n, dtype=bool))
-    tangents = lad.tangents
     folds = set(branch.folds)
     missed = 0
     for i in range(n):
         if out[i] is not None or i in folds:
             continue
         missed += 1
-        anchor = _anchor(branch, i)
-        st = None
-        if i > 0 and out[i - 1] is not None and i - 1 not in folds:
-            st = _walk(lad, H, (_anchor(branch, i - 1), out[i - 1]), anchor, tangents[i - 1], tangents[i])
-        if st is None:
-            st = lad.solve(H, anchor, tangents[i], None)
-        if st is None:
-            log.info("accuracy: point %d has no solution with H = %d near it", i, H)
-        out[i] = st
+        prev = (_anchor(branch, i - 1), out[i - 1]) if i > 0 and out[i - 1] is not None and i - 1 not in folds else None
+        out[i] = _level_point(lad, H, i, _anchor(branch, i), prev)
     for f in branch.folds:
         if out[f] is None:
             out[f] = lad.locate_fold(H, out, f)
