@@ -87,7 +87,9 @@ def test_duffing_coexisting_orbits_middle_one_unstable(duffing, w):
 def test_hill_and_shooting_agree_on_a_smooth_orbit(duffing):
     # On the smooth Duffing both are accurate; the HBM orbit at H = 9 differs from the true one
     # by ~1e-7 (fold frequencies above), so the multipliers agree to a few 1e-6.
-    for i in (5, 25, 36):
+    # lower branch, upper branch before its fold, unstable middle branch
+    f0, f1 = duffing.folds[:2]
+    for i in (5, f0 - 3, (f0 + f1) // 2):
         sol = duffing[i]
         h = fm.stability(sol, method="hill").multipliers
         s = fm.stability(sol, method="shooting").multipliers

@@ -255,7 +255,11 @@ def test_errors_say_what_is_wrong(forced, backbone, monkeypatch):
     monkeypatch.undo()
     # a "branch point" where the branch is regular (an imperfect connection would look like
     # this): no sign change of the test function, no rank drop -> said so, no pretending
-    i = 30
+    # (the point inside the switching span farthest, in points, from every bifurcation)
+    special = np.array([z.index for z in b.bifurcations])
+    inside = np.flatnonzero((b.omega > 0.95) & (b.omega < 1.65))
+    i = int(inside[np.argmax([np.min(np.abs(special - j)) for j in inside])])
+    assert np.min(np.abs(special - i)) >= 3
     fake = dataclasses.replace(bp, index=i, omega=float(b.omega[i]), parameter=float(b.parameter[i]), Q=b.Q[i], P=b.P[i])
     with pytest.raises(RuntimeError, match="not a crossing of two branches"):
         fm.switch_branch(b, fake, omega=(0.9, 1.7), window=2)

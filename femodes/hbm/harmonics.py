@@ -316,6 +316,32 @@ class Harmonics:
             "phases", lambda: _readonly(_TWO_PI * np.arange(self._N) / self._N)
         )
 
+    def time_shift(self, Q, tau: float) -> np.ndarray:
+        r"""Coefficients of the delayed signals :math:`q(\theta - \tau)` from ``Q`` (shape
+        ``(n_coef, ...)``): harmonic ``k`` turned by the angle ``k tau``."""
+        Q = np.asarray(Q, dtype=float)
+        self.check_coef(Q, "Q")
+        out = Q.copy()
+        if self._H:
+            kt = (np.arange(1, self._H + 1) * float(tau)).reshape((-1,) + (1,) * (Q.ndim - 1))
+            co, si = np.cos(kt), np.sin(kt)
+            c, s = Q[1::2], Q[2::2]
+            out[1::2] = co * c - si * s
+            out[2::2] = si * c + co * s
+        return out
+
+    def shift_generator(self, Q) -> np.ndarray:
+        r"""``d/dtau`` of :meth:`time_shift` at ``tau = 0``, i.e. the coefficients of
+        :math:`-\partial q / \partial\theta`: ``c_k -> -k s_k``, ``s_k -> k c_k``."""
+        Q = np.asarray(Q, dtype=float)
+        self.check_coef(Q, "Q")
+        out = np.zeros_like(Q)
+        if self._H:
+            k = np.arange(1, self._H + 1).reshape((-1,) + (1,) * (Q.ndim - 1))
+            out[1::2] = -k * Q[2::2]
+            out[2::2] = k * Q[1::2]
+        return out
+
     def period(self, omega: float) -> float:
         r"""Period :math:`T = 2\pi\nu/\omega` of the response."""
         return _TWO_PI * self._nu / _check_omega(omega)

@@ -94,6 +94,15 @@ class ForcedResponseProblem:
         q = s.solve_linear(s.force(), omega)
         return s.join(q.reshape(s.h.n_coef, s.n))
 
+    def phase_shift(self, x: np.ndarray, tau: float) -> np.ndarray:
+        """The unknowns of the response delayed by the phase ``tau`` (radians of ``w t / nu``).
+        With :meth:`phase_generator`, what the continuation's ``predictor="phase"`` uses."""
+        return self.system.time_shift(np.asarray(x, dtype=float), float(tau))
+
+    def phase_generator(self, x: np.ndarray) -> np.ndarray:
+        """``d/dtau`` of :meth:`phase_shift` at ``tau = 0``."""
+        return self.system.shift_generator(np.asarray(x, dtype=float))
+
     def forcing(self) -> np.ndarray:
         """The forcing's part of the residual (in the residual's scaling): ``r(x, w) = A(w) x + g(x) - forcing()``."""
         s = self.system

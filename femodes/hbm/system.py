@@ -339,6 +339,17 @@ class HBMSystem:
             P = np.zeros((self.h.n_coef, self.n_uc))
         return np.concatenate([np.asarray(Q, dtype=float).ravel(), np.asarray(P, dtype=float).ravel()])
 
+    def time_shift(self, y: np.ndarray, tau: float) -> np.ndarray:
+        """The unknowns ``[Q; P]`` of the motion delayed by the phase ``tau`` (every displacement
+        and contact force ``f(theta) -> f(theta - tau)``, :meth:`Harmonics.time_shift`)."""
+        Q, P = self.split(y)
+        return self.join(self.h.time_shift(Q, tau), self.h.time_shift(P, tau))
+
+    def shift_generator(self, y: np.ndarray) -> np.ndarray:
+        """``d/dtau`` of :meth:`time_shift` at ``tau = 0``."""
+        Q, P = self.split(y)
+        return self.join(self.h.shift_generator(Q), self.h.shift_generator(P))
+
     # -- forcing ----------------------------------------------------------------------------
     def force(self) -> np.ndarray:
         """Galerkin coefficients of the forcing ``sum f cos(k w t + phase)`` (length nq).

@@ -38,18 +38,33 @@ DEGREE_TOL = 1e-16
 
 _MAX_POLISH = 100
 
+# trig_eval sums the series directly (one complex exponential per point and harmonic, batched
+# matrix products) when rows x points x harmonics is at most this, by Horner's rule (a Python
+# loop over the harmonics, less memory and fewer exponentials) above it. Measured on the
+# single-contact seed case at H = 20: direct 6x cheaper (the loop's ~4H small array operations).
+_DIRECT_EVAL_MAX = 65536
+
+
 def trig_eval(A, x, derivative=False):
     """Values (and d/dθ) of the series with coefficient rows ``A`` (p, L) at ``x`` (p, q).
 
-    Horner's rule in ``z = exp(iθ)``:
-    ``phi = c0 + Re sum_k (c_k - i s_k) z^k``,
-    ``phi' = Re sum_k i k (c_k - i s_k) z^k``.
+    ``phi = c0 + Re sum_k (c_k - i s_k) z^k``, ``phi' = Re sum_k i k (c_k - i s_k) z^k``,
+    ``z = exp(iθ)``: summed directly for small sizes, by Horner's rule in ``z`` otherwise.
     """
     H = (A.shape[1] - 1) // 2
     if H == 0:
         f = np.broadcast_to(A[:, :1], x.shape).copy()
         return (f, np.zeros_like(x)) if derivative else f
-    coef = (A[:, 1::2] - 1j * A[:, 2::2])[:, None, :]  # (p, 1, H)
+    coef = A[:, 1::2] - 1j * A[:, 2::2]  # (p, H)
+    if x.size * H <= _DIRECT_EVAL_MAX:
+        k = np.arange(1, H + 1)
+        Z = np.exp(1j * x[:, :, None] * k)  # (p, q, H)
+        if not derivative:
+            return A[:, :1] + np.matmul(Z, coef[:, :, None])[..., 0].real
+        both = np.stack([coef, coef * (1j * k)], axis=2)  # (p, H, 2)
+        s = np.matmul(Z, both)
+        return A[:, :1] + s[..., 0].real, s[..., 1].real
+    coef = coef[:, None, :]  # (p, 1, H)
     z = np.exp(1j * x)
     acc = np.broadcast_to(coef[..., H - 1], x.shape).copy()
     if derivative:

@@ -100,6 +100,14 @@ _INITIAL_MAX_ITER = 50
 #: Iterations and tolerance of the fold localisation (regula falsi on dp/ds).
 _FOLD_MAX_ITER = 12
 _FOLD_TOL = 1e-9
+#: A fold counts as located when ``|dp/ds|`` at the best point found is at most this fraction of
+#: the larger ``|dp/ds|`` at the two ends of the step (regula falsi converged, not stopped by a
+#: failed corrector); otherwise the step is halved, at most _FOLD_HALVINGS times per fold, before
+#: the nearer end is marked instead. Seed case 1, penalty law, H = 40, phase predictor: a step of
+#: 0.83 across the lower fold (a grazing point) had its second trial corrector fail, and the one
+#: point found (|dp/ds| 0.027 of 0.12) was taken as the fold, 0.4 % off in w.
+_FOLD_ACCEPT = 1e-3
+_FOLD_HALVINGS = 4
 #: Kink acceptance (see ContinuationOptions.max_turn_angle): after a geometric
 #: rejection, the halved step is accepted as crossing a kink when the turn angle
 #: kept >= 75 % of its value, the predictor distance shrank to <= 75 % and is
@@ -130,6 +138,8 @@ class _Pt:
     angle: float = math.nan
     dist: float = math.nan
     theta: float = math.nan
+    #: phase delay of the step's predictor (radians; 0 for the tangent predictor)
+    tau: float = 0.0
 
 
 def _contraction(history: tuple[float, ...]) -> float:
@@ -334,6 +344,15 @@ class _Tracer:
         self.last_sign = 0.0  # sign of dp/ds at the last point where it was non-zero (fold detection)
         self.just_rejected = False  # no step growth right after a rejection
         self.prev_geo: tuple[float, float] | None = None  # (angle, distance) of the last geometric rejection
+        self.fold_halvings = 0  # steps halved because the fold they crossed was not located
+        # phase-following predictor (ContinuationOptions.predictor): the problem's delay and its
+        # generator, and the phase delay of the current step's predictor (None: tangent predictor)
+        problem = system.problem
+        self.phase = None
+        if (options.predictor == "phase" and callable(getattr(problem, "phase_shift", None))
+                and callable(getattr(problem, "phase_generator", None))):
+            self.phase = (problem.phase_shift, problem.phase_generator)
+        self.tau: float | None = None
 
     def trace(self, x_init: np.ndarray | None) -> ContinuationResult:
         """Run from ``x_init`` (a new run) or from ``start`` until a stop; the result."""
@@ -413,7 +432,7 @@ class _Tracer:
         if self.i0 + len(self.pts) >= self.opt.max_points:
             raise _Stop(2, f"{self.i0 + len(self.pts)} points, last p={self.pts[-1].y[n]:g}")
         a = self.pts[-1]
-        y_pred = a.y + self.ds * a.t
+        y_pred = self.predict(a)
         bound = self.crossed(y_pred[n])
         if bound is not None:
             self.try_finish(a, y_pred, bound)
@@ -429,6 +448,34 @@ class _Tracer:
         self.control_step(b)
         if not self.emit(b, is_fold_b, self.ds):
             raise _Stop(3)
+
+    def predict(self, a: _Pt) -> np.ndarray:
+        """The predictor of the step ``ds`` from ``a`` (``ContinuationOptions.predictor``); sets
+        :attr:`tau`, the phase delay it applied (None for the tangent predictor)."""
+        self.tau = None
+        if self.phase is not None:
+            n, ds = self.n, self.ds
+            shift, generator = self.phase
+            x, tx, w = a.y[:n], a.t[:n], self.sys.w[:n]
+            g = np.asarray(generator(x), dtype=float)
+            gg = float(np.sum(w * g * g))
+            if gg > 0 and math.isfinite(gg):
+                alpha = float(np.sum(w * tx * g)) / gg
+                x_pred = np.asarray(shift(x + ds * (tx - alpha * g), ds * alpha), dtype=float)
+                if x_pred.shape == (n,) and np.all(np.isfinite(x_pred)):
+                    self.tau = ds * alpha
+                    return np.append(x_pred, a.y[n] + ds * a.t[n])
+        return a.y + self.ds * a.t
+
+    def reference_tangent(self, a: _Pt) -> np.ndarray:
+        """``a``'s tangent delayed by the phase of the step's predictor (unit length in the scaled
+        norm): what a step that only moved the motion in phase would end with."""
+        if self.tau is None:
+            return a.t
+        n = self.n
+        t = np.append(np.asarray(self.phase[0](a.t[:n], self.tau), dtype=float), a.t[n])
+        norm = self.sys.norm(t)
+        return t / norm if norm > 0 and math.isfinite(norm) else a.t
 
     def correct(self, a: _Pt, y_pred: np.ndarray) -> _Pt:
         """Corrector from ``y_pred`` on the hyperplane orthogonal to ``a.t``, and the new tangent."""
@@ -446,7 +493,7 @@ class _Tracer:
         y_b = np.array(res.x)
         angle, dist = self.guard(a, y_pred, y_b, t_b)
         return _Pt(y=y_b, t=t_b, nit=res.nit, rnorm=float(np.max(np.abs(res.fun[:n]))), step=self.ds,
-                   angle=angle, dist=dist, theta=_contraction(res.history))
+                   angle=angle, dist=dist, theta=_contraction(res.history), tau=self.tau or 0.0)
 
     def guard(self, a: _Pt, y_pred: np.ndarray, y_b: np.ndarray, t_b: np.ndarray) -> tuple[float, float]:
         """Branch-jumping guard: reject a corrected point too far from the predictor or whose
@@ -454,7 +501,7 @@ class _Tracer:
         Returns the turn angle (degrees) and the predictor-corrector distance of an accepted step."""
         opt = self.opt
         dist = self.sys.norm(y_b - y_pred)
-        angle = math.degrees(math.acos(max(-1.0, min(1.0, self.sys.dot(a.t, t_b)))))
+        angle = math.degrees(math.acos(max(-1.0, min(1.0, self.sys.dot(self.reference_tangent(a), t_b)))))
         geometric = None
         if dist > opt.max_corrector_distance * self.ds:
             geometric = f"corrector moved {dist:.3g} > {opt.max_corrector_distance:g}*ds from the predictor"
@@ -552,7 +599,9 @@ class _Tracer:
             f = 0.0
         f_angle = f_theta = 0.0
         if opt.target_angle is not None and math.isfinite(b.angle):
-            f_angle = b.angle / opt.target_angle
+            # the turn left after the phase delay, and the phase delay itself (the motion's phase
+            # turns by at most target_angle per step, as the tangent predictor's angle kept it)
+            f_angle = max(b.angle, math.degrees(abs(b.tau))) / opt.target_angle
         if opt.target_contraction is not None and math.isfinite(b.theta):
             f_theta = math.sqrt(b.theta / opt.target_contraction)
         f = max(f, f_angle, f_theta)
@@ -580,8 +629,13 @@ class _Tracer:
         the two; True if that is ``b``.  A located fold beyond the span ends the run there."""
         n, opt = self.n, self.opt
         located = None
-        if opt.locate_folds and self.i0 + len(self.pts) + 2 <= opt.max_points:
+        tried = opt.locate_folds and self.i0 + len(self.pts) + 2 <= opt.max_points
+        if tried:
             located = self.locate_fold(a, self.ds, b)
+        if located is None and tried and self.fold_halvings < _FOLD_HALVINGS and 0.5 * self.ds >= opt.min_step:
+            self.fold_halvings += 1
+            self.reject(a, "fold not located: a shorter step", failure="fold not located")
+        self.fold_halvings = 0
         if located is not None and self.crossed(located.y[n]) is not None:
             # the branch left the span between a and b (excursion through the
             # fold): stop on the boundary before the fold
@@ -619,7 +673,10 @@ class _Tracer:
             return t[n]
 
         illinois(dp_ds, 0.0, ds, a.t[n], b.t[n], max_iter=_FOLD_MAX_ITER, ftol=_FOLD_TOL, xtol=1e-12 * ds)
-        return min(found, key=lambda q: abs(q.t[n])) if found else None
+        best = min(found, key=lambda q: abs(q.t[n])) if found else None
+        if best is None or abs(best.t[n]) > _FOLD_ACCEPT * max(abs(a.t[n]), abs(b.t[n])):
+            return None
+        return best
 
     # -- span end ---------------------------------------------------------- #
     def crossed(self, p: float) -> float | None:
