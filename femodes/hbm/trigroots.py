@@ -39,10 +39,11 @@ DEGREE_TOL = 1e-16
 _MAX_POLISH = 100
 
 # trig_eval sums the series directly (one complex exponential per point and harmonic, batched
-# matrix products) when rows x points x harmonics is at most this, by Horner's rule (a Python
-# loop over the harmonics, less memory and fewer exponentials) above it. Measured on the
-# single-contact seed case at H = 20: direct 6x cheaper (the loop's ~4H small array operations).
-_DIRECT_EVAL_MAX = 65536
+# matrix products) when points x harmonics is at most this, by Horner's rule (a Python loop over
+# the harmonics) above it. Measured (values and derivatives, microseconds, direct / Horner):
+# 1 point at H = 20 21 / 117; 42 points at H = 20 45 / 92; 84 points at H = 40 116 / 198;
+# 160 at H = 40 199 / 171; 320 at H = 20 202 / 119 (crossover near 3000-5000).
+_DIRECT_EVAL_MAX = 4096
 
 
 def trig_eval(A, x, derivative=False):
@@ -188,30 +189,23 @@ class GridRoots:
 
     def angles(self, a: np.ndarray, h: int) -> np.ndarray:
         """As :meth:`CompanionRoots.angles`; shape ``(rows, 4h)``."""
-        rows = a.shape[0]
-        N = max(64, self.per_harmonic * int(h))
-        k = np.arange(-h, h + 1)
-        spec = np.zeros((rows, N), dtype=complex)
-        spec[:, k % N] = a
-        f = (np.fft.ifft(spec, axis=1) * N).real
-        spec[:, k % N] = a * (1j * k)
-        fp = (np.fft.ifft(spec, axis=1) * N).real
-        cell = _TWO_PI / N
-        out = np.full((rows, 4 * int(h)), np.inf)
-        for vals in (f, fp):
-            nxt = np.roll(vals, -1, axis=1)
-            r, j = np.nonzero((np.sign(vals) != np.sign(nxt)) & (nxt != 0.0))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                frac = vals[r, j] / (vals[r, j] - nxt[r, j])
-            x = (j + np.clip(np.nan_to_num(frac, nan=0.5), 0.0, 1.0)) * cell
-            # place each row's candidates after those already there
-            count = np.zeros(rows, dtype=int) if vals is f else np.sum(np.isfinite(out), axis=1)
-            order = np.argsort(r, kind="stable")
-            r, x = r[order], x[order]
-            first = np.searchsorted(r, np.arange(rows))
-            slot = count[r] + np.arange(r.size) - first[r]
-            keep = slot < out.shape[1]
-            out[r[keep], slot[keep]] = np.mod(x[keep], _TWO_PI)
+        rows, h = a.shape[0], int(h)
+        N = max(64, self.per_harmonic * h)
+        # samples of phi and phi' (one real inverse FFT of the half spectra k = 0..h, stacked)
+        half = a[:, h:]
+        k = np.arange(h + 1)
+        vals = np.fft.irfft(np.concatenate([half, half * (1j * k)]), n=N, axis=1) * N  # (2 rows, N)
+        nxt = np.concatenate([vals[:, 1:], vals[:, :1]], axis=1)
+        q, j = np.nonzero((np.sign(vals) != np.sign(nxt)) & (nxt != 0.0))
+        v0, v1 = vals[q, j], nxt[q, j]
+        x = (j + np.clip(v0 / (v0 - v1), 0.0, 1.0)) * (_TWO_PI / N)  # v0 != v1: opposite signs
+        r = q % rows  # zeros of phi and of phi' of the same signal go to the same row
+        order = np.argsort(r, kind="stable")
+        r, x = r[order], x[order]
+        slot = np.arange(r.size) - np.searchsorted(r, r)
+        keep = slot < 4 * h
+        out = np.full((rows, 4 * h), np.inf)
+        out[r[keep], slot[keep]] = np.mod(x[keep], _TWO_PI)
         return out
 
     def __repr__(self) -> str:
@@ -304,26 +298,40 @@ def _polish(A, x, lo, hi, sign_lo):
     x, lo, hi = x.copy(), lo.copy(), hi.copy()
     active = np.arange(x.size)
     tol_f = 8.0 * _EPS * np.sum(np.abs(A), axis=1)
-    for _ in range(_MAX_POLISH):
-        if active.size == 0:
-            break
-        xa = x[active]
-        f, fp = trig_eval(A[active], xa[:, None], derivative=True)
-        f, fp = f[:, 0], fp[:, 0]
-        root = np.abs(f) <= tol_f[active]
-        same = np.sign(f) == sign_lo[active]
-        lo[active] = np.where(same & ~root, xa, lo[active])
-        hi[active] = np.where(~same & ~root, xa, hi[active])
-        la, ha = lo[active], hi[active]
-        with np.errstate(divide="ignore", invalid="ignore"):
+    H = (A.shape[1] - 1) // 2
+    if H == 0 or x.size * H > _DIRECT_EVAL_MAX:
+        evaluate = lambda act, xa: trig_eval(A[act], xa[:, None], derivative=True)  # noqa: E731
+    else:
+        # direct sums, the complex coefficients formed once: phi = c0 + Re sum a_k z^k,
+        # phi' = Re sum i k a_k z^k
+        k = np.arange(1, H + 1)
+        coef = A[:, 1::2] - 1j * A[:, 2::2]
+        both = np.stack([coef, coef * (1j * k)], axis=2)  # (p, H, 2)
+
+        def evaluate(act, xa):
+            s = np.matmul(np.exp(1j * xa[:, None] * k)[:, None, :], both[act])[:, 0, :].real
+            return s[:, :1] + A[act, :1], s[:, 1:]
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for _ in range(_MAX_POLISH):
+            if active.size == 0:
+                break
+            xa = x[active]
+            f, fp = evaluate(active, xa)
+            f, fp = f[:, 0], fp[:, 0]
+            root = np.abs(f) <= tol_f[active]
+            same = np.sign(f) == sign_lo[active]
+            lo[active] = np.where(same & ~root, xa, lo[active])
+            hi[active] = np.where(~same & ~root, xa, hi[active])
+            la, ha = lo[active], hi[active]
             xn = xa - f / fp
-        bad = ~np.isfinite(xn) | (xn <= la) | (xn >= ha)
-        xn = np.where(bad, 0.5 * (la + ha), xn)
-        step = np.abs(xn - xa)
-        small = 4.0 * _EPS * (1.0 + np.abs(xa))
-        done = root | (step <= small) | (ha - la <= small)
-        # at a rounding-level residual take one last Newton step (if it stays
-        # in the bracket): it lands within ~eps |phi| / |phi'| of the root
-        x[active] = np.where(root & bad, xa, xn)
-        active = active[~done]
+            bad = ~np.isfinite(xn) | (xn <= la) | (xn >= ha)
+            xn = np.where(bad, 0.5 * (la + ha), xn)
+            step = np.abs(xn - xa)
+            small = 4.0 * _EPS * (1.0 + np.abs(xa))
+            done = root | (step <= small) | (ha - la <= small)
+            # at a rounding-level residual take one last Newton step (if it stays
+            # in the bracket): it lands within ~eps |phi| / |phi'| of the root
+            x[active] = np.where(root & bad, xa, xn)
+            active = active[~done]
     return x
