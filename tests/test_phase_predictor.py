@@ -69,7 +69,7 @@ def test_forced_problem_shifts_displacements_and_contact_forces():
 def test_phase_predictor_takes_fewer_points_for_the_same_curve(monkeypatch):
     """Seed case 1 at H = 20 (complementarity law): the same folds (both located by the same
     regula falsi to |dp/ds| <= 1e-9: agree to 1e-7 relative), and fewer points and residual
-    evaluations. Measured: 179 -> 113 points, 795 -> 499 evaluations; asserted: at most 0.8x."""
+    evaluations. Measured: 179 -> 91 points, 795 -> 436 evaluations; asserted: at most 0.8x."""
     calls = _counted(monkeypatch)
     model = _seed()
     out = {}

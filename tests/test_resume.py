@@ -22,6 +22,7 @@ import pytest
 
 import femodes as fm
 from femodes.store import CHECKPOINT_VERSION, Checkpoint, CheckpointStore
+from femodes.analyses import frequency_response_options
 from femodes.solvers import ContinuationOptions, NewtonOptions
 
 SPAN = (0.8, 1.6)
@@ -29,14 +30,14 @@ H = 10
 
 
 def contact_oscillator(gap=1.0):
-    """1-DOF oscillator against a stop: 110 points with two located folds (at indices 61 and 97)."""
+    """1-DOF oscillator against a stop: a branch with two located folds."""
     return (fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_damping(alpha=0.1)
             .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)).with_contact(fm.UnilateralContact(at=0, gap=gap)))
 
 
 def options(callback=None):
     # the defaults of frequency_response, plus a callback
-    return ContinuationOptions(step=0.05, max_step=2.0, newton=NewtonOptions(atol=1e-9, max_iter=20), callback=callback)
+    return frequency_response_options(callback=callback)
 
 
 @pytest.fixture(scope="module")
@@ -82,13 +83,12 @@ def assert_same_branch(a, b):
 SCRIPT = """
 import sys, time
 import femodes as fm
-from femodes.solvers import ContinuationOptions, NewtonOptions
+from femodes.analyses import frequency_response_options
 
 model = (fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_damping(alpha=0.1)
          .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)).with_contact(fm.UnilateralContact(at=0, gap=1.0)))
 # slowed down so that the parent can kill it in the middle of the branch
-opts = ContinuationOptions(step=0.05, max_step=2.0, newton=NewtonOptions(atol=1e-9, max_iter=20),
-                           callback=lambda point: time.sleep(0.03))
+opts = frequency_response_options(callback=lambda point: time.sleep(0.03))
 fm.frequency_response(model, omega={span}, harmonics={h}, options=opts, checkpoint=sys.argv[1])
 """
 

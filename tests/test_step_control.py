@@ -46,9 +46,10 @@ def upper_fold(branch) -> float:
     return max(float(branch.omega[i]) for i in branch.folds)
 
 
-@pytest.mark.parametrize("H, bound, fold", [(20, 233, FOLD_H20), (40, 380, FOLD_H40)])
+@pytest.mark.parametrize("H, bound, fold", [(20, 118, FOLD_H20), (40, 208, FOLD_H40)])
 def test_seed_case1_points_and_fold(H, bound, fold):
-    """Measured 179 points at H = 20 (305 before) and 292 at H = 40 (687 before); x 1.3 margin.
+    """Measured 91 points at H = 20 (179 with the tangent predictor, 305 before the step control)
+    and 160 at H = 40 (292, 687); x 1.3 margin.
     Both folds are located, the upper one equal to the reference."""
     br = seed_branch(H)
     assert br.success and br.omega[-1] == 2.0, br.message
@@ -58,16 +59,18 @@ def test_seed_case1_points_and_fold(H, bound, fold):
 
 
 def test_seed_case1_penalty_points():
-    """Penalty k = 100 at H = 20: 66 points measured (63 before, but 287 Newton iterations instead
-    of 346); x 1.3; same upper fold as the old code (1.34830083)."""
+    """Penalty k = 100 at H = 20: 66 points measured with the tangent predictor (63 before the step
+    control, but 287 Newton iterations instead of 346), 54 with the phase predictor; bound 66 x 1.3;
+    same upper fold as the old code (1.34830083)."""
     br = seed_branch(20, "penalty")
     assert br.success and len(br) <= 86, len(br)
     assert upper_fold(br) == pytest.approx(1.3483008315, rel=1e-6)
 
 
 def test_duffing_not_more_points_than_before():
-    """Smooth branch: 47 points at H = 3 and 9 (142 before with the iteration-count control);
-    the bound 61 is 47 x 1.3, well below the old count; folds equal to the old ones."""
+    """Smooth branch: 47 points at H = 3 and 9 with the tangent predictor (142 before with the
+    iteration-count control), 32 with the phase predictor; the bound 61 is 47 x 1.3, well below
+    the old count; folds equal to the old ones."""
     for H, folds in ((3, (1.904064889, 1.136924557)), (9, (1.904069256, 1.136924564))):
         br = fm.frequency_response(duffing(), (0.5, 2.5), fm.Harmonics(H))
         assert br.success and len(br) <= 61, (H, len(br))
@@ -118,8 +121,8 @@ def test_options_disable_and_defaults():
     opts = fm.ContinuationOptions(target_angle=None, target_contraction=None, corrector_deadline=None)
     assert opts.target_angle is None and opts.target_contraction is None and opts.corrector_deadline is None
     d = fm.ContinuationOptions()
-    assert (d.target_angle, d.target_contraction, d.corrector_deadline) == (10.0, 0.25, 3)
-    assert frequency_response_options().max_step == 2.0
+    assert (d.target_angle, d.target_contraction, d.corrector_deadline, d.predictor) == (10.0, 0.25, 3, "phase")
+    assert frequency_response_options().max_step == 3.0
 
 
 def test_force_unit_does_not_change_the_curve():

@@ -697,8 +697,7 @@ class HarmonicBlockJacobian:
         n0, nq = s.size, s.nq
         A = np.zeros(self.shape)
         A[:nq, :nq] = s.dense_linear_operator(self.omega, self.xi)
-        N = self.N.tocoo()
-        np.add.at(A, (N.row, N.col), N.data)
+        A[:n0, :n0] += self.N.toarray()
         if self.scale != 1.0:
             A[:n0, :n0] *= self.scale
         if self.n_border:

@@ -101,9 +101,13 @@ class _Triplets:
 
     def block(self, ri, ci, B) -> None:
         rr, cc = np.meshgrid(ri, ci, indexing="ij")
-        self.rows.append(rr.ravel())
-        self.cols.append(cc.ravel())
-        self.vals.append(np.asarray(B).ravel())
+        self.entries(rr, cc, B)
+
+    def entries(self, rows, cols, vals) -> None:
+        """Entries ``vals`` at ``(rows, cols)`` (arrays of one shape)."""
+        self.rows.append(np.ravel(rows))
+        self.cols.append(np.ravel(cols))
+        self.vals.append(np.ravel(vals))
 
     def matrix(self, size: int) -> sp.csr_matrix:
         """The sparse ``size x size`` matrix (duplicates summed)."""
@@ -502,30 +506,42 @@ class HBMSystem:
 
     def _complementarity_contacts(self, x: np.ndarray, Q: np.ndarray, r: np.ndarray, jac: "_Triplets") -> None:
         """Signorini contacts by complementarity: contact forces on the structure rows and the
-        equations ``P - proj[max(0, P + c U_c - c g0)] = 0`` on the contact-force rows."""
-        h, nq = self.h, self.nq
-        P = x[nq : self.size].reshape(h.n_coef, self.n_uc)
-        phis = np.empty((h.n_coef, self.n_uc))
-        slopes = np.empty(self.n_uc)
-        for ct in self.unilateral:
-            # the law is p - max(0, p + slope (u - offset)), slope = c
-            slope, offset = ct.law.positive_part_form(ct.c)
-            phi = P[:, ct.slot] + slope * Q[:, ct.dof]
-            phi[0] -= slope * offset
-            phis[:, ct.slot] = phi
-            slopes[ct.slot] = slope
+        equations ``P - proj[max(0, P + c U_c - c g0)] = 0`` on the contact-force rows (all
+        contacts at once)."""
+        nq, L = self.nq, self.h.n_coef
+        P = x[nq : self.size].reshape(L, self.n_uc)
+        dofs, slopes, offsets, Qi, Pi, shared = self._contact_tables()
+        # the law is p - max(0, p + slope (u - offset)), slope = c
+        phis = P + slopes * Q[:, dofs]
+        phis[0] -= slopes * offsets
         proj, G = self._positive(phis)
-        eye = np.eye(h.n_coef)
-        for ct in self.unilateral:
-            qi, pi = self.q_index(ct.dof), self.p_index(ct.slot)
-            Gi = G[ct.slot]
-            pr = proj[:, ct.slot] if proj.ndim == 2 else proj
-            # contact force acts on the structure along -w_c: +p in the residual of K q = f - p
-            r[qi] += P[:, ct.slot]
-            jac.block(qi, pi, eye)
-            r[pi] = P[:, ct.slot] - pr
-            jac.block(pi, pi, eye - Gi)
-            jac.block(pi, qi, -slopes[ct.slot] * Gi)
+        # contact force acts on the structure along -w_c: +p in the residual of K q = f - p
+        if shared:
+            np.add.at(r, Qi, P)
+        else:
+            r[Qi] += P
+        r[Pi] = P - proj
+        jac.entries(Qi.ravel(), Pi.ravel(), np.ones(Qi.size))
+        rows = np.broadcast_to(Pi.T[:, :, None], G.shape)
+        jac.entries(rows, np.broadcast_to(Pi.T[:, None, :], G.shape), np.eye(L) - G)
+        jac.entries(rows, np.broadcast_to(Qi.T[:, None, :], G.shape), -slopes[:, None, None] * G)
+
+    def _contact_tables(self):
+        """Per complementarity contact (by slot): DOF, slope ``c`` and offset of the law's positive
+        part, the global indices ``(n_coef, n_uc)`` of its displacement and force coefficients, and
+        whether two contacts share a DOF."""
+        def build():
+            order = sorted(self.unilateral, key=lambda ct: ct.slot)
+            forms = [ct.law.positive_part_form(ct.c) for ct in order]
+            dofs = np.array([ct.dof for ct in order], dtype=np.intp)
+            rows = np.arange(self.h.n_coef)[:, None]
+            Qi = self.h.global_index(rows, dofs, self.n)
+            Pi = self.nq + self.h.global_index(rows, np.arange(self.n_uc), self.n_uc)
+            return (dofs, np.array([f[0] for f in forms], dtype=float), np.array([f[1] for f in forms], dtype=float),
+                    Qi, Pi, bool(np.unique(dofs).size < dofs.size))
+        if "contacts" not in self._cache:
+            self._cache["contacts"] = build()
+        return self._cache["contacts"]
 
     def _positive(self, phis):
         """Projection of ``max(0, .)`` of the columns of ``phis`` (n_coef, m): (n_coef, m), (m, n_coef, n_coef)."""

@@ -94,7 +94,8 @@ class ContinuationOptions:
         ``[min_step, max_step]``; it depends only on the last accepted step,
         so runs are deterministic and resumable.  On the seed contact case
         (1 DOF, H = 20, exact complementarity) it takes 179 points instead of
-        305 with ``max_step=2`` (benchmarks/README_steps.md); with
+        305 with ``max_step=2`` and the tangent predictor, 91 with the phase
+        predictor and ``max_step=3`` (benchmarks/README_steps.md); with
         ``max_step=0.5`` most steps sit at ``max_step`` either way.
     corrector_deadline : int or None, default 3
         Rejection of a corrector that does not contract: the corrector is
@@ -183,9 +184,9 @@ class ContinuationOptions:
         whose turning grows with ``H`` and the tangent predictor took a
         number of points proportional to ``H``. Measured on the seed
         contact case 1 (complementarity law, ``frequency_response``
-        defaults): residual evaluations 795 -> 499 at H = 20, 1393 -> 764
-        at H = 40 (``benchmarks/README_steps.md``). Problems without the two
-        methods get the tangent predictor.
+        defaults but ``max_step=2``): residual evaluations 795 -> 499 at
+        H = 20, 1393 -> 764 at H = 40 (``benchmarks/README_steps.md``).
+        Problems without the two methods get the tangent predictor.
     """
 
     step: float = 0.05
