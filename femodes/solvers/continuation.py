@@ -102,12 +102,13 @@ _FOLD_MAX_ITER = 12
 _FOLD_TOL = 1e-9
 #: A fold counts as located when ``|dp/ds|`` at the best point found is at most this fraction of
 #: the larger ``|dp/ds|`` at the two ends of the step (regula falsi converged, not stopped by a
-#: failed corrector); otherwise the step is halved, at most _FOLD_HALVINGS times per fold, before
-#: the nearer end is marked instead. Seed case 1, penalty law, H = 40, phase predictor: a step of
-#: 0.83 across the lower fold (a grazing point) had its second trial corrector fail, and the one
-#: point found (|dp/ds| 0.027 of 0.12) was taken as the fold, 0.4 % off in w.
+#: failed corrector); otherwise a step longer than a quarter of ``ContinuationOptions.step`` (the
+#: initial step) is halved, and a shorter one marks the nearer end (a rule of the step alone, so
+#: that a resumed run repeats it; with a quarter, the lower folds of the penalty seed cases, at
+#: grazing, are located: with the initial step itself, seed case 2 at H = 10 marked one 0.24 % off). Seed case 1, penalty law, H = 40, phase predictor: a step of 0.83 across the
+#: lower fold (a grazing point) had its second trial corrector fail, and the one point found
+#: (|dp/ds| 0.027 of 0.12) was taken as the fold, 0.4 % off in w.
 _FOLD_ACCEPT = 1e-3
-_FOLD_HALVINGS = 4
 #: Kink acceptance (see ContinuationOptions.max_turn_angle): after a geometric
 #: rejection, the halved step is accepted as crossing a kink when the turn angle
 #: kept >= 75 % of its value, the predictor distance shrank to <= 75 % and is
@@ -344,7 +345,6 @@ class _Tracer:
         self.last_sign = 0.0  # sign of dp/ds at the last point where it was non-zero (fold detection)
         self.just_rejected = False  # no step growth right after a rejection
         self.prev_geo: tuple[float, float] | None = None  # (angle, distance) of the last geometric rejection
-        self.fold_halvings = 0  # steps halved because the fold they crossed was not located
         # phase-following predictor (ContinuationOptions.predictor): the problem's delay and its
         # generator, and the phase delay of the current step's predictor (None: tangent predictor)
         problem = system.problem
@@ -632,10 +632,8 @@ class _Tracer:
         tried = opt.locate_folds and self.i0 + len(self.pts) + 2 <= opt.max_points
         if tried:
             located = self.locate_fold(a, self.ds, b)
-        if located is None and tried and self.fold_halvings < _FOLD_HALVINGS and 0.5 * self.ds >= opt.min_step:
-            self.fold_halvings += 1
+        if located is None and tried and self.ds > 0.25 * opt.step and 0.5 * self.ds >= opt.min_step:
             self.reject(a, "fold not located: a shorter step", failure="fold not located")
-        self.fold_halvings = 0
         if located is not None and self.crossed(located.y[n]) is not None:
             # the branch left the span between a and b (excursion through the
             # fold): stop on the boundary before the fold
