@@ -676,7 +676,7 @@ def _trace_by_continuation(lad: _Ladder, H: int, need: np.ndarray) -> list:
         if not k.size:
             continue
         theta = sd[k] / np.where(sd[k] == sd[k + 1], 1.0, sd[k] - sd[k + 1])
-        cand = Y[k] + theta[:, None] * (Y[k + 1] - Y[k])
+        cand = np.array([_between(prob, Y[j], Y[j + 1], th) for j, th in zip(k, theta)])
         best = cand[int(np.argmin(((cand - a) ** 2) @ near))]
         out[i] = lad.solve(H, anchor, t, lad.state(H, best))
     for f in branch.folds:
@@ -686,6 +686,33 @@ def _trace_by_continuation(lad: _Ladder, H: int, need: np.ndarray) -> list:
             k = min(res.folds, key=lambda j: float(((Y[j] - a) ** 2) @ near))
             out[f] = lad.state(H, Y[k])
     return out
+
+
+def _between(prob, y0: np.ndarray, y1: np.ndarray, theta: float) -> np.ndarray:
+    """The point a fraction ``theta`` of the way from ``y0`` to ``y1`` (``[x; p]`` of two points
+    of a continuation of ``prob``). For a problem that can delay its motion (``phase_shift``),
+    the phase is interpolated: ``y1`` is delayed back by the phase ``tau`` between the two points
+    (weighted mean of the first harmonics' phase differences), blended linearly with ``y0``, and
+    the blend delayed by ``theta tau``; harmonic ``k`` then turns by ``k theta tau`` instead of
+    moving along its chord. Measured on the seed case at rtol 1e-3: the continuation's points are
+    far enough apart (phase predictor) that the linear blend, a poor start for the contact-force
+    harmonics at H = 80-160, cost 56-65 Newton evaluations per hyperplane solve."""
+    x0, x1, p0, p1 = y0[:-1], y1[:-1], float(y0[-1]), float(y1[-1])
+    p = p0 + theta * (p1 - p0)
+    shift = getattr(prob, "phase_shift", None)
+    if shift is None:
+        return y0 + theta * (y1 - y0)
+    u0, u1 = prob.unpack(x0, p0), prob.unpack(x1, p1)
+    # first harmonics (rows 1, 2: c_1, s_1) of all displacements and contact forces
+    z0 = np.concatenate([u0.Q[1] + 1j * u0.Q[2], u0.P[1] + 1j * u0.P[2]]) if u0.Q.shape[0] > 2 else np.zeros(0)
+    z1 = np.concatenate([u1.Q[1] + 1j * u1.Q[2], u1.P[1] + 1j * u1.P[2]]) if u1.Q.shape[0] > 2 else np.zeros(0)
+    # c cos + s sin = Re((c - i s) e^{i theta}): a delay tau multiplies c + i s by e^{i tau}
+    cross = np.sum(z1 * np.conj(z0))
+    if not abs(cross) > 0:
+        return y0 + theta * (y1 - y0)
+    tau = float(np.angle(cross))
+    back = np.asarray(shift(x1, -tau), dtype=float)
+    return np.append(np.asarray(shift(x0 + theta * (back - x0), theta * tau), dtype=float), p)
 
 
 def _free_before(branch: Branch, i: int) -> int:
