@@ -510,16 +510,14 @@ class HBMSystem:
         contacts at once)."""
         nq, L = self.nq, self.h.n_coef
         P = x[nq : self.size].reshape(L, self.n_uc)
-        dofs, slopes, offsets, Qi, Pi, shared = self._contact_tables()
+        dofs, slopes, offsets, Qi, Pi = self._contact_tables()
         # the law is p - max(0, p + slope (u - offset)), slope = c
         phis = P + slopes * Q[:, dofs]
         phis[0] -= slopes * offsets
         proj, G = self._positive(phis)
-        # contact force acts on the structure along -w_c: +p in the residual of K q = f - p
-        if shared:
-            np.add.at(r, Qi, P)
-        else:
-            r[Qi] += P
+        # contact force acts on the structure along -w_c: +p in the residual of K q = f - p (one
+        # contact per DOF, StructuralModel.with_contact: no repeated index in Qi)
+        r[Qi] += P
         r[Pi] = P - proj
         jac.entries(Qi.ravel(), Pi.ravel(), np.ones(Qi.size))
         rows = np.broadcast_to(Pi.T[:, :, None], G.shape)
@@ -528,8 +526,7 @@ class HBMSystem:
 
     def _contact_tables(self):
         """Per complementarity contact (by slot): DOF, slope ``c`` and offset of the law's positive
-        part, the global indices ``(n_coef, n_uc)`` of its displacement and force coefficients, and
-        whether two contacts share a DOF."""
+        part, and the global indices ``(n_coef, n_uc)`` of its displacement and force coefficients."""
         def build():
             order = sorted(self.unilateral, key=lambda ct: ct.slot)
             forms = [ct.law.positive_part_form(ct.c) for ct in order]
@@ -538,7 +535,7 @@ class HBMSystem:
             Qi = self.h.global_index(rows, dofs, self.n)
             Pi = self.nq + self.h.global_index(rows, np.arange(self.n_uc), self.n_uc)
             return (dofs, np.array([f[0] for f in forms], dtype=float), np.array([f[1] for f in forms], dtype=float),
-                    Qi, Pi, bool(np.unique(dofs).size < dofs.size))
+                    Qi, Pi)
         if "contacts" not in self._cache:
             self._cache["contacts"] = build()
         return self._cache["contacts"]
