@@ -1,7 +1,8 @@
 r"""Pseudo-arclength continuation of solution branches of :math:`r(x, p) = 0`.
 
 The branch :math:`\{y = (x, p) \in \mathbb{R}^{n+1} : r(x, p) = 0\}` is traced
-by a tangent predictor and a corrector on the hyperplane orthogonal (in a
+by a tangent predictor (or, for periodic motions that can be delayed in phase, one that follows
+the phase: ``ContinuationOptions.predictor``) and a corrector on the hyperplane orthogonal (in a
 scaled inner product) to the previous tangent, following Allgower & Georg
 [AG03]_ (chapters 2 and 6) and Keller's pseudo-arclength method [K77]_:
 
@@ -189,7 +190,10 @@ def continuation(
        the first tangent, whose sign of ``dp`` is set by ``direction``;
        ``c = S t_prev`` afterwards, which keeps ``<t, t_prev>_S > 0`` and
        passes folds), normalised in the scaled norm.
-    3. Predictor ``y + ds t``; corrector: semismooth Newton on the bordered
+    3. Predictor ``y + ds t`` (``predictor="phase"`` with a problem that has
+       ``phase_shift``/``phase_generator``: the phase part of ``t`` applied
+       as an exact delay, see :class:`ContinuationOptions`); corrector:
+       semismooth Newton on the bordered
        system ``[r(x, p); t^T S (y - y_pred)] = 0`` (sparse ``bmat`` if
        ``r_x`` is sparse, dense otherwise).
     4. Step control from the geometry of the branch (turn of the tangent)
