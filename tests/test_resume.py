@@ -95,7 +95,7 @@ fm.frequency_response(model, omega={span}, harmonics={h}, options=opts, checkpoi
 
 def test_sigkill_then_resume_loses_and_duplicates_no_point(model, reference, tmp_path):
     """SIGKILL a running continuation after >= 30 saved points, resume in-process: the final branch is
-    the uninterrupted one (110 points, both folds), the file loads back, the journal is gone."""
+    the uninterrupted one (all points, both folds), the file loads back, the journal is gone."""
     script = tmp_path / "run.py"
     script.write_text(textwrap.dedent(SCRIPT.format(span=SPAN, h=H)))
     path = tmp_path / "frc.npz"
