@@ -46,6 +46,11 @@ _MAX_POLISH = 100
 _DIRECT_EVAL_MAX = 4096
 
 
+def _value_and_slope(coef):
+    """``(p, H, 2)``: the complex coefficients ``a_k`` of ``phi`` and ``i k a_k`` of ``phi'``."""
+    return np.stack([coef, coef * (1j * np.arange(1, coef.shape[1] + 1))], axis=2)
+
+
 def trig_eval(A, x, derivative=False):
     """Values (and d/dθ) of the series with coefficient rows ``A`` (p, L) at ``x`` (p, q).
 
@@ -62,8 +67,7 @@ def trig_eval(A, x, derivative=False):
         Z = np.exp(1j * x[:, :, None] * k)  # (p, q, H)
         if not derivative:
             return A[:, :1] + np.matmul(Z, coef[:, :, None])[..., 0].real
-        both = np.stack([coef, coef * (1j * k)], axis=2)  # (p, H, 2)
-        s = np.matmul(Z, both)
+        s = np.matmul(Z, _value_and_slope(coef))
         return A[:, :1] + s[..., 0].real, s[..., 1].real
     coef = coef[:, None, :]  # (p, 1, H)
     z = np.exp(1j * x)
@@ -164,7 +168,7 @@ class ColleagueRoots:
 
 class GridRoots:
     """Candidate sign changes from samples: the signal and its derivative on ``per_harmonic``
-    equidistant points per period of its highest harmonic (one FFT each), giving
+    equidistant points per period of its highest harmonic (one real inverse FFT for both), giving
 
     * the linearly interpolated zero of every cell where the signal changes sign, and
     * the linearly interpolated zero of the derivative in every cell where *it* changes sign
@@ -305,8 +309,7 @@ def _polish(A, x, lo, hi, sign_lo):
         # direct sums, the complex coefficients formed once: phi = c0 + Re sum a_k z^k,
         # phi' = Re sum i k a_k z^k
         k = np.arange(1, H + 1)
-        coef = A[:, 1::2] - 1j * A[:, 2::2]
-        both = np.stack([coef, coef * (1j * k)], axis=2)  # (p, H, 2)
+        both = _value_and_slope(A[:, 1::2] - 1j * A[:, 2::2])
 
         def evaluate(act, xa):
             s = np.matmul(np.exp(1j * xa[:, None] * k)[:, None, :], both[act])[:, 0, :].real
