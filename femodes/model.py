@@ -18,7 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .eigen import normal_modes
-from .fe.redistribution import ConsistentMass, RedistributeMass
+from .fe.redistribution import ConsistentMass, RedistributeMass, apply_each
 from .laws import CubicSpring, Location, PenaltyContact, UnilateralContact, check_location
 
 __all__ = ["DofMap", "NodalFrame", "HarmonicForce", "Attached", "StructuralModel", "LowRankDamping", "as_sparse_matrix",
@@ -577,12 +577,7 @@ def _redistribute(strategy, fe, M, dofs) -> tuple:
     if callable(getattr(strategy, "apply_all", None)):
         M, reps = strategy.apply_all(fe, M, dofs)
         return M, list(reps)
-    reports = []
-    for dof in dofs:
-        M, rep = strategy.apply(fe, M, dof)
-        if rep is not None:
-            reports.append(rep)
-    return M, reports
+    return apply_each(strategy, fe, M, dofs)
 
 
 # --------------------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-__all__ = ["redistribute_contact_mass", "redistribute_surface_mass", "RedistributeMass", "ConsistentMass"]
+__all__ = ["redistribute_contact_mass", "redistribute_surface_mass", "RedistributeMass", "ConsistentMass", "apply_each"]
 
 log = logging.getLogger(__name__)
 
@@ -370,6 +370,17 @@ def _com_shift(M: sp.csr_matrix, new: sp.csr_matrix, pos: np.ndarray, comp: np.n
     return shift
 
 
+def apply_each(strategy, fe, M, dofs) -> tuple:
+    """``(M, reports)`` after ``strategy.apply(fe, M, dof)`` on each of ``dofs`` in turn (the
+    reports that are not None): what a strategy without ``apply_all`` does to several DOFs."""
+    reports = []
+    for dof in dofs:
+        M, rep = strategy.apply(fe, M, dof)
+        if rep is not None:
+            reports.append(rep)
+    return M, reports
+
+
 class RedistributeMass:
     """Contact-mass strategy: zero mass at each contact DOF, moved to its nearest translational
     neighbours (:func:`redistribute_contact_mass` for bars and beams; for solids, all contact
@@ -395,12 +406,7 @@ class RedistributeMass:
         if fe.kind == "solid":
             M, report = redistribute_surface_mass(fe, M, dofs)
             return M, ([report] if report["dofs"] else [])
-        reports = []
-        for dof in dofs:
-            M, rep = self.apply(fe, M, dof)
-            if rep is not None:
-                reports.append(rep)
-        return M, reports
+        return apply_each(self, fe, M, dofs)
 
     def __repr__(self) -> str:
         return "RedistributeMass()"
