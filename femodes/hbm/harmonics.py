@@ -332,15 +332,11 @@ class Harmonics:
 
     def shift_generator(self, Q) -> np.ndarray:
         r"""``d/dtau`` of :meth:`time_shift` at ``tau = 0``, i.e. the coefficients of
-        :math:`-\partial q / \partial\theta`: ``c_k -> -k s_k``, ``s_k -> k c_k``."""
+        :math:`-\partial q / \partial\theta = -\nu D_1 Q` (:meth:`derivative_domega`):
+        ``c_k -> -k s_k``, ``s_k -> k c_k``."""
         Q = np.asarray(Q, dtype=float)
         self.check_coef(Q, "Q")
-        out = np.zeros_like(Q)
-        if self._H:
-            k = np.arange(1, self._H + 1).reshape((-1,) + (1,) * (Q.ndim - 1))
-            out[1::2] = -k * Q[2::2]
-            out[2::2] = k * Q[1::2]
-        return out
+        return -self._nu * (self.derivative_domega() @ Q)
 
     def period(self, omega: float) -> float:
         r"""Period :math:`T = 2\pi\nu/\omega` of the response."""

@@ -350,9 +350,11 @@ class HBMSystem:
         return self.join(self.h.time_shift(Q, tau), self.h.time_shift(P, tau))
 
     def shift_generator(self, y: np.ndarray) -> np.ndarray:
-        """``d/dtau`` of :meth:`time_shift` at ``tau = 0``."""
+        """``d/dtau`` of :meth:`time_shift` at ``tau = 0``: ``-nu D1`` on every signal (the sparse
+        derivative operator of the residual, :meth:`Harmonics.shift_generator`)."""
         Q, P = self.split(y)
-        return self.join(self.h.shift_generator(Q), self.h.shift_generator(P))
+        minus_nu = -float(self.h.subharmonic)
+        return self.join(minus_nu * (self.D1 @ Q), minus_nu * (self.D1 @ P))
 
     # -- forcing ----------------------------------------------------------------------------
     def force(self) -> np.ndarray:
