@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..solvers.checks import check_int
-from .trigroots import DEGREE_TOL, GridRoots, candidates, sign_changes
+from .trigroots import DEGREE_TOL, GridRoots, sign_changes_of
 
 __all__ = ["positive_part", "positive_intervals", "positive_part_sampled", "ExactProjection", "SampledProjection"]
 
@@ -73,6 +73,13 @@ def positive_part(h, phi, *, roots=None):
        for ``H >= 20``.  Leading harmonics with
        ``max(|c_k|, |s_k|) <= 1e-16 max|phi|`` are dropped (effective
        degree).
+       With :class:`~femodes.hbm.trigroots.GridRoots` the sign changes are read off the grid
+       directly (:meth:`~femodes.hbm.trigroots.GridRoots.sign_changes`): a cell whose samples
+       change sign brackets a root, started from the cubic Hermite interpolant of the cell's
+       values and slopes; a cell where ``phi'`` changes sign is tested at its interpolated
+       extremum. Signals with a sample or a dip within rounding of zero take steps 2-3 below
+       (measured: 0 of the 795 signals of the seed's forced curve at H = 20; ``positive_gram`` on
+       them 660 -> 380 us, 845 -> 510 us at H = 40).
     2. The candidates and the midpoints between them are sorted
        cyclically and ``phi`` is evaluated there.  Values below the
        rounding bound ``8 eps sum|phi_a|`` are "undetermined" and take the
@@ -268,8 +275,7 @@ def positive_gram(h, Phi, roots=None):
         heff = np.zeros(m, dtype=int)
     heff = np.where(nonzero, heff, 0)
 
-    cand = candidates(A, heff, roots)  # (m, R) sorted, inf padded
-    rows, rho, w, wrap, sign_const = sign_changes(A, cand)
+    rows, rho, w, wrap, sign_const = sign_changes_of(A, heff, roots)
 
     # signals without sign change: constant sign
     changed = np.zeros(m, dtype=bool)
