@@ -198,6 +198,56 @@ def test_system_jacobian_matches_central_differences(harmonics, exact):
     np.testing.assert_allclose(r - r0, -np.r_[s.force(), np.zeros(s.np)], atol=1e-14)
 
 
+def test_small_systems_take_the_dense_linear_residual(monkeypatch):
+    """Below DENSE_MAX_SIZE unknowns the linear part of the residual and its derivatives come from
+    the cached dense operators; they equal the sparse products to rounding (a few eps times the
+    largest term; measured 1.4e-14 on terms ~10), with and without artificial damping and
+    forcing. The Jacobian itself is checked against differences above on such a system."""
+    import femodes.hbm.system as system
+
+    s = HBMSystem(chain4(), fm.Harmonics(5))
+    assert s.nq <= system.DENSE_MAX_SIZE
+    x = np.random.default_rng(3).standard_normal(s.size)
+    Q = x[: s.nq].reshape(s.h.n_coef, s.n)
+    for xi in (0.0, 0.3):
+        for forced in (True, False):
+            dense = s._linear_residual(Q, 1.3, xi, forced)
+            with monkeypatch.context() as mp:
+                mp.setattr(system, "DENSE_MAX_SIZE", 0)
+                sparse = s._linear_residual(Q, 1.3, xi, forced)
+            for a, b in zip(dense, sparse):
+                np.testing.assert_allclose(a, b, rtol=0, atol=64 * np.finfo(float).eps * np.abs(b).max())
+
+
+def test_nonlinear_part_reuses_its_sparse_pattern():
+    """The nonlinear Jacobian's CSR pattern is built once per system and refilled: the same matrix
+    as a fresh COO conversion at two different points, and a new pattern when the triplets
+    change (duplicates summed either way)."""
+    from femodes.hbm.system import _Triplets
+
+    s = HBMSystem(chain4(), fm.Harmonics(4))
+    rng = np.random.default_rng(5)
+    for _ in range(2):
+        x = 0.4 * rng.standard_normal(s.size)
+        N = s.residual(x, 1.3)[1].N
+        assert "triplets" in s._cache
+        jac = _Triplets()
+        Q = x[: s.nq].reshape(s.h.n_coef, s.n)
+        r = np.zeros(s.size)
+        s._cubic_springs(Q, r, jac)
+        s._penalty_contacts(Q, r, jac)
+        s._complementarity_contacts(x, Q, r, jac)
+        ref = jac.matrix(s.size)
+        assert (N != ref).nnz == 0 and N.has_sorted_indices
+    cache: dict = {}
+    a, b = _Triplets(), _Triplets()
+    a.entries(np.array([0, 1, 0]), np.array([1, 1, 1]), np.array([1.0, 2.0, 3.0]))
+    b.entries(np.array([2, 2]), np.array([0, 0]), np.array([1.0, 5.0]))
+    np.testing.assert_array_equal(a.matrix(3, cache).toarray(), [[0, 4, 0], [0, 2, 0], [0, 0, 0]])
+    np.testing.assert_array_equal(b.matrix(3, cache).toarray(), [[0, 0, 0], [0, 0, 0], [6, 0, 0]])
+    np.testing.assert_array_equal(a.matrix(3, cache).toarray(), [[0, 4, 0], [0, 2, 0], [0, 0, 0]])
+
+
 def test_energy_gradient_matches_central_differences():
     model = chain4()
     s = HBMSystem(model, fm.Harmonics(4))

@@ -33,7 +33,7 @@ import scipy.sparse.linalg as spla
 from ..laws import CubicSpring, PenaltyContact, UnilateralContact
 from ..model import StructuralModel, low_rank_solver
 from .harmonics import Harmonics
-from .linsolve import BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure, build_pattern
+from .linsolve import DENSE_MAX_SIZE, BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure, build_pattern
 from .positive_part import ExactProjection
 
 __all__ = ["HBMSystem", "default_contact_parameter", "default_contact_parameters"]
@@ -109,12 +109,24 @@ class _Triplets:
         self.cols.append(np.ravel(cols))
         self.vals.append(np.ravel(vals))
 
-    def matrix(self, size: int) -> sp.csr_matrix:
-        """The sparse ``size x size`` matrix (duplicates summed)."""
-        if self.rows:
-            return sp.csr_matrix((np.concatenate(self.vals), (np.concatenate(self.rows), np.concatenate(self.cols))),
-                                 shape=(size, size))
-        return sp.csr_matrix((size, size))
+    def matrix(self, size: int, cache: dict | None = None) -> sp.csr_matrix:
+        """The sparse ``size x size`` matrix (duplicates summed). With ``cache`` (a dict kept by
+        the caller), the CSR pattern of the last call is reused when the rows and columns are the
+        same, as they are at every evaluation of one system: the values are summed into it by one
+        ``bincount`` (measured 16 us against 140 us for the COO conversion with 3400 entries)."""
+        if not self.rows:
+            return sp.csr_matrix((size, size))
+        rows, cols, vals = np.concatenate(self.rows), np.concatenate(self.cols), np.concatenate(self.vals)
+        if cache is None:
+            return sp.csr_matrix((vals, (rows, cols)), shape=(size, size))
+        pat = cache.get("triplets")
+        if pat is None or pat[0] != size or not (np.array_equal(pat[1], rows) and np.array_equal(pat[2], cols)):
+            linear, slot = np.unique(rows.astype(np.int64) * size + cols, return_inverse=True)
+            indptr = np.searchsorted(linear // size, np.arange(size + 1))
+            pat = cache["triplets"] = (size, rows, cols, slot.reshape(-1), linear % size, indptr)
+        _, _, _, slot, indices, indptr = pat
+        data = np.bincount(slot, weights=vals, minlength=indices.size)
+        return sp.csr_matrix((data, indices.copy(), indptr.copy()), shape=(size, size))
 
 
 class HBMSystem:
@@ -456,13 +468,15 @@ class HBMSystem:
         self._penalty_contacts(Q, r, jac)
         if self.n_uc:
             self._complementarity_contacts(x, Q, r, jac)
-        N = jac.matrix(self.size)
+        N = jac.matrix(self.size, self._cache)
         return r, HarmonicBlockJacobian(self, omega, xi, N), dr_domega, dr_dxi
 
     def _linear_residual(self, Q: np.ndarray, omega: float, xi: float, forced: bool):
         """Linear part ``S(w) q - xi w (D1 x M) q (- f)`` of the residual and its derivatives in
         ``w`` and ``xi`` (zero on the contact-force rows)."""
         nq = self.nq
+        if nq <= DENSE_MAX_SIZE and self.C_lr is None:
+            return self._linear_residual_dense(Q, omega, xi, forced)
         MQ = _mul(self.M, Q)
         D1MQ = self.D1 @ MQ
         CQ = _mul(self.C, Q) if self.C.nnz else np.zeros_like(Q)
@@ -482,6 +496,30 @@ class HBMSystem:
         dr_domega[:nq] = dS.ravel()
         dr_dxi = np.zeros(self.size)
         dr_dxi[:nq] = -omega * D1MQ.ravel()
+        return r, dr_domega, dr_dxi
+
+    def _linear_residual_dense(self, Q: np.ndarray, omega: float, xi: float, forced: bool):
+        """:meth:`_linear_residual` of a small system from its cached dense operators
+        (:meth:`dense_linear_operator`): four small dense products instead of a dozen sparse ones
+        (the 1-DOF seed case: 15 against 90 us)."""
+        nq = self.nq
+        if "dense" not in self._cache:
+            self.dense_linear_operator(omega)
+        A2, A1, A0, AM = self._cache["dense"]
+        q = Q.reshape(-1)
+        y2, y1 = A2 @ q, A1 @ q
+        r, dr_domega, dr_dxi = np.zeros(self.size), np.zeros(self.size), np.zeros(self.size)
+        r[:nq] = (omega * omega) * y2 + omega * y1 + A0 @ q
+        dr_domega[:nq] = (2.0 * omega) * y2 + y1
+        if xi:
+            ym = AM @ q
+            r[:nq] -= (xi * omega) * ym
+            dr_domega[:nq] -= xi * ym
+            dr_dxi[:nq] = -omega * ym
+        else:
+            dr_dxi[:nq] = -omega * (AM @ q)
+        if forced:
+            r[:nq] -= self.force()
         return r, dr_domega, dr_dxi
 
     def _cubic_springs(self, Q: np.ndarray, r: np.ndarray, jac: "_Triplets") -> None:
