@@ -271,6 +271,40 @@ def test_newton_nonfinite_residual_status3():
     assert res.status == 3 and not res.success
 
 
+def test_newton_backward_error_product_only_near_convergence(monkeypatch):
+    """The product |J| |x| of the rtol test is formed only when the residual is within
+    TOLERANCE_RECHECK of the last tolerance or |x| has more than doubled: the same iterates and
+    decisions as forming it at every iterate, fewer products. From x0 = 0 (|J||x| = 0, the
+    tolerance atol) the rtol test must still accept x = 1 on its 1e-6 noise floor."""
+    import femodes.solvers.newton as newton
+
+    calls = []
+    real = newton._tolerance
+
+    def counting(*args, **kw):
+        calls.append(1)
+        return real(*args, **kw)
+
+    monkeypatch.setattr(newton, "_tolerance", counting)
+    opts = NewtonOptions(atol=1e-300, rtol=1e-14)  # only the backward-error test can converge
+    x0 = np.full(N_SMOOTH, 3.0)
+    res = semismooth_newton(smooth_fun, x0, options=opts)
+    n_skip = len(calls)
+    monkeypatch.setattr(newton, "TOLERANCE_RECHECK", math.inf)  # the product at every iterate
+    calls.clear()
+    ref = semismooth_newton(smooth_fun, x0, options=opts)
+    assert res.success and ref.success and "rtol" in res.message
+    assert res.history == ref.history and np.array_equal(res.x, ref.x)
+    assert n_skip < len(calls) == ref.nit + 1
+
+    def noisy(x):
+        return 1e6 * (x - 1.0) + 1e-6 * np.cos(1e15 * x), np.array([[1e6]])
+
+    monkeypatch.setattr(newton, "TOLERANCE_RECHECK", 16.0)
+    rel = semismooth_newton(noisy, [0.0], options=NewtonOptions(rtol=1e-12))
+    assert rel.success and "rtol" in rel.message
+
+
 def test_newton_xtol_convergence_on_roundoff_floor():
     """Residual with a 1e-6 noise floor and J = 1e6: accepted as converged by the xtol test (|r| <= sqrt(atol))."""
 
