@@ -509,3 +509,34 @@ def test_continuation_same_branch_with_and_without_reuse():
     assert solvers[0].stats["reused"] == 0
     assert st["solves_reused"] - st["refactorized"] > 0
     assert st["factorizations"] < solvers[0].stats["factorizations"]
+
+
+def test_block_solver_factorises_half_full_systems_densely(monkeypatch):
+    """Above DENSE_MAX_SIZE, a system whose nonlinear block fills at least DENSE_FILL of the
+    matrix (a 1-DOF contact at H = 80: two dense 161 x 161 blocks in 322 unknowns) is factorised
+    by LAPACK, a sparse one of similar size (20-DOF cantilever, one contact, H = 10: 441
+    unknowns) by SuperLU; both solve as the assembled matrix does (to 1e-10 relative: the
+    systems' condition numbers are below 1e5)."""
+    from femodes.hbm import linsolve as ls
+
+    monkeypatch.setattr(ls, "STRUCTURED_MIN_SIZE", 2000)  # the defaults (the module's fixture lowers them)
+    monkeypatch.setattr(ls, "DENSE_MAX_SIZE", 250)
+    one = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]]).with_contact(fm.UnilateralContact(at=0, gap=1.0))
+           .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
+    mesh = fm.line_mesh(length=1.0, n_elements=10, boundaries={"clamp": 0.0, "tip": 1.0})
+    beam = (fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
+            .with_contact(fm.UnilateralContact(at="tip", gap=0.01)).with_damping(alpha=0.01)
+            .with_forcing(fm.HarmonicForce(at="tip", amplitude=1.0)))
+    rng = np.random.default_rng(2)
+    for model, H, kind in ((one, 80, ls._Dense), (beam, 10, ls._Generic)):
+        prob = ForcedResponseProblem(model, fm.Harmonics(H))
+        x = 0.3 * rng.standard_normal(prob.size)
+        J = prob.residual(x, 1.1)[1]
+        n = J.shape[0]
+        assert n > ls.DENSE_MAX_SIZE
+        assert (J.N.nnz >= ls.DENSE_FILL * n * n) == (kind is ls._Dense)
+        F = ls.BlockSolver().factorize(J)
+        assert type(F) is kind
+        b = rng.standard_normal(n)
+        y = F.solve(b)
+        np.testing.assert_allclose(y, ls.AssembledSolver().factorize(J).solve(b), rtol=0, atol=1e-10 * np.abs(y).max())

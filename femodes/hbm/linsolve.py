@@ -152,6 +152,14 @@ STRUCTURED_MIN_SIZE = 2000
 #: cantilever with a stop 122, 232, 442: 0.35/1.5, 0.8/1.6, 3.8/2.0.
 DENSE_MAX_SIZE = 250
 
+#: Below STRUCTURED_MIN_SIZE, a system whose nonlinear block alone fills at least this fraction
+#: of the matrix is factorised densely too: a contact DOF couples all its harmonics (two dense
+#: ``n_coef x n_coef`` blocks per complementarity contact), so a 1-DOF contact model at high H is
+#: half full. Measured (factorisation and solve of the bordered Jacobian at an in-contact point of
+#: the seed's forced case, one core, ms, LAPACK dense / SuperLU): 323 unknowns (H = 80) 2.3 / 5.0,
+#: 483 (H = 120) 4.3 / 5.7, 643 (H = 160) 8.3 / 9.4.
+DENSE_FILL = 0.25
+
 #: Memory allowed for keeping the condensation columns ``W = Z_II^-1 Z_Ib`` of all harmonics
 #: (``16 n_I n_b (H + 1)`` bytes; 18 MB for a 1e4-DOF bar with 10 contacts at H = 10, 176 MB at
 #: 1e5). With them a solve needs one band solve per harmonic instead of two, and the border
@@ -741,7 +749,8 @@ STAT_KEYS = ("factorizations", "reused", "solves_reused", "passes", "refactorize
 class BlockSolver:
     """Linear solver strategy of the harmonic balance (the default): per-harmonic band LU of the
     linear DOFs and a dense Schur complement on the nonlinear DOFs and borders (module
-    docstring); systems up to :data:`DENSE_MAX_SIZE` unknowns are assembled densely for LAPACK,
+    docstring); systems up to :data:`DENSE_MAX_SIZE` unknowns (or below
+    :data:`STRUCTURED_MIN_SIZE` and at least :data:`DENSE_FILL` full) are assembled densely for LAPACK,
     larger ones below :data:`STRUCTURED_MIN_SIZE`, and blocks that cannot be factorised (an
     interior resonance), go to SuperLU on the assembled matrix.
 
@@ -800,7 +809,8 @@ class BlockSolver:
         self._states = weakref.WeakKeyDictionary()
 
     def factorize(self, J: HarmonicBlockJacobian, *, threads: int | None = None):
-        if J.shape[0] <= DENSE_MAX_SIZE:
+        n = J.shape[0]
+        if n <= DENSE_MAX_SIZE or (n < STRUCTURED_MIN_SIZE and J.N.nnz >= DENSE_FILL * n * n):
             return _Dense(J)
         if J.shape[0] < STRUCTURED_MIN_SIZE:
             return _Generic(J)
