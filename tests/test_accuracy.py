@@ -231,3 +231,28 @@ def test_rtol_forced_fold_within_tolerance():
     assert acc.met[f]
     assert abs(acc.omega_limit[f] / ref - 1.0) <= acc.omega_limit_error[f] <= 1e-3
     assert abs(b.omega[f] / ref - 1.0) > 0.03
+
+
+def test_level_traced_for_some_points_stops_past_the_last(caplog):
+    """A refinement level traced for some points only stops a few points past the last of them
+    (``_Progress``), with the same states for those points as a trace of the whole branch (each
+    the level's solution on the point's hyperplane, polished by Newton to atol 1e-9 from starts
+    on two different continuations: equal to 1e-9)."""
+    import logging
+
+    from femodes.accuracy import _ladder, _trace_by_continuation
+
+    branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
+    lad = _ladder(branch, None, None, "test")
+    n = len(branch)
+    need = np.zeros(n, dtype=bool)
+    need[n // 4: n // 2] = True
+    with caplog.at_level(logging.INFO, logger="femodes.accuracy"):
+        some = _trace_by_continuation(lad, 20, need)
+    assert "stopped by callback" in caplog.text
+    every = _trace_by_continuation(lad, 20, np.ones(n, dtype=bool))
+    for i in np.flatnonzero(need):
+        assert some[i] is not None and every[i] is not None
+        assert abs(some[i].omega - every[i].omega) <= 1e-9
+        np.testing.assert_allclose(some[i].Q, every[i].Q, rtol=0, atol=1e-9)
+    assert all(some[i] is None for i in np.flatnonzero(~need))
