@@ -111,10 +111,32 @@ def test_step_control_recorded_and_resumable():
     ({"corrector_deadline": 0}, ValueError, r"corrector_deadline must be an integer >= 1, got 0"),
     ({"corrector_deadline": 2.0}, TypeError, r"corrector_deadline must be an integer >= 1, got 2\.0"),
     ({"corrector_deadline": True}, TypeError, r"corrector_deadline must be an integer >= 1, got True"),
+    ({"target_norm_change": 0.0}, ValueError, r"target_norm_change must be a positive finite number, got 0\.0"),
 ])
 def test_option_validation(kwargs, error, match):
     with pytest.raises(error, match=match):
         fm.ContinuationOptions(**kwargs)
+
+
+def test_curve_between_points_follows_the_response_off_contact():
+    """With target_norm_change=0.3 the size of the response changes by a
+    bounded ratio per step, so lines drawn between points follow it where the tangent barely turns:
+    on seed case 1 (H = 20) the midpoint of every chord between two points without contact is
+    within 5 % of the linear response there (measured 3.5 %; the response off contact is the
+    linear one, F / |1 - w^2 + i c w|, exactly); without it one step spans w = 1.21 -> 1.83 and its
+    chord is 65 % off at mid-step."""
+    def worst_chord(branch):
+        w, A = branch.omega, np.abs(branch.Q[:, :, 0] @ fm.Harmonics(20).synthesis(np.linspace(0, 2 * np.pi, 256, endpoint=False)).T).max(axis=1)
+        mid, chord = 0.5 * (w[1:] + w[:-1]), 0.5 * (A[1:] + A[:-1])
+        lin = 0.2 / np.abs(1 - mid ** 2 + 0.1j * mid)
+        off = (lin < 0.98) & (A[1:] < 0.98) & (A[:-1] < 0.98)  # gap 1
+        return float(np.max(np.abs(chord[off] / lin[off] - 1)))
+
+    assert frequency_response_options().target_norm_change is None
+    assert worst_chord(seed_branch(20)) > 0.3
+    bounded = fm.frequency_response(seed_case1(), (0.5, 2.0), fm.Harmonics(20),
+                                    options=frequency_response_options(target_norm_change=0.3))
+    assert worst_chord(bounded) <= 0.05
 
 
 def test_options_disable_and_defaults():

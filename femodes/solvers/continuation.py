@@ -588,8 +588,9 @@ class _Tracer:
     def control_step(self, b: _Pt) -> None:
         """Next step from what the accepted step to ``b`` measured (see
         :class:`ContinuationOptions`, ``target_angle``): ``ds / f`` with ``f`` the largest of the
-        deceleration factors ``nit / target_iterations``, ``angle / target_angle`` and
-        ``sqrt(theta / target_contraction)``, ``1/f`` clipped to ``[0.5, max_growth]`` (no growth
+        deceleration factors ``nit / target_iterations``, ``angle / target_angle``,
+        ``sqrt(theta / target_contraction)`` and ``|ln(|x_b| / |x_a|)| / ln(1 +
+        target_norm_change)``, ``1/f`` clipped to ``[0.5, max_growth]`` (no growth
         right after a rejection) and ``ds`` to ``[min_step, max_step]``."""
         opt = self.opt
         # Allgower & Georg [AG03] sec. 6.1: each measure m of a step h behaves like m ~ c h^q
@@ -608,7 +609,12 @@ class _Tracer:
             f_angle = max(b.angle, math.degrees(abs(b.tau))) / opt.target_angle
         if opt.target_contraction is not None and math.isfinite(b.theta):
             f_theta = math.sqrt(b.theta / opt.target_contraction)
-        f = max(f, f_angle, f_theta)
+        f_norm = 0.0
+        if opt.target_norm_change is not None and self.pts:
+            na, nb = self._x_norm(self.pts[-1]), self._x_norm(b)
+            if na > 0 and nb > 0 and math.isfinite(na / nb):
+                f_norm = abs(math.log(nb / na)) / math.log1p(opt.target_norm_change)
+        f = max(f, f_angle, f_theta, f_norm)
         factor = min(max(1.0 / f, 0.5), opt.max_growth) if f > 0 else opt.max_growth
         if self.just_rejected:
             factor = min(factor, 1.0)
@@ -616,6 +622,10 @@ class _Tracer:
         logger.debug("step control at p=%.6g: ds=%.3g nit=%d angle=%.2f deg dist=%.3g theta=%.3g -> x%.3g",
                      b.y[self.n], self.ds, b.nit, b.angle, b.dist, b.theta, factor)
         self.ds = min(max(self.ds * factor, opt.min_step), opt.max_step)
+
+    def _x_norm(self, q: _Pt) -> float:
+        """Scaled norm of the unknowns ``x`` of ``q`` (the parameter left out)."""
+        return self.sys.norm(np.append(q.y[: self.n], 0.0))
 
     # -- folds ------------------------------------------------------------- #
     def detect_fold(self, a: _Pt, b: _Pt) -> bool:
