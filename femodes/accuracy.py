@@ -707,8 +707,8 @@ class _Progress:
     (forward only, a few points ahead, in displacements and frequency) and stops the run once that
     is past branch point ``last``. On the seed's forced case from H = 20 at rtol 1e-3 the needed
     points of levels 80 and 160 end at w = 1.11 on the lower branch; the rest of the branch up to
-    w = 2 was 24 of the 122 points of level 80 and 24 of the 215 of level 160 (with few contacts
-    there, cheap points: 0.4-0.5 s of 21 s). Without the stop a level is traced to the end."""
+    w = 2 was 24 of the 122 points of level 80 and 24 of the 215 of level 160 (few contacts there,
+    cheap points: about 1 s of the 25 s run). Without the stop a level is traced to the end."""
 
     def __init__(self, lad: _Ladder, H: int, near: np.ndarray, first: int, last: int):
         self.lad, self.H, self.near, self.at, self.last = lad, H, near, first, last

@@ -195,11 +195,11 @@ class ContinuationOptions:
         response away from resonance: its phase barely moves and the
         tangent barely turns), where lines drawn between the points cut the
         curve: with the phase predictor the seed contact curve took one step
-        from w = 1.21 to 1.83, amplitude 0.42 -> 0.09, whose chord is 50 %
+        from w = 1.21 to 1.83, amplitude 0.42 -> 0.09, whose chord is 65 %
         off the true amplitude at mid-step. With 0.3 (seed case 1, H = 20:
-        91 -> 94 points, the longest step 0.62 -> 0.17 in w) the chord
+        91 -> 94 points, the longest step 0.62 -> 0.17 in w) every chord
         between two points without contact is within 3.5 % of the response
-        at mid-step instead of 65 %. Not a default of
+        at mid-step. Not a default of
         :func:`femodes.frequency_response` (yet): the other steps move too,
         and on the penalty seed case at H = 40 the lower fold (at grazing)
         was then only approached, 2e-4 off, instead of located, and a
