@@ -88,10 +88,13 @@ def test_a_fold_is_located_or_approached_with_shorter_steps():
     """A fold counts as located only where |dp/ds| is small; otherwise the step is halved.
     Seed case 1, penalty law, H = 40: a step of 0.83 across the lower fold (at grazing) once
     located it at w = 1.0854 (0.4 % off) from a single trial point whose |dp/ds| was 0.027.
-    Now both predictors find the lower fold at the grazing amplitude, w = 1.0808685, within 1e-6."""
-    for predictor in ("tangent", "phase"):
+    Now both predictors find the lower fold at the grazing amplitude, w = 1.0808685, within 1e-6,
+    also with target_norm_change=0.3 (with the tangent predictor the fold is then a corner met at
+    a short step: located after the halvings down to 1/64 of the initial step, marked 2e-4 off
+    with 1/4)."""
+    for predictor, norm in (("tangent", None), ("phase", None), ("tangent", 0.3), ("phase", 0.3)):
         b = fm.frequency_response(_seed("penalty"), (0.5, 2.0), 40,
-                                  options=frequency_response_options(predictor=predictor))
+                                  options=frequency_response_options(predictor=predictor, target_norm_change=norm))
         folds = np.sort(b.omega[list(b.folds)])
         assert b.success and folds == pytest.approx([1.0808685, 1.348299], rel=1e-6)
 
