@@ -13,7 +13,6 @@ conditions converges to it slowly (algebraically in H) because the velocity jump
 import numpy as np
 
 import femodes as fm
-from femodes.analyses import frequency_response_options
 
 H = fm.Harmonics(20)
 GAP = 1.0
@@ -38,12 +37,8 @@ case1 = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]])
 case2 = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.2]])
          .with_contact(fm.UnilateralContact(at=0, gap=2.5))
          .with_forcing(fm.HarmonicForce(at=0, amplitude=1.0)))
-# for the plot: the response's size changes by at most ~30 % per step, so that the lines drawn
-# through the points follow the curve away from resonance (the default steps are sized for the
-# folds and the turning of the branch; there one step spans w = 1.21 -> 1.83)
-PLOT_STEPS = frequency_response_options(target_norm_change=0.3)
-forced1 = fm.frequency_response(case1, (0.5, 2.0), H, options=PLOT_STEPS)
-forced2 = fm.frequency_response(case2, (0.5, 2.0), H, options=PLOT_STEPS)
+forced1 = fm.frequency_response(case1, (0.5, 2.0), H)
+forced2 = fm.frequency_response(case2, (0.5, 2.0), H)
 
 
 def main(out="out"):

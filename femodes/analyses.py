@@ -211,11 +211,12 @@ def frequency_response_options(**changes) -> ContinuationOptions:
     (e.g. ``max_points=50``) applied: step 0.05, max_step 3 (the step control of
     :class:`ContinuationOptions` sizes the steps below it; with the phase predictor most steps of
     the seed contact case reached max_step 2: 113 -> 91 points, 499 -> 436 residual evaluations at
-    H = 20, benchmarks/README_steps.md), Newton to ``atol=1e-9`` in at most 20 iterations. For
-    plots, ``frequency_response_options(target_norm_change=0.3)`` also bounds the change of the
-    response's size per step, so that lines drawn through the points follow the curve away from
-    resonance (:class:`ContinuationOptions`)."""
-    base = ContinuationOptions(step=0.05, max_step=3.0, newton=NewtonOptions(atol=1e-9, max_iter=20))
+    H = 20, benchmarks/README_steps.md), ``target_norm_change=0.3`` (the response's size changes by
+    about 30 % per step at most, so that lines drawn through the points follow the curve away from
+    resonance, where the tangent barely turns: :class:`ContinuationOptions`), Newton to
+    ``atol=1e-9`` in at most 20 iterations."""
+    base = ContinuationOptions(step=0.05, max_step=3.0, newton=NewtonOptions(atol=1e-9, max_iter=20),
+                               target_norm_change=0.3)
     return dataclasses.replace(base, **changes) if changes else base
 
 

@@ -194,14 +194,17 @@ def test_sweep_reports_stable_points_per_case(tmp_path, thread_sweep):
     """analysis.stability as a sweep parameter: n_stable (stable points of the branch, -1 without
     stability), the methods and the bifurcations by kind, in the records, the study file and the table."""
     assert parse_set("analysis.stability=true,false,hill") == ("analysis.stability", [True, False, "hill"])
-    params = {"contact.0.gap": [1.0], "analysis.stability": [True, False], **{k: [v] for k, v in SMALL.items()}}
+    # 16 points: the step control bounds the change of the response's size per step
+    # (target_norm_change), so 12 points end before the grazing point
+    params = {"contact.0.gap": [1.0], "analysis.stability": [True, False], **{k: [v] for k, v in SMALL.items()},
+              "analysis.max_points": [16]}
     with cf.ThreadPoolExecutor(2) as ex:
         res = run_sweep(FRC, params, out=tmp_path, executor=ex)
     assert res.success and [r.parameters["analysis.stability"] for r in res] == [True, False]
     on, off = res
     br = res.load_branch(on.id)
     assert br.stable is not None and on.n_stable == int(br.stable.sum())
-    assert 0 < on.n_stable < on.n_points == len(br) == 12  # H = 3: unstable past the grazing point
+    assert 0 < on.n_stable < on.n_points == len(br) == 16  # H = 3: unstable past the grazing point
     # "auto": shooting, with Hill where a shooting fails
     assert on.stability_method == "+".join(sorted(set(br.stability_method)))
     assert on.stability_method in ("shooting", "hill+shooting")
@@ -221,7 +224,7 @@ def test_sweep_reports_stable_points_per_case(tmp_path, thread_sweep):
         assert json.loads(str(f["header"]))["version"] == 2
     lines = res.table().splitlines()
     assert "stable" in lines[0] and "bifurcations" in lines[0]
-    assert f"{on.n_stable}/12" in lines[2]
+    assert f"{on.n_stable}/{on.n_points}" in lines[2]
     for kind, count in (("nonsmooth", on.n_nonsmooth), ("period_doubling", on.n_period_doubling)):
         assert (f"{kind} {count}" in lines[2]) == (count > 0)
     assert " - " in lines[3]

@@ -199,12 +199,10 @@ class ContinuationOptions:
         off the true amplitude at mid-step. With 0.3 (seed case 1, H = 20:
         91 -> 94 points, the longest step 0.62 -> 0.17 in w) every chord
         between two points without contact is within 3.5 % of the response
-        at mid-step. Not a default of
-        :func:`femodes.frequency_response` (yet): the other steps move too,
-        and on the penalty seed case at H = 40 the lower fold (at grazing)
-        was then only approached, 2e-4 off, instead of located, and a
-        sweep's nonsmooth bifurcation at H = 3 fell between points.
-        ``None``: not used.
+        at mid-step. :func:`femodes.frequency_response` uses 0.3 (with it,
+        the penalty seed case's grazing fold at H = 40 with the tangent
+        predictor is met at a short step and needed the fold retries down
+        to 1/64 of the initial step to be located). ``None``: not used.
     """
 
     step: float = 0.05
