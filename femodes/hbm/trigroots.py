@@ -54,9 +54,11 @@ _GRID_TOL = 64.0
 _DIRECT_EVAL_MAX = 4096
 
 
-def _value_and_slope(coef):
-    """``(p, H, 2)``: the complex coefficients ``a_k`` of ``phi`` and ``i k a_k`` of ``phi'``."""
-    return np.stack([coef, coef * (1j * np.arange(1, coef.shape[1] + 1))], axis=2)
+def _value_and_slope(coef, curvature=False):
+    """``(p, H, 2)``: the complex coefficients ``a_k`` of ``phi`` and ``i k a_k`` of ``phi'``;
+    with ``curvature``, ``(p, H, 3)``: also ``-k^2 a_k`` of ``phi''``."""
+    ik = 1j * np.arange(1, coef.shape[1] + 1)
+    return np.stack([coef, coef * ik, coef * (ik * ik)] if curvature else [coef, coef * ik], axis=2)
 
 
 def trig_eval(A, x, derivative=False):
@@ -202,11 +204,7 @@ class GridRoots:
     def angles(self, a: np.ndarray, h: int) -> np.ndarray:
         """As :meth:`CompanionRoots.angles`; shape ``(rows, 4h)``."""
         rows, h = a.shape[0], int(h)
-        N = max(64, self.per_harmonic * h)
-        # samples of phi and phi' (one real inverse FFT of the half spectra k = 0..h, stacked)
-        half = a[:, h:]
-        k = np.arange(h + 1)
-        vals = np.fft.irfft(np.concatenate([half, half * (1j * k)]), n=N, axis=1) * N  # (2 rows, N)
+        N, vals = self._samples(a[:, h:])  # (2 rows, N)
         nxt = np.concatenate([vals[:, 1:], vals[:, :1]], axis=1)
         q, j = np.nonzero((np.sign(vals) != np.sign(nxt)) & (nxt != 0.0))
         v0, v1 = vals[q, j], nxt[q, j]
@@ -219,6 +217,14 @@ class GridRoots:
         out = np.full((rows, 4 * h), np.inf)
         out[r[keep], slot[keep]] = np.mod(x[keep], _TWO_PI)
         return out
+
+    def _samples(self, half: np.ndarray) -> tuple[int, np.ndarray]:
+        """The grid size ``N`` for the degree ``h`` of the half spectra ``half`` (rows of the
+        complex coefficients ``a_k``, ``k = 0..h``) and the samples of ``phi`` (first rows) and
+        ``phi'`` (last rows) on it: one real inverse FFT of both half spectra, stacked."""
+        h = half.shape[1] - 1
+        N = max(64, self.per_harmonic * h)
+        return N, np.fft.irfft(np.concatenate([half, half * (1j * np.arange(h + 1))]), n=N, axis=1) * N
 
     def sign_changes(self, A: np.ndarray) -> tuple[tuple, np.ndarray]:
         """The sign changes of the series rows ``A`` (m, L) read off the grid directly, without the
@@ -235,12 +241,11 @@ class GridRoots:
         cell at most is seen)."""
         m, L = A.shape
         H = (L - 1) // 2
-        N = max(64, self.per_harmonic * H)
-        cell = _TWO_PI / N
         half = np.empty((m, H + 1), dtype=complex)
         half[:, 0] = A[:, 0]
         half[:, 1:] = 0.5 * (A[:, 1::2] - 1j * A[:, 2::2])
-        vals = np.fft.irfft(np.concatenate([half, half * (1j * np.arange(H + 1))]), n=N, axis=1) * N
+        N, vals = self._samples(half)
+        cell = _TWO_PI / N
         vals = np.concatenate([vals, vals[:, :1]], axis=1)  # sample N is sample 0: the cells' right ends
         f, d = vals[:m], vals[m:]
         tol = _GRID_TOL * _EPS * np.sum(np.abs(A), axis=1)
@@ -444,8 +449,7 @@ def _polish_in_cells(A, x, lo, hi, positive):
     x0 = x
     H = (A.shape[1] - 1) // 2
     k = np.arange(1, H + 1)
-    coef = A[:, 1::2] - 1j * A[:, 2::2]
-    both = np.stack([coef, coef * (1j * k), coef * (-(k * k))], axis=2)  # phi, phi', phi''
+    both = _value_and_slope(A[:, 1::2] - 1j * A[:, 2::2], curvature=True)  # phi, phi', phi''
     c0 = A[:, 0]
     tol_f = 8.0 * _EPS * np.sum(np.abs(A), axis=1)
     done = np.zeros(x.size, dtype=bool)
