@@ -400,13 +400,17 @@ class HBMSystem:
     def dense_linear_operator(self, omega: float, xi: float = 0.0) -> np.ndarray:
         """``S(w) - xi w (D1 x M)`` as a dense array (small systems; the dense operators are
         cached on first use)."""
-        if "dense" not in self._cache:
-            self._cache["dense"] = tuple(A.toarray() for A in (self.A2, self.A1, self.A0, self.AM))
-        A2, A1, A0, AM = self._cache["dense"]
+        A2, A1, A0, AM = self._dense_operators()
         S = (omega * omega) * A2 + omega * A1 + A0
         if xi:
             S -= (xi * omega) * AM
         return S
+
+    def _dense_operators(self) -> tuple:
+        """``A2, A1, A0, AM`` as dense arrays (small systems; cached on first use)."""
+        if "dense" not in self._cache:
+            self._cache["dense"] = tuple(A.toarray() for A in (self.A2, self.A1, self.A0, self.AM))
+        return self._cache["dense"]
 
     def solve_linear(self, rhs: np.ndarray, omega: float) -> np.ndarray:
         """Solve ``S(w) q = rhs`` (the linear structure, no contact) harmonic by harmonic.
@@ -503,21 +507,16 @@ class HBMSystem:
         (:meth:`dense_linear_operator`): four small dense products instead of a dozen sparse ones
         (the 1-DOF seed case: 15 against 90 us)."""
         nq = self.nq
-        if "dense" not in self._cache:
-            self.dense_linear_operator(omega)
-        A2, A1, A0, AM = self._cache["dense"]
+        A2, A1, A0, AM = self._dense_operators()
         q = Q.reshape(-1)
-        y2, y1 = A2 @ q, A1 @ q
+        y2, y1, ym = A2 @ q, A1 @ q, AM @ q
         r, dr_domega, dr_dxi = np.zeros(self.size), np.zeros(self.size), np.zeros(self.size)
         r[:nq] = (omega * omega) * y2 + omega * y1 + A0 @ q
         dr_domega[:nq] = (2.0 * omega) * y2 + y1
+        dr_dxi[:nq] = -omega * ym
         if xi:
-            ym = AM @ q
             r[:nq] -= (xi * omega) * ym
             dr_domega[:nq] -= xi * ym
-            dr_dxi[:nq] = -omega * ym
-        else:
-            dr_dxi[:nq] = -omega * (AM @ q)
         if forced:
             r[:nq] -= self.force()
         return r, dr_domega, dr_dxi
