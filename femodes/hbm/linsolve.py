@@ -812,7 +812,7 @@ class BlockSolver:
         n = J.shape[0]
         if n <= DENSE_MAX_SIZE or (n < STRUCTURED_MIN_SIZE and J.N.nnz >= DENSE_FILL * n * n):
             return _Dense(J)
-        if J.shape[0] < STRUCTURED_MIN_SIZE:
+        if n < STRUCTURED_MIN_SIZE:
             return _Generic(J)
         try:
             state = self._state(J.system)

@@ -103,19 +103,18 @@ _FOLD_MAX_ITER = 12
 _FOLD_TOL = 1e-9
 #: A fold counts as located when ``|dp/ds|`` at the best point found is at most this fraction of
 #: the larger ``|dp/ds|`` at the two ends of the step (regula falsi converged, not stopped by a
-#: failed corrector); otherwise a step longer than ``_FOLD_RETRY_STEP`` times
-#: ``ContinuationOptions.step`` (the initial step) is halved, and a shorter one marks the nearer
-#: end (a rule of the step alone, so that a resumed run repeats it; with the initial step itself as
-#: the limit, seed case 2 at H = 10 marked one 0.24 % off). Seed case 1, penalty law, H = 40, phase predictor: a step of 0.83 across the
+#: failed corrector). Seed case 1, penalty law, H = 40, phase predictor: a step of 0.83 across the
 #: lower fold (a grazing point) had its second trial corrector fail, and the one point found
 #: (|dp/ds| 0.027 of 0.12) was taken as the fold, 0.4 % off in w.
 _FOLD_ACCEPT = 1e-3
 #: A fold that is not located (``_FOLD_ACCEPT``) is retried with the step halved while the step is
 #: longer than this fraction of the initial step (``ContinuationOptions.step``); below it the
-#: nearer end of the step is marked. 1/64: on the penalty seed case at H = 40 (tangent predictor,
-#: ``target_norm_change=0.3``) the lower fold, a corner at grazing, is located with the shorter
-#: steps; with 1/4 its step stopped at 0.0125 and the marked point was 2e-4 off in w. Where folds
-#: are located anyway (the benchmark cases with the default options) nothing changes.
+#: nearer end of the step is marked (a rule of the step alone, so that a resumed run repeats it;
+#: with the initial step itself as the limit, seed case 2 at H = 10 marked one 0.24 % off). 1/64:
+#: on the penalty seed case at H = 40 (tangent predictor, ``target_norm_change=0.3``) the lower
+#: fold, a corner at grazing, is located with the shorter steps; with 1/4 its step stopped at
+#: 0.0125 and the marked point was 2e-4 off in w. Where folds are located anyway (the benchmark
+#: cases with the default options) nothing changes.
 _FOLD_RETRY_STEP = 1.0 / 64.0
 #: Kink acceptance (see ContinuationOptions.max_turn_angle): after a geometric
 #: rejection, the halved step is accepted as crossing a kink when the turn angle
