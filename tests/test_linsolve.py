@@ -537,6 +537,13 @@ def test_block_solver_factorises_half_full_systems_densely(monkeypatch):
         assert (J.N.nnz >= ls.DENSE_FILL * n * n) == (kind is ls._Dense)
         F = ls.BlockSolver().factorize(J)
         assert type(F) is kind
+        if kind is ls._Dense:  # assembled from the cached dense operators (no CSR matrix), entry for entry
+            Jb = J.bordered(np.ones((n, 1)), np.ones((1, n)), np.array([[2.0]]))
+            sparse = [A.tocsr().toarray() for A in (J, 2.5 * J, Jb)]
+            with monkeypatch.context() as m:
+                m.setattr(HarmonicBlockJacobian, "tocsr", lambda self: pytest.fail("toarray built a CSR matrix"))
+                for A, S in zip((J, 2.5 * J, Jb), sparse):
+                    np.testing.assert_array_equal(A.toarray(), S)
         b = rng.standard_normal(n)
         y = F.solve(b)
         np.testing.assert_allclose(y, ls.AssembledSolver().factorize(J).solve(b), rtol=0, atol=1e-10 * np.abs(y).max())
