@@ -351,24 +351,6 @@ class _Levels:
         return dw * f, dq * f, r
 
 
-def _relative_quality(branch: Branch) -> tuple[np.ndarray, np.ndarray]:
-    """Penetration over the largest contact-DOF displacement, tension over the largest contact
-    force, per point (0 without contacts)."""
-    n = len(branch)
-    pen, ten = np.zeros(n), np.zeros(n)
-    if not branch.contacts.kinds or not n:
-        return pen, ten
-    for i, sol in enumerate(branch):
-        t = sol._fine_t()
-        u = sol.displacement(t)[:, list(branch.contacts.dofs)]
-        f = sol.contact_force(t)
-        amp = float(np.max(np.abs(u))) or 1.0
-        fmax = float(np.max(f)) if f.size else 0.0
-        pen[i] = sol.penetration / amp
-        ten[i] = sol.tension / fmax if fmax > 0 else 0.0
-    return pen, ten
-
-
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: int | None = None, projection=None,
                    newton: NewtonOptions | None = None) -> Branch:
@@ -450,7 +432,7 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
                 lv = _Levels(chains[i], lad.Q_norm(i), lad.omega_ref(i))
                 w_lim[i], w_lim_err[i] = lv.frequency_bracket()
                 finest[i] = top
-    pen, ten = _relative_quality(branch)
+    pen, ten = branch.contact_quality()
     method = np.where(np.isfinite(ew), "doubling", "failed")
     branch.set_accuracy(ErrorEstimate(omega=ew, amplitude=eq, penetration=pen, tension=ten,
                                       harmonics=np.full(n, H), rate=rates, method=method, rtol=rtol,

@@ -246,6 +246,31 @@ def _penetration(harmonics: Harmonics, contacts: ContactInfo, Q: np.ndarray) -> 
     return worst
 
 
+def _contact_quality(harmonics: Harmonics, contacts: ContactInfo, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Per point, over all contacts on the fine grid of :func:`_penetration`: penetration
+    ``max(0, max_t -g_N)``, tension ``max(0, max_t -p)``, the largest ``|q|`` of a contact DOF
+    and the largest contact force ``max_t p`` (rows 0-3 of the ``(4, n_points)`` result).
+
+    ``Q``, ``P`` of shapes ``(n_points, n_coef, n_dofs)`` and ``(n_points, n_coef, n_p)``: one
+    synthesis matrix for all points (the error estimate's contact quality of a 94-point branch
+    took 1.2 s point by point, four syntheses each)."""
+    m = Q.shape[0]
+    out = np.zeros((4, m))
+    if not contacts.kinds or not m:
+        return out
+    out[3] = -np.inf
+    n = _fine_points(harmonics)
+    E = harmonics.synthesis(2 * np.pi * np.arange(n) / n)
+    for kind, law, dof, slot in zip(contacts.kinds, contacts.laws, contacts.dofs, contacts.slots):
+        u = E @ Q[:, :, dof].T  # (n, m)
+        f = E @ P[:, :, slot].T if kind == "complementarity" else law.force(u)[0]
+        out[0] = np.maximum(out[0], np.max(-law.gap_function(u), axis=0))
+        out[1] = np.maximum(out[1], np.max(-f, axis=0))
+        out[2] = np.maximum(out[2], np.max(np.abs(u), axis=0))
+        out[3] = np.maximum(out[3], np.max(f, axis=0))
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class PeriodicSolution:
     """One periodic solution ``q(t) = sum_k Q_k (cos, sin)(k w t / nu)``.
@@ -501,7 +526,20 @@ class Branch:
 
     @property
     def tension(self) -> np.ndarray:
-        return np.array([s.tension for s in self])
+        """:attr:`PeriodicSolution.tension` at every point (one synthesis for the branch)."""
+        return _contact_quality(self.harmonics, self.contacts, self.Q, self.P)[1]
+
+    def contact_quality(self) -> tuple[np.ndarray, np.ndarray]:
+        """Relative contact quality at every point: penetration over the largest displacement of a
+        contact DOF, tension over the largest contact force; zeros without contacts. A point
+        whose largest contact force is at round-off level of the branch's (``1e-12`` of it: the
+        complementarity forces of a point without contact) counts as without contact force (its
+        tension over that force would be a ratio of round-offs, about 1). The measures of
+        :attr:`ErrorEstimate.penetration` and :attr:`ErrorEstimate.tension`."""
+        pen, ten, amp, fmax = _contact_quality(self.harmonics, self.contacts, self.Q, self.P)
+        touching = fmax > 1e-12 * max(float(np.max(fmax, initial=0.0)), 0.0)
+        touching &= fmax > 0
+        return pen / np.where(amp > 0, amp, 1.0), np.where(touching, ten / np.where(touching, fmax, 1.0), 0.0)
 
     def attach(self, model) -> "Branch":
         """Attach the model (after :func:`load_branch`) so solutions can expand to the full field."""

@@ -169,6 +169,26 @@ def test_penetration_and_tension(mixed, duffing_branch):
     assert np.all(duffing_branch.penetration == 0.0)
 
 
+def test_branch_contact_quality_is_the_points(mixed, duffing_branch):
+    """Branch.tension and Branch.contact_quality (one synthesis for the branch) are the points'
+    own measures: tension to the rounding of two series evaluations, the relative penetration
+    and tension (error estimate's contact quality) against their definition point by point."""
+    ten = mixed.tension
+    pen_rel, ten_rel = mixed.contact_quality()
+    assert pen_rel.shape == ten_rel.shape == (len(mixed),)
+    for i, s in enumerate(mixed):
+        t = s._fine_t()
+        amp = np.abs(s.displacement(t)[:, list(mixed.contacts.dofs)]).max()
+        fmax = s.contact_force(t).max()
+        scale = 4 * np.finfo(float).eps * (1 + 2 * np.pi * s.harmonics.n_harmonics) * np.abs(s.P).sum()
+        assert abs(ten[i] - s.tension) <= scale
+        assert pen_rel[i] == pytest.approx(s.penetration / amp, rel=1e-12, abs=1e-15)
+        assert ten_rel[i] == pytest.approx(s.tension / fmax if fmax > 0 else 0.0, rel=1e-12, abs=1e-15)
+    assert ten_rel.max() > 0 and pen_rel.max() > 0
+    pen_d, ten_d = duffing_branch.contact_quality()
+    assert np.all(pen_d == 0) and np.all(ten_d == 0) and np.all(duffing_branch.tension == 0)
+
+
 # =============================================================================== Branch
 def test_branch_indexing_and_iteration(duffing_branch):
     br = duffing_branch
