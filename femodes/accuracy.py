@@ -15,7 +15,9 @@ Newton cannot jump between levels from the branch's own point (the truncated or 
 forces are outside its basin), so each level is traced: with impacts by a continuation of the
 level itself from the branch's first point, each point being the crossing of that curve with its
 hyperplane (:func:`_trace_level_by_continuation`; points it misses are walked from their
-predecessor), for smooth laws along the branch, point after point (:func:`_trace_level`). A
+predecessor; points without contact force are every level's own point, nothing is solved for
+them, so the continuation runs from the last of them before the first contact to two points
+after the last contact), for smooth laws along the branch, point after point (:func:`_trace_level`). A
 located fold is the level's nearest fold, so fold frequencies of the levels are compared
 directly.
 
@@ -171,6 +173,11 @@ class _Ladder:
         n_coef = A.shape[0]
         H = (n_coef - 1) // 2
         return self.harmonics(H).convert(A, h) if H != h.n_harmonics else A
+
+    def padded(self, H: int, i: int) -> _State:
+        """Point ``i`` of the branch on level ``H`` as it is (zero harmonics added, or dropped)."""
+        a, h = _anchor(self.branch, i), self.harmonics(H)
+        return _State(H, self._on(a.Q, h), self._on(a.P, h), a.omega, a.xi, a.p, a.nit, a.residual_norm)
 
     def state(self, H: int, y: np.ndarray) -> _State:
         u = self.problem(H).unpack(y[:-1], y[-1])
@@ -588,9 +595,12 @@ def _trace_level(lad: _Ladder, H: int) -> list:
 
 
 def _trace_level_by_continuation(lad: _Ladder, H: int) -> list:
-    """Every point of the branch at level ``H`` (branches with impacts): from a continuation of
-    the level itself (:func:`_trace_by_continuation`), the points it misses walked from their
+    """Every point of the branch at level ``H`` (branches with impacts): the points without
+    contact force as they are (:func:`_without_contact`), the others from a continuation of the
+    level itself (:func:`_trace_by_continuation`), the points it misses walked from their
     predecessor as :func:`_trace_level` does, and a missed fold located by a short continuation.
+    Seed's forced case at H = 20: 27 of 94 points without contact; levels 10 and 40 took 51 and
+    96 continuation points over the whole branch, 30 and 67 over its contact part.
 
     Walking level 2H along every point costs more than tracing it: on the seed's forced case at
     H = 20, 230 hyperplane solves (26 failing, halved) and 33 s of CPU for level 40, against
@@ -600,7 +610,10 @@ def _trace_level_by_continuation(lad: _Ladder, H: int) -> list:
     n = len(branch)
     if H == branch.harmonics.n_harmonics:
         return [_anchor(branch, i) for i in range(n)]
-    out = _trace_by_continuation(lad, H, np.ones(n, dtype=bool))
+    free = _without_contact(branch)
+    out = _trace_by_continuation(lad, H, ~free) if not free.all() else [None] * n
+    for i in np.flatnonzero(free):  # the branch's point is the level's (padded): nothing to solve
+        out[i] = lad.padded(H, i)
     folds = set(branch.folds)
     missed = 0
     for i in range(n):
@@ -738,13 +751,18 @@ def _between(prob, y0: np.ndarray, y1: np.ndarray, theta: float) -> np.ndarray:
     return np.append(np.asarray(shift(x0 + theta * (back - x0), theta * tau), dtype=float), p)
 
 
-def _free_before(branch: Branch, i: int) -> int:
-    """The last point at or before ``i`` without contact force (every level agrees there), else 0."""
+def _without_contact(branch: Branch) -> np.ndarray:
+    """The points without contact force (complementarity forces zero to round-off): every level is
+    the branch's own point there (the linear response, padded with zero harmonics, solves the
+    equations of any level exactly)."""
     P = np.abs(branch.P)
     if not P.size:
-        return i
+        return np.zeros(len(branch), dtype=bool)
     small = 1e-12 * float(P.max())  # the complementarity force below contact is zero to round-off
-    for j in range(i, -1, -1):
-        if float(P[j].max()) <= small:
-            return j
-    return 0
+    return P.reshape(len(branch), -1).max(axis=1) <= small
+
+
+def _free_before(branch: Branch, i: int) -> int:
+    """The last point at or before ``i`` without contact force (every level agrees there), else 0."""
+    free = np.flatnonzero(_without_contact(branch)[: i + 1])
+    return int(free[-1]) if free.size else (i if not branch.P.size else 0)

@@ -547,3 +547,72 @@ def test_block_solver_factorises_half_full_systems_densely(monkeypatch):
         b = rng.standard_normal(n)
         y = F.solve(b)
         np.testing.assert_allclose(y, ls.AssembledSolver().factorize(J).solve(b), rtol=0, atol=1e-10 * np.abs(y).max())
+
+
+def _one_dof(damping=0.1, cubic=False):
+    m = fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[damping]] if damping else None)
+    m = m.with_contact(fm.UnilateralContact(at=0, gap=1.0)).with_forcing(fm.HarmonicForce(at=0, amplitude=0.2))
+    return m.with_nonlinearity(fm.CubicSpring(at=0, k3=0.5)) if cubic else m
+
+
+def test_dense_solve_eliminates_displacements_first():
+    """Half-full systems without displacement-displacement nonlinear terms (complementarity
+    contacts only) eliminate the displacements harmonic by harmonic and factorise the Schur
+    complement on the contact forces (half the size for a 1-DOF contact): the same solution as
+    the LU of the whole matrix, to the backward-error test of the structured solver (64 eps
+    ||J|| |x|); several right-hand sides, a border, EPMC's xi."""
+    from femodes.hbm import linsolve as ls
+
+    rng = np.random.default_rng(5)
+    for H, xi in ((80, 0.0), (40, 0.03)):
+        prob = ForcedResponseProblem(_one_dof(), fm.Harmonics(H))
+        x = 0.3 * rng.standard_normal(prob.size)
+        J = prob.residual(x, 1.1)[1]
+        if xi:
+            J = HarmonicBlockJacobian(J.system, J.omega, xi, J.N, scale=J.scale)
+        n = J.shape[0]
+        Jb = J.bordered(rng.standard_normal((n, 1)), rng.standard_normal((1, n)), np.array([[2.0]]))
+        F = ls._Dense(Jb)
+        assert isinstance(F.schur, ls._ForceSchur) and F.lu is None
+        assert F.schur.lu[0].shape[0] == prob.system.np + 1  # forces and the border only
+        A = Jb.toarray()
+        B = rng.standard_normal((n + 1, 3))
+        X = F.solve(B)
+        assert F.schur is not None  # no fallback was needed
+        res = np.abs(A @ X - B).max(axis=0)
+        assert np.all(res <= 64 * np.finfo(float).eps * (np.abs(A).sum(axis=1).max() * np.abs(X).max(axis=0)
+                                                         + np.abs(B).max(axis=0)))
+        np.testing.assert_allclose(X, sla.lu_solve(sla.lu_factor(A), B), rtol=0,
+                                   atol=1e-9 * np.abs(X).max())  # cond(A) < 1e5 here
+        np.testing.assert_allclose(F.solve(B[:, 0]), X[:, 0], rtol=0, atol=1e-12 * np.abs(X).max())
+
+
+def test_dense_solve_keeps_the_whole_lu_where_elimination_does_not_apply(monkeypatch):
+    """A cubic spring couples the displacements (no elimination); a harmonic block at or next to
+    an undamped resonance (k w = 1) is singular or makes the Schur complement grow (no
+    elimination: the whole matrix is pivoted); an inaccurate solve falls back to the LU of the
+    whole matrix."""
+    from femodes.hbm import linsolve as ls
+
+    rng = np.random.default_rng(6)
+    prob = ForcedResponseProblem(_one_dof(cubic=True), fm.Harmonics(40))
+    J = prob.residual(0.3 * rng.standard_normal(prob.size), 1.1)[1]
+    F = ls._Dense(J)
+    assert F.schur is None and F.lu is not None
+    undamped = ForcedResponseProblem(_one_dof(damping=0.0), fm.Harmonics(40))
+    x = 0.3 * rng.standard_normal(undamped.size)
+    for w, blocked in ((1.0, True), (1.0 + 1e-10, True), (0.5 + 0.1234, False)):
+        J = undamped.residual(x, w)[1]
+        assert (ls._Dense(J).schur is None) == blocked
+    # a solve that the refinement cannot make accurate (here: an elimination that returns
+    # zeros) is redone by the LU of the whole matrix, which is kept from then on
+    J = undamped.residual(x, 0.5 + 0.1234)[1]
+    F = ls._Dense(J)
+    assert F.schur is not None
+    monkeypatch.setattr(ls._ForceSchur, "_solve", lambda self, B: np.zeros_like(B))
+    b = rng.standard_normal(J.shape[0])
+    y = F.solve(b)
+    A = J.toarray()
+    assert F.schur is None and F.lu is not None
+    assert np.abs(A @ y - b).max() <= 64 * np.finfo(float).eps * (np.abs(A).sum(axis=1).max() * np.abs(y).max()
+                                                                  + np.abs(b).max())

@@ -167,6 +167,13 @@ DENSE_FILL = 0.25
 #: conversion took 3.0 of the 4.3 ms of a factorisation, the LU itself 1.1 ms.
 DENSE_OPERATORS_MAX = 1000
 
+#: Largest growth of the entries that :class:`_ForceSchur` accepts from eliminating the
+#: displacements without pivoting across blocks: the Schur complement's largest entry over the
+#: largest entry of the blocks it comes from (a harmonic block near singular, ``k w`` at an
+#: eigenfrequency of the undamped structure, makes it large; the whole matrix is then pivoted).
+#: Growth ``g`` costs up to ``g eps`` of relative accuracy before refinement.
+SCHUR_MAX_GROWTH = 1e6
+
 #: Memory allowed for keeping the condensation columns ``W = Z_II^-1 Z_Ib`` of all harmonics
 #: (``16 n_I n_b (H + 1)`` bytes; 18 MB for a 1e4-DOF bar with 10 contacts at H = 10, 176 MB at
 #: 1e5). With them a solve needs one band solve per harmonic instead of two, and the border
@@ -938,18 +945,145 @@ class _Dense:
     """LAPACK LU (partial pivoting) of the densely assembled matrix: for small systems the sparse
     machinery's per-call overhead (building CSR matrices, SuperLU's symbolic phase) is what a
     Newton step costs (measured: seed contact case, 83 unknowns, 4.3 of 5.0 ms per factorisation
-    in assembling the sparse matrix)."""
+    in assembling the sparse matrix). Above :data:`DENSE_MAX_SIZE` (half-full systems,
+    :data:`DENSE_FILL`) the displacements are eliminated first when they can be
+    (:class:`_ForceSchur`)."""
 
     def __init__(self, J: HarmonicBlockJacobian):
         A = J.toarray()
         if not np.all(np.isfinite(A)):
             raise RuntimeError("matrix has non-finite entries")
-        self.lu = sla.lu_factor(A, check_finite=False)
+        self.A = A
+        self.schur = _ForceSchur.build(J, A) if A.shape[0] > DENSE_MAX_SIZE else None
+        self.lu = None
+        if self.schur is None:
+            self._factor()
+
+    def _factor(self) -> None:
+        self.lu = sla.lu_factor(self.A, check_finite=False)
         if np.any(np.diagonal(self.lu[0]) == 0.0):
             raise RuntimeError("Factor is exactly singular")
 
     def solve(self, b):
-        return sla.lu_solve(self.lu, np.asarray(b, dtype=float), check_finite=False)
+        b = np.asarray(b, dtype=float)
+        if self.schur is not None:
+            x = self.schur.solve(b)
+            if x is not None:
+                return x
+            self.schur = None  # not accurate enough here: the plain LU from now on
+            self._factor()
+        return sla.lu_solve(self.lu, b, check_finite=False)
+
+
+class _ForceSchur:
+    r"""Solve of a dense HBM Jacobian by eliminating the displacement coefficients first.
+
+    Without nonlinear displacement-displacement terms (complementarity contacts only: the
+    contact forces are unknowns of their own and the displacements enter only their rows), the
+    displacement block of ``J`` is ``s S(w)``, block diagonal over harmonics (``n x n`` for the
+    mean, ``2n x 2n`` for each ``(cos, sin)`` pair; Rayleigh, modal and EPMC damping all stay
+    within a harmonic). With ``J = [[A, B], [C, D]]`` (``q`` first; forces and borders second),
+    ``A^{-1}`` costs ``H`` small inverses, and the forces act on the displacements of their own
+    coefficient only (``B = s (I x B_c)`` on the force columns), so the Schur complement
+    ``D - C A^{-1} B`` needs ``O(H n^2 n_p)`` work for them plus one product for the border
+    columns: the LU is of size ``n_p (2H + 1) + m`` instead of ``(n + n_p)(2H + 1) + m`` (a 1-DOF
+    contact: half the size, an eighth of the work). Measured on level H = 160 of the seed's
+    forced case (643 unknowns): 6 ms per LU of the whole matrix, see ``benchmarks/README_accuracy.md``.
+
+    Pivoting is only within the harmonic blocks and within the Schur complement, so no block may
+    be near singular (``k w`` on an eigenfrequency of the undamped structure, as for an undamped
+    nonlinear mode at low energy): if the Schur complement's entries grow by more than
+    :data:`SCHUR_MAX_GROWTH` over those of the blocks, nothing is eliminated (:meth:`build`
+    returns None), and a solve whose backward error after two refinement steps still exceeds
+    the test of :class:`_Factorization` is redone by the plain LU (:meth:`solve` returns None).
+    """
+
+    def __init__(self, A, nq, G0, G, Ainv0, Ainv, T):
+        self.A, self.nq, self.G0, self.G = A, nq, G0, G
+        self.Ainv0, self.Ainv = Ainv0, Ainv
+        self._norm = None
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", sla.LinAlgWarning)  # zero pivots are checked below
+            self.lu = sla.lu_factor(T, check_finite=False)
+        if np.any(np.diagonal(self.lu[0]) == 0.0):
+            raise RuntimeError("Factor is exactly singular")
+
+    @property
+    def norm(self) -> float:
+        """``||J||_inf`` (for the backward-error test; on first use)."""
+        if self._norm is None:
+            self._norm = float(np.abs(self.A).sum(axis=1).max())
+        return self._norm
+
+    @classmethod
+    def build(cls, J: HarmonicBlockJacobian, A: np.ndarray) -> "_ForceSchur | None":
+        s = J.system
+        nq, n, n_uc = getattr(s, "nq", 0), getattr(s, "n", 0), getattr(s, "n_uc", 0)
+        h = getattr(s, "h", None)
+        if not (n_uc and nq and h is not None and h.n_harmonics):
+            return None
+        # rows of the displacements in N: only the forces of their own coefficient row (no
+        # cubic or penalty terms, which couple displacements; B_c = the contacts' DOFs)
+        N = J.N
+        end = int(N.indptr[nq])
+        cols = N.indices[:end]
+        if end and (np.any(cols < nq) or np.any(np.repeat(np.arange(nq) // n, np.diff(N.indptr[: nq + 1]))
+                                                   != (cols - nq) // n_uc)):
+            return None
+        H = h.n_harmonics
+        k = np.arange(1, H + 1)
+        rows = np.stack([h.cos_rows(k), h.sin_rows(k)], axis=1)             # (H, 2)
+        G = (rows[:, :, None] * n + np.arange(n)).reshape(H, 2 * n)          # q positions
+        P = (rows[:, :, None] * n_uc + np.arange(n_uc)).reshape(H, 2 * n_uc)  # force positions (- nq)
+        G0, P0 = np.arange(n), np.arange(n_uc)
+        A11 = A[G[:, :, None], G[:, None, :]]
+        A0 = A[np.ix_(G0, G0)]
+        try:
+            Ainv, Ainv0 = np.linalg.inv(A11), np.linalg.inv(A0)
+        except np.linalg.LinAlgError:
+            return None
+        C = A[nq:, :nq]
+        T = A[nq:, nq:].copy()
+        scale = max(float(np.abs(A11).max()), float(np.abs(A0).max()), float(np.abs(T).max()))
+        # force columns, harmonic by harmonic: T[:, P_k] -= C[:, G_k] A_k^-1 B[G_k, P_k]
+        Xk = Ainv @ A[G[:, :, None], nq + P[:, None, :]]                     # (H, 2n, 2n_uc)
+        T[:, P] -= np.matmul(C[:, G].transpose(1, 0, 2), Xk).transpose(1, 0, 2)
+        T[:, P0] -= C[:, G0] @ (Ainv0 @ A[np.ix_(G0, nq + P0)])
+        if A.shape[1] > nq + s.np:  # border columns: dense
+            T[:, s.np:] -= C @ cls._apply(Ainv0, Ainv, G0, G, A[:nq, nq + s.np:])
+        if not float(np.abs(T).max()) <= SCHUR_MAX_GROWTH * scale:  # also catches non-finite entries
+            return None
+        return cls(A, nq, G0, G, Ainv0, Ainv, T)
+
+    @staticmethod
+    def _apply(Ainv0, Ainv, G0, G, R: np.ndarray) -> np.ndarray:
+        """``A^{-1} R`` for the displacement rows ``R`` (``(nq, k)``), block by block."""
+        out = np.empty_like(R)
+        out[G] = Ainv @ R[G]
+        out[G0] = Ainv0 @ R[G0]
+        return out
+
+    def solve(self, b: np.ndarray) -> np.ndarray | None:
+        B = b.reshape(b.shape[0], -1)
+        x = self._solve(B)
+        scale_b = float(np.max(np.abs(B))) or 1.0
+        for _ in range(2):
+            res = B - self.A @ x
+            tol = 64 * np.finfo(float).eps * (self.norm * float(np.max(np.abs(x))) + scale_b)
+            if np.max(np.abs(res)) <= tol:
+                return x.reshape(b.shape)
+            x = x + self._solve(res)
+        log.debug("displacement elimination inaccurate (|res| = %.2e > %.2e); plain LU",
+                  float(np.max(np.abs(B - self.A @ x))), tol)
+        return None
+
+    def _solve(self, B: np.ndarray) -> np.ndarray:
+        nq = self.nq
+        A = self.A
+        y = self._apply(self.Ainv0, self.Ainv, self.G0, self.G, B[:nq])
+        x2 = sla.lu_solve(self.lu, B[nq:] - A[nq:, :nq] @ y, check_finite=False)
+        x1 = self._apply(self.Ainv0, self.Ainv, self.G0, self.G, B[:nq] - A[:nq, nq:] @ x2)
+        return np.concatenate([x1, x2])
 
 
 class _Generic:
