@@ -555,7 +555,7 @@ def _one_dof(damping=0.1, cubic=False):
     return m.with_nonlinearity(fm.CubicSpring(at=0, k3=0.5)) if cubic else m
 
 
-def test_dense_solve_eliminates_displacements_first():
+def test_dense_solve_eliminates_displacements_first(monkeypatch):
     """Half-full systems without displacement-displacement nonlinear terms (complementarity
     contacts only) eliminate the displacements harmonic by harmonic and factorise the Schur
     complement on the contact forces (half the size for a 1-DOF contact): the same solution as
@@ -564,6 +564,14 @@ def test_dense_solve_eliminates_displacements_first():
     from femodes.hbm import linsolve as ls
 
     rng = np.random.default_rng(5)
+    # the defaults: a 1-DOF contact at H = 120 (483 unknowns) goes to LAPACK with the elimination
+    with monkeypatch.context() as m:
+        m.setattr(ls, "STRUCTURED_MIN_SIZE", 2000)
+        m.setattr(ls, "DENSE_MAX_SIZE", 250)
+        prob = ForcedResponseProblem(_one_dof(), fm.Harmonics(120))
+        F = ls.BlockSolver().factorize(prob.residual(0.3 * rng.standard_normal(prob.size), 1.1)[1])
+        assert type(F) is ls._Dense and F.schur is not None
+    monkeypatch.setattr(ls, "SCHUR_MIN_SIZE", 0)  # down to the small systems of the test
     for H, xi in ((80, 0.0), (40, 0.03)):
         prob = ForcedResponseProblem(_one_dof(), fm.Harmonics(H))
         x = 0.3 * rng.standard_normal(prob.size)
@@ -594,6 +602,7 @@ def test_dense_solve_keeps_the_whole_lu_where_elimination_does_not_apply(monkeyp
     whole matrix."""
     from femodes.hbm import linsolve as ls
 
+    monkeypatch.setattr(ls, "SCHUR_MIN_SIZE", 0)
     rng = np.random.default_rng(6)
     prob = ForcedResponseProblem(_one_dof(cubic=True), fm.Harmonics(40))
     J = prob.residual(0.3 * rng.standard_normal(prob.size), 1.1)[1]

@@ -167,6 +167,12 @@ DENSE_FILL = 0.25
 #: conversion took 3.0 of the 4.3 ms of a factorisation, the LU itself 1.1 ms.
 DENSE_OPERATORS_MAX = 1000
 
+#: Dense systems from this size on eliminate the displacements first when they can
+#: (:class:`_ForceSchur`). Measured per factorisation and two solves of the bordered 1-DOF
+#: contact Jacobian (one core, ms, elimination / whole LU): 323 unknowns (H = 80) 1.9 / 1.3,
+#: 483 (H = 120) 2.4 / 3.4, 643 (H = 160) 4.3 / 7.5.
+SCHUR_MIN_SIZE = 400
+
 #: Largest growth of the entries that :class:`_ForceSchur` accepts from eliminating the
 #: displacements without pivoting across blocks: the Schur complement's largest entry over the
 #: largest entry of the blocks it comes from (a harmonic block near singular, ``k w`` at an
@@ -945,8 +951,8 @@ class _Dense:
     """LAPACK LU (partial pivoting) of the densely assembled matrix: for small systems the sparse
     machinery's per-call overhead (building CSR matrices, SuperLU's symbolic phase) is what a
     Newton step costs (measured: seed contact case, 83 unknowns, 4.3 of 5.0 ms per factorisation
-    in assembling the sparse matrix). Above :data:`DENSE_MAX_SIZE` (half-full systems,
-    :data:`DENSE_FILL`) the displacements are eliminated first when they can be
+    in assembling the sparse matrix). From :data:`SCHUR_MIN_SIZE` unknowns on (half-full
+    systems, :data:`DENSE_FILL`) the displacements are eliminated first when they can be
     (:class:`_ForceSchur`)."""
 
     def __init__(self, J: HarmonicBlockJacobian):
@@ -954,7 +960,7 @@ class _Dense:
         if not np.all(np.isfinite(A)):
             raise RuntimeError("matrix has non-finite entries")
         self.A = A
-        self.schur = _ForceSchur.build(J, A) if A.shape[0] > DENSE_MAX_SIZE else None
+        self.schur = _ForceSchur.build(J, A) if A.shape[0] >= SCHUR_MIN_SIZE else None
         self.lu = None
         if self.schur is None:
             self._factor()
@@ -987,8 +993,9 @@ class _ForceSchur:
     coefficient only (``B = s (I x B_c)`` on the force columns), so the Schur complement
     ``D - C A^{-1} B`` needs ``O(H n^2 n_p)`` work for them plus one product for the border
     columns: the LU is of size ``n_p (2H + 1) + m`` instead of ``(n + n_p)(2H + 1) + m`` (a 1-DOF
-    contact: half the size, an eighth of the work). Measured on level H = 160 of the seed's
-    forced case (643 unknowns): 6 ms per LU of the whole matrix, see ``benchmarks/README_accuracy.md``.
+    contact: half the size, an eighth of the work). Measured on the seed's 1-DOF contact at
+    H = 160 (643 unknowns with the border): 5.9 ms per LU of the whole matrix, 2.3 ms for the
+    elimination and the LU of the forces (:data:`SCHUR_MIN_SIZE`).
 
     Pivoting is only within the harmonic blocks and within the Schur complement, so no block may
     be near singular (``k w`` on an eigenfrequency of the undamped structure, as for an undamped
