@@ -258,3 +258,36 @@ def test_level_traced_for_some_points_stops_past_the_last(caplog):
         assert abs(some[i].omega - every[i].omega) <= 1e-9
         np.testing.assert_allclose(some[i].Q, every[i].Q, rtol=0, atol=1e-9)
     assert all(some[i] is None for i in np.flatnonzero(~need))
+
+
+def test_level_traced_backward_for_the_far_side(caplog):
+    """Needed points on the rising side and next to the lower fold (as level 160 of an rtol run
+    has them): the level is traced forward for the first group and backward from the branch's
+    contact-free end for the second (``_plan_traces``), with the same states as one forward
+    trace of the whole branch (polished on the same hyperplanes: equal to 1e-9, as above)."""
+    import logging
+
+    from femodes.accuracy import _ladder, _plan_traces, _trace_by_continuation, _without_contact
+
+    branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
+    lad = _ladder(branch, None, None, "test")
+    n = len(branch)
+    contact = np.flatnonzero(~_without_contact(branch))
+    upper, lower = branch.folds[:2]
+    need = np.zeros(n, dtype=bool)
+    need[contact[0] + 2: contact[0] + 5] = True
+    need[lower - 4: lower - 1] = True
+    plan = _plan_traces(branch, need)
+    assert [forward for _, forward in plan] == [True, False]
+    with caplog.at_level(logging.INFO, logger="femodes.accuracy"):
+        some = _trace_by_continuation(lad, 20, need)
+    assert "backward from point %d" % (n - 1) in caplog.text
+    every = _trace_by_continuation(lad, 20, np.ones(n, dtype=bool))
+    for i in np.flatnonzero(need):
+        assert some[i] is not None and every[i] is not None
+        assert abs(some[i].omega - every[i].omega) <= 1e-9
+        np.testing.assert_allclose(some[i].Q, every[i].Q, rtol=0, atol=1e-9)
+    # points spread over the whole resonance: one trace
+    spread = np.zeros(n, dtype=bool)
+    spread[contact[0]: lower] = True
+    assert [forward for _, forward in _plan_traces(branch, spread)] == [True]
