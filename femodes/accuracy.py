@@ -725,8 +725,13 @@ def _trace_segment(lad: _Ladder, H: int, idx: np.ndarray, forward: bool, out: li
         last = int(idx[0]) - PAST_LAST
         after = int(idx[-1]) + int(np.argmax(_without_contact(branch)[idx[-1]:]))
         progress = _Progress(lad, H, near, after, last, step=-1) if last > 0 else None
+    # folds of the level are located only if a fold of the branch is among the needed points
+    # (level 160 of the seed case at rtol 1e-3, whose backward trace passes the lower fold, not
+    # needed there: 8.8 -> 6.9 s)
+    locate = any(f in idx for f in branch.folds)
     opts = ContinuationOptions(step=0.05, max_step=2.0, newton=lad.newton, x_scale=x_scale,
-                               p_scale=float(1.0 / math.sqrt(w[-1])), max_points=20 * max(n, 50), callback=progress)
+                               p_scale=float(1.0 / math.sqrt(w[-1])), max_points=20 * max(n, 50), callback=progress,
+                               locate_folds=locate)
     with np.errstate(all="ignore"):
         res = continuation(prob, span, x0=x0, options=opts)
     log.info("accuracy: level H = %d traced by continuation %s from point %d: %d points (%s)", H,
