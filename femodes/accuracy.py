@@ -13,7 +13,7 @@ component), so the difference of two levels is the change of the curve, not a sl
 Nonlinear modes are compared at the same energy instead (the backbone's abscissa).
 Newton cannot jump between levels from the branch's own point (the truncated or padded contact
 forces are outside its basin), so each level is traced: with impacts by a continuation of the
-level itself from the branch's first point, each point being the crossing of that curve with its
+level itself from a point without contact, each point being the crossing of that curve with its
 hyperplane (:func:`_trace_level_by_continuation`; points it misses are walked from their
 predecessor; points without contact force are every level's own point, nothing is solved for
 them, so the continuation runs from the last of them before the first contact to two points
@@ -824,9 +824,12 @@ def _between(prob, y0: np.ndarray, y1: np.ndarray, theta: float) -> np.ndarray:
 def _without_contact(branch: Branch) -> np.ndarray:
     """The points without contact force (complementarity forces zero to round-off): every level is
     the branch's own point there (the linear response, padded with zero harmonics, solves the
-    equations of any level exactly)."""
+    equations of any level exactly). None with other nonlinear laws (penalty contacts, cubic
+    springs): their points are not linear even where the complementarity forces vanish."""
     P = np.abs(branch.P)
-    if not P.size:
+    model = branch.model
+    others = "penalty" in branch.contacts.kinds or bool(model is not None and model.nonlinearities)
+    if not P.size or others:
         return np.zeros(len(branch), dtype=bool)
     small = 1e-12 * float(P.max())  # the complementarity force below contact is zero to round-off
     return P.reshape(len(branch), -1).max(axis=1) <= small

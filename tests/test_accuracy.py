@@ -291,3 +291,7 @@ def test_level_traced_backward_for_the_far_side(caplog):
     spread = np.zeros(n, dtype=bool)
     spread[contact[0]: lower] = True
     assert [forward for _, forward in _plan_traces(branch, spread)] == [True]
+    # with another nonlinear law no point is linear, even without a complementarity force
+    stiff = _forced().with_nonlinearity(fm.CubicSpring(at=0, k3=0.5))
+    low = fm.frequency_response(stiff, (0.5, 0.7), 6)
+    assert np.all(low.P == 0) and _without_contact(branch).any() and not _without_contact(low).any()
