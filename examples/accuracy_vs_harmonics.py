@@ -25,7 +25,7 @@ Measured (H = 5, 10, 20, 40; estimates at H = 5, 10, 20, odd H = 5 with the leve
   extrapolated limit off by 0.094 % (half-width 0.50 %), 0.094 % (0.49 %), 0.022 % (0.14 %);
 * free backbone at A = 1.9: true 10.2, 6.0, 3.4, 1.9 %; estimate 12.7, 7.7, 3.9 %; limit off by
   0.23 % (half-width 1.1 %), 0.23 % (1.1 %), 0.0017 % (0.33 %); ``rtol=2e-3`` from H = 10: limit off
-  by 3.6e-5 (half-width 0.13 %, levels to 80), 4.4 s of CPU;
+  by 3.6e-5 (half-width 0.13 %, levels to 80), 1.6 s of CPU;
 * Duffing at H = 1, 3, 5, 7: 2.5e-3, 3.7e-6, 3.3e-9, 2.2e-12 (~700x per odd harmonic), every
   estimate within 2 % of the true error.
 
@@ -34,13 +34,13 @@ bracket, whose midpoint is 20-2000x closer than the branch itself. Odd H costs m
 (the levels H, 2H, 4H: H // 2 would not be a doubling, and the ratio and the bracket assume
 doublings); prefer even H.
 
-Costs (CPU, one BLAS thread, load about 2): the forced fold's plain runs take 0.7, 1.1, 2.0,
-5.5 s at H = 5, 10, 20, 40; its estimate 5.8, 5.4, 15 s at H = 5, 10, 20 (7x the plain run at
-H = 20: each level is traced by a continuation of its own, the finest costing about a plain run
-at 2H); the free backbone's estimate at H = 20 takes 2.6 s for a 0.3 s branch. The estimate at
-H = 40 (82 s) is left out to keep the example short. ``benchmarks/bench_accuracy.py`` has the
-costs of ``rtol=1e-3`` and ``1e-4`` on the forced cases (``README_accuracy.md``). About 60 s of
-CPU.
+Costs (CPU, one BLAS thread, load about 1): the forced fold's plain runs take 0.2, 0.2, 0.5,
+1.0 s at H = 5, 10, 20, 40; its estimate 0.9, 0.9, 1.8 s at H = 5, 10, 20 (3.7x the plain run at
+H = 20: each level is traced by a continuation of its own over the part of the branch with
+contact, the finest costing about a plain run at 2H there); the free backbone's estimate at
+H = 20 takes 0.5 s for a 0.2 s branch. The estimate at H = 40 is left out to keep the example
+short. ``benchmarks/bench_accuracy.py`` has the costs of ``rtol=1e-3`` and ``1e-4`` on the
+forced cases (``README_accuracy.md``). About 11 s of CPU.
 """
 
 from __future__ import annotations
