@@ -537,8 +537,7 @@ class Branch:
         tension over that force would be a ratio of round-offs, about 1). The measures of
         :attr:`ErrorEstimate.penetration` and :attr:`ErrorEstimate.tension`."""
         pen, ten, amp, fmax = _contact_quality(self.harmonics, self.contacts, self.Q, self.P)
-        touching = fmax > 1e-12 * max(float(np.max(fmax, initial=0.0)), 0.0)
-        touching &= fmax > 0
+        touching = (fmax > 0) & (fmax > 1e-12 * float(np.max(fmax, initial=0.0)))
         return pen / np.where(amp > 0, amp, 1.0), np.where(touching, ten / np.where(touching, fmax, 1.0), 0.0)
 
     def attach(self, model) -> "Branch":
