@@ -227,33 +227,16 @@ def _fine_points(harmonics: Harmonics) -> int:
     return max(2048, 64 * harmonics.n_coef)
 
 
-def _penetration(harmonics: Harmonics, contacts: ContactInfo, Q: np.ndarray) -> np.ndarray:
-    """Max penetration ``max(0, max_t -g_N(t))`` over all contacts, per point.
-
-    ``Q`` of shape ``(n_points, n_coef, n_dofs)``; the fine grid is ``_fine_points`` equidistant
-    phases over the period, one synthesis matrix for all points (only the contact DOFs are
-    evaluated). The single definition behind :attr:`PeriodicSolution.penetration` and
-    :attr:`Branch.penetration`.
-    """
-    worst = np.zeros(Q.shape[0])
-    if not contacts.kinds or not Q.shape[0]:
-        return worst
-    n = _fine_points(harmonics)
-    E = harmonics.synthesis(2 * np.pi * np.arange(n) / n)
-    for law, dof in zip(contacts.laws, contacts.dofs):
-        g = law.gap_function(E @ Q[:, :, dof].T)  # (n, n_points)
-        worst = np.maximum(worst, np.max(-g, axis=0))
-    return worst
-
-
 def _contact_quality(harmonics: Harmonics, contacts: ContactInfo, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """Per point, over all contacts on the fine grid of :func:`_penetration`: penetration
-    ``max(0, max_t -g_N)``, tension ``max(0, max_t -p)``, the largest ``|q|`` of a contact DOF
-    and the largest contact force ``max_t p`` (rows 0-3 of the ``(4, n_points)`` result).
+    """Per point, over all contacts on a fine grid of ``_fine_points`` equidistant phases over the
+    period: penetration ``max(0, max_t -g_N)``, tension ``max(0, max_t -p)``, the largest ``|q|``
+    of a contact DOF and the largest contact force ``max_t p`` (rows 0-3 of the ``(4, n_points)``
+    result). The single definition behind the penetration and tension of
+    :class:`PeriodicSolution` and :class:`Branch`.
 
     ``Q``, ``P`` of shapes ``(n_points, n_coef, n_dofs)`` and ``(n_points, n_coef, n_p)``: one
-    synthesis matrix for all points (the error estimate's contact quality of a 94-point branch
-    took 1.2 s point by point, four syntheses each)."""
+    synthesis matrix for all points, only the contact DOFs evaluated (the error estimate's
+    contact quality of a 94-point branch took 1.2 s point by point, four syntheses each)."""
     m = Q.shape[0]
     out = np.zeros((4, m))
     if not contacts.kinds or not m:
@@ -372,14 +355,12 @@ class PeriodicSolution:
     @property
     def penetration(self) -> float:
         """Max penetration ``max(0, max_t -g_N(t))`` over a fine time grid (0 without contacts)."""
-        return float(_penetration(self.harmonics, self.contacts, self.Q[None])[0])
+        return float(_contact_quality(self.harmonics, self.contacts, self.Q[None], self.P[None])[0, 0])
 
     @property
     def tension(self) -> float:
         """Max tension ``max(0, max_t -p(t))`` over a fine time grid (truncation artefact)."""
-        if not self.contacts.kinds:
-            return 0.0
-        return float(max(0.0, np.max(-self.contact_force(self._fine_t()))))
+        return float(_contact_quality(self.harmonics, self.contacts, self.Q[None], self.P[None])[1, 0])
 
     def amplitude(self, dof: int) -> float:
         """``max_t |q_dof(t)|`` over a fine grid."""
@@ -522,7 +503,7 @@ class Branch:
         """:attr:`PeriodicSolution.penetration` at every point (one synthesis for the branch)."""
         if not len(self):
             return np.zeros(0)
-        return _penetration(self.harmonics, self.contacts, self.Q)
+        return _contact_quality(self.harmonics, self.contacts, self.Q, self.P)[0]
 
     @property
     def tension(self) -> np.ndarray:
