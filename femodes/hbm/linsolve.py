@@ -947,6 +947,12 @@ class AssembledSolver:
         return "AssembledSolver()"
 
 
+def _refinement_tolerance(norm: float, x: np.ndarray, scale_b: float) -> float:
+    """The backward-error test of the refined solves (:class:`_Factorization`,
+    :class:`_ForceSchur`): ``64 eps (||J|| max|x| + max|b|)`` with a bound ``norm`` of ``||J||``."""
+    return 64 * np.finfo(float).eps * (norm * float(np.max(np.abs(x))) + scale_b)
+
+
 class _Dense:
     """LAPACK LU (partial pivoting) of the densely assembled matrix: for small systems the sparse
     machinery's per-call overhead (building CSR matrices, SuperLU's symbolic phase) is what a
@@ -1076,7 +1082,7 @@ class _ForceSchur:
         scale_b = float(np.max(np.abs(B))) or 1.0
         for step in range(3):  # the solve, then up to two refinement steps
             res = B - self.A @ x
-            tol = 64 * np.finfo(float).eps * (self.norm * float(np.max(np.abs(x))) + scale_b)
+            tol = _refinement_tolerance(self.norm, x, scale_b)
             if np.max(np.abs(res)) <= tol:
                 return x.reshape(b.shape)
             if step < 2:
@@ -1406,8 +1412,7 @@ class _Factorization:
         return x[:, 0] if one_d else x
 
     def _tolerance(self, x: np.ndarray, scale_b: float) -> float:
-        """The refinement test: ``64 eps (||J|| max|x| + max|b|)``."""
-        return 64 * np.finfo(float).eps * (self.norm_bound * float(np.max(np.abs(x))) + scale_b)
+        return _refinement_tolerance(self.norm_bound, x, scale_b)
 
     def _solve_refined(self, B: np.ndarray) -> np.ndarray:
         x = self._solve(B)
