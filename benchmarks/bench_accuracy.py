@@ -65,7 +65,11 @@ RUNS = {"plain20": dict(H=20), "plain40": dict(H=40), "plain80": dict(H=80),
         # levels up to 80 only: the folds' brackets from levels 20-40-80, points that need 160 not met
         "rtol1e-3cap80": dict(H=20, rtol=1e-3, max_harmonics=80),
         # the cantilever's plain H = 20 curve does not finish (below): runs from H = 10 as well
-        "plain10": dict(H=10), "est10": dict(H=10, estimate=True), "rtol1e-3@10": dict(H=10, rtol=1e-3, max_harmonics=160)}
+        "plain10": dict(H=10), "est10": dict(H=10, estimate=True), "rtol1e-3@10": dict(H=10, rtol=1e-3, max_harmonics=160),
+        # the plain curve, then estimate_error(rtol, method="auto"): exact orbits by shooting where the
+        # model is linear with rigid stops, levels for the points shooting misses
+        "shoot1e-3": dict(H=20, rtol=1e-3, max_harmonics=160, method="auto"),
+        "shoot1e-4": dict(H=20, rtol=1e-4, max_harmonics=160, method="auto")}
 BASE = "plain20"
 #: the bar of the mesh study
 BAR = dict(tip_mass=0.75, gap=1.0, beta=0.02, force=0.05, span=(0.8, 1.3))
@@ -126,8 +130,12 @@ def child(spec: dict) -> dict:
 
         model, dof = femodes_model(case, "signorini")
         span = PEER_CASES[case]["span"]
-    br = fm.frequency_response(model, span, fm.Harmonics(run["H"]), rtol=run.get("rtol"),
-                               max_harmonics=run.get("max_harmonics"))
+    if run.get("method"):
+        br = fm.frequency_response(model, span, fm.Harmonics(run["H"]))
+        fm.estimate_error(br, rtol=run["rtol"], max_harmonics=run["max_harmonics"], method=run["method"])
+    else:
+        br = fm.frequency_response(model, span, fm.Harmonics(run["H"]), rtol=run.get("rtol"),
+                                   max_harmonics=run.get("max_harmonics"))
     if run.get("estimate"):
         fm.estimate_error(br)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu

@@ -75,9 +75,11 @@ class Bifurcation:
 
 
 #: How the error of a point was estimated (:attr:`ErrorEstimate.method`): from the change between
-#: levels of harmonics (``"doubling"``), or not at all (``"failed"``: a level had no solution near
-#: the point, e.g. next to a fold that moves by more than the branch's curvature allows).
-ERROR_METHODS = ("doubling", "failed")
+#: levels of harmonics (``"doubling"``), from the exact orbit of the flow with rigid stops
+#: (``"shooting"``, :func:`femodes.estimate_error` with ``method="shooting"``), or not at all
+#: (``"failed"``: a level had no solution near the point, e.g. next to a fold that moves by more
+#: than the branch's curvature allows).
+ERROR_METHODS = ("doubling", "shooting", "failed")
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,7 +112,7 @@ class ErrorEstimate:
         bracket the limit (non-monotone changes, or an observed ratio outside ``(1, 2]``).
     finest : ndarray of int or None
         The largest number of harmonics whose solution entered the point's estimate (``2 H``, or
-        more where ``rtol`` added levels).
+        more where ``rtol`` added levels; 0 where the exact orbit by shooting answered).
     """
 
     omega: np.ndarray

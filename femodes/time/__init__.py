@@ -12,6 +12,10 @@
   the orbit (:class:`ShootingResult`); the time-domain reference for Hill's method (module
   ``shooting``).
 
+* ``exact.LinearImpactFlow`` -- the closed-form flow of a linear model with rigid stops (modal
+  exponentials between impacts, impacts located to round-off, exact Fourier coefficients):
+  the shooting refinement of :func:`femodes.estimate_error` (``method="shooting"``).
+
 Modules: ``moreau`` (the scheme, described once, and the public names), ``results`` (the two
 result classes), ``stepper`` (operators of a step, its local problem, the stepping loop),
 ``impact`` (the impact law and its complementarity problem), ``drivers`` (``simulate``,

@@ -1,0 +1,143 @@
+"""The exact flow of a linear model with rigid stops (femodes.time.exact) and the shooting
+refinement of error-controlled branches built on it (femodes.accuracy, method "shooting").
+
+References: the event-driven DOP853 shooting of femodes.time.shooting (an independent
+integration of the same orbit, tolerance 1e-12), the semi-analytic upper fold of
+tests/impact_reference.py, and the grazing frequency of the linear response in closed form.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+import femodes as fm
+from femodes.accuracy import SHOOTING_FLOOR, estimate_error
+from femodes.time import shoot
+from femodes.time.exact import LinearImpactFlow, exact_flow_unsupported
+
+from .impact_reference import upper_fold
+
+
+def _forced(c=0.1, F=0.2, g=1.0):
+    return (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[c]]).with_contact(fm.UnilateralContact(at=0, gap=g))
+            .with_forcing(fm.HarmonicForce(at=0, amplitude=F)))
+
+
+def _periodic(flow, x, t0):
+    """Newton on x(t0 + T) - x0, halving steps that would start inside the obstacle."""
+    for _ in range(40):
+        run = flow.run(x, t0, variational=True)
+        F = run.x_end - x
+        if np.max(np.abs(F)) < 1e-13:
+            return x, run
+        d = -np.linalg.solve(run.Phi - np.eye(x.size), F)
+        while flow.gaps[0] - (x + d)[0] < 0.0:
+            d *= 0.5
+        x = x + d
+    raise AssertionError("no periodic orbit")
+
+
+@pytest.fixture(scope="module")
+def orbit():
+    """The impacting orbit (a non-impacting one coexists) from a harmonic balance point below the
+    upper fold, started at its most open phase."""
+    model = _forced()
+    b = fm.frequency_response(model, (0.5, 2.0), 10)
+    i = max(b.folds, key=lambda j: b.omega[j]) - 5
+    x, theta0 = fm.accuracy._Shooter(fm.accuracy._ladder(b, None, None, "test")).start(i)
+    w = float(b.omega[i])
+    flow = LinearImpactFlow(model, w)
+    x, run = _periodic(flow, x, theta0 / w)
+    return model, flow, w, theta0 / w, x, run
+
+
+def test_orbit_matches_event_driven_integration(orbit):
+    """Same orbit and multipliers as the DOP853 event-driven shooting (rtol 1e-12): the state to
+    1e-8 of its size (the integrator's error accumulates over the period), the multipliers to 1e-7."""
+    model, flow, w, t0, x, run = orbit
+    assert len(run.impacts) == 1
+    ref = shoot(model, w, x, t0=t0, tol=1e-12, rtol=1e-12, atol=1e-13)
+    assert ref.success
+    np.testing.assert_allclose(x, ref.x, atol=1e-8 * np.max(np.abs(x)))
+    mu = np.sort_complex(np.linalg.eigvals(run.Phi))
+    np.testing.assert_allclose(mu, np.sort_complex(ref.multipliers), atol=1e-7)
+
+
+def test_monodromy_matches_finite_differences(orbit):
+    _, flow, _, t0, x, run = orbit
+    eps = 1e-6
+    fd = np.column_stack([(flow.run(x + eps * e, t0).x_end - flow.run(x - eps * e, t0).x_end) / (2 * eps)
+                          for e in np.eye(2)])
+    np.testing.assert_allclose(run.Phi, fd, atol=1e-7)  # central differences: O(eps^2) plus round-off / eps
+
+
+def test_fourier_coefficients_exact(orbit):
+    """Closed-form coefficients against the trapezoid rule on 2^14 samples of the same orbit
+    (q is continuous with kinks at the impacts: the rule's error is O(N^-2) ~ 1e-8 here), and the
+    static balance ``K c0(q) = -c0(p)`` (no static load) to round-off."""
+    _, flow, w, t0, x, run = orbit
+    Q, P = run.coefficients(8)
+    N = 2 ** 14
+    T = 2 * math.pi / w
+    t = t0 + np.arange(N) * T / N
+    q = np.empty(N)
+    for ta, tb, z in run.segments:
+        m = (t >= ta) & (t <= tb)
+        q[m] = flow.particular(t[m])[:, 0] + np.real((np.exp(np.multiply.outer(t[m] - ta, flow.lam)) * z) @ flow.V[0])
+    ref = [np.mean(q)] + [2 / N * np.sum(q * f(k * w * t)) for k in range(1, 9) for f in (np.cos, np.sin)]
+    np.testing.assert_allclose(Q[:, 0], ref, atol=1e-7)
+    assert abs(Q[0, 0] + P[0, 0]) <= 1e-13
+
+
+def test_unsupported_models_named():
+    cubic = _forced().with_nonlinearity(fm.CubicSpring(at=0, k3=0.5))
+    assert "cubic" in exact_flow_unsupported(cubic)
+    pen = fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_contact(fm.PenaltyContact(at=0, gap=1.0, stiffness=50.0))
+    assert "penalty" in exact_flow_unsupported(pen)
+    with pytest.raises(ValueError, match="penalty"):
+        LinearImpactFlow(pen, 1.0)
+    with pytest.raises(ValueError, match="omega"):
+        LinearImpactFlow(_forced(), -1.0)
+
+
+@pytest.fixture(scope="module")
+def shot10():
+    branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
+    return estimate_error(branch, rtol=1e-3, method="shooting")
+
+
+def test_shooting_folds_exact(shot10):
+    """Upper fold: the semi-analytic reference to 1e-9 (the stated floor); lower fold: the grazing
+    of the linear response, |1 - w^2 + 0.1 i w| = 0.2 in closed form (w^2 = (1.99 + sqrt(0.1201)) / 2)."""
+    b = shot10
+    acc = b.accuracy
+    up, lo = sorted(b.folds, key=lambda i: -b.omega[i])
+    ref = upper_fold(0.1, 0.2, 1.0).w
+    assert abs(acc.omega_limit[up] / ref - 1.0) <= SHOOTING_FLOOR
+    graze = math.sqrt((1.99 + math.sqrt(1.99 ** 2 - 4 * 0.96)) / 2)
+    assert abs(acc.omega_limit[lo] / graze - 1.0) <= SHOOTING_FLOOR
+    assert acc.met[[up, lo]].all() and acc.omega_limit_error[up] <= 1e-6
+    # the estimate of the H = 10 fold's own error (relative to its frequency) is its true error
+    # (4.7 %) plus the floor
+    assert abs(acc.omega[up] - abs(b.omega[up] - ref) / b.omega[up]) <= 2 * SHOOTING_FLOOR
+
+
+def test_shooting_meets_rtol_where_it_finds_the_orbit(shot10):
+    """Every point with an exact orbit meets rtol; the others (just above grazing, where Newton
+    on the flow cycles between orbits with and without the impact) fall back to the levels."""
+    acc = shot10.accuracy
+    shot = acc.method == "shooting"
+    assert shot.sum() >= 0.9 * len(shot10)
+    assert acc.met[shot].all()
+    assert np.all(acc.finest[~shot] >= 20)  # levels there (10, 20 and more)
+
+
+def test_shooting_method_checked():
+    duffing = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.05]]).with_nonlinearity(fm.CubicSpring(at=0, k3=0.5))
+               .with_forcing(fm.HarmonicForce(at=0, amplitude=0.1)))
+    b = fm.frequency_response(duffing, (0.8, 1.3), 3)
+    with pytest.raises(ValueError, match="method='shooting'"):
+        estimate_error(b, method="shooting")
+    with pytest.raises(ValueError, match="method must be one of"):
+        estimate_error(b, method="exact")
