@@ -14,9 +14,11 @@ Cases (complementarity law ``fm.UnilateralContact`` throughout; w in rad/s):
   (levels up to 160, its bracket stated), which is therefore not an independent check of itself.
 
 Runs (``--runs``): ``plain20``, ``plain40``, ``plain80`` (``fm.frequency_response`` with that H),
-``rtol1e-3`` and ``rtol1e-4`` (from H = 20, ``max_harmonics=160``: levels 10, 20, 40 of the
-estimate, then 80 and 160 where the bracket is wider than rtol), ``rtol1e-3cap80`` (not by
-default: ``max_harmonics=80``, levels up to 80); not by default, for the
+``rtol1e-3`` and ``rtol1e-4`` (from H = 20, ``max_harmonics=160``, ``error_method="auto"``, the
+default: exact orbits by shooting where the model is linear with rigid stops on DOFs with mass,
+levels elsewhere), ``levels1e-3``, ``levels1e-4`` (``error_method="levels"``: levels 10, 20, 40 of
+the estimate, then 80 and 160 where the bracket is wider than rtol), ``rtol1e-3cap80``,
+``levels1e-3cap80`` (not by default: ``max_harmonics=80``); not by default, for the
 cantilever whose plain H = 20 curve does not finish: ``plain10``, ``est10`` (``fm.estimate_error``
 at H = 10) and ``rtol1e-3@10`` (rtol=1e-3 from H = 10).  The fold is the main one: of
 ``branch.folds`` the one with the largest amplitude of the contact DOF (seed cases: the upper
@@ -66,10 +68,11 @@ RUNS = {"plain20": dict(H=20), "plain40": dict(H=40), "plain80": dict(H=80),
         "rtol1e-3cap80": dict(H=20, rtol=1e-3, max_harmonics=80),
         # the cantilever's plain H = 20 curve does not finish (below): runs from H = 10 as well
         "plain10": dict(H=10), "est10": dict(H=10, estimate=True), "rtol1e-3@10": dict(H=10, rtol=1e-3, max_harmonics=160),
-        # the plain curve, then estimate_error(rtol, method="auto"): exact orbits by shooting where the
-        # model is linear with rigid stops, levels for the points shooting misses
-        "shoot1e-3": dict(H=20, rtol=1e-3, max_harmonics=160, method="auto"),
-        "shoot1e-4": dict(H=20, rtol=1e-4, max_harmonics=160, method="auto")}
+        # the rtol runs above use error_method="auto" (the default: exact orbits by shooting where the
+        # model is linear with rigid stops); these the levels of harmonics alone, as before
+        "levels1e-3": dict(H=20, rtol=1e-3, max_harmonics=160, method="levels"),
+        "levels1e-4": dict(H=20, rtol=1e-4, max_harmonics=160, method="levels"),
+        "levels1e-3cap80": dict(H=20, rtol=1e-3, max_harmonics=80, method="levels")}
 BASE = "plain20"
 #: the bar of the mesh study
 BAR = dict(tip_mass=0.75, gap=1.0, beta=0.02, force=0.05, span=(0.8, 1.3))
@@ -130,14 +133,10 @@ def child(spec: dict) -> dict:
 
         model, dof = femodes_model(case, "signorini")
         span = PEER_CASES[case]["span"]
-    if run.get("method"):
-        br = fm.frequency_response(model, span, fm.Harmonics(run["H"]))
-        fm.estimate_error(br, rtol=run["rtol"], max_harmonics=run["max_harmonics"], method=run["method"])
-    else:
-        br = fm.frequency_response(model, span, fm.Harmonics(run["H"]), rtol=run.get("rtol"),
-                                   max_harmonics=run.get("max_harmonics"))
+    br = fm.frequency_response(model, span, fm.Harmonics(run["H"]), rtol=run.get("rtol"),
+                               max_harmonics=run.get("max_harmonics"), error_method=run.get("method", "auto"))
     if run.get("estimate"):
-        fm.estimate_error(br)
+        fm.estimate_error(br, method=run.get("method", "auto"))
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     amp = br.amplitude(dof)
     rec = dict(wall=wall, cpu=cpu, points=len(br), success=bool(br.success), status=int(br.status),

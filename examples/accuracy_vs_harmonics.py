@@ -142,7 +142,7 @@ def _estimated(branch, estimate: bool) -> _Clock | None:
     if not estimate:
         return None
     with _Clock() as c:
-        fm.estimate_error(branch)
+        fm.estimate_error(branch, method="levels")  # the levels of harmonics (this example's subject)
     return c
 
 

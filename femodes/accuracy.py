@@ -95,7 +95,8 @@ from .solvers.threads import limit_blas_threads
 from .solvers.arclength import ArclengthSystem
 from .solvers.bordered import bordered_solver
 
-__all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "refinement_options", "RATE_MIN", "BRACKET_RATE_MAX"]
+__all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "refinement_options", "check_estimate_method",
+           "shooting_unsupported", "ESTIMATE_METHODS", "RATE_MIN", "BRACKET_RATE_MAX"]
 
 log = logging.getLogger(__name__)
 
@@ -385,7 +386,7 @@ class _Levels:
 
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: int | None = None, projection=None,
-                   newton: NewtonOptions | None = None, method: str = "levels") -> Branch:
+                   newton: NewtonOptions | None = None, method: str = "auto") -> Branch:
     """Attach the estimated error of every point of ``branch`` (``branch.error_estimate``).
 
     Each point is solved again with ``H // 2`` and ``2 H`` harmonics on the hyperplane normal to
@@ -416,7 +417,7 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     projection : ExactProjection or SampledProjection, optional
         The projection the branch was computed with (default exact).
     newton : NewtonOptions, optional
-    method : {"levels", "shooting", "auto"}, default "levels"
+    method : {"auto", "shooting", "levels"}, default "auto"
         ``"levels"``: harmonic balance at other H (above). ``"shooting"``: the exact orbits of
         the flow with rigid stops (module docstring, "Shooting"; forced branches of linear
         models with unilateral contacts only, else ValueError), the levels for the points where
@@ -432,8 +433,7 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     lad = _ladder(branch, projection, newton, "estimate_error")
     H = branch.harmonics.n_harmonics
     rtol, max_harmonics = refinement_options(rtol, max_harmonics, H)
-    if method not in ESTIMATE_METHODS:
-        raise ValueError(f"estimate_error: method must be one of {ESTIMATE_METHODS}, got {method!r}")
+    check_estimate_method(method, "estimate_error")
     n = len(branch)
     impacts = "complementarity" in branch.contacts.kinds
     ew, eq, rates = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
@@ -534,6 +534,10 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
         if r is None:
             todo[i] = True
             continue
+        if r is GLANCING:  # no counterpart on the exact curve: not estimated (the levels' ratios are
+            kind[i] = "failed"  # erratic there as well: seed case 1, points just above grazing)
+            finest[i] = 0
+            continue
         w = r[1]
         if i in branch.folds:
             fold = sh.fold(i, r)
@@ -554,6 +558,13 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
         kind[i] = "shooting"
     log.info("accuracy: shooting: %d runs of the exact flow for %d points", sh.runs, len(solved))
     return todo
+
+
+def check_estimate_method(method, owner: str, name: str = "method") -> str:
+    """``method`` checked against :data:`ESTIMATE_METHODS`."""
+    if not isinstance(method, str) or method not in ESTIMATE_METHODS:
+        raise ValueError(f"{owner}: {name} must be one of {ESTIMATE_METHODS}, got {method!r}")
+    return method
 
 
 def estimate_levels(H: int) -> tuple[list[int], int]:
@@ -583,7 +594,7 @@ def _bounded_by_bracket(ew: float, omega: float, w_lim: float, half: float, omeg
 
 
 def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun, *, projection=None,
-                   newton: NewtonOptions | None = None) -> Branch:
+                   newton: NewtonOptions | None = None, method: str = "auto") -> Branch:
     """``rtol=`` of :func:`femodes.frequency_response` and :func:`femodes.nonlinear_mode`.
 
     With complementarity contacts (algebraic convergence): :func:`estimate_error` with ``rtol``,
@@ -601,7 +612,8 @@ def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun
                     branch.message)
         return branch
     if "complementarity" in branch.contacts.kinds:
-        return estimate_error(branch, rtol=rtol, max_harmonics=max_harmonics, projection=projection, newton=newton)
+        return estimate_error(branch, rtol=rtol, max_harmonics=max_harmonics, projection=projection, newton=newton,
+                              method=method)
     while True:
         estimate_error(branch, rtol=rtol, projection=projection, newton=newton)
         H = branch.harmonics.n_harmonics
@@ -957,6 +969,11 @@ SHOOTING_MAX_CORRECTION = 0.5
 #: round-off and the root tolerance of the impact times (1e-15 relative); the Newton solve stops
 #: at 1e-12. The floor leaves a margin of 1e3 over that.
 SHOOTING_FLOOR = 1e-9
+#: Largest ``kappa`` (:meth:`_Shooter.glancing`) for which the exact orbit on a point's
+#: hyperplane is taken as the point's counterpart.
+GLANCING_MAX = 3.0
+#: Marks a point whose exact crossing is no counterpart (:meth:`_Shooter.glancing`).
+GLANCING = "glancing"
 #: Relative step of the finite differences of the shooting Jacobian (frequency column and the
 #: hyperplane row).
 _FD_STEP = 1e-7
@@ -1020,50 +1037,56 @@ class _Shooter:
 
     def evaluate(self, x0: np.ndarray, omega: float, theta0: float, plane, jac: bool):
         """Periodicity residual, hyperplane value and (with ``jac``) their Jacobian in ``(x0, w)``:
-        the monodromy matrix exact, the frequency column and the hyperplane row by finite
-        differences (``2 n + 1`` more runs)."""
+        the monodromy matrix and the hyperplane's gradient in ``x0`` exact (variational run),
+        the frequency column by a finite difference (one more run)."""
         flow = self._at(omega)
         run = flow.run(x0, theta0 / omega, variational=jac)
         self.runs += 1
         F = run.x_end - x0
-        h = plane(run, omega)
+        h = plane.value(run, omega)
         if not jac:
             return F, h, None, run
         n2 = 2 * self.n
         J = np.zeros((n2 + 1, n2 + 1))
         J[:n2, :n2] = run.Phi - np.eye(n2)
-        xs = max(float(np.max(np.abs(x0))), 1e-300)
-        for k in range(n2):
-            dx = np.zeros(n2)
-            dx[k] = _FD_STEP * xs
-            r2 = flow.run(x0 + dx, theta0 / omega)
-            J[n2, k] = (plane(r2, omega) - h) / dx[k]
+        J[n2, :n2] = plane.gradient(run)
         dw = _FD_STEP * omega
-        f2 = self._at(omega + dw)
-        r2 = f2.run(x0, theta0 / (omega + dw))
-        self.runs += n2 + 1
+        r2 = self._at(omega + dw).run(x0, theta0 / (omega + dw))
+        self.runs += 1
         J[:n2, n2] = (r2.x_end - x0 - F) / dw
-        J[n2, n2] = (plane(r2, omega + dw) - h) / dw
+        J[n2, n2] = (plane.value(r2, omega + dw) - h) / dw
         return F, h, J, run
 
-    def plane(self, i: int, offset: float = 0.0):
-        """The hyperplane of point ``i`` as a function of a run: ``c . (Y - a) - offset`` with
-        ``Y`` the orbit's coefficients on the branch's harmonics (the levels' hyperplane)."""
-        lad, H = self.lad, self.H
-        a_st, n_st = _anchor(self.branch, i), lad.tangents[i]
-        a = lad.vector(H, a_st.Q, a_st.P, a_st.omega, a_st.xi, a_st.p)
-        # the normal's displacement and frequency parts: the contact forces of the exact orbit
-        # are impulses, whose coefficients the branch's truncated forces do not resemble
-        c = lad.weights(H) * lad.vector(H, n_st.Q, 0.0 * n_st.P, n_st.omega, n_st.xi, n_st.p)
-        cn = float(np.linalg.norm(c)) or 1.0
-        an = float(np.linalg.norm(a)) or 1.0
+    def plane(self, i: int, offset: float = 0.0) -> "_Plane":
+        """The hyperplane of point ``i`` (shifted by ``offset``) as a function of a run."""
+        return _Plane(self, i, offset)
 
-        def value(run, omega):
-            Q, P = run.coefficients(H)
-            y = lad.vector(H, Q, P, omega, 0.0, omega)
-            return (float(c @ (y - a)) - offset) / (cn * an)
-
-        return value
+    def glancing(self, i: int, r) -> float:
+        """How obliquely the exact curve crosses point ``i``'s hyperplane compared with the
+        branch: ``kappa = (dw*/ds) / (dw/ds)``, the change of the crossing frequency per unit
+        offset of the plane on the exact curve over the same on the branch (its neighbours).
+        About 1 where the two curves run alike (1.0-1.1 on seed case 1 from the rising side to
+        the fold); large just above grazing, where a displacement's amplitude stays at the gap
+        while the frequency moves and the plane is nearly tangent to the exact curve (18, 14, 10
+        at the first three points with contact of seed case 1, whose crossings lie 12 %, 7 %
+        and 1.2 % away), or negative (seed case 2, three points above grazing: the exact curve
+        runs back through the plane): the crossing is then not the point's counterpart."""
+        J = r[5]
+        b = self.branch
+        if J is None:  # the linear orbit: its curve is the branch's own
+            return 1.0
+        n2 = J.shape[0] - 1
+        try:
+            dws = float(np.linalg.solve(J, np.r_[np.zeros(n2), 1.0])[n2])
+        except np.linalg.LinAlgError:
+            return math.inf
+        plane = self.plane(i)
+        j0, j1 = max(i - 1, 0), min(i + 1, len(b) - 1)
+        ds = plane.at(b.Q[j1], float(b.omega[j1])) - plane.at(b.Q[j0], float(b.omega[j0]))
+        dw = float(b.omega[j1] - b.omega[j0])
+        if dw == 0.0 or ds == 0.0:
+            return math.inf
+        return dws / (dw / ds)
 
     def warm(self, i: int, prev) -> tuple:
         """A first guess for point ``i`` from the exact orbit ``prev = (x0, w, theta0)`` of a
@@ -1088,7 +1111,7 @@ class _Shooter:
             t0 = theta0 / omega
             self.runs += 1
             run = flow.run(flow.particular(t0), t0)
-            return plane(run, omega), run
+            return plane.value(run, omega), run
 
         w0 = float(self.branch.omega[i])
         w1 = w0 * (1.0 + 1e-3)
@@ -1105,12 +1128,26 @@ class _Shooter:
                     h1, run = value(w1)
                     if run.impacts:
                         return None  # the linear orbit there reaches an obstacle
-                    return run.x_end, w1, theta0, run, abs(w1 - w0)
+                    return run.x_end, w1, theta0, run, abs(w1 - w0), None
         except ValueError:
             return None
         return None
 
-    def solve(self, i: int, guess=None, offset: float = 0.0):
+    def solve_from(self, i: int, j: int, at_j, pieces: int = 8):
+        """The orbit on point ``i``'s hyperplane by a continuation over the planes between a
+        neighbour ``j``'s (solved: ``at_j``) and ``i``'s, in ``pieces`` steps: just above
+        grazing, where the flow's derivative jumps with the impact, Newton from ``j``'s orbit
+        in one step cycles between orbits with and without it (seed case 1: the first two
+        points with contact)."""
+        r = at_j
+        for k in range(1, pieces + 1):
+            plane = _Plane(self, j, toward=i, theta=k / pieces)
+            r = self.solve(i, guess=r[:3], plane=plane)
+            if r is None:
+                return None
+        return r
+
+    def solve(self, i: int, guess=None, offset: float = 0.0, plane=None):
         """The exact orbit on the hyperplane of point ``i`` (shifted by ``offset``): ``(x0, w,
         theta0, run, dw)`` with the last Newton step ``dw``, or None. Newton with a backtracking
         search on the residual norm (near grazing the flow's derivative jumps where an impact
@@ -1120,7 +1157,7 @@ class _Shooter:
             x0, omega = x_hbm, float(self.branch.omega[i])
         else:
             x0, omega, theta0 = guess[0].copy(), guess[1], guess[2]
-        plane = self.plane(i, offset)
+        plane = plane or self.plane(i, offset)
         n2 = 2 * self.n
         step = np.inf
 
@@ -1143,7 +1180,7 @@ class _Shooter:
                     log.info("accuracy: shooting at point %d found another orbit (start state moved by %.0f %%)",
                              i, 100 * corr)
                     return None
-                return x0, omega, theta0, run, step
+                return x0, omega, theta0, run, step, J
             try:
                 d = np.linalg.solve(J, -np.append(F, h))
             except np.linalg.LinAlgError:
@@ -1180,25 +1217,21 @@ class _Shooter:
         tolerance in ``s``, at least :data:`SHOOTING_FLOOR`), or None."""
         from scipy.optimize import minimize_scalar
 
-        b, lad, H = self.branch, self.lad, self.H
+        b = self.branch
         n = len(b)
         nb = [j for j in (f - 1, f + 1) if 0 <= j < n]
         upper = all(b.omega[j] <= b.omega[f] for j in nb)
         sign = -1.0 if upper else 1.0
         # the offset of the neighbours in the plane's units: the scale of the search
-        a_st, n_st = _anchor(b, f), lad.tangents[f]
-        a = lad.vector(H, a_st.Q, a_st.P, a_st.omega, a_st.xi, a_st.p)
-        c = lad.weights(H) * lad.vector(H, n_st.Q, 0.0 * n_st.P, n_st.omega, n_st.xi, n_st.p)
-        norm = (float(np.linalg.norm(c)) or 1.0) * (float(np.linalg.norm(a)) or 1.0)
-        d = max(abs(float(c @ (lad.vector(H, b.Q[j], b.P[j], b.omega[j], b.xi[j], b.parameter[j]) - a))) / norm
-                for j in nb)
+        plane = _Plane(self, f)
+        d = max(abs(plane.at(b.Q[j], float(b.omega[j]))) for j in nb)
         if not d > 0.0:
             return None
         solved = {0.0: at_f}
 
         def omega_at(s: float) -> float:
             near = min(solved, key=lambda t: abs(t - s))
-            steps = max(1, int(math.ceil(abs(s - near) / (0.125 * d))))  # continuation in small steps
+            steps = max(1, int(math.ceil(abs(s - near) / (0.5 * d))))  # continuation in steps of d / 2
             r = solved[near]
             for k in range(1, steps + 1):
                 sk = near + (s - near) * k / steps
@@ -1262,6 +1295,40 @@ class _Shooter:
         return min(roots, key=lambda r: abs(r - omega)) if roots else None
 
 
+class _Plane:
+    """The hyperplane of a branch point for orbits of the exact flow: ``(c_Q . (Q - Q_a) +
+    c_w (w - w_a) - offset) / (|c| |a|)`` with ``Q`` the orbit's displacement coefficients on the
+    branch's harmonics, ``c`` the point's normal in the branch's arclength weights (the levels'
+    hyperplane without its contact-force part: the exact contact forces are impulses, whose
+    coefficients the branch's truncated forces do not resemble) and ``a`` the point."""
+
+    def __init__(self, sh: _Shooter, i: int, offset: float = 0.0, toward: int | None = None, theta: float = 0.0):
+        lad, H = sh.lad, sh.H
+        b = sh.branch
+        a_st, n_st = _anchor(b, i), lad.tangents[i]
+        if toward is not None:  # the plane a fraction theta of the way to point `toward`'s
+            a_st = lad.blend(a_st, _anchor(b, toward), theta)
+            n_st = lad.blend(n_st, lad.tangents[toward], theta)
+        a = lad.vector(H, a_st.Q, a_st.P, a_st.omega, a_st.xi, a_st.p)
+        c = lad.weights(H) * lad.vector(H, n_st.Q, 0.0 * n_st.P, n_st.omega, n_st.xi, n_st.p)
+        self.H = H
+        self.scale = (float(np.linalg.norm(c)) or 1.0) * (float(np.linalg.norm(a)) or 1.0)
+        self.cQ = lad.problem(H).unpack(c[:-1], c[-1]).Q
+        self.cw = float(c[-1])
+        self.Qa, self.wa = a_st.Q, a_st.omega
+        self.offset = offset
+
+    def at(self, Q: np.ndarray, omega: float) -> float:
+        return (float(np.sum(self.cQ * (Q - self.Qa))) + self.cw * (omega - self.wa) - self.offset) / self.scale
+
+    def value(self, run, omega: float) -> float:
+        return self.at(run.coefficients(self.H)[0], omega)
+
+    def gradient(self, run) -> np.ndarray:
+        """``d value / d x0`` (a variational run)."""
+        return np.einsum("kd,kdc->c", self.cQ, run.coefficient_sensitivity(self.H)) / self.scale
+
+
 class _ShootingFailed(RuntimeError):
     pass
 
@@ -1269,7 +1336,8 @@ class _ShootingFailed(RuntimeError):
 def _shoot_branch(lad: _Ladder) -> tuple[dict, _Shooter]:
     """Exact orbits on the hyperplanes of the branch's points with contact, each from its
     predecessor's (moved by the branch's step), else from the point itself, else the linear
-    orbit; ``{i: (x0, w, theta0, run, step)}`` (None where none was found)."""
+    orbit, else (a second pass, backward) from its successor's; ``{i: (x0, w, theta0, run,
+    step)}`` (None where none was found)."""
     sh = _Shooter(lad)
     free = _without_contact(lad.branch)
     out: dict = {}
@@ -1285,4 +1353,18 @@ def _shoot_branch(lad: _Ladder) -> tuple[dict, _Shooter]:
             r = sh.linear(i)
         out[i] = r
         prev = r[:3] + (i,) if r is not None else None
+    for i in sorted((i for i, r in out.items() if r is None), reverse=True):  # from the successor's orbit
+        nxt = out.get(i + 1)
+        if nxt is not None:
+            out[i] = sh.solve(i, guess=sh.warm(i, nxt[:3] + (i + 1,))) or sh.solve_from(i, i + 1, nxt)
+    # next to a fold the branch's dw/ds vanishes and kappa says nothing; the plane there is
+    # across the fold's amplitude, which the exact curve crosses near its own fold
+    near_fold = {j for f in lad.branch.folds for j in (f - 1, f, f + 1)}
+    for i, r in out.items():
+        if r is not None and i not in near_fold:
+            kappa = sh.glancing(i, r)
+            if not 0.0 < kappa <= GLANCING_MAX:
+                log.info("accuracy: point %d: the exact curve crosses its hyperplane obliquely or backward "
+                         "(kappa = %.3g, outside (0, %g]): no counterpart", i, kappa, GLANCING_MAX)
+                out[i] = GLANCING
     return out, sh

@@ -26,7 +26,7 @@ from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.threads import limit_blas_threads
-from .accuracy import meet_tolerance, refinement_options
+from .accuracy import check_estimate_method, meet_tolerance, refinement_options
 from .floquet import METHODS, annotate_branch
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
@@ -104,6 +104,7 @@ def frequency_response(
     stability: bool | str = False,
     rtol: float | None = None,
     max_harmonics: int | None = None,
+    error_method: str = "auto",
 ) -> Branch:
     """Forced frequency-response curve by HBM and pseudo-arclength continuation.
 
@@ -153,6 +154,11 @@ def frequency_response(
         may not: their levels do not bracket the limit). :mod:`femodes.accuracy`.
     max_harmonics : int, optional
         Largest number of harmonics ``rtol`` may use (default ``8 H``).
+    error_method : {"auto", "shooting", "levels"}, default "auto"
+        How ``rtol`` is met with complementarity contacts (:func:`femodes.estimate_error`):
+        ``"auto"`` computes the converged orbits themselves by shooting on the exact flow with
+        rigid stops where the model is linear with unilateral contacts only (mass at the contact
+        DOFs), and uses the levels of harmonics elsewhere.
 
     Returns
     -------
@@ -166,6 +172,7 @@ def frequency_response(
     h = _harmonics(harmonics, "frequency_response")
     _options(options, "frequency_response")
     refinement_options(rtol, max_harmonics, h.n_harmonics, "frequency_response")
+    check_estimate_method(error_method, "frequency_response", "error_method")
     span = _span(omega, "omega", "frequency_response", positive=True)
     problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
@@ -203,7 +210,7 @@ def frequency_response(
         return frequency_response(model, omega, Harmonics(H, subharmonic=h.subharmonic), options=options,
                                   projection=projection, progress=progress, stability=stability)
 
-    return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection)
+    return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method)
 
 
 def frequency_response_options(**changes) -> ContinuationOptions:

@@ -28,7 +28,7 @@ def _forced(c=0.1, F=0.2, g=1.0):
 @pytest.fixture(scope="module")
 def forced10():
     branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    return estimate_error(branch)
+    return estimate_error(branch, method="levels")  # this module tests the levels (shooting: test_exact_flow)
 
 
 def test_fold_estimate_bounds_true_error(forced10):
@@ -226,7 +226,7 @@ def test_rtol_forced_fold_within_tolerance():
     """frequency_response(rtol=1e-3) from H = 10 on the seed's forced case 1: the upper fold's
     extrapolated frequency within 1e-3 of the event-driven reference (plain H = 10: 4.4 % low;
     measured -0.008 %, bracket half-width 0.057 % with levels 20, 40, 80)."""
-    b = fm.frequency_response(_forced(), (0.5, 2.0), 10, rtol=1e-3)
+    b = fm.frequency_response(_forced(), (0.5, 2.0), 10, rtol=1e-3, error_method="levels")
     f = b.folds[0]
     ref = upper_fold(0.1, 0.2, 1.0).w
     acc = b.accuracy

@@ -182,12 +182,15 @@ class FlowRun:
         self.segments: list = []
         self.impacts: list = []
         self.Phi = np.eye(n2) if variational else None
+        self.sensitivities: list = []
         t, x = t0, x0.copy()
         while True:
             z = flow.Vinv @ (x - flow.particular(t))
             hit = self._next_impact(t, z, t1)
             tb = t1 if hit is None else hit[0]
             self.segments.append((t, tb, z))
+            if variational:
+                self.sensitivities.append(self.Phi)  # d x(t_a+) / d x0 of the segment
             x = flow.particular(tb) + np.real(flow.V @ (np.exp(flow.lam * (tb - t)) * z))
             if variational:
                 self.Phi = flow.propagator(tb - t) @ self.Phi
@@ -225,7 +228,7 @@ class FlowRun:
             gc0 = max(gc[0], 0.0)  # on the stop after an impact (or round-off below it)
 
             def gap(s, c=c):
-                return float(self._gap_and_rate(t, z, np.array([s]))[0][0, c])
+                return self._scalar(t, z, c, s)[0]
 
             found = None
             for i in range(1, m + 1):
@@ -240,10 +243,9 @@ class FlowRun:
                     found = self._root(t, z, c, lo, tau[i])
                     break
                 if a > 0.0 and rc[i - 1] < 0.0 < rc[i]:  # a minimum between two grid points: grazing?
-                    res = minimize_scalar(gap, bounds=(tau[i - 1], tau[i]), method="bounded",
-                                          options={"xatol": 1e-14 * max(1.0, span)})
-                    if res.fun < 0.0:
-                        found = self._root(t, z, c, tau[i - 1], res.x)
+                    s_min = self._root(t, z, c, tau[i - 1], tau[i], rate=True)
+                    if self._scalar(t, z, c, s_min)[0] < 0.0:
+                        found = self._root(t, z, c, tau[i - 1], s_min)
                         break
             if found is not None and (best is None or found < best[0]):
                 best = (found, c)
@@ -251,22 +253,37 @@ class FlowRun:
             return None
         return t + best[0], best[1]
 
-    def _root(self, t: float, z: np.ndarray, c: int, a: float, b: float) -> float:
-        """The zero of the gap of contact ``c`` in ``[a, b]`` (positive at ``a``, negative at
-        ``b``): Newton on the closed form with its rate, kept in the bracket (bisection when a
-        step leaves it), to round-off in time."""
+    def _scalar(self, t: float, z: np.ndarray, c: int, s: float) -> tuple[float, float, float]:
+        """Gap of contact ``c`` at ``t + s``, its rate and the rate's rate (one point, no arrays
+        of times: the root searches call it a few times per impact)."""
+        f = self.flow
+        e = np.exp(f.lam * s) * z
+        ph = np.exp(1j * f.omega * f.k * (t + s))
+        row = f.V[f.dofs[c]]
+        x = f.X[:, f.dofs[c]]
+        q = (row @ e + x @ ph).real
+        v = (row @ (f.lam * e) + x @ (1j * f.omega * f.k * ph)).real
+        acc = (row @ (f.lam ** 2 * e) + x @ (-(f.omega * f.k) ** 2 * ph)).real
+        return f.gaps[c] - q, -v, -acc
+
+    def _root(self, t: float, z: np.ndarray, c: int, a: float, b: float, rate: bool = False) -> float:
+        """The zero in ``[a, b]`` of the gap of contact ``c`` (positive at ``a``, negative at
+        ``b``), or with ``rate`` of its rate (negative at ``a``, positive at ``b``: the gap's
+        minimum): Newton on the closed form with its derivative, kept in the bracket (bisection
+        when a step leaves it), to round-off in time."""
         tol = 4.0 * np.finfo(float).eps * max(1.0, abs(t) + abs(b))
+        sign = -1.0 if rate else 1.0  # the function is positive at a
         x = 0.5 * (a + b)
-        for _ in range(60):
-            g, r = self._gap_and_rate(t, z, np.array([x]))
-            g, r = float(g[0, c]), float(r[0, c])
-            if g > 0.0:
+        for _ in range(100):
+            g, r, dr = self._scalar(t, z, c, x)
+            val, der = (sign * r, sign * dr) if rate else (g, r)
+            if val > 0.0:
                 a = x
-            elif g < 0.0:
+            elif val < 0.0:
                 b = x
             else:
                 return x
-            x1 = x - g / r if r != 0.0 else 0.5 * (a + b)
+            x1 = x - val / der if der != 0.0 else 0.5 * (a + b)
             if not a < x1 < b:
                 x1 = 0.5 * (a + b)
             if abs(x1 - x) <= tol or b - a <= tol:
@@ -304,6 +321,29 @@ class FlowRun:
         return xp
 
     # -- Fourier coefficients ---------------------------------------------------------------------
+    def _integrals(self, H: int):
+        """Per free-flight segment ``int_ta^tb e^{lam_m (t - ta)} e^{-i k w t} dt``, shape
+        ``(2n, H + 1)``."""
+        f = self.flow
+        w = f.omega
+        k = np.arange(H + 1)
+        mu = np.subtract.outer(f.lam, 1j * k * w)  # (2n, H+1)
+        for ta, tb, _ in self.segments:
+            d = tb - ta
+            x = mu * d
+            small = np.abs(x) < 1e-8
+            phi1 = np.where(small, 1.0 + 0.5 * x, np.expm1(np.where(small, 1.0, x)) / np.where(small, 1.0, x))
+            yield d * phi1 * np.exp(-1j * k * w * ta)
+
+    @staticmethod
+    def _real(C: np.ndarray, H: int) -> np.ndarray:
+        """Real coefficients ``[c0, c1, s1, ...]`` from ``(w / pi) int q e^{-ikwt} dt`` (rows k)."""
+        out = np.zeros((2 * H + 1,) + C.shape[1:])
+        out[0] = 0.5 * np.real(C[0])
+        out[1::2] = np.real(C[1:])
+        out[2::2] = -np.imag(C[1:])
+        return out
+
     def coefficients(self, H: int) -> tuple[np.ndarray, np.ndarray]:
         """Real Fourier coefficients ``[c0, c1, s1, ..., cH, sH]`` of the displacements (shape
         ``(2H + 1, n)``) and of the contact forces (``(2H + 1, n_contacts)``; impulses) over the
@@ -314,23 +354,11 @@ class FlowRun:
         k = np.arange(H + 1)
         Ic = np.zeros((H + 1, n), dtype=complex)  # int q(t) e^{-i k w t} dt
         Vq = f.V[:n]
-        for ta, tb, z in self.segments:
-            d = tb - ta
-            mu = np.subtract.outer(f.lam, 1j * k * w)  # (2n, H+1)
-            x = mu * d
-            small = np.abs(x) < 1e-8
-            phi1 = np.where(small, 1.0 + 0.5 * x, np.expm1(np.where(small, 1.0, x)) / np.where(small, 1.0, x))
-            J = d * phi1 * np.exp(-1j * k * w * ta)  # int_ta^tb e^{lam (t - ta)} e^{-ikwt} dt
+        for J, (_, _, z) in zip(self._integrals(H), self.segments):
             Ic += (J.T * z) @ Vq.T
-        T = self.t1 - self.t0
-        Q = np.zeros((2 * H + 1, n))
-        C = Ic * (w / math.pi)  # (1/pi) int q e^{-ik theta} dtheta over one period
-        C[0] *= 0.5
-        Q[0] = np.real(C[0])
-        Q[1::2] = np.real(C[1:])
-        Q[2::2] = -np.imag(C[1:])
+        Q = self._real(Ic * (w / math.pi), H)  # (1/pi) int q e^{-ik theta} dtheta over one period
         # the particular solution is periodic: its coefficients exactly (times the whole period)
-        scale = T * w / (2.0 * math.pi)
+        scale = (self.t1 - self.t0) * w / (2.0 * math.pi)
         for kk, Xk in zip(f.k, f.X):
             if kk > H:
                 continue
@@ -346,3 +374,19 @@ class FlowRun:
             P[1::2, c] += imp * w / math.pi * np.cos(ph)
             P[2::2, c] += imp * w / math.pi * np.sin(ph)
         return Q, P
+
+    def coefficient_sensitivity(self, H: int) -> np.ndarray:
+        """``d Q / d x0`` of :meth:`coefficients`, shape ``(2H + 1, n, 2n)`` (a variational run):
+        on each segment ``dq(t)/dx0 = [I 0] V e^{Lambda (t - t_a)} V^-1 Phi_a`` with ``Phi_a``
+        the sensitivity after the impact that starts it (saltation included; q is continuous at
+        an impact, so a shift of the impact time adds nothing else)."""
+        if self.Phi is None:
+            raise ValueError("coefficient_sensitivity needs a run with variational=True")
+        f = self.flow
+        n, w = f.n, f.omega
+        Vq = f.V[:n]
+        Ic = np.zeros((H + 1, n, 2 * n), dtype=complex)
+        for J, Phi_a in zip(self._integrals(H), self.sensitivities):
+            Zm = f.Vinv @ Phi_a  # (2n modes, 2n columns)
+            Ic += np.einsum("mk,dm,mc->kdc", J, Vq, Zm)
+        return self._real(Ic * (w / math.pi), H)
