@@ -227,7 +227,9 @@ def report_cases(rows: dict) -> str:
                 lines.append(f"| {case} | {name} | | | {r['error']} | | | | | | | |")
                 continue
             spec = RUNS[name]
-            levels = (f"{spec['H']} (to {r.get('finest', '-')}; cap {spec['max_harmonics']})" if "rtol" in spec
+            finest = r.get("finest", "-")
+            finest = "shooting" if finest == 0 else f"to {finest}"  # 0: the exact orbit answered at the fold
+            levels = (f"{spec['H']} ({finest}; cap {spec['max_harmonics']})" if "rtol" in spec
                       else f"{spec['H']} (levels {spec['H'] // 2}, {spec['H']}, {2 * spec['H']})" if spec.get("estimate")
                       else str(spec["H"]))
             err = (r["fold"] / ref - 1.0) if ref is not None and math.isfinite(r.get("fold", math.nan)) else math.nan

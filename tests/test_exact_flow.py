@@ -32,7 +32,7 @@ def _periodic(flow, x, t0):
         if np.max(np.abs(F)) < 1e-13:
             return x, run
         d = -np.linalg.solve(run.Phi - np.eye(x.size), F)
-        while flow.gaps[0] - (x + d)[0] < 0.0:
+        while np.any(flow.gaps - (x + d)[flow.dofs] < 0.0):
             d *= 0.5
         x = x + d
     raise AssertionError("no periodic orbit")
@@ -144,3 +144,55 @@ def test_shooting_method_checked():
         estimate_error(b, method="shooting")
     with pytest.raises(ValueError, match="method must be one of"):
         estimate_error(b, method="exact")
+
+
+def _bar(ne=6):
+    """The FE bar with a tip mass and a stop of README_accuracy section 2 (consistent mass at the
+    contact node: the impulse acts along M^-1 e_c, not on the tip DOF alone)."""
+    mesh = fm.line_mesh(length=1.0, n_elements=ne, boundaries={"clamp": 0.0, "tip": 1.0})
+    return (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp",
+                   point_masses={"tip": 0.75})
+            .with_damping(beta=0.02).with_forcing(fm.HarmonicForce(at="tip", amplitude=0.05))
+            .with_contact(fm.UnilateralContact(at="tip", gap=1.0), contact_mass=fm.ConsistentMass()))
+
+
+def test_fe_bar_orbit_matches_event_driven_integration():
+    """6-element bar near its upper fold (the exact orbit on the hyperplane of an H = 8 point): it
+    is a periodic orbit of the DOP853 event-driven shooting too (rtol 1e-12), equal to 1e-7 of the
+    state, with the same number of impacts; the impulse moves the neighbouring DOF too."""
+    model = _bar()
+    w1 = float(fm.linear_modes(model, n=1).omega[0])
+    b = fm.frequency_response(model, (0.9 * w1, 1.25 * w1), 8)
+    i = max(b.folds, key=lambda j: b.omega[j]) - 3
+    # the exact orbit on the point's hyperplane (a plain Newton from the point lands on the
+    # coexisting orbit without impacts)
+    x, w, theta0, run = fm.accuracy._Shooter(fm.accuracy._ladder(b, None, None, "test")).solve(i)[:4]
+    flow = run.flow
+    tip = model.dof("tip")
+    assert len(run.impacts) >= 1 and np.max(np.abs(run.x_end - x)) <= 1e-10 * np.max(np.abs(x))
+    assert np.count_nonzero(np.abs(flow.impact_dir[0]) > 1e-12) > 1  # consistent mass: not e_c alone
+    assert abs(flow.impact_dir[0][tip] - 1.0) < 1e-14
+    ref = shoot(model, w, x, t0=theta0 / w, tol=1e-12, rtol=1e-12, atol=1e-13)
+    assert ref.success and len(ref.impacts) == len(run.impacts)
+    np.testing.assert_allclose(x, ref.x, atol=1e-7 * np.max(np.abs(x)))
+
+
+def test_massless_contact_dof_left_to_the_levels():
+    """Mass redistributed away from the contact (the default of with_contact for FE models): no
+    impact law, so "auto" keeps the levels and "shooting" says why."""
+    model = (fm.StructuralModel(M=[[1.0, 0.0], [0.0, 0.0]], K=[[2.0, -1.0], [-1.0, 1.0]], C=[[0.1, 0.0], [0.0, 0.0]])
+             .with_contact(fm.UnilateralContact(at=1, gap=1.0)).with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
+    assert "no mass" in exact_flow_unsupported(model)
+    b = fm.frequency_response(model, (0.3, 0.5), 4)
+    assert "no mass" in fm.accuracy.shooting_unsupported(b)
+    with pytest.raises(ValueError, match="no mass"):
+        estimate_error(b, method="shooting")
+
+
+def test_shooting_estimate_saved_and_loaded(shot10, tmp_path):
+    path = tmp_path / "b.npz"
+    shot10.save(path)
+    back = fm.load_branch(path)
+    assert list(back.accuracy.method) == list(shot10.accuracy.method)
+    np.testing.assert_array_equal(back.accuracy.omega_limit, shot10.accuracy.omega_limit)
+    np.testing.assert_array_equal(back.accuracy.finest, shot10.accuracy.finest)

@@ -55,6 +55,12 @@ def exact_flow_unsupported(model: StructuralModel) -> str:
     shooting refuses (:func:`femodes.time.shooting.unsupported`)."""
     if not isinstance(model, StructuralModel):
         return f"model must be a StructuralModel (or ReducedModel), got {type(model).__name__}"
+    Md = model.M.diagonal()
+    for j, a in enumerate(model.contacts):
+        if isinstance(a.item, UnilateralContact) and not Md[a.dof] > 0.0:
+            return (f"UnilateralContact {j} (at={a.item.at!r}) acts on DOF {model.dofmap.label(a.dof)!r}, which has "
+                    "no mass (redistributed away from the contact): an impact law needs a mass there "
+                    "(with_contact(..., contact_mass=fm.ConsistentMass()) keeps it)")
     why = unsupported(model)
     if why:
         return why
