@@ -147,11 +147,14 @@ def frequency_response(
     rtol : float, optional
         Requested relative accuracy of the frequency with respect to the converged (``H -> inf``)
         answer (e.g. ``1e-3``). The branch then carries :attr:`~femodes.Branch.accuracy`: with
-        complementarity contacts, ``accuracy.omega_limit`` is the frequency extrapolated in
-        ``H`` (first order in ``1/H`` for rigid impacts), refined by further levels where its
-        bracket is wider than ``rtol``; smooth systems are recomputed with ``2 H`` until the
-        estimate meets ``rtol``. ``accuracy.met`` says which points meet it (those near grazing
-        may not: their levels do not bracket the limit). :mod:`femodes.accuracy`.
+        complementarity contacts, ``accuracy.omega_limit`` is the converged frequency: computed
+        by shooting on the exact flow with rigid stops (``error_method="auto"``, linear models
+        with mass at the contact DOFs: exact folds, about 4x the plain curve on the seed cases),
+        or extrapolated in ``H`` (first order in ``1/H`` for rigid impacts) and refined by
+        further levels where its bracket is wider than ``rtol``; smooth systems are recomputed
+        with ``2 H`` until the estimate meets ``rtol``. ``accuracy.met`` says which points meet
+        it (those just above grazing may not: no counterpart on the exact curve, no bracket by
+        the levels). :mod:`femodes.accuracy`.
     max_harmonics : int, optional
         Largest number of harmonics ``rtol`` may use (default ``8 H``).
     error_method : {"auto", "shooting", "levels"}, default "auto"

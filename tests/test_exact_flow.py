@@ -196,3 +196,13 @@ def test_shooting_estimate_saved_and_loaded(shot10, tmp_path):
     assert list(back.accuracy.method) == list(shot10.accuracy.method)
     np.testing.assert_array_equal(back.accuracy.omega_limit, shot10.accuracy.omega_limit)
     np.testing.assert_array_equal(back.accuracy.finest, shot10.accuracy.finest)
+
+
+def test_defective_state_matrix_falls_back_to_the_levels():
+    """Critical damping (c = 2: a double eigenvalue of the state matrix) has no modal flow: "auto"
+    estimates by the levels, "shooting" says why."""
+    model = _forced(c=2.0, F=2.0)
+    b = fm.frequency_response(model, (0.5, 0.7), 4)
+    with pytest.raises(ValueError, match="defective"):
+        estimate_error(b, method="shooting")
+    assert set(estimate_error(b).accuracy.method) <= {"doubling", "failed"}
