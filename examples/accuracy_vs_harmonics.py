@@ -16,8 +16,11 @@ For each H: the true relative error of the branch's own frequency, the estimate
 ``branch.accuracy.omega`` of ``fm.estimate_error`` (levels H/2, H, 2H), the extrapolated
 ``accuracy.omega_limit`` (impacts only: first order in 1/H) with the relative half-width
 ``accuracy.omega_limit_error`` of its bracket, and the CPU (and wall) time of the plain run and of
-the estimate. Then ``nonlinear_mode(..., rtol=2e-3)`` from H = 10 on the free backbone: it adds
-levels 40, 80 where the bracket is too wide.
+the estimate (``method="levels"``: this example studies the levels of harmonics). Then
+``nonlinear_mode(..., rtol=2e-3)`` from H = 10 on the free backbone: it adds levels 40, 80 where
+the bracket is too wide; and ``frequency_response(..., rtol=1e-3)`` on the forced oscillator from
+H = 10 and 20 with the default ``error_method="auto"``: a linear model with a rigid stop, so the
+converged orbits come from shooting on the exact flow (``femodes.time.exact``).
 
 Measured (H = 5, 10, 20, 40; estimates at H = 5, 10, 20, odd H = 5 with the levels 5, 10, 20):
 
@@ -27,7 +30,9 @@ Measured (H = 5, 10, 20, 40; estimates at H = 5, 10, 20, odd H = 5 with the leve
   0.23 % (half-width 1.1 %), 0.23 % (1.1 %), 0.0017 % (0.33 %); ``rtol=2e-3`` from H = 10: limit off
   by 3.6e-5 (half-width 0.13 %, levels to 80), 1.6 s of CPU;
 * Duffing at H = 1, 3, 5, 7: 2.5e-3, 3.7e-6, 3.3e-9, 2.2e-12 (~700x per odd harmonic), every
-  estimate within 2 % of the true error.
+  estimate within 2 % of the true error;
+* forced fold by shooting (``rtol=1e-3``): limit 1.4191583461 from H = 10 and H = 20, off by
+  4e-15 and 1e-16 (stated half-width 1e-9), in 1.1 s and 2.0 s of CPU with the plain run.
 
 So the estimate is safe and close (1.1-1.3x the true error) and the exact value lies inside the
 bracket, whose midpoint is 20-2000x closer than the branch itself. Odd H costs more to estimate
@@ -40,7 +45,7 @@ H = 20: each level is traced by a continuation of its own over the part of the b
 contact, the finest costing about a plain run at 2H there); the free backbone's estimate at
 H = 20 takes 0.5 s for a 0.2 s branch. The estimate at H = 40 is left out to keep the example
 short. ``benchmarks/bench_accuracy.py`` has the costs of ``rtol=1e-3`` and ``1e-4`` on the
-forced cases (``README_accuracy.md``). About 11 s of CPU.
+forced cases (``README_accuracy.md``). About 14 s of CPU.
 """
 
 from __future__ import annotations
@@ -177,6 +182,18 @@ duffing = {H: duffing_backbone(H) for H in DUFFING_H}
 free_rtol = free_backbone(RTOL_H, rtol=RTOL)
 
 
+def forced_shooting(H: int) -> dict:
+    """``frequency_response(..., rtol=1e-3)`` with the default ``error_method="auto"``: this linear
+    model with a rigid stop gets the converged orbits by shooting on the exact flow."""
+    with _Clock() as c:
+        b = fm.frequency_response(forced_model, W_SPAN, H, rtol=1e-3)
+    return _row(b, b.folds[0], FOLD_EXACT, c, None)
+
+
+SHOOT_H = (10, 20)
+forced_shoot = {H: forced_shooting(H) for H in SHOOT_H}
+
+
 def table() -> str:
     lines = ["system          H  points  w_H         true err   estimate   limit err  half-width  "
              "plain CPU (wall) [s]  estimate CPU (wall) [s]"]
@@ -185,6 +202,10 @@ def table() -> str:
             lines.append(f"{name:14s} {H:3d} {r['points']:6d}  {r['omega']:.7f}  {r['true']:.3e}  {r['estimate']:.3e}  "
                          f"{r['limit_error']:.3e}  {r['half_width']:.3e}   {r['cpu_plain']:6.1f} ({r['wall_plain']:5.1f})"
                          f"        {r['cpu_estimate']:6.1f} ({r['wall_estimate']:5.1f})")
+    for H, r in forced_shoot.items():
+        lines.append(f"forced fold, rtol = 1e-3 by shooting from H = {H}: limit {r['limit']:.10f} (exact "
+                     f"{r['exact']:.10f}), error {r['limit_error']:.1e}, half-width {r['half_width']:.0e}, met {r['met']}, "
+                     f"CPU {r['cpu_plain']:.1f} s (wall {r['wall_plain']:.1f} s) with the plain run")
     r = free_rtol
     lines.append(f"free backbone, rtol = {RTOL:g} from H = {RTOL_H}: limit {r['limit']:.6f} (exact {r['exact']:.6f}), "
                  f"error {r['limit_error']:.2e}, half-width {r['half_width']:.2e}, met {r['met']}, finest level "
@@ -223,6 +244,10 @@ def main(out="out"):
         ax1.loglog(H[ok], half[ok], "v", color=c, mfc="none", ms=9)
     r = free_rtol
     ax1.loglog([RTOL_H], [r["limit_error"]], "*", color="C1", ms=15)
+    Hs_ = np.array(list(forced_shoot), dtype=float)
+    ax1.loglog(Hs_, np.full(Hs_.size, 7e-6), "P", color="C0", ms=11)  # exact to round-off: drawn on the axis
+    ax1.text(Hs_[0] * 1.08, 8.5e-6, "forced fold by shooting (rtol = 1e-3, auto):\nerror < 1e-14, below the axis",
+             fontsize=7.5, color="C0")
     ax1.text(4.2, 1.2e-4, "H = 5 is odd: its levels are 5, 10, 20\n(H // 2 = 2 would not be a doubling)",
              fontsize=7.5, color="0.3")
     Hs = np.array([4.0, 50.0])
@@ -240,7 +265,9 @@ def main(out="out"):
             Line2D([], [], color="k", marker="x", ls="", mew=2, label="extrapolated omega_limit: true error"),
             Line2D([], [], color="k", marker="v", mfc="none", ls="", label="omega_limit_error (bracket half-width)"),
             Line2D([], [], color="C1", marker="*", ls="", ms=12,
-                   label=f"free backbone, rtol = {RTOL:g} from H = {RTOL_H}: omega_limit true error")]
+                   label=f"free backbone, rtol = {RTOL:g} from H = {RTOL_H}: omega_limit true error"),
+            Line2D([], [], color="C0", marker="P", ls="", ms=10,
+                   label="forced fold, rtol = 1e-3 by shooting (error_method auto): omega_limit exact")]
     ax1.legend(handles=keys, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=1)
 
     H, true, est = _columns(duffing, "true", "estimate")
@@ -260,6 +287,8 @@ def main(out="out"):
         ax3.loglog(H[ok], tp[ok] + te[ok], "s--", color=c, mfc="none", ms=10, label=f"{label}: plain + estimate_error")
     ax3.loglog([RTOL_H], [r["cpu_plain"]], "*", color="C1", ms=15,
                label=f"free backbone: rtol = {RTOL:g} from H = {RTOL_H} (levels to {r['finest']})")
+    H, ts = _columns(forced_shoot, "cpu_plain")
+    ax3.loglog(H, ts, "P", color="C0", ms=11, label="forced fold: rtol = 1e-3 by shooting (plain run included)")
     ax3.set_xlabel("harmonics H of the branch")
     ax3.set_ylabel("CPU time [s] (one process, 1 BLAS thread)")
     ax3.set_title("cost of a run and of its error estimate", fontsize=10)

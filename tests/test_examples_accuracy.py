@@ -208,5 +208,7 @@ def test_accuracy_vs_harmonics_example(tmp_path):
         assert r["true"] < 3e-3 and (r["true"] < 1e-11 or 0.98 * r["true"] <= r["estimate"] <= 1.05 * r["true"])
     r = ex.free_rtol
     assert r["met"] and r["limit_error"] <= r["half_width"] <= ex.RTOL and r["finest"] >= 40
+    for r in ex.forced_shoot.values():  # shooting on the exact flow: the fold to its stated floor (measured <= 4e-15)
+        assert r["met"] and r["limit_error"] <= r["half_width"] <= 1e-9
     png = ex.main(tmp_path)
     assert png.stat().st_size > 50_000
