@@ -981,14 +981,18 @@ def _free_before(branch: Branch, i: int) -> int:
 #: balance point's is taken as another orbit, and the point is left to the levels.
 SHOOTING_MAX_CORRECTION = 0.5
 #: Floor of the relative half-width stated for a shooting limit: the exact flow is exact up to
-#: round-off and the root tolerance of the impact times (1e-15 relative); the Newton solve stops
-#: at 1e-12. The floor leaves a margin of 1e3 over that.
+#: round-off and the root tolerance of the impact times (4 eps); the Newton solve stops after a
+#: relative frequency step of SHOOTING_STEP (1e-7), leaving about its square. The floor leaves a
+#: margin of 1e3 and more over both (the seed folds came out within 1e-14 of their references).
 SHOOTING_FLOOR = 1e-9
 #: Largest ``kappa`` (:meth:`_Shooter.glancing`) for which the exact orbit on a point's
 #: hyperplane is taken as the point's counterpart.
 GLANCING_MAX = 3.0
 #: Marks a point whose exact crossing is no counterpart (:meth:`_Shooter.glancing`).
 GLANCING = "glancing"
+#: A lower fold with a point without contact at most this many points away may be a grazing
+#: (:meth:`_Shooter.fold`; seed case 1: the lower fold is point 79, contact ends at point 81).
+GRAZING_POINTS = 4
 #: Relative step of the finite differences of the shooting Jacobian (frequency column and the
 #: hyperplane row).
 _FD_STEP = 1e-7
@@ -1104,7 +1108,7 @@ class _Shooter:
         return dws / (dw / ds)
 
     def warm(self, i: int, prev) -> tuple:
-        """A first guess for point ``i`` from the exact orbit ``prev = (x0, w, theta0)`` of a
+        """A first guess for point ``i`` from the exact orbit ``prev = (x0, w, theta0, j)`` of a
         neighbour ``j``: moved by the branch's change from ``j`` to ``i`` at the same phase."""
         x0, omega, theta0, j = prev[:4]
         b, h = self.branch, self.lad.h0
@@ -1276,7 +1280,11 @@ class _Shooter:
             tol = 1e-4 * max(abs(s), d)
             spread = max(abs(sign * omega_at(s + tol) - w), abs(sign * omega_at(s - tol) - w))
         except (_ShootingFailed, ValueError, RuntimeError) as exc:
-            graze = self.grazing(float(b.omega[f]))
+            # a lower fold that ends the contact within a few points: the impacting orbits end at a
+            # grazing there (past it the exact curve has no impacting orbit on these planes)
+            free = _without_contact(b)
+            ends_contact = bool(free[max(f - GRAZING_POINTS, 0): f + GRAZING_POINTS + 1].any())
+            graze = self.grazing(float(b.omega[f])) if not upper and ends_contact else None
             if graze is None:
                 log.info("accuracy: the exact fold next to point %d was not located (%s)", f, exc)
                 return None
