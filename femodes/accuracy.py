@@ -58,7 +58,8 @@ seed's forced case at rtol 1e-3, 134 continuation points instead of 196). Each p
 then comes from its last three levels.
 
 **Shooting** (``method="auto"``, the default, or ``"shooting"``; forced branches of linear
-models whose only contacts are rigid stops on DOFs with mass). The limit itself is computed
+models whose only contacts are rigid stops on DOFs with mass; ``auto`` also leaves stiff models,
+whose impact search per period exceeds :data:`SHOOTING_AUTO_MAX_WORK`, to the levels). The limit itself is computed
 instead of extrapolated: the orbit of the exact flow with restitution 1 (closed form between
 impacts, :class:`femodes.time.exact.LinearImpactFlow`) on each point's hyperplane, by Newton on
 the start state and the frequency (monodromy matrix and the hyperplane's gradient exact, the
@@ -455,8 +456,9 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
                              "method='levels' (or 'auto')")
         if not why:
             try:
-                todo = _estimate_by_shooting(lad, ew, eq, rates, w_lim, w_lim_err, finest, kind)
-            except ValueError as exc:  # the flow itself (a nearly defective state matrix)
+                todo = _estimate_by_shooting(lad, ew, eq, rates, w_lim, w_lim_err, finest, kind,
+                                             max_work=SHOOTING_AUTO_MAX_WORK if method == "auto" else math.inf)
+            except ValueError as exc:  # the flow itself (a nearly defective state matrix), or too stiff for auto
                 if method == "shooting":
                     raise ValueError(f"estimate_error: method='shooting': {exc}") from None
                 log.info("accuracy: no shooting (%s); levels", exc)
@@ -527,11 +529,20 @@ def _estimate_by_levels(lad: _Ladder, rtol, max_harmonics: int, todo: np.ndarray
                 finest[i] = top
 
 
-def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest, kind) -> np.ndarray:
+def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest, kind,
+                          max_work: float = math.inf) -> np.ndarray:
     """Errors of the points from the exact orbits on their hyperplanes (:class:`_Shooter`; the
     branch's folds: the exact folds), into the arrays given; returns the points without an
-    exact orbit."""
+    exact orbit. ValueError if the flow cannot be built or one period's impact search would
+    evaluate more than ``max_work`` modal terms (grid points times 2 n)."""
     branch = lad.branch
+    from .time.exact import LinearImpactFlow
+
+    probe = LinearImpactFlow(lad.model, float(np.min(branch.omega)))
+    work = 2.0 * math.pi / probe.omega / probe.dt * 2 * probe.n
+    if work > max_work:
+        raise ValueError(f"the exact flow would evaluate {work:.3g} modal terms per period (stiff model: fastest "
+                         f"eigenvalue {float(np.max(np.abs(probe.lam))):.3g} rad/s); more than {max_work:g}")
     n = len(branch)
     H = branch.harmonics.n_harmonics
     free = _without_contact(branch)
@@ -542,7 +553,7 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
     rates[free] = math.inf
     finest[free] = H
     kind[free] = "shooting"
-    solved, sh = _shoot_branch(lad)
+    solved, sh = _shoot_branch(lad, probe)
     K = 8 * H  # the exact orbit's displacement to 8 H harmonics: the error includes the tail
     hk = Harmonics(K)
     for i, r in solved.items():
@@ -985,6 +996,10 @@ SHOOTING_MAX_CORRECTION = 0.5
 #: relative frequency step of SHOOTING_STEP (1e-7), leaving about its square. The floor leaves a
 #: margin of 1e3 and more over both (the seed folds came out within 1e-14 of their references).
 SHOOTING_FLOOR = 1e-9
+#: ``method="auto"`` shoots only if one period's impact search evaluates at most this many modal
+#: terms (grid points times 2 n): the FE bar of README_accuracy with 40 elements (41 DOFs) needs
+#: 2.7e5 (33 s for 49 points), a stiff 500-DOF model could need 1e8 and more.
+SHOOTING_AUTO_MAX_WORK = 1e6
 #: Largest ``kappa`` (:meth:`_Shooter.glancing`) for which the exact orbit on a point's
 #: hyperplane is taken as the point's counterpart.
 GLANCING_MAX = 3.0
@@ -1027,13 +1042,13 @@ class _Shooter:
     with restitution 1 (the limit of harmonic balance with complementarity contacts: 4.4, 2.4,
     1.2, 0.67 % fold errors at H = 10-80 against the event-driven reference converge to it)."""
 
-    def __init__(self, lad: _Ladder):
+    def __init__(self, lad: _Ladder, flow=None):
         from .time.exact import LinearImpactFlow
 
         self.lad = lad
         self.branch = lad.branch
         self.H = lad.h0.n_harmonics
-        self.flow = LinearImpactFlow(lad.model, float(np.mean(self.branch.omega)))
+        self.flow = flow or LinearImpactFlow(lad.model, float(np.mean(self.branch.omega)))
         self.n = self.flow.n
         self.runs = 0
 
@@ -1356,12 +1371,12 @@ class _ShootingFailed(RuntimeError):
     pass
 
 
-def _shoot_branch(lad: _Ladder) -> tuple[dict, _Shooter]:
+def _shoot_branch(lad: _Ladder, flow=None) -> tuple[dict, _Shooter]:
     """Exact orbits on the hyperplanes of the branch's points with contact, each from its
     predecessor's (moved by the branch's step), else from the point itself, else the linear
     orbit, else (a second pass, backward) from its successor's; ``{i: (x0, w, theta0, run,
     step)}`` (None where none was found)."""
-    sh = _Shooter(lad)
+    sh = _Shooter(lad, flow)
     free = _without_contact(lad.branch)
     out: dict = {}
     prev = None

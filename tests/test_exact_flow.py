@@ -206,3 +206,25 @@ def test_defective_state_matrix_falls_back_to_the_levels():
     with pytest.raises(ValueError, match="defective"):
         estimate_error(b, method="shooting")
     assert set(estimate_error(b).accuracy.method) <= {"doubling", "failed"}
+
+
+def test_chunked_impact_search_same_orbit(orbit, monkeypatch):
+    """A stiff model's impact search goes chunk by chunk (memory): with chunks of 5 grid points
+    the run is the same to round-off."""
+    import femodes.time.exact as exact
+
+    _, flow, _, t0, x, run = orbit
+    monkeypatch.setattr(exact, "CHUNK", 5)
+    again = flow.run(x, t0, variational=True)
+    assert len(again.impacts) == len(run.impacts)
+    np.testing.assert_allclose(again.x_end, run.x_end, rtol=0, atol=1e-14 * np.max(np.abs(x)))
+    np.testing.assert_allclose(again.Phi, run.Phi, rtol=0, atol=1e-12)
+
+
+def test_auto_leaves_stiff_models_to_the_levels(monkeypatch):
+    """``auto`` shoots only if a period's impact search is small enough (SHOOTING_AUTO_MAX_WORK);
+    ``shooting`` asked for explicitly goes on."""
+    b = fm.frequency_response(_forced(), (1.2, 1.3), 6)
+    monkeypatch.setattr(fm.accuracy, "SHOOTING_AUTO_MAX_WORK", 10.0)
+    assert set(estimate_error(b).accuracy.method) <= {"doubling", "failed"}
+    assert "shooting" in set(estimate_error(b, method="shooting").accuracy.method)

@@ -39,11 +39,14 @@ from ..laws import UnilateralContact
 from ..model import StructuralModel
 from .shooting import MAX_DOFS, MAX_IMPACTS, unsupported
 
-__all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "SAMPLES"]
+__all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "SAMPLES", "CHUNK"]
 
 #: Grid points per shortest period of the flow (fastest eigenvalue or forcing harmonic) on which
 #: the impacts are bracketed.
 SAMPLES = 24
+#: Largest number of grid points of one impact search evaluated at once (memory CHUNK x 2n
+#: complex numbers); longer searches go chunk by chunk and stop at the first impact.
+CHUNK = 4096
 #: Largest condition number of the eigenvector matrix (a nearly defective A, e.g. critical
 #: damping, makes the modal flow inaccurate).
 MAX_CONDITION = 1e8
@@ -219,19 +222,36 @@ class FlowRun:
         v = np.real(E @ f.V[n + f.dofs].T + ph @ f.X[:, n + f.dofs])
         return f.gaps - q, -v
 
-    def _next_impact(self, t: float, z: np.ndarray, t1: float):
-        """``(time, contact)`` of the first approach to zero gap in ``(t, t1]``, or None."""
+    def _next_impact(self, t: float, z: np.ndarray, t1: float, start: float = 0.0):
+        """``(time, contact)`` of the first approach to zero gap in ``(t + start, t1]`` (``start``
+        > 0: a later chunk of the search, whose first sample is an ordinary one), or None."""
         f = self.flow
         span = t1 - t
-        if span <= 0.0:
+        if span <= start:
             return None
+        if start > 0.0:
+            m = max(2, int(math.ceil((span - start) / f.dt)))
+            tau = np.linspace(start, span, m + 1)
+            g, r = self._gap_and_rate(t, z, tau)
+            return self._first_crossing(t, z, tau, g, r, m, after_impact=False)
         m = max(2, int(math.ceil(span / f.dt)))
+        if m > CHUNK:  # a stiff model: search chunk by chunk (memory m x 2n), the first hit ends it
+            edges = np.linspace(0.0, span, -(-m // CHUNK) + 1)
+            for a, b in zip(edges[:-1], edges[1:]):
+                hit = (self._next_impact(t, z, t + b, start=a) if a > 0.0 else self._next_impact(t, z, t + b))
+                if hit is not None:
+                    return hit
+            return None
         tau = np.linspace(0.0, span, m + 1)
         g, r = self._gap_and_rate(t, z, tau)
+        return self._first_crossing(t, z, tau, g, r, m, after_impact=True)
+
+    def _first_crossing(self, t, z, tau, g, r, m, after_impact: bool):
+        """The earliest crossing on the sampled gaps ``g`` (rates ``r``) at ``t + tau``."""
         best = None
         for c in range(g.shape[1]):
             gc, rc = g[:, c], r[:, c]
-            gc0 = max(gc[0], 0.0)  # on the stop after an impact (or round-off below it)
+            gc0 = max(gc[0], 0.0) if after_impact else gc[0]  # on the stop after an impact (or round-off below)
 
             def gap(s, c=c):
                 return self._scalar(t, z, c, s)[0]
@@ -241,7 +261,7 @@ class FlowRun:
                 a = gc0 if i == 1 else gc[i - 1]
                 if gc[i] < 0.0:
                     lo = tau[i - 1]
-                    if i == 1 and gc[0] <= 0.0:  # leaving the stop: find where it really starts to close
+                    if i == 1 and gc[0] <= 0.0 and after_impact:  # leaving the stop: where does it close?
                         lo = self._leave(gap, tau[0], tau[1])
                         if lo is None:
                             found = None
