@@ -3,7 +3,8 @@ r"""The exact flow of a linear model with rigid stops: closed form between impac
 Between impacts a model without smooth nonlinear laws is linear, ``x' = A x + b(t)`` with
 ``x = [q; v]``, ``A = [[0, I], [-M^-1 K, -M^-1 C]]`` and harmonic forcing
 ``b(t) = Re sum_k [0; M^-1 F_k] e^{i k w t}``. With ``A = V diag(lambda) V^-1`` (diagonalised
-once per model and frequency) and the particular solution ``x_p(t) = Re sum_k X_k e^{i k w t}``,
+once per model; :meth:`LinearImpactFlow.at` changes the frequency) and the particular solution
+``x_p(t) = Re sum_k X_k e^{i k w t}``,
 ``(i k w I - A) X_k = [0; M^-1 F_k]``, the flow is
 
 .. math::
@@ -13,10 +14,12 @@ once per model and frequency) and the particular solution ``x_p(t) = Re sum_k X_
 on a free-flight interval starting at ``t_a``. An impact is the first time the gap
 ``g_N = gap - q_c`` of a :class:`~femodes.laws.UnilateralContact` reaches 0 while approaching;
 it is bracketed on a grid of :data:`SAMPLES` points per shortest period of the flow (grazing
-minima between grid points are searched too) and located by ``brentq`` to round-off. Newton's
-impact law and the saltation matrix are those of :mod:`femodes.time.shooting` (impulse along
-``M^-1 e_c``). No step size, no integration error: the orbit is exact to round-off and to the
-root tolerance of the impact times.
+minima between grid points are searched too) and located to round-off by Newton on the closed
+form, kept in the bracket. Newton's impact law and the saltation matrix are those of
+:mod:`femodes.time.shooting` (impulse along ``M^-1 e_c``). No step size, no integration error:
+the orbit is exact to round-off and to the root tolerance of the impact times (4 eps).
+Restitution below 1 is accepted, but an accumulation of impacts (chattering into sticking) is
+refused after :data:`~femodes.time.shooting.MAX_IMPACTS` impacts.
 
 The Fourier coefficients of the orbit follow in closed form as well (integrals of exponentials
 over each free-flight interval; impulses for the contact forces), which is what
