@@ -1052,28 +1052,19 @@ class _Shooter:
         self.n = self.flow.n
         self.runs = 0
 
-    def _at(self, omega: float):
-        return self.flow.at(omega)
-
     def start(self, i: int) -> tuple[np.ndarray, float]:
         """State of point ``i`` at its most open phase (largest smallest gap) and that phase."""
         b, h = self.branch, self.lad.h0
-        m = max(256, 8 * h.n_coef)
-        theta = 2.0 * np.pi * np.arange(m) / m
-        E = h.synthesis(theta)
         Q = b.Q[i]
-        gaps = self.flow.gaps - (E @ Q)[:, self.flow.dofs]
-        j = int(np.argmax(gaps.min(axis=1)))
-        e = E[j]
-        q = e @ Q
-        v = e @ (h.derivative(float(b.omega[i])) @ Q)
-        return np.concatenate([q, v]), float(theta[j])
+        theta = h.most_open_phase(Q, self.flow.dofs, self.flow.gaps)
+        e = h.synthesis(np.array([theta]))[0]
+        return np.concatenate([e @ Q, e @ (h.derivative(float(b.omega[i])) @ Q)]), theta
 
     def evaluate(self, x0: np.ndarray, omega: float, theta0: float, plane, jac: bool):
         """Periodicity residual, hyperplane value and (with ``jac``) their Jacobian in ``(x0, w)``:
         the monodromy matrix and the hyperplane's gradient in ``x0`` exact (variational run),
         the frequency column by a finite difference (one more run)."""
-        flow = self._at(omega)
+        flow = self.flow.at(omega)
         run = flow.run(x0, theta0 / omega, variational=jac)
         self.runs += 1
         F = run.x_end - x0
@@ -1085,7 +1076,7 @@ class _Shooter:
         J[:n2, :n2] = run.Phi - np.eye(n2)
         J[n2, :n2] = plane.gradient(run)
         dw = _FD_STEP * omega
-        r2 = self._at(omega + dw).run(x0, theta0 / (omega + dw))
+        r2 = self.flow.at(omega + dw).run(x0, theta0 / (omega + dw))
         self.runs += 1
         J[:n2, n2] = (r2.x_end - x0 - F) / dw
         J[n2, n2] = (plane.value(r2, omega + dw) - h) / dw
@@ -1141,7 +1132,7 @@ class _Shooter:
         theta0 = self.start(i)[1]
 
         def value(omega):
-            flow = self._at(omega)
+            flow = self.flow.at(omega)
             t0 = theta0 / omega
             self.runs += 1
             run = flow.run(flow.particular(t0), t0)
@@ -1321,7 +1312,7 @@ class _Shooter:
             return None
 
         def margin(w):
-            fl = self._at(w)
+            fl = self.flow.at(w)
             X = dict(zip(fl.k.tolist(), fl.X))
             top = np.abs(X[1][fl.dofs]) if 1 in X else 0.0
             mean = np.real(X[0][fl.dofs]) if 0 in X else 0.0

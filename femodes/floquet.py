@@ -160,15 +160,9 @@ def _fastest_frequency(model: StructuralModel) -> float:
 def _start_time(system: HBMSystem, Q: np.ndarray, omega: float) -> float:
     """The most open instant of the orbit (largest smallest gap): the shooting starts there, away
     from the HBM's contact phases and slight penetrations."""
-    if not system.n_uc:
-        return 0.0
     h = system.h
-    n = max(256, 8 * h.n_coef)
-    theta = 2.0 * np.pi * np.arange(n) / n
-    E = h.synthesis(theta)
-    gaps = np.column_stack([ct.law.gap - E @ Q[:, ct.dof] for ct in system.unilateral])
-    j = int(np.argmax(gaps.min(axis=1)))
-    return float(theta[j] / (2.0 * np.pi) * h.period(omega))
+    theta = h.most_open_phase(Q, [ct.dof for ct in system.unilateral], [ct.law.gap for ct in system.unilateral])
+    return float(theta / (2.0 * np.pi) * h.period(omega))
 
 
 def _by_shooting(model: StructuralModel, system: HBMSystem, Q: np.ndarray, omega: float, tol: float,

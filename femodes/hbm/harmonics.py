@@ -350,6 +350,20 @@ class Harmonics:
         r"""Angular frequency :math:`k\omega/\nu` of each coefficient row (0 for ``c0``)."""
         return self.harmonic_of * (float(omega) / self._nu)
 
+    def most_open_phase(self, Q, dofs, gaps) -> float:
+        r"""The phase :math:`\theta` at which the smallest of the gaps ``gaps - q_dofs(theta)`` is
+        largest, on a grid of ``max(256, 8 n_coef)`` phases (0 without gaps): a start for a time
+        integration away from the contact phases and slight penetrations of a harmonic balance
+        solution ``Q`` (``fm.stability`` by shooting, the shooting refinement of
+        :mod:`femodes.accuracy`)."""
+        dofs = np.asarray(dofs, dtype=int)
+        if not dofs.size:
+            return 0.0
+        n = max(256, 8 * self.n_coef)
+        theta = _TWO_PI * np.arange(n) / n
+        gaps = np.asarray(gaps, dtype=float) - self.synthesis(theta) @ np.asarray(Q)[:, dofs]
+        return float(theta[int(np.argmax(gaps.min(axis=1)))])
+
     # -------------------------------------------------------------- operators
     def _basis(self, theta):
         theta = np.asarray(theta, dtype=float)
