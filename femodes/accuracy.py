@@ -58,10 +58,13 @@ seed's forced case at rtol 1e-3, 134 continuation points instead of 196). Each p
 then comes from its last three levels.
 
 **Shooting** (``method="auto"``, the default, or ``"shooting"``; forced branches of linear
-models whose only contacts are rigid stops on DOFs with mass; ``auto`` also leaves stiff models,
-whose impact search per period exceeds :data:`SHOOTING_AUTO_MAX_WORK`, to the levels). The limit itself is computed
+models whose only contacts are rigid stops, on DOFs with mass (impacts) or on massless DOFs
+(mass redistributed: the contact closes and opens, no impact); ``auto`` leaves to the levels a
+model whose probe run (one period from the point with the largest contact force) evaluates more
+than :data:`SHOOTING_AUTO_MAX_WORK` modal terms in its event search or has more than
+:data:`SHOOTING_AUTO_MAX_EVENTS` contact events: a chattering orbit). The limit itself is computed
 instead of extrapolated: the orbit of the exact flow with restitution 1 (closed form between
-impacts, :class:`femodes.time.exact.LinearImpactFlow`) on each point's hyperplane, by Newton on
+contact events, :class:`femodes.time.exact.LinearImpactFlow`) on each point's hyperplane, by Newton on
 the start state and the frequency (monodromy matrix and the hyperplane's gradient exact, the
 frequency column by one finite difference), each point from its predecessor's orbit. The
 hyperplane is the levels' without its contact-force part (:class:`_Plane`: the exact contact
@@ -69,9 +72,13 @@ forces are impulses, whose coefficients the truncated forces do not resemble), s
 ``omega_limit`` may differ from the levels' by the change of section (seed case 1: up to 0.6 %
 on the steep sides, where the extrapolations' brackets are 0.03-0.08 % wide); folds do not
 depend on it. A located fold is the extreme frequency of the exact orbits on hyperplanes
-parallel to its own (Brent's method in the offset); where the impacting orbits end at a grazing
+parallel to its own (Brent's method in the offset; with massless contacts a failed
+continuation step to a plane is halved, :data:`FOLD_STEP_HALVINGS` times in all); where the impacting orbits end at a grazing
 (the lower fold of a forced impact oscillator: the branch meets the linear response there) the
-fold is that grazing frequency, in closed form. Measured from H = 20: the upper folds of the
+fold is that grazing frequency, in closed form (impacts only: with a massless contact DOF the
+orbits with contact leave the linear one smoothly, and a lower fold is an ordinary one; 2-DOF
+case of ``tests/test_exact_flow.py``: 1.0779321 by shooting, 1.0779320 at H = 80, the grazing
+1.0808687). Measured from H = 20: the upper folds of the
 seed's forced cases 1.4191583461 and 1.4227515912, equal to the event-driven references to
 1e-16 and 9e-15; lower folds at the grazing frequencies 1.0808687 and 1.1519492. Just above
 grazing the exact curve crosses the points' hyperplanes obliquely or backward (``kappa``,
@@ -533,16 +540,24 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
                           max_work: float = math.inf) -> np.ndarray:
     """Errors of the points from the exact orbits on their hyperplanes (:class:`_Shooter`; the
     branch's folds: the exact folds), into the arrays given; returns the points without an
-    exact orbit. ValueError if the flow cannot be built or one period's impact search would
-    evaluate more than ``max_work`` modal terms (grid points times 2 n)."""
+    exact orbit. ValueError if the flow cannot be built, or if ``max_work`` is finite (``auto``)
+    and the probe run's event search evaluates more than ``max_work`` modal terms or the probe
+    orbit has more than :data:`SHOOTING_AUTO_MAX_EVENTS` contact events (:func:`_probe_run`)."""
     branch = lad.branch
     from .time.exact import LinearImpactFlow
 
     probe = LinearImpactFlow(lad.model, float(np.min(branch.omega)))
-    work = 2.0 * math.pi / probe.omega / probe.dt * 2 * probe.n
-    if work > max_work:
-        raise ValueError(f"the exact flow would evaluate {work:.3g} modal terms per period (stiff model: fastest "
-                         f"eigenvalue {float(np.max(np.abs(probe.lam))):.3g} rad/s); more than {max_work:g}")
+    if math.isfinite(max_work):
+        run = _probe_run(lad, probe)
+        work = float(run.samples) * 2 * probe.I.size
+        if work > max_work:
+            raise ValueError(f"the exact flow's event search evaluated {work:.3g} modal terms over one period of the "
+                             f"point with the largest contact force (a stiff model); more than {max_work:g}")
+        events = len(run.impacts) + len(run.switches)
+        if events > SHOOTING_AUTO_MAX_EVENTS:
+            raise ValueError(f"the exact flow from the point with the largest contact force has {events} contact events in "
+                             f"one period (chattering: Newton on the exact orbit does not converge there); more than "
+                             f"{SHOOTING_AUTO_MAX_EVENTS}")
     n = len(branch)
     H = branch.harmonics.n_harmonics
     free = _without_contact(branch)
@@ -584,6 +599,20 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
         kind[i] = "shooting"
     log.info("accuracy: shooting: %d runs of the exact flow for %d points", sh.runs, len(solved))
     return todo
+
+
+def _probe_run(lad: _Ladder, flow):
+    """One run of ``flow`` over one period from the branch's point with the largest contact force
+    at its most open phase: its event search's samples (times the state's size: the modal terms
+    evaluated) are the cost of a run, which a stiff model drives up (the search refines to the
+    fastest mode near events, and everywhere where impacts excite the fast modes); its events
+    show an orbit that chatters."""
+    branch = lad.branch
+    P = np.abs(branch.P).reshape(len(branch), -1).max(axis=1) if branch.P.size else np.zeros(len(branch))
+    i = int(np.argmax(P))
+    x0, theta0 = _Shooter(lad, flow).start(i)
+    omega = float(branch.omega[i])
+    return flow.at(omega).run(x0, theta0 / omega)
 
 
 def check_estimate_method(method, owner: str, name: str = "method") -> str:
@@ -996,10 +1025,18 @@ SHOOTING_MAX_CORRECTION = 0.5
 #: relative frequency step of SHOOTING_STEP (1e-7), leaving about its square. The floor leaves a
 #: margin of 1e3 and more over both (the seed folds came out within 1e-14 of their references).
 SHOOTING_FLOOR = 1e-9
-#: ``method="auto"`` shoots only if one period's impact search evaluates at most this many modal
-#: terms (grid points times 2 n): the FE bar of README_accuracy with 40 elements (41 DOFs) needs
-#: 2.7e5 (33 s for 49 points), a stiff 500-DOF model could need 1e8 and more.
+#: ``method="auto"`` shoots only if the event search of the probe run (one period from the point
+#: with the largest contact force) evaluates at most this many modal terms (samples times the
+#: state's size): the FE bar of README_accuracy with 40 elements (41 DOFs) needs 1.9e4, where a
+#: fine grid over the whole period would need 8e5; a stiff model whose impacts excite its fast
+#: modes pays the fine grid nearly everywhere.
 SHOOTING_AUTO_MAX_WORK = 1e6
+#: ``auto`` also leaves to the levels a model whose probe run (one period from the point with the
+#: largest contact force) has more contact events than this: the 10-element Hermite cantilever of
+#: README_accuracy (``cant20``) chatters, its massless tip node closing and opening 20 times within
+#: 0.1 time units (88 impacts per period with the tip's mass kept), and Newton on its exact orbit
+#: stalls (|F| 0.18 after 60 s); the seed cases and the FE bar (10-40 elements) have one impact.
+SHOOTING_AUTO_MAX_EVENTS = 8
 #: Largest ``kappa`` (:meth:`_Shooter.glancing`) for which the exact orbit on a point's
 #: hyperplane is taken as the point's counterpart.
 GLANCING_MAX = 3.0
@@ -1008,6 +1045,10 @@ GLANCING = "glancing"
 #: A lower fold with a point without contact at most this many points away may be a grazing
 #: (:meth:`_Shooter.fold`; seed case 1: the lower fold is point 79, contact ends at point 81).
 GRAZING_POINTS = 4
+#: Halvings of the failed steps of one continuation over the parallel planes of a fold
+#: (:meth:`_Shooter.fold`) of a model with massless contacts, whose orbits with contact go on
+#: smoothly into the linear one past a lower fold (with impacts they end at a grazing there).
+FOLD_STEP_HALVINGS = 4
 #: Relative step of the finite differences of the shooting Jacobian (frequency column and the
 #: hyperplane row).
 _FD_STEP = 1e-7
@@ -1151,7 +1192,7 @@ class _Shooter:
                     return None
                 if abs(w1 - w0) <= SHOOTING_STEP * abs(w1) and abs(h1) <= SHOOTING_TOL:
                     h1, run = value(w1)
-                    if run.impacts:
+                    if run.touches:
                         return None  # the linear orbit there reaches an obstacle
                     return run.x_end, w1, theta0, run, abs(w1 - w0), None
         except ValueError:
@@ -1216,7 +1257,7 @@ class _Shooter:
             alpha = 1.0
             while alpha >= 2.0 ** -20:
                 x1, w1 = x0 + alpha * d[:n2], omega + alpha * d[n2]
-                if w1 > 0.0 and np.all(self.flow.gaps - x1[self.flow.dofs] >= 0.0):
+                if w1 > 0.0 and self.flow.admissible(x1):
                     try:
                         F1, h1, _, run1 = self.evaluate(x1, w1, theta0, plane, False)
                     except ValueError:
@@ -1254,35 +1295,67 @@ class _Shooter:
             return None
         solved = {0.0: at_f}
 
-        def omega_at(s: float) -> float:
-            near = min(solved, key=lambda t: abs(t - s))
-            steps = max(1, int(math.ceil(abs(s - near) / (0.5 * d))))  # continuation in steps of d / 2
-            r = solved[near]
-            for k in range(1, steps + 1):
-                sk = near + (s - near) * k / steps
-                r = self.solve(f, guess=r[:3], offset=sk)
-                if r is None:
-                    raise _ShootingFailed(f"no exact orbit at offset {sk:g} from fold {f}")
-                solved[sk] = r
-            return sign * r[1]
+        # with impacts the orbits with contact end at a grazing next to a lower fold (handled below),
+        # with massless contacts they go on into the linear orbit, which a step may overshoot
+        halvings = FOLD_STEP_HALVINGS if self.flow.massless.any() else 0
+        scale = [d]  # the continuation's steps are half of it
 
-        try:
-            # a bracket (sa, sb, sc) with the extreme inside, walking downhill by d
-            sa, sb, sc = -d, 0.0, d
-            fa, fb, fc = omega_at(sa), sign * at_f[1], omega_at(sc)
+        def reach(s: float, exact: bool = True) -> float:
+            """Continuation from the nearest solved offset to ``s`` in steps of ``scale / 2``, a failed
+            step halved (``halvings`` times in all); the offset reached (``s`` if ``exact``)."""
+            near = min(solved, key=lambda t: abs(t - s))
+            r, at, step = solved[near], near, math.copysign(0.5 * scale[0], s - near)
+            fails = 0
+            while at != s:
+                sk = s if abs(s - at) <= abs(step) else at + step
+                rk = self.solve(f, guess=r[:3], offset=sk)
+                if rk is None:
+                    fails += 1
+                    if fails > halvings:
+                        if exact or at == near:
+                            raise _ShootingFailed(f"no exact orbit at offset {sk:g} from fold {f}")
+                        return at
+                    step *= 0.5
+                    continue
+                r, at = rk, sk
+                solved[sk] = r
+            return at
+
+        def omega_at(s: float) -> float:
+            return sign * solved[reach(s)][1]
+
+        def side(s: float) -> tuple[float, float]:
+            at = reach(s, exact=False)
+            return at, sign * solved[at][1]
+
+        def extreme(h: float) -> tuple[float, float]:
+            """A bracket (sa, sb, sc) with the extreme inside, walking downhill by ``h``, then Brent."""
+            scale[0] = h
+            sb, fb = 0.0, sign * at_f[1]
+            (sa, fa), (sc, fc) = side(-h), side(h)
             for _ in range(8):
                 if fb <= min(fa, fc):
                     break
                 if fa < fc:
-                    sa, sb, sc, fc, fb = sa - d, sa, sb, fb, fa
+                    sa, sb, sc, fc, fb = sa - h, sa, sb, fb, fa
                     fa = omega_at(sa)
                 else:
-                    sa, sb, sc, fa, fb = sb, sc, sc + d, fb, fc
+                    sa, sb, sc, fa, fb = sb, sc, sc + h, fb, fc
                     fc = omega_at(sc)
             else:
-                raise _ShootingFailed(f"no extreme frequency within {8 * d:g} of fold {f}")
+                raise _ShootingFailed(f"no extreme frequency within {8 * h:g} of fold {f}")
             res = minimize_scalar(omega_at, bracket=(sa, sb, sc), method="brent", options={"xtol": 1e-4})
-            s, w = float(res.x), sign * float(res.fun)
+            return float(res.x), sign * float(res.fun)
+
+        try:
+            try:
+                s, w = extreme(d)
+            except _ShootingFailed:
+                if not halvings:
+                    raise
+                # massless contacts: planes a neighbour's offset away may cross the exact curve past its
+                # fold (2-DOF case of the tests, H = 10: an orbit below the fold's frequency at 0.87 d)
+                s, w = extreme(0.25 * d)
             tol = 1e-4 * max(abs(s), d)
             spread = max(abs(sign * omega_at(s + tol) - w), abs(sign * omega_at(s - tol) - w))
         except (_ShootingFailed, ValueError, RuntimeError) as exc:
@@ -1290,7 +1363,9 @@ class _Shooter:
             # grazing there (past it the exact curve has no impacting orbit on these planes)
             free = _without_contact(b)
             ends_contact = bool(free[max(f - GRAZING_POINTS, 0): f + GRAZING_POINTS + 1].any())
-            graze = self.grazing(float(b.omega[f])) if not upper and ends_contact else None
+            # (impacts only: a massless contact's orbits leave the linear one smoothly, its folds are ordinary)
+            impacts = not self.flow.massless.any()
+            graze = self.grazing(float(b.omega[f])) if not upper and ends_contact and impacts else None
             if graze is None:
                 log.info("accuracy: the exact fold next to point %d was not located (%s)", f, exc)
                 return None
@@ -1313,10 +1388,9 @@ class _Shooter:
 
         def margin(w):
             fl = self.flow.at(w)
-            X = dict(zip(fl.k.tolist(), fl.X))
-            top = np.abs(X[1][fl.dofs]) if 1 in X else 0.0
-            mean = np.real(X[0][fl.dofs]) if 0 in X else 0.0
-            return float(np.min(fl.gaps - mean - top))
+            X = fl.free_harmonics()
+            top = np.abs(X[1]) if 1 in X else 0.0
+            return float(np.min(fl.gaps - np.real(X[0]) - top))
 
         ws = omega * (1.0 + np.linspace(-0.05, 0.05, 201))
         m = np.array([margin(w) for w in ws])

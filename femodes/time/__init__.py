@@ -13,7 +13,9 @@
   ``shooting``).
 
 * ``exact.LinearImpactFlow`` -- the closed-form flow of a linear model with rigid stops (modal
-  exponentials between impacts, impacts located to round-off, exact Fourier coefficients):
+  exponentials between contact events; impacts at contacts on DOFs with mass, switches of
+  condensed massless contact DOFs; events located to round-off by a certified search; exact
+  Fourier coefficients):
   the shooting refinement of :func:`femodes.estimate_error` (``method="shooting"``).
 
 Modules: ``moreau`` (the scheme, described once, and the public names), ``results`` (the two

@@ -1,29 +1,45 @@
-r"""The exact flow of a linear model with rigid stops: closed form between impacts.
+r"""The exact flow of a linear model with rigid stops: closed form between contact events.
 
-Between impacts a model without smooth nonlinear laws is linear, ``x' = A x + b(t)`` with
-``x = [q; v]``, ``A = [[0, I], [-M^-1 K, -M^-1 C]]`` and harmonic forcing
-``b(t) = Re sum_k [0; M^-1 F_k] e^{i k w t}``. With ``A = V diag(lambda) V^-1`` (diagonalised
-once per model; :meth:`LinearImpactFlow.at` changes the frequency) and the particular solution
-``x_p(t) = Re sum_k X_k e^{i k w t}``,
-``(i k w I - A) X_k = [0; M^-1 F_k]``, the flow is
+Between contact events a model without smooth nonlinear laws is linear. Its DOFs split into the
+inertial ones ``I`` (``M_II`` positive definite) and the massless ones ``Z`` (zero rows of ``M``
+and ``C``: a contact node whose mass was redistributed, ``fm.RedistributeMass()``), whose
+displacements follow from the others by static condensation. A *mode* is the set ``S`` of
+massless contacts that are closed (``q_S = gap``); the others ``O = Z \ S`` are condensed,
+``q_O = K_OO^-1 (f_O(t) - K_OI q_I - K_OS gap_S)``. In every mode the inertial state
+``x = [q_I; v_I]`` obeys ``x' = A_S x + b_S(t)`` with the condensed stiffness, and with
+``A_S = V diag(lambda) V^-1`` (diagonalised once per mode; :meth:`LinearImpactFlow.at` changes the
+frequency) and the periodic particular solution ``x_p(t) = Re sum_k X_k e^{i k w t}``,
+``(i k w I - A_S) X_k = [0; M_II^-1 F_k^S]``, the flow is
 
 .. math::
 
     x(t) = x_p(t) + V\,e^{\Lambda (t - t_a)}\,V^{-1}\bigl(x(t_a) - x_p(t_a)\bigr)
 
-on a free-flight interval starting at ``t_a``. An impact is the first time the gap
-``g_N = gap - q_c`` of a :class:`~femodes.laws.UnilateralContact` reaches 0 while approaching;
-it is bracketed on a grid of :data:`SAMPLES` points per shortest period of the flow (grazing
-minima between grid points are searched too) and located to round-off by Newton on the closed
-form, kept in the bracket. Newton's impact law and the saltation matrix are those of
-:mod:`femodes.time.shooting` (impulse along ``M^-1 e_c``). No step size, no integration error:
-the orbit is exact to round-off and to the root tolerance of the impact times (4 eps).
-Restitution below 1 is accepted, but an accumulation of impacts (chattering into sticking) is
-refused after :data:`~femodes.time.shooting.MAX_IMPACTS` impacts.
+from the start ``t_a`` of a segment. Every displacement, velocity and contact force is an affine
+function of ``x`` and the forcing, hence of the same closed form. Events:
+
+* a contact on an inertial DOF: the gap ``gap - q_c`` reaches 0 while approaching: an impact
+  (Newton's law, impulse along ``M^-1 e_c``, the saltation matrix of :mod:`femodes.time.shooting`);
+* an open massless contact: its condensed displacement reaches the gap: it closes;
+* a closed massless contact: its contact force ``lambda = f_c(t) - K_c q`` falls to 0: it opens.
+  Both sides of a switch have the same vector field (at ``q_c = gap`` the force is 0), so the
+  state and the monodromy matrix pass it unchanged (saltation matrix ``I``).
+
+Events are located by a certified search: the event functions are sampled on a coarse grid
+(:data:`SAMPLES` per period of the highest forcing harmonic); on an interval of length ``h`` each
+modal term ``c_m e^{lambda_m s}`` moves the function by less than ``|c_m| min(|lambda_m|^2
+h^2 / 8, 2)`` away from the chord of its samples, so an interval whose samples exceed that bound
+has no event and is not looked at again; the others are split (:data:`REFINE` parts) down to
+:data:`SAMPLES` points per shortest period of the flow, where sign changes and sampled minima
+bracket the event, which Newton on the closed form locates to round-off. A stiff model pays the
+fine grid only near its events. No step size, no integration error: the orbit is exact to
+round-off and to the root tolerance of the event times (4 eps). Restitution below 1 is
+accepted, but an accumulation of events (chattering) is refused after
+:data:`~femodes.time.shooting.MAX_IMPACTS` of them.
 
 The Fourier coefficients of the orbit follow in closed form as well (integrals of exponentials
-over each free-flight interval; impulses for the contact forces), which is what
-:mod:`femodes.accuracy` compares harmonic balance solutions with.
+over each segment; impulses and the piecewise closed-form forces for the contact forces), which
+is what :mod:`femodes.accuracy` compares harmonic balance solutions with.
 
 Used by :mod:`femodes.accuracy` (shooting refinement of error-controlled branches); the general
 event-driven integration with smooth laws is :mod:`femodes.time.shooting`.
@@ -32,6 +48,7 @@ event-driven integration with smooth laws is :mod:`femodes.time.shooting`.
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 
 import numpy as np
@@ -40,34 +57,33 @@ from scipy.optimize import minimize_scalar
 
 from ..laws import UnilateralContact
 from ..model import StructuralModel
-from .shooting import MAX_DOFS, MAX_IMPACTS, unsupported
+from .shooting import MAX_IMPACTS, unsupported
 
-__all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "SAMPLES", "CHUNK"]
+__all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "SAMPLES", "CHUNK", "REFINE",
+           "MAX_MASSLESS_CONTACTS"]
 
 #: Grid points per shortest period of the flow (fastest eigenvalue or forcing harmonic) on which
-#: the impacts are bracketed.
+#: the events are bracketed, and of the coarse grid per period of the highest forcing harmonic.
 SAMPLES = 24
-#: Largest number of grid points of one impact search evaluated at once (memory CHUNK x 2n
-#: complex numbers); longer searches go chunk by chunk and stop at the first impact.
+#: Largest number of grid points of one fine search evaluated at once (memory CHUNK x 2n complex
+#: numbers); longer searches go chunk by chunk and stop at the first event.
 CHUNK = 4096
+#: Parts into which the certified search splits an interval that may hold an event.
+REFINE = 8
 #: Largest condition number of the eigenvector matrix (a nearly defective A, e.g. critical
 #: damping, makes the modal flow inaccurate).
 MAX_CONDITION = 1e8
+#: Largest number of contacts on massless DOFs (their open/closed combinations are the modes).
+MAX_MASSLESS_CONTACTS = 8
 
 
 def exact_flow_unsupported(model: StructuralModel) -> str:
     """Why :class:`LinearImpactFlow` cannot take ``model`` (``""`` if it can): smooth nonlinear
-    laws (cubic springs, penalty contacts), no unilateral contact, or what the event-driven
-    shooting refuses (:func:`femodes.time.shooting.unsupported`)."""
+    laws (cubic springs, penalty contacts), no unilateral contact, more than ``MAX_DOFS`` DOFs, a
+    massless DOF with damping, or too many massless contacts."""
     if not isinstance(model, StructuralModel):
         return f"model must be a StructuralModel (or ReducedModel), got {type(model).__name__}"
-    Md = model.M.diagonal()
-    for j, a in enumerate(model.contacts):
-        if isinstance(a.item, UnilateralContact) and not Md[a.dof] > 0.0:
-            return (f"UnilateralContact {j} (at={a.item.at!r}) acts on DOF {model.dofmap.label(a.dof)!r}, which has "
-                    "no mass (redistributed away from the contact): an impact law needs a mass there "
-                    "(with_contact(..., contact_mass=fm.ConsistentMass()) keeps it)")
-    why = unsupported(model)
+    why = unsupported(model, massless_contacts=True)
     if why:
         return why
     if model.nonlinearities:
@@ -77,11 +93,132 @@ def exact_flow_unsupported(model: StructuralModel) -> str:
         return "the model has no contact"
     if not all(isinstance(law, UnilateralContact) for law in laws):
         return "the model has penalty contacts: the flow between impacts is not linear"
+    Md = model.M.diagonal()
+    Z = np.flatnonzero(~(Md > 0.0))
+    if Z.size:
+        M, C = abs(model.M).tocsr(), abs(model.damping_matrix()).tocsr()
+        for d in Z:
+            if M[d].sum() > 0.0 or C[d].sum() > 0.0:
+                which = "mass" if M[d].sum() > 0.0 else "damping"
+                hint = (" (Rayleigh damping set before with_contact redistributed the mass keeps the old mass "
+                        "matrix's row: call with_damping after with_contact)" if which == "damping" else "")
+                return (f"DOF {model.dofmap.label(int(d))!r} has no mass on the diagonal but {which} coupling it to other "
+                        f"DOFs: a massless DOF must have zero rows of M and C (mass-proportional damping){hint}")
+        n_massless = sum(1 for a in model.contacts if not Md[a.dof] > 0.0)
+        if n_massless > MAX_MASSLESS_CONTACTS:
+            return (f"the model has {n_massless} contacts on massless DOFs; the exact flow takes at most "
+                    f"{MAX_MASSLESS_CONTACTS} (keep their mass: with_contact(..., contact_mass=fm.ConsistentMass()))")
     return ""
 
 
+class _Mode:
+    """The linear system of the inertial DOFs with the massless contacts ``closed`` closed."""
+
+    def __init__(self, flow: "LinearImpactFlow", closed: frozenset):
+        n, I, Z = flow.n, flow.I, flow.Z
+        K = flow.K
+        S = [flow.dofs[j] for j in sorted(closed)]
+        O = [d for d in Z if d not in S]
+        self.closed, self.S, self.O = closed, np.array(S, dtype=int), np.array(O, dtype=int)
+        nI = I.size
+        Pq = np.zeros((n, nI))  # q = Pq q_I + (forcing and gap terms)
+        Pq[I, np.arange(nI)] = 1.0
+        self.Koo = None
+        if O:
+            try:
+                self.Koo = sla.cho_factor(K[np.ix_(O, O)])
+            except np.linalg.LinAlgError:
+                raise ValueError("LinearImpactFlow: the stiffness of the massless DOFs is not positive definite "
+                                 "(a massless DOF without elastic support)") from None
+            Pq[O] = -sla.cho_solve(self.Koo, K[np.ix_(O, I)])
+        self.Pq = Pq
+        Keff = K[I] @ Pq
+        A = np.zeros((2 * nI, 2 * nI))
+        A[:nI, nI:] = np.eye(nI)
+        A[nI:, :nI] = -flow.MinvII @ (0.5 * (Keff + Keff.T))
+        A[nI:, nI:] = -flow.MinvII @ flow.CII
+        self.A = A
+        lam, V = np.linalg.eig(A)
+        cond = np.linalg.cond(V)
+        if not cond < MAX_CONDITION:
+            raise ValueError(f"LinearImpactFlow: the state matrix is nearly defective (eigenvector condition "
+                             f"{cond:.3g}, e.g. a critically damped mode); its modal flow is not accurate")
+        self.lam, self.V, self.Vinv = lam, V, np.linalg.inv(V)
+        self.Lq = np.hstack([Pq, np.zeros((n, nI))])  # q = Lq x + ...
+        self.Lv = np.hstack([np.zeros((n, nI)), Pq])  # v = Lv x + ...
+        self.Rq, self.Rv = self.Lq @ V, self.Lv @ V
+        # event functions: the gap of every contact, or the force of a closed massless one
+        Le = np.array([-(K[c] @ self.Lq) if j in closed else -self.Lq[c] for j, c in enumerate(flow.dofs)])
+        self.Le = Le.reshape(len(flow.dofs), 2 * nI)
+        self.Re = self.Le @ V
+        self.fastest = float(np.max(np.abs(lam)))
+        self._loads = None
+
+    def loads(self, flow: "LinearImpactFlow"):
+        """The frequency-independent parts of the particular solutions (cached): harmonics ``ks``
+        (0 included), the forcing and gap part ``G`` of the displacements, the right-hand sides
+        in modal coordinates ``W = (V^-1 b_k)`` and the constant part of the event functions."""
+        if self._loads is None:
+            nI = flow.I.size
+            ks = np.array(sorted(set(flow.k.tolist()) | {0}), dtype=int)
+            G, B, E = [], [], []
+            for k in ks:
+                F = flow.F.get(int(k), np.zeros(flow.n, dtype=complex))
+                g = self.gq(flow, int(k), F)
+                B.append(np.concatenate([np.zeros(nI), flow.MinvII @ (F[flow.I] - flow.K[flow.I] @ g)]))
+                G.append(g)
+                E.append([F[c] - flow.K[c] @ g if j in self.closed else -g[c] + (flow.gaps[j] if k == 0 else 0.0)
+                          for j, c in enumerate(flow.dofs)])
+            self._loads = (ks, np.array(G), np.array(B) @ self.Vinv.T, np.array(E, dtype=complex).reshape(len(ks), -1))
+        return self._loads
+
+    def gq(self, flow: "LinearImpactFlow", k: int, F: np.ndarray) -> np.ndarray:
+        """Forcing and gap part of the displacements for harmonic ``k`` with load ``F``."""
+        g = np.zeros(flow.n, dtype=complex)
+        if k == 0 and self.S.size:
+            g[self.S] = flow.gaps[sorted(self.closed)]
+        if self.O.size:
+            rhs = F[self.O] - flow.K[np.ix_(self.O, self.S)] @ g[self.S] if self.S.size else F[self.O].copy()
+            g[self.O] = sla.cho_solve(self.Koo, rhs)
+        return g
+
+
+class _ModeAt:
+    """A mode's particular solution at one forcing frequency: per harmonic ``k`` (0 included)
+    the inertial state ``X``, the displacements ``Yq``, velocities ``Yv`` and event functions
+    ``Ye`` (complex amplitudes, the gap constant in ``k = 0``), and the fine grid step.
+    ``(i k w I - A) X_k = b_k`` is solved in the mode's eigenbasis (the frequency-independent
+    parts are the mode's: :meth:`_Mode.loads`)."""
+
+    def __init__(self, flow: "LinearImpactFlow", m: _Mode, omega: float):
+        ks, G, W, Ye0 = m.loads(flow)
+        iw = 1j * omega * ks
+        den = iw[:, None] - m.lam[None, :]
+        if np.any(den == 0.0):
+            k = int(ks[np.flatnonzero(np.any(den == 0.0, axis=1))[0]])
+            raise ValueError(f"LinearImpactFlow: forcing harmonic {k} at omega = {omega:g} is at an undamped "
+                             "eigenfrequency (no periodic particular solution)")
+        X = (W / den) @ m.V.T  # (n_k, 2nI)
+        self.ks, self.X, self.iw = ks, X, iw
+        self.Yq = X @ m.Lq.T + G
+        self.Yv = X @ m.Lv.T + iw[:, None] * G
+        self.Ye = X @ m.Le.T + Ye0
+        fastest = max(m.fastest, float(np.max(ks)) * omega)
+        self.dt = 2.0 * math.pi / fastest / SAMPLES
+        self.coarse = 2.0 * math.pi / (max(1, int(np.max(ks))) * omega) / SAMPLES
+
+    def phases(self, t) -> np.ndarray:
+        return np.exp(np.multiply.outer(t, self.iw))
+
+    def particular(self, t) -> np.ndarray:
+        return np.real(self.phases(t) @ self.X)
+
+
 class LinearImpactFlow:
-    """Closed-form flow of a linear model with rigid stops at forcing frequency ``omega``."""
+    """Closed-form flow of a linear model with rigid stops at forcing frequency ``omega``.
+
+    States are full ``[q; v]`` (``2 n``); the entries of massless DOFs in a start state are not
+    used (they follow from the others) and are returned consistent with them."""
 
     def __init__(self, model: StructuralModel, omega: float, restitution: float = 1.0):
         why = exact_flow_unsupported(model)
@@ -93,52 +230,63 @@ class LinearImpactFlow:
         if not 0.0 <= restitution <= 1.0:
             raise ValueError(f"LinearImpactFlow: restitution must lie in [0, 1], got {restitution!r}")
         n = model.n_dofs
-        if n > MAX_DOFS:  # unsupported() has said so; kept for the dense eigenproblem below
-            raise ValueError(f"LinearImpactFlow: at most {MAX_DOFS} DOFs")
         self.n, self.e = n, float(restitution)
-        M = model.M.toarray()
-        Minv = sla.cho_solve(sla.cho_factor(M), np.eye(n))
-        self.Minv = 0.5 * (Minv + Minv.T)
-        A = np.zeros((2 * n, 2 * n))
-        A[:n, n:] = np.eye(n)
-        A[n:, :n] = -self.Minv @ model.K.toarray()
-        A[n:, n:] = -self.Minv @ model.damping_matrix().toarray()
-        self.A = A
-        lam, V = np.linalg.eig(A)
-        cond = np.linalg.cond(V)
-        if not cond < MAX_CONDITION:
-            raise ValueError(f"LinearImpactFlow: the state matrix is nearly defective (eigenvector condition "
-                             f"{cond:.3g}, e.g. a critically damped mode); its modal flow is not accurate")
-        self.lam, self.V, self.Vinv = lam, V, np.linalg.inv(V)
+        Md = model.M.diagonal()
+        self.Z = np.flatnonzero(~(Md > 0.0))
+        self.I = np.flatnonzero(Md > 0.0)
+        nI = self.I.size
+        M = model.M.toarray()[np.ix_(self.I, self.I)]
+        try:
+            MinvII = sla.cho_solve(sla.cho_factor(M), np.eye(nI))
+        except np.linalg.LinAlgError:
+            raise ValueError("LinearImpactFlow: the mass matrix of the DOFs with mass is not positive definite") from None
+        self.MinvII = 0.5 * (MinvII + MinvII.T)
+        K = model.K.toarray()
+        self.K = 0.5 * (K + K.T)
+        self.CII = model.damping_matrix().toarray()[np.ix_(self.I, self.I)]
         fv = model.force_vectors()
         self.k = np.array(sorted(fv), dtype=int)
-        self.MinvF = [self.Minv @ np.asarray(fv[k]) for k in self.k]
+        self.F = {int(k): np.asarray(fv[k], dtype=complex) for k in fv}
         self.contacts = [(j, a.item, a.dof) for j, a in enumerate(model.contacts)]
         self.dofs = np.array([c for _, _, c in self.contacts], dtype=int)
         self.gaps = np.array([law.gap for _, law, _ in self.contacts], dtype=float)
-        # impulse along M^-1 e_c, scaled so that the contact velocity alone is reversed
-        self.impact_dir = np.array([self.Minv[:, c] / self.Minv[c, c] for c in self.dofs])
+        self.massless = ~(Md[self.dofs] > 0.0)
+        pos = np.full(n, -1)
+        pos[self.I] = np.arange(nI)
+        self.pos = pos  # index of a DOF among the inertial ones
+        # the state's inertial entries in a full state [q; v]
+        self.state_index = np.concatenate([self.I, n + self.I])
+        # impulse along M^-1 e_c (inertial DOFs), scaled so that the contact velocity alone is reversed
+        self.impact_dir = np.zeros((len(self.dofs), n))
+        for j, c in enumerate(self.dofs):
+            if not self.massless[j]:
+                col = self.MinvII[:, pos[c]]
+                self.impact_dir[j, self.I] = col / col[pos[c]]
+        self._modes: dict = {}  # shared by the copies of at()
         self._set_omega(omega)
+        self.mode(frozenset())  # the all-open mode: its eigenproblem (and errors) now
 
     def _set_omega(self, omega: float) -> None:
-        """Particular solution, one complex amplitude per forcing harmonic ``k`` (0: static load),
-        and the grid step of the impact search."""
-        n, A = self.n, self.A
-        X = []
-        for k, f in zip(self.k, self.MinvF):
-            rhs = np.concatenate([np.zeros(n), f]).astype(complex)
-            try:
-                X.append(np.linalg.solve(1j * k * omega * np.eye(2 * n) - A, rhs))
-            except np.linalg.LinAlgError:
-                raise ValueError(f"LinearImpactFlow: forcing harmonic {k} at omega = {omega:g} is at an undamped "
-                                 "eigenfrequency (no periodic particular solution)") from None
         self.omega = omega
-        self.X = np.array(X).reshape(len(self.k), 2 * n)
-        fastest = max(float(np.max(np.abs(self.lam))), float(np.max(self.k, initial=1)) * omega)
-        self.dt = 2.0 * math.pi / fastest / SAMPLES
+        self._at: dict = {}
+
+    def mode(self, closed: frozenset) -> tuple[_Mode, _ModeAt]:
+        """The mode with the massless contacts ``closed`` closed, at this frequency."""
+        m = self._modes.get(closed)
+        if m is None:
+            m = self._modes[closed] = _Mode(self, closed)
+        d = self._at.get(closed)
+        if d is None:
+            d = self._at[closed] = _ModeAt(self, m, self.omega)
+        return m, d
+
+    @property
+    def fine_step(self) -> float:
+        """Step of the fine event search of the all-open mode."""
+        return self.mode(frozenset())[1].dt
 
     def at(self, omega: float) -> "LinearImpactFlow":
-        """The same model at another forcing frequency (the eigenproblem is not solved again)."""
+        """The same model at another forcing frequency (the eigenproblems are not solved again)."""
         omega = float(omega)
         if not (math.isfinite(omega) and omega > 0.0):
             raise ValueError(f"LinearImpactFlow.at: omega must be a finite positive frequency, got {omega!r}")
@@ -148,38 +296,68 @@ class LinearImpactFlow:
 
     # -- pieces -------------------------------------------------------------------------------
     def particular(self, t) -> np.ndarray:
-        """``x_p(t)``, shape ``(len(t), 2n)`` (or ``(2n,)`` for a scalar ``t``)."""
-        t = np.asarray(t, dtype=float)
-        ph = np.exp(1j * self.omega * np.multiply.outer(t, self.k))
-        return np.real(ph @ self.X)
+        """The periodic response without contact (all massless contacts open), full states ``[q;
+        v]``: shape ``(len(t), 2n)`` (or ``(2n,)`` for a scalar ``t``)."""
+        _, d = self.mode(frozenset())
+        ph = d.phases(np.asarray(t, dtype=float))
+        return np.concatenate([np.real(ph @ d.Yq), np.real(ph @ d.Yv)], axis=-1)
 
-    def field(self, t: float, x: np.ndarray) -> np.ndarray:
-        """``x' = A x + b(t)`` (free flight)."""
-        xp = self.particular(t)
-        return self.A @ (x - xp) + np.real(1j * self.omega * (self.k * np.exp(1j * self.omega * self.k * t)) @ self.X)
+    def free_harmonics(self) -> dict:
+        """``{k: complex amplitudes of the contact DOFs' displacements}`` of the response without
+        contact (``k = 0`` included)."""
+        _, d = self.mode(frozenset())
+        return {int(k): d.Yq[i, self.dofs] for i, k in enumerate(d.ks)}
 
-    def propagator(self, tau: float) -> np.ndarray:
-        """``exp(A tau)`` (real)."""
-        return np.real((self.V * np.exp(self.lam * tau)) @ self.Vinv)
+    def admissible(self, x: np.ndarray) -> bool:
+        """Whether a start state keeps off the obstacles at its inertial contact DOFs (the others
+        are not part of the state)."""
+        inertial = ~self.massless
+        return bool(np.all(self.gaps[inertial] - x[self.dofs[inertial]] >= 0.0))
 
     def run(self, x0, t0: float, period: float | None = None, variational: bool = False) -> "FlowRun":
         """The orbit from ``x(t0) = x0`` over ``period`` (default one forcing period)."""
         T = 2.0 * math.pi / self.omega if period is None else float(period)
         return FlowRun(self, np.asarray(x0, dtype=float), float(t0), float(t0) + T, variational)
 
+    def _start_mode(self, x: np.ndarray, t: float) -> frozenset:
+        """The massless contacts closed at the start: the set whose condensed displacements keep
+        to the gaps and whose forces are compressive (unique: the condensed stiffness is
+        positive definite), by enumeration."""
+        js = [j for j in range(len(self.dofs)) if self.massless[j]]
+        if not js:
+            return frozenset()
+        best, best_v = None, -math.inf
+        for r in range(len(js) + 1):
+            for closed in itertools.combinations(js, r):
+                S = frozenset(closed)
+                m, d = self.mode(S)
+                # gaps of the open, forces of the closed: Ye holds the particular solution's share too
+                ev = m.Le @ x + np.real(d.phases(t) @ (d.Ye - d.X @ m.Le.T))
+                v = float(np.min(ev[js]))
+                if v >= 0.0:
+                    return S
+                if v > best_v:
+                    best, best_v = S, v
+        return best  # round-off on a switching surface: the least violated
+
 
 class FlowRun:
-    """One run of :class:`LinearImpactFlow`: end state, monodromy, free-flight segments, impacts.
+    """One run of :class:`LinearImpactFlow`: end state, monodromy, segments, impacts, switches.
 
     Attributes
     ----------
     x_end : ndarray (2n,)
     Phi : ndarray (2n, 2n) or None
-        ``d x_end / d x0`` (saltation matrices at the impacts) when ``variational``.
-    segments : list of (t_a, t_b, z_a)
-        Free-flight intervals with the modal coordinates ``z_a = V^-1 (x(t_a) - x_p(t_a))``.
+        ``d x_end / d x0`` (saltation matrices at the impacts) when ``variational``; zero columns
+        for the massless DOFs' entries.
+    segments : list of (t_a, t_b, z_a, closed)
+        Intervals between events with the modal coordinates ``z_a = V^-1 (x(t_a) - x_p(t_a))`` of
+        the mode ``closed`` (the massless contacts closed there).
     impacts : list of (t, contact index, impulse)
         Impulse ``(1 + e) v_c^- / (M^-1)_cc`` (compression positive).
+    switches : list of (t, contact index, "close" | "open")
+    samples : int
+        Event function evaluations of the searches (the cost of a stiff model).
     """
 
     def __init__(self, flow: LinearImpactFlow, x0: np.ndarray, t0: float, t1: float, variational: bool):
@@ -187,76 +365,133 @@ class FlowRun:
         n2 = 2 * flow.n
         if x0.shape != (n2,) or not np.all(np.isfinite(x0)):
             raise ValueError(f"LinearImpactFlow.run: x0 must be {n2} finite numbers, got shape {x0.shape}")
-        g0 = flow.gaps - x0[flow.dofs]
+        inertial = ~flow.massless
+        g0 = flow.gaps[inertial] - x0[flow.dofs[inertial]]
         scale = max(float(np.max(np.abs(flow.gaps))), float(np.max(np.abs(x0[:flow.n]))), 1e-300)
-        if np.any(g0 < -1e-9 * scale):
+        if g0.size and np.any(g0 < -1e-9 * scale):
             raise ValueError(f"LinearImpactFlow.run: the start state penetrates an obstacle (gap {float(g0.min()):.3g})")
         self.segments: list = []
         self.impacts: list = []
-        self.Phi = np.eye(n2) if variational else None
+        self.switches: list = []
+        self.samples = 0
+        x = x0[flow.state_index].copy()
+        self._Phi = np.eye(n2)[flow.state_index] if variational else None
         self.sensitivities: list = []
-        t, x = t0, x0.copy()
+        closed = flow._start_mode(x, t0)
+        t = t0
         while True:
-            z = flow.Vinv @ (x - flow.particular(t))
-            hit = self._next_impact(t, z, t1)
+            m, d = flow.mode(closed)
+            self._m, self._d = m, d
+            z = m.Vinv @ (x - d.particular(t))
+            hit = self._next_event(t, z, t1)
             tb = t1 if hit is None else hit[0]
-            self.segments.append((t, tb, z))
+            self.segments.append((t, tb, z, closed))
             if variational:
-                self.sensitivities.append(self.Phi)  # d x(t_a+) / d x0 of the segment
-            x = flow.particular(tb) + np.real(flow.V @ (np.exp(flow.lam * (tb - t)) * z))
+                self.sensitivities.append(self._Phi)  # d x(t_a+) / d x0 of the segment
+            e = np.exp(m.lam * (tb - t))
+            x = d.particular(tb) + np.real(m.V @ (e * z))
             if variational:
-                self.Phi = flow.propagator(tb - t) @ self.Phi
+                self._Phi = np.real((m.V * e) @ m.Vinv) @ self._Phi
             if hit is None:
                 break
-            if len(self.impacts) >= MAX_IMPACTS:
-                raise ValueError(f"LinearImpactFlow.run: more than {MAX_IMPACTS} impacts in one run (an "
-                                 "accumulation of impacts)")
-            x = self._impact(tb, x, hit[1], variational)
+            if len(self.impacts) + len(self.switches) >= MAX_IMPACTS:
+                raise ValueError(f"LinearImpactFlow.run: more than {MAX_IMPACTS} contact events in one run (an "
+                                 "accumulation of impacts or switches)")
+            j = hit[1]
+            if flow.massless[j]:
+                closed = closed ^ {j}
+                self.switches.append((tb, j, "close" if j in closed else "open"))
+            else:
+                x = self._impact(tb, x, j, variational)
             t = tb
-        self.x_end = x
+        m, d = flow.mode(closed)
+        tail = d.phases(t1)
+        self.x_end = np.concatenate([m.Lq @ x + np.real(tail @ (d.Yq - d.X @ m.Lq.T)),
+                                     m.Lv @ x + np.real(tail @ (d.Yv - d.X @ m.Lv.T))])
+        self.Phi = np.vstack([m.Lq, m.Lv]) @ self._Phi if variational else None
 
-    def _gap_and_rate(self, t: float, z: np.ndarray, tau: np.ndarray):
-        """Gaps and their rates at ``t + tau`` (rows) for every contact (columns)."""
-        f = self.flow
-        E = np.exp(np.multiply.outer(tau, f.lam)) * z  # (m, 2n)
-        ph = np.exp(1j * f.omega * np.multiply.outer(t + tau, f.k))  # (m, nk)
-        n = f.n
-        q = np.real(E @ f.V[f.dofs].T + ph @ f.X[:, f.dofs])
-        v = np.real(E @ f.V[n + f.dofs].T + ph @ f.X[:, n + f.dofs])
-        return f.gaps - q, -v
+    @property
+    def touches(self) -> bool:
+        """Whether the orbit touches an obstacle (an impact or a closed massless contact)."""
+        return bool(self.impacts or self.switches or any(s[3] for s in self.segments))
 
-    def _next_impact(self, t: float, z: np.ndarray, t1: float, start: float = 0.0):
-        """``(time, contact)`` of the first approach to zero gap in ``(t + start, t1]`` (``start``
-        > 0: a later chunk of the search, whose first sample is an ordinary one), or None."""
-        f = self.flow
+    # -- event search ---------------------------------------------------------------------------
+    def _event_and_rate(self, t: float, z: np.ndarray, tau: np.ndarray):
+        """Event functions and their rates at ``t + tau`` (rows) for every contact (columns)."""
+        m, d = self._m, self._d
+        self.samples += tau.size
+        E = np.exp(np.multiply.outer(tau, m.lam)) * z  # (p, 2nI)
+        ph = d.phases(t + tau)  # (p, nk)
+        g = np.real(E @ m.Re.T + ph @ d.Ye)
+        r = np.real((E * m.lam) @ m.Re.T + (ph * d.iw) @ d.Ye)
+        return g, r
+
+    def _next_event(self, t: float, z: np.ndarray, t1: float):
+        """``(time, contact)`` of the first event in ``(t, t1]``, or None: the certified coarse
+        search (module docstring), then the fine search where it cannot exclude an event."""
         span = t1 - t
-        if span <= start:
+        if span <= 0.0:
             return None
-        if start > 0.0:
-            m = max(2, int(math.ceil((span - start) / f.dt)))
-            tau = np.linspace(start, span, m + 1)
-            g, r = self._gap_and_rate(t, z, tau)
-            return self._first_crossing(t, z, tau, g, r, m, after_impact=False)
-        m = max(2, int(math.ceil(span / f.dt)))
-        if m > CHUNK:  # a stiff model: search chunk by chunk (memory m x 2n), the first hit ends it
-            edges = np.linspace(0.0, span, -(-m // CHUNK) + 1)
-            for a, b in zip(edges[:-1], edges[1:]):
-                hit = (self._next_impact(t, z, t + b, start=a) if a > 0.0 else self._next_impact(t, z, t + b))
+        d = self._d
+        fine = d.dt
+        m0 = max(1, int(math.ceil(span / d.coarse)))
+        h = span / m0
+        if h <= REFINE * fine:  # not stiff: the fine search everywhere
+            return self._fine(t, z, t1, 0.0, span)
+        m = self._m
+        starts = np.linspace(0.0, span, m0 + 1)[:-1]
+        amp = np.abs(m.Re * z)  # (nc, 2nI) modal amplitudes of the event functions
+        famp = np.abs(d.Ye[1:]) if d.ks.size > 1 else np.zeros((0, d.Ye.shape[1]))
+        kw = np.abs(d.iw[1:])
+        while h > fine:
+            g, _ = self._event_and_rate(t, z, np.concatenate([starts, starts + h]))
+            p = starts.size
+            ga, gb = g[:p], g[p:]
+            if starts[0] == 0.0:
+                ga[0] = np.minimum(ga[0], 0.0)  # after an event the function starts at 0: look closer
+            growth = np.exp(np.multiply.outer(starts, m.lam.real)) * np.maximum(1.0, np.exp(m.lam.real * h))
+            curv = np.minimum(np.abs(m.lam) ** 2 * h * h / 8.0, 2.0)
+            bound = growth @ (amp * curv).T + (np.minimum(kw ** 2 * h * h / 8.0, 2.0) @ famp)
+            unsure = np.any(np.minimum(ga, gb) - bound < 0.0, axis=1)
+            below = np.flatnonzero(np.any(gb < 0.0, axis=1))
+            if below.size:  # an event for sure up to there: nothing after it matters
+                unsure[below[0] + 1:] = False
+            starts = starts[unsure]
+            if not starts.size:
+                return None
+            h /= REFINE
+            starts = (starts[:, None] + h * np.arange(REFINE)).ravel()
+        # the intervals left, in time order, as runs of adjacent ones: the first event found is the first
+        cut = np.flatnonzero(np.diff(starts) > 1.5 * h) + 1
+        for run in np.split(starts, cut):
+            hit = self._fine(t, z, t1, float(run[0]), float(run[-1]) + h)
+            if hit is not None:
+                return hit
+        return None
+
+    def _fine(self, t: float, z: np.ndarray, t1: float, a: float, b: float):
+        """The first event in ``(t + a, t + b]`` on the fine grid (chunk by chunk)."""
+        fine = self._d.dt
+        m = max(2, int(math.ceil((b - a) / fine)))
+        if m > CHUNK:
+            edges = np.linspace(a, b, -(-m // CHUNK) + 1)
+            for lo, hi in zip(edges[:-1], edges[1:]):
+                hit = self._fine(t, z, t1, lo, hi)
                 if hit is not None:
                     return hit
             return None
-        tau = np.linspace(0.0, span, m + 1)
-        g, r = self._gap_and_rate(t, z, tau)
-        return self._first_crossing(t, z, tau, g, r, m, after_impact=True)
+        tau = np.linspace(a, b, m + 1)
+        g, r = self._event_and_rate(t, z, tau)
+        return self._first_crossing(t, z, tau, g, r, m, after_event=(a == 0.0))
 
-    def _first_crossing(self, t, z, tau, g, r, m, after_impact: bool):
-        """The earliest crossing on the sampled gaps ``g`` (rates ``r``) at ``t + tau``."""
+    def _first_crossing(self, t, z, tau, g, r, m, after_event: bool):
+        """The earliest crossing on the sampled event functions ``g`` (rates ``r``) at ``t + tau``."""
         best = None
         for c in range(g.shape[1]):
             gc, rc = g[:, c], r[:, c]
-            gc0 = max(gc[0], 0.0) if after_impact else gc[0]  # on the stop after an impact (or round-off below)
+            gc0 = max(gc[0], 0.0) if after_event else gc[0]  # at 0 after an event (or round-off below)
 
-            def gap(s, c=c):
+            def value(s, c=c):
                 return self._scalar(t, z, c, s)[0]
 
             found = None
@@ -264,8 +499,8 @@ class FlowRun:
                 a = gc0 if i == 1 else gc[i - 1]
                 if gc[i] < 0.0:
                     lo = tau[i - 1]
-                    if i == 1 and gc[0] <= 0.0 and after_impact:  # leaving the stop: where does it close?
-                        lo = self._leave(gap, tau[0], tau[1])
+                    if i == 1 and gc[0] <= 0.0 and after_event:  # leaving zero: where does it return?
+                        lo = self._leave(value, tau[0], tau[1])
                         if lo is None:
                             found = None
                             break
@@ -283,21 +518,19 @@ class FlowRun:
         return t + best[0], best[1]
 
     def _scalar(self, t: float, z: np.ndarray, c: int, s: float) -> tuple[float, float, float]:
-        """Gap of contact ``c`` at ``t + s``, its rate and the rate's rate (one point, no arrays
-        of times: the root searches call it a few times per impact)."""
-        f = self.flow
-        e = np.exp(f.lam * s) * z
-        ph = np.exp(1j * f.omega * f.k * (t + s))
-        row = f.V[f.dofs[c]]
-        x = f.X[:, f.dofs[c]]
-        q = (row @ e + x @ ph).real
-        v = (row @ (f.lam * e) + x @ (1j * f.omega * f.k * ph)).real
-        acc = (row @ (f.lam ** 2 * e) + x @ (-(f.omega * f.k) ** 2 * ph)).real
-        return f.gaps[c] - q, -v, -acc
+        """Event function ``c`` at ``t + s``, its rate and the rate's rate (one point)."""
+        m, d = self._m, self._d
+        e = np.exp(m.lam * s) * z
+        ph = np.exp(d.iw * (t + s))
+        row, y = m.Re[c], d.Ye[:, c]
+        val = (row @ e + y @ ph).real
+        rate = (row @ (m.lam * e) + y @ (d.iw * ph)).real
+        acc = (row @ (m.lam ** 2 * e) + y @ (d.iw ** 2 * ph)).real
+        return val, rate, acc
 
     def _root(self, t: float, z: np.ndarray, c: int, a: float, b: float, rate: bool = False) -> float:
-        """The zero in ``[a, b]`` of the gap of contact ``c`` (positive at ``a``, negative at
-        ``b``), or with ``rate`` of its rate (negative at ``a``, positive at ``b``: the gap's
+        """The zero in ``[a, b]`` of event function ``c`` (positive at ``a``, negative at ``b``),
+        or with ``rate`` of its rate (negative at ``a``, positive at ``b``: the function's
         minimum): Newton on the closed form with its derivative, kept in the bracket (bisection
         when a step leaves it), to round-off in time."""
         tol = 4.0 * np.finfo(float).eps * max(1.0, abs(t) + abs(b))
@@ -321,48 +554,83 @@ class FlowRun:
         return x
 
     @staticmethod
-    def _leave(gap, a: float, b: float):
-        """After an impact the gap starts at 0 and must open: the first sampled interval is
-        negative only if the rebound is slower than the forcing pushes back (a re-impact within
-        one grid step); the root sought is then the one after the gap's maximum."""
-        res = minimize_scalar(lambda s: -gap(s), bounds=(a, b), method="bounded")
+    def _leave(value, a: float, b: float):
+        """After an event the function starts at 0 and must grow: the first sampled interval is
+        negative only if it returns within one grid step; the root sought is then the one after
+        the function's maximum."""
+        res = minimize_scalar(lambda s: -value(s), bounds=(a, b), method="bounded")
         if -res.fun <= 0.0:
             return None
         return res.x
 
-    def _impact(self, t: float, x: np.ndarray, c: int, variational: bool) -> np.ndarray:
+    def _field(self, t: float, x: np.ndarray) -> np.ndarray:
+        """``x' = A x + b(t)`` of the current mode (inertial state)."""
+        m, d = self._m, self._d
+        ph = d.phases(t)
+        return m.A @ (x - np.real(ph @ d.X)) + np.real((ph * d.iw) @ d.X)
+
+    def _impact(self, t: float, x: np.ndarray, j: int, variational: bool) -> np.ndarray:
         f = self.flow
-        n = f.n
-        dof = f.dofs[c]
-        vc = x[n + dof]
+        nI = f.I.size
+        i = f.pos[f.dofs[j]]
+        vc = x[nI + i]
         if vc <= 0.0:  # touching without approach: nothing to reverse
             return x
-        self.impacts.append((t, c, (1.0 + f.e) * vc / f.Minv[dof, dof]))
+        self.impacts.append((t, j, (1.0 + f.e) * vc / f.MinvII[i, i]))
         xp = x.copy()
-        xp[n:] -= (1.0 + f.e) * vc * f.impact_dir[c]
+        dirI = f.impact_dir[j, f.I]
+        xp[nI:] -= (1.0 + f.e) * vc * dirI
         if variational:
-            R = np.eye(2 * n)
-            R[n:, n + dof] -= (1.0 + f.e) * f.impact_dir[c]
-            f_minus, f_plus = f.field(t, x), f.field(t, xp)
-            nvec = np.zeros(2 * n)
-            nvec[dof] = -1.0
-            self.Phi = (R + np.outer(f_plus - R @ f_minus, nvec) / (nvec @ f_minus)) @ self.Phi
+            R = np.eye(2 * nI)
+            R[nI:, nI + i] -= (1.0 + f.e) * dirI
+            f_minus, f_plus = self._field(t, x), self._field(t, xp)
+            nvec = np.zeros(2 * nI)
+            nvec[i] = -1.0
+            self._Phi = (R + np.outer(f_plus - R @ f_minus, nvec) / (nvec @ f_minus)) @ self._Phi
         return xp
 
-    # -- Fourier coefficients ---------------------------------------------------------------------
-    def _integrals(self, H: int):
-        """Per free-flight segment ``int_ta^tb e^{lam_m (t - ta)} e^{-i k w t} dt``, shape
-        ``(2n, H + 1)``."""
-        f = self.flow
-        w = f.omega
+    # -- closed form over the run ---------------------------------------------------------------
+    def displacement(self, t) -> np.ndarray:
+        """Displacements of all DOFs at times ``t`` in ``[t0, t1]``, shape ``(len(t), n)``."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        out = np.empty((t.size, self.flow.n))
+        for k, (ta, tb, z, closed) in enumerate(self.segments):
+            last = k == len(self.segments) - 1
+            sel = (t >= ta) & ((t <= tb) if last else (t < tb))
+            if sel.any():
+                m, d = self.flow.mode(closed)
+                E = np.exp(np.multiply.outer(t[sel] - ta, m.lam)) * z
+                out[sel] = np.real(E @ m.Rq.T + d.phases(t[sel]) @ d.Yq)
+        return out
+
+    def _integrals(self, H: int, ta: float, tb: float, lam: np.ndarray) -> np.ndarray:
+        """``int_ta^tb e^{lam_m (t - ta)} e^{-i k w t} dt``, shape ``(2nI, H + 1)``."""
+        w = self.flow.omega
         k = np.arange(H + 1)
-        mu = np.subtract.outer(f.lam, 1j * k * w)  # (2n, H+1)
-        for ta, tb, _ in self.segments:
-            d = tb - ta
-            x = mu * d
-            small = np.abs(x) < 1e-8
-            phi1 = np.where(small, 1.0 + 0.5 * x, np.expm1(np.where(small, 1.0, x)) / np.where(small, 1.0, x))
-            yield d * phi1 * np.exp(-1j * k * w * ta)
+        mu = np.subtract.outer(lam, 1j * k * w)
+        dlt = tb - ta
+        x = mu * dlt
+        small = np.abs(x) < 1e-8
+        phi1 = np.where(small, 1.0 + 0.5 * x, np.expm1(np.where(small, 1.0, x)) / np.where(small, 1.0, x))
+        return dlt * phi1 * np.exp(-1j * k * w * ta)
+
+    def _harmonic_integrals(self, H: int, ta: float, tb: float, d: _ModeAt, Y: np.ndarray) -> np.ndarray:
+        """``int_ta^tb Re(sum_k Y_k e^{i k w t}) e^{-i j w t} dt`` for ``j = 0..H``, shape
+        ``(H + 1,) + Y.shape[1:]``."""
+        w = self.flow.omega
+        j = np.arange(H + 1)
+
+        def E(mu):  # int_ta^tb e^{i mu w t} dt
+            mu = np.asarray(mu, dtype=float)
+            safe = np.where(mu == 0.0, 1.0, mu)
+            return np.where(mu == 0.0, tb - ta,
+                            (np.exp(1j * safe * w * tb) - np.exp(1j * safe * w * ta)) / (1j * safe * w))
+
+        k = d.ks[:, None]
+        E1, E2 = E(k - j), E(-(k + j))  # (n_k, H + 1)
+        Yf = Y.reshape(len(d.ks), -1)
+        out = 0.5 * (E1.T @ Yf + E2.T @ np.conj(Yf))
+        return out.reshape((H + 1,) + Y.shape[1:])
 
     @staticmethod
     def _real(C: np.ndarray, H: int) -> np.ndarray:
@@ -375,28 +643,24 @@ class FlowRun:
 
     def coefficients(self, H: int) -> tuple[np.ndarray, np.ndarray]:
         """Real Fourier coefficients ``[c0, c1, s1, ..., cH, sH]`` of the displacements (shape
-        ``(2H + 1, n)``) and of the contact forces (``(2H + 1, n_contacts)``; impulses) over the
-        run, in the phase ``theta = w t`` (the conventions of :mod:`femodes.hbm.harmonics`).
-        Exact when the run is one period of a periodic orbit."""
+        ``(2H + 1, n)``) and of the contact forces (``(2H + 1, n_contacts)``; impulses at the
+        impacts, the closed-form forces of closed massless contacts) over the run, in the phase
+        ``theta = w t`` (the conventions of :mod:`femodes.hbm.harmonics`). Exact when the run is
+        one period of a periodic orbit."""
         f = self.flow
-        n, w = f.n, f.omega
+        w = f.omega
         k = np.arange(H + 1)
-        Ic = np.zeros((H + 1, n), dtype=complex)  # int q(t) e^{-i k w t} dt
-        Vq = f.V[:n]
-        for J, (_, _, z) in zip(self._integrals(H), self.segments):
-            Ic += (J.T * z) @ Vq.T
-        Q = self._real(Ic * (w / math.pi), H)  # (1/pi) int q e^{-ik theta} dtheta over one period
-        # the particular solution is periodic: its coefficients exactly (times the whole period)
-        scale = (self.t1 - self.t0) * w / (2.0 * math.pi)
-        for kk, Xk in zip(f.k, f.X):
-            if kk > H:
-                continue
-            if kk == 0:
-                Q[0] += scale * np.real(Xk[:n])
-            else:
-                Q[2 * kk - 1] += scale * np.real(Xk[:n])
-                Q[2 * kk] -= scale * np.imag(Xk[:n])
-        P = np.zeros((2 * H + 1, len(f.dofs)))
+        Ic = np.zeros((H + 1, f.n), dtype=complex)  # int q(t) e^{-i k w t} dt
+        Il = np.zeros((H + 1, len(f.dofs)), dtype=complex)  # the same for the massless contacts' forces
+        for ta, tb, z, closed in self.segments:
+            m, d = f.mode(closed)
+            J = self._integrals(H, ta, tb, m.lam)
+            Ic += (J.T * z) @ m.Rq.T + self._harmonic_integrals(H, ta, tb, d, d.Yq)
+            if closed:
+                js = sorted(closed)
+                Il[:, js] += (J.T * z) @ m.Re[js].T + self._harmonic_integrals(H, ta, tb, d, d.Ye[:, js])
+        Q = self._real(Ic * (w / math.pi), H)
+        P = self._real(Il * (w / math.pi), H)
         for t, c, imp in self.impacts:
             ph = w * t * k[1:]
             P[0, c] += imp * w / (2.0 * math.pi)
@@ -406,16 +670,17 @@ class FlowRun:
 
     def coefficient_sensitivity(self, H: int) -> np.ndarray:
         """``d Q / d x0`` of :meth:`coefficients`, shape ``(2H + 1, n, 2n)`` (a variational run):
-        on each segment ``dq(t)/dx0 = [I 0] V e^{Lambda (t - t_a)} V^-1 Phi_a`` with ``Phi_a``
-        the sensitivity after the impact that starts it (saltation included; q is continuous at
-        an impact, so a shift of the impact time adds nothing else)."""
-        if self.Phi is None:
+        on each segment ``dq(t)/dx0 = L_q V e^{Lambda (t - t_a)} V^-1 Phi_a`` with ``Phi_a`` the
+        sensitivity at its start (saltation included; q is continuous at the events, so a shift of
+        an event time adds nothing else)."""
+        if self._Phi is None:
             raise ValueError("coefficient_sensitivity needs a run with variational=True")
         f = self.flow
-        n, w = f.n, f.omega
-        Vq = f.V[:n]
-        Ic = np.zeros((H + 1, n, 2 * n), dtype=complex)
-        for J, Phi_a in zip(self._integrals(H), self.sensitivities):
-            Zm = f.Vinv @ Phi_a  # (2n modes, 2n columns)
-            Ic += np.einsum("mk,dm,mc->kdc", J, Vq, Zm)
+        w = f.omega
+        Ic = np.zeros((H + 1, f.n, 2 * f.n), dtype=complex)
+        for (ta, tb, _, closed), Phi_a in zip(self.segments, self.sensitivities):
+            m, _ = f.mode(closed)
+            J = self._integrals(H, ta, tb, m.lam)
+            Zm = m.Vinv @ Phi_a  # (modes, 2n columns)
+            Ic += np.einsum("mk,dm,mc->kdc", J, m.Rq, Zm)
         return self._real(Ic * (w / math.pi), H)

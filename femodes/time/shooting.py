@@ -255,17 +255,19 @@ def _period(model: StructuralModel, omega: float, period: Any, owner: str) -> fl
 # --------------------------------------------------------------------------------------------
 # The event-driven flow
 # --------------------------------------------------------------------------------------------
-def unsupported(model: StructuralModel) -> str:
+def unsupported(model: StructuralModel, massless_contacts: bool = False) -> str:
     """Why the event-driven shooting cannot take ``model`` (``""`` if it can): more than
-    :data:`MAX_DOFS` DOFs, or a UnilateralContact on a DOF without mass. The one place these
-    limits are checked (``fm.stability(method="auto")`` asks before choosing the method)."""
+    :data:`MAX_DOFS` DOFs, or a UnilateralContact on a DOF without mass (unless
+    ``massless_contacts``: the closed-form flow of :mod:`femodes.time.exact` condenses such a DOF).
+    The one place these limits are checked (``fm.stability(method="auto")`` asks before choosing
+    the method)."""
     n = model.n_dofs
     if n > MAX_DOFS:
         return (f"model has {n} DOFs; the dense variational equations ((2n)^2 = {4 * n * n} unknowns) are "
                 f"limited to {MAX_DOFS} DOFs: reduce the model first (fm.craig_bampton) or {_HILL}")
     Md = model.M.diagonal()
     for j, a in enumerate(model.contacts):
-        if isinstance(a.item, UnilateralContact) and not Md[a.dof] > 0.0:
+        if not massless_contacts and isinstance(a.item, UnilateralContact) and not Md[a.dof] > 0.0:
             return (f"model: UnilateralContact {j} (at={a.item.at!r}) acts on DOF {model.dofmap.label(a.dof)!r}, "
                     "which has no mass (mass redistributed away from the contact, e.g. fm.RedistributeMass()); an "
                     f"event-driven impact law needs a mass at the contact DOF: {_HILL}, or keep the mass with "
