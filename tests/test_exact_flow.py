@@ -285,6 +285,20 @@ def test_certified_search_same_as_fine_search(monkeypatch):
     np.testing.assert_allclose(again.Phi, fine.Phi, rtol=0, atol=1e-11 * np.max(np.abs(fine.Phi)))
 
 
+def test_crossing_cosine_separates_glancing_points(monkeypatch):
+    """Seed case 1, H = 20: the first point with contact, whose plane the exact curve crosses
+    12 % away at kappa 18, is glancing (cosine 0.27 measured, below GLANCING_COS); a point half
+    way to the upper fold crosses nearly at right angles (cosine above 0.9)."""
+    b = fm.frequency_response(_forced(), (0.5, 2.0), 20)
+    monkeypatch.setattr(fm.accuracy, "GLANCING_MAX", math.inf)  # keep the orbits of glancing points
+    solved, sh = fm.accuracy._shoot_branch(fm.accuracy._ladder(b, None, None, "test"))
+    first = int(np.flatnonzero(~fm.accuracy._without_contact(b))[0])
+    mid = (first + max(b.folds, key=lambda j: b.omega[j])) // 2
+    assert sh.glancing(first, solved[first]) > 3.0
+    assert sh.crossing_cosine(first, solved[first]) < fm.accuracy.GLANCING_COS
+    assert sh.crossing_cosine(mid, solved[mid]) > 0.9
+
+
 def test_massless_dof_with_damping_refused():
     model = (fm.StructuralModel(M=[[1.0, 0.0], [0.0, 0.0]], K=[[2.0, -1.0], [-1.0, 1.0]], C=[[0.1, 0.0], [0.0, 0.02]])
              .with_contact(fm.UnilateralContact(at=1, gap=1.0)).with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
