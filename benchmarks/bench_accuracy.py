@@ -30,7 +30,9 @@ tip, stop at the tip (gap 1), ``beta = 0.02`` stiffness damping, tip force 0.05 
 0.8 to 1.3 times w1; the contact node keeps its mass (``fm.ConsistentMass()``: it carries the tip
 mass, so the semi-discrete problem has a limit as h -> 0).  For ne = 10, 20, 40 elements: plain
 H = 10, 20, 40, 80 (harmonic error at fixed mesh, mesh error at fixed H) and ``rtol=1e-3`` from
-H = 10 with ``max_harmonics=160`` (the extrapolated fold per mesh and its bracket).
+H = 10 with ``max_harmonics=160`` (the extrapolated fold per mesh and its bracket). ``--massless``:
+the same bar with the tip's mass (point mass included) redistributed, a massless contact DOF
+whose contact closes and opens (``alpha = 0.02`` mass-proportional damping; cases ``barm<ne>``).
 
 Every run is a fresh child process (``OPENBLAS/OMP/MKL_NUM_THREADS=1``) bounded by ``--timeout``;
 wall and CPU (process) time of model build + the whole analysis, imports excluded.  ``--repeat``
@@ -43,6 +45,7 @@ Usage::
     python benchmarks/bench_accuracy.py                           # all cases, markdown on stdout
     python benchmarks/bench_accuracy.py --cases seed1 --runs plain20 rtol1e-3 --repeat 1
     python benchmarks/bench_accuracy.py --mesh --json out/accuracy_mesh.json
+    python benchmarks/bench_accuracy.py --mesh --massless --meshes 10 20 --mesh-runs plain10 plain20 plain40 rtol1e-3
 """
 
 from __future__ import annotations
@@ -75,7 +78,7 @@ RUNS = {"plain20": dict(H=20), "plain40": dict(H=40), "plain80": dict(H=80),
         "levels1e-3cap80": dict(H=20, rtol=1e-3, max_harmonics=80, method="levels")}
 BASE = "plain20"
 #: the bar of the mesh study
-BAR = dict(tip_mass=0.75, gap=1.0, beta=0.02, force=0.05, span=(0.8, 1.3))
+BAR = dict(tip_mass=0.75, gap=1.0, beta=0.02, alpha=0.02, force=0.05, span=(0.8, 1.3))
 MESHES = (10, 20, 40)
 MESH_RUNS = {"plain10": dict(H=10), "plain20": dict(H=20), "plain40": dict(H=40), "plain80": dict(H=80),
              "est20": dict(H=20, estimate=True), "rtol1e-3": dict(H=10, rtol=1e-3, max_harmonics=160),
@@ -102,15 +105,21 @@ def exact_fold(case: str) -> float | None:
     return None
 
 
-def bar_model(ne: int):
+def bar_model(ne: int, massless: bool = False):
+    """The bar of the mesh study; ``massless``: the tip's mass (point mass included) redistributed
+    (``with_contact``'s default for FE models) and mass-proportional damping ``alpha`` instead of
+    ``beta`` (stiffness-proportional damping would couple the massless tip DOF)."""
     import femodes as fm
 
     mesh = fm.line_mesh(length=1.0, n_elements=ne, boundaries={"clamp": 0.0, "tip": 1.0})
     model = (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp",
                     point_masses={"tip": BAR["tip_mass"]})
-             .with_damping(beta=BAR["beta"])
-             .with_forcing(fm.HarmonicForce(at="tip", amplitude=BAR["force"]))
-             .with_contact(fm.UnilateralContact(at="tip", gap=BAR["gap"]), contact_mass=fm.ConsistentMass()))
+             .with_forcing(fm.HarmonicForce(at="tip", amplitude=BAR["force"])))
+    if massless:
+        model = model.with_contact(fm.UnilateralContact(at="tip", gap=BAR["gap"])).with_damping(alpha=BAR["alpha"])
+    else:
+        model = (model.with_damping(beta=BAR["beta"])
+                 .with_contact(fm.UnilateralContact(at="tip", gap=BAR["gap"]), contact_mass=fm.ConsistentMass()))
     w1 = float(fm.linear_modes(model, n=1).omega[0])
     return model, model.dof("tip"), (BAR["span"][0] * w1, BAR["span"][1] * w1)
 
@@ -126,7 +135,7 @@ def child(spec: dict) -> dict:
     run = (MESH_RUNS if case.startswith("bar") else RUNS)[spec["run"]]
     wall, cpu = time.perf_counter(), time.process_time()
     if case.startswith("bar"):
-        model, dof, span = bar_model(int(case[3:]))
+        model, dof, span = bar_model(*_mesh_case(case))
     else:
         from bench_peers import CASES as PEER_CASES
         from bench_peers import femodes_model
@@ -157,6 +166,12 @@ def child(spec: dict) -> dict:
     else:
         rec.update(fold=float(br.omega[f]))
     return rec
+
+
+def _mesh_case(case: str) -> tuple[int, bool]:
+    """``"bar10"`` -> (10, False), ``"barm10"`` (the tip's mass redistributed) -> (10, True)."""
+    massless = case.startswith("barm")
+    return int(case[4:] if massless else case[3:]), massless
 
 
 def loadavg() -> str:
@@ -323,6 +338,8 @@ def main(argv=None) -> int:
                     help="default: plain20 plain40 plain80 rtol1e-3 rtol1e-4")
     ap.add_argument("--mesh", action="store_true", help="the bar mesh study instead of the cases")
     ap.add_argument("--meshes", nargs="+", type=int, default=list(MESHES))
+    ap.add_argument("--massless", action="store_true", help="mesh study of the bar with its tip's mass redistributed "
+                    "(a massless contact DOF; mass-proportional damping)")
     ap.add_argument("--mesh-runs", nargs="+", default=list(MESH_RUNS), choices=list(MESH_RUNS))
     ap.add_argument("--repeat", type=int, default=3, help="rounds of the plain runs")
     ap.add_argument("--repeat-rtol", type=int, default=1, help="rounds of the rtol and estimate runs")
@@ -344,10 +361,11 @@ def main(argv=None) -> int:
         order = list(MESH_RUNS if mesh else RUNS)
         specs.sort(key=lambda s: (s["case"] if mesh else CASES.index(s["case"]), order.index(s["run"])))
         if mesh:
-            specs.sort(key=lambda s: (int(s["case"][3:]), order.index(s["run"])))
+            specs.sort(key=lambda s: (_mesh_case(s["case"]), order.index(s["run"])))
         return _report(specs, raw, mesh, None)
     if args.mesh:
-        specs = [dict(case=f"bar{ne}", run=k) for ne in args.meshes for k in args.mesh_runs]
+        specs = [dict(case=f"{'barm' if args.massless else 'bar'}{ne}", run=k) for ne in args.meshes
+                 for k in args.mesh_runs]
     else:
         specs = [dict(case=c, run=k) for c in args.cases for k in args.runs]
     raw = {json.dumps(s): [] for s in specs}
