@@ -62,7 +62,7 @@ models whose only contacts are rigid stops, on DOFs with mass (impacts) or on ma
 (mass redistributed: the contact closes and opens, no impact); ``auto`` leaves to the levels a
 model whose probe run (one period from the point with the largest contact force) evaluates more
 than :data:`SHOOTING_AUTO_MAX_WORK` modal terms in its event search or has more than
-:data:`SHOOTING_AUTO_MAX_EVENTS` contact events: a chattering orbit). The limit itself is computed
+:data:`SHOOTING_AUTO_MAX_EVENTS` events at one contact: a chattering orbit). The limit itself is computed
 instead of extrapolated: the orbit of the exact flow with restitution 1 (closed form between
 contact events, :class:`femodes.time.exact.LinearImpactFlow`) on each point's hyperplane, by Newton on
 the start state and the frequency (monodromy matrix and the hyperplane's gradient exact, the
@@ -543,7 +543,7 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
     branch's folds: the exact folds), into the arrays given; returns the points without an
     exact orbit. ValueError if the flow cannot be built, or if ``max_work`` is finite (``auto``)
     and the probe run's event search evaluates more than ``max_work`` modal terms or the probe
-    orbit has more than :data:`SHOOTING_AUTO_MAX_EVENTS` contact events (:func:`_probe_run`)."""
+    orbit has more than :data:`SHOOTING_AUTO_MAX_EVENTS` events at one contact (:func:`_probe_run`)."""
     branch = lad.branch
     from .time.exact import LinearImpactFlow
 
@@ -554,11 +554,12 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
         if work > max_work:
             raise ValueError(f"the exact flow's event search evaluated {work:.3g} modal terms over one period of the "
                              f"point with the largest contact force (a stiff model); more than {max_work:g}")
-        events = len(run.impacts) + len(run.switches)
-        if events > SHOOTING_AUTO_MAX_EVENTS:
-            raise ValueError(f"the exact flow from the point with the largest contact force has {events} contact events in "
-                             f"one period (chattering: Newton on the exact orbit does not converge there); more than "
-                             f"{SHOOTING_AUTO_MAX_EVENTS}")
+        per_contact = np.bincount([e[1] for e in run.impacts + run.switches], minlength=len(probe.dofs))
+        if per_contact.max(initial=0) > SHOOTING_AUTO_MAX_EVENTS:
+            j = int(np.argmax(per_contact))
+            raise ValueError(f"the exact flow from the point with the largest contact force has {int(per_contact[j])} "
+                             f"events at contact {j} in one period (chattering: Newton on the exact orbit does not "
+                             f"converge there); more than {SHOOTING_AUTO_MAX_EVENTS}")
     n = len(branch)
     H = branch.harmonics.n_harmonics
     free = _without_contact(branch)
@@ -1033,7 +1034,7 @@ SHOOTING_FLOOR = 1e-9
 #: modes pays the fine grid nearly everywhere.
 SHOOTING_AUTO_MAX_WORK = 1e6
 #: ``auto`` also leaves to the levels a model whose probe run (one period from the point with the
-#: largest contact force) has more contact events than this: the 10-element Hermite cantilever of
+#: largest contact force) has more events than this at one contact: the 10-element Hermite cantilever of
 #: README_accuracy (``cant20``) chatters, its massless tip node closing and opening 20 times within
 #: 0.1 time units (88 impacts per period with the tip's mass kept), and Newton on its exact orbit
 #: stalls (|F| 0.18 after 60 s); the seed cases and the FE bar (10-40 elements) have one impact.

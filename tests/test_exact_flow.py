@@ -308,7 +308,7 @@ def test_massless_dof_with_damping_refused():
 
 
 def test_chattering_orbit_left_to_the_levels(monkeypatch):
-    """``auto`` leaves a model whose probe orbit has more contact events per period than
+    """``auto`` leaves a model whose probe orbit has more events per period at one contact than
     SHOOTING_AUTO_MAX_EVENTS to the levels; ``shooting`` asked for explicitly goes on."""
     b = fm.frequency_response(_forced(), (0.95, 1.05), 6)  # in contact: one impact per period
     assert np.abs(b.P).max() > 0.1
