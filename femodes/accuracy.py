@@ -1066,6 +1066,12 @@ _FD_STEP = 1e-7
 SHOOTING_TOL, SHOOTING_STEP = 1e-11, 1e-7
 #: Newton iterations of one shooting solve.
 SHOOTING_MAX_ITER = 40
+#: A shooting solve gives up after SHOOTING_STALL consecutive Newton steps that the backtracking
+#: cut below SHOOTING_STALL_ALPHA of the full step: on the seed cases and the FE bars (10, 20
+#: elements, with and without the tip's mass) no solve that converged had two such steps in a
+#: row, while the failing ones had up to 23 (a failing solve costs up to 40 iterations of up to
+#: 21 runs each).
+SHOOTING_STALL, SHOOTING_STALL_ALPHA = 3, 2.0 ** -8
 
 
 def shooting_unsupported(branch: Branch, projection=None) -> str:
@@ -1265,6 +1271,7 @@ class _Shooter:
         plane = plane or self.plane(i, offset)
         n2 = 2 * self.n
         step = np.inf
+        stalled = 0
 
         def converged(F, h, x, step, w):
             return (float(np.max(np.abs(F))) <= SHOOTING_TOL * max(1.0, float(np.max(np.abs(x))))
@@ -1308,6 +1315,11 @@ class _Shooter:
                 log.debug("accuracy: shooting at point %d: no step reduces the residual", i)
                 return None
             step = abs(alpha * d[n2])
+            stalled = stalled + 1 if alpha < SHOOTING_STALL_ALPHA else 0
+            if stalled >= SHOOTING_STALL:
+                log.debug("accuracy: shooting at point %d stalls (%d steps shorter than %g)", i, stalled,
+                          SHOOTING_STALL_ALPHA)
+                return None
             x0, omega, F, h, run = x1, w1, F1, h1, run1
             if not converged(F, h, x0, step, omega):
                 F, h, J, run = self.evaluate(x0, omega, theta0, plane, True)
