@@ -60,8 +60,9 @@ then comes from its last three levels.
 **Shooting** (``method="auto"``, the default, or ``"shooting"``; forced branches of linear
 models whose only contacts are rigid stops, on DOFs with mass (impacts) or on massless DOFs
 (mass redistributed: the contact closes and opens, no impact); ``auto`` leaves to the levels a
-model whose probe run (one period from the point with the largest contact force) evaluates more
-than :data:`SHOOTING_AUTO_MAX_WORK` modal terms in its event search or has more than
+model with more than :data:`SHOOTING_AUTO_MAX_DOFS` DOFs with mass, or whose probe run (one
+period from the point with the largest contact force) evaluates more than
+:data:`SHOOTING_AUTO_MAX_WORK` modal terms in its event search or has more than
 :data:`SHOOTING_AUTO_MAX_EVENTS` events at one contact: a chattering orbit). The limit itself is computed
 instead of extrapolated: the orbit of the exact flow with restitution 1 (closed form between
 contact events, :class:`femodes.time.exact.LinearImpactFlow`) on each point's hyperplane, by Newton on
@@ -542,13 +543,17 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
     """Errors of the points from the exact orbits on their hyperplanes (:class:`_Shooter`; the
     branch's folds: the exact folds), into the arrays given; returns the points without an
     exact orbit. ValueError if the flow cannot be built, or if ``max_work`` is finite (``auto``)
-    and the probe run's event search evaluates more than ``max_work`` modal terms or the probe
+    and the model has more than :data:`SHOOTING_AUTO_MAX_DOFS` DOFs with mass, or the probe run's event search evaluates more than ``max_work`` modal terms or the probe
     orbit has more than :data:`SHOOTING_AUTO_MAX_EVENTS` events at one contact (:func:`_probe_run`)."""
     branch = lad.branch
     from .time.exact import LinearImpactFlow
 
     probe = LinearImpactFlow(lad.model, float(np.min(branch.omega)))
     if math.isfinite(max_work):
+        if probe.I.size > SHOOTING_AUTO_MAX_DOFS:
+            raise ValueError(f"the model has {probe.I.size} DOFs with mass; the exact flow's dense modal algebra (cost "
+                             f"~ n^3 per run) is left to models of at most {SHOOTING_AUTO_MAX_DOFS} (reduce the model with "
+                             "fm.craig_bampton, which keeps the contact DOFs, or ask for method='shooting')")
         run = _probe_run(lad, probe)
         work = float(run.samples) * 2 * probe.I.size
         if work > max_work:
@@ -1033,6 +1038,11 @@ SHOOTING_FLOOR = 1e-9
 #: fine grid over the whole period would need 8e5; a stiff model whose impacts excite its fast
 #: modes pays the fine grid nearly everywhere.
 SHOOTING_AUTO_MAX_WORK = 1e6
+#: ``auto`` shoots only models with at most this many DOFs with mass: a run's dense algebra (modal
+#: propagators, monodromy matrix, coefficient sensitivities) grows like n^3 (the FE bar of
+#: README_accuracy: 41 DOFs 6.2 s, 81 DOFs 44 s for about 50 points); larger models go to the
+#: levels, or can be reduced by Craig-Bampton first.
+SHOOTING_AUTO_MAX_DOFS = 120
 #: ``auto`` also leaves to the levels a model whose probe run (one period from the point with the
 #: largest contact force) has more events than this at one contact: the 10-element Hermite cantilever of
 #: README_accuracy (``cant20``) chatters, its massless tip node closing and opening 20 times within

@@ -358,3 +358,12 @@ def test_auto_leaves_stiff_models_to_the_levels(monkeypatch):
     monkeypatch.setattr(fm.accuracy, "SHOOTING_AUTO_MAX_WORK", 10.0)
     assert set(estimate_error(b).accuracy.method) <= {"doubling", "failed"}
     assert "shooting" in set(estimate_error(b, method="shooting").accuracy.method)
+
+
+def test_auto_leaves_large_models_to_the_levels(monkeypatch):
+    """``auto`` shoots only models with at most SHOOTING_AUTO_MAX_DOFS DOFs with mass (dense
+    modal algebra); ``shooting`` asked for explicitly goes on."""
+    b = fm.frequency_response(_forced(), (0.95, 1.05), 6)
+    monkeypatch.setattr(fm.accuracy, "SHOOTING_AUTO_MAX_DOFS", 0)
+    assert set(estimate_error(b).accuracy.method) <= {"doubling", "failed"}
+    assert "shooting" in set(estimate_error(b, method="shooting").accuracy.method)
