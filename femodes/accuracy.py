@@ -466,7 +466,7 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
         if not why:
             try:
                 todo = _estimate_by_shooting(lad, ew, eq, rates, w_lim, w_lim_err, finest, kind,
-                                             max_work=SHOOTING_AUTO_MAX_WORK if method == "auto" else math.inf)
+                                             auto=method == "auto")
             except ValueError as exc:  # the flow itself (a nearly defective state matrix), or too stiff for auto
                 if method == "shooting":
                     raise ValueError(f"estimate_error: method='shooting': {exc}") from None
@@ -539,26 +539,27 @@ def _estimate_by_levels(lad: _Ladder, rtol, max_harmonics: int, todo: np.ndarray
 
 
 def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest, kind,
-                          max_work: float = math.inf) -> np.ndarray:
+                          auto: bool = False) -> np.ndarray:
     """Errors of the points from the exact orbits on their hyperplanes (:class:`_Shooter`; the
     branch's folds: the exact folds), into the arrays given; returns the points without an
-    exact orbit. ValueError if the flow cannot be built, or if ``max_work`` is finite (``auto``)
-    and the model has more than :data:`SHOOTING_AUTO_MAX_DOFS` DOFs with mass, or the probe run's event search evaluates more than ``max_work`` modal terms or the probe
-    orbit has more than :data:`SHOOTING_AUTO_MAX_EVENTS` events at one contact (:func:`_probe_run`)."""
+    exact orbit. ValueError if the flow cannot be built, or with ``auto`` if the model has more
+    than :data:`SHOOTING_AUTO_MAX_DOFS` DOFs with mass, or the probe run's event search
+    evaluates more than :data:`SHOOTING_AUTO_MAX_WORK` modal terms, or the probe orbit has more
+    than :data:`SHOOTING_AUTO_MAX_EVENTS` events at one contact (:func:`_probe_run`)."""
     branch = lad.branch
     from .time.exact import LinearImpactFlow
 
     probe = LinearImpactFlow(lad.model, float(np.min(branch.omega)))
-    if math.isfinite(max_work):
+    if auto:
         if probe.I.size > SHOOTING_AUTO_MAX_DOFS:
             raise ValueError(f"the model has {probe.I.size} DOFs with mass; the exact flow's dense modal algebra (cost "
                              f"~ n^3 per run) is left to models of at most {SHOOTING_AUTO_MAX_DOFS} (reduce the model with "
                              "fm.craig_bampton, which keeps the contact DOFs, or ask for method='shooting')")
         run = _probe_run(lad, probe)
         work = float(run.samples) * 2 * probe.I.size
-        if work > max_work:
+        if work > SHOOTING_AUTO_MAX_WORK:
             raise ValueError(f"the exact flow's event search evaluated {work:.3g} modal terms over one period of the "
-                             f"point with the largest contact force (a stiff model); more than {max_work:g}")
+                             f"point with the largest contact force (a stiff model); more than {SHOOTING_AUTO_MAX_WORK:g}")
         per_contact = np.bincount([e[1] for e in run.impacts + run.switches], minlength=len(probe.dofs))
         if per_contact.max(initial=0) > SHOOTING_AUTO_MAX_EVENTS:
             j = int(np.argmax(per_contact))
@@ -1359,13 +1360,13 @@ class _Shooter:
         # with impacts the orbits with contact end at a grazing next to a lower fold (handled below),
         # with massless contacts they go on into the linear orbit, which a step may overshoot
         halvings = FOLD_STEP_HALVINGS if self.flow.massless.any() else 0
-        scale = [d]  # the continuation's steps are half of it
+        scale = d  # of the bracket; the continuation's steps are half of it
 
         def reach(s: float, exact: bool = True) -> float:
             """Continuation from the nearest solved offset to ``s`` in steps of ``scale / 2``, a failed
             step halved (``halvings`` times in all); the offset reached (``s`` if ``exact``)."""
             near = min(solved, key=lambda t: abs(t - s))
-            r, at, step = solved[near], near, math.copysign(0.5 * scale[0], s - near)
+            r, at, step = solved[near], near, math.copysign(0.5 * scale, s - near)
             fails = 0
             while at != s:
                 sk = s if abs(s - at) <= abs(step) else at + step
@@ -1391,7 +1392,8 @@ class _Shooter:
 
         def extreme(h: float) -> tuple[float, float]:
             """A bracket (sa, sb, sc) with the extreme inside, walking downhill by ``h``, then Brent."""
-            scale[0] = h
+            nonlocal scale
+            scale = h
             sb, fb = 0.0, sign * at_f[1]
             (sa, fa), (sc, fc) = side(-h), side(h)
             for _ in range(8):

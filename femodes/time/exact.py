@@ -146,7 +146,7 @@ class _Mode:
         self.lam, self.V, self.Vinv = lam, V, np.linalg.inv(V)
         self.Lq = np.hstack([Pq, np.zeros((n, nI))])  # q = Lq x + ...
         self.Lv = np.hstack([np.zeros((n, nI)), Pq])  # v = Lv x + ...
-        self.Rq, self.Rv = self.Lq @ V, self.Lv @ V
+        self.Rq = self.Lq @ V
         # event functions: the gap of every contact, or the force of a closed massless one
         Le = np.array([-(K[c] @ self.Lq) if j in closed else -self.Lq[c] for j, c in enumerate(flow.dofs)])
         self.Le = Le.reshape(len(flow.dofs), 2 * nI)
@@ -186,7 +186,8 @@ class _Mode:
 class _ModeAt:
     """A mode's particular solution at one forcing frequency: per harmonic ``k`` (0 included)
     the inertial state ``X``, the displacements ``Yq``, velocities ``Yv`` and event functions
-    ``Ye`` (complex amplitudes, the gap constant in ``k = 0``), and the fine grid step.
+    ``Ye`` (complex amplitudes, the gap constant in ``k = 0``; ``G`` the forcing and gap part of
+    the displacements, not carried by the inertial state), and the fine grid step.
     ``(i k w I - A) X_k = b_k`` is solved in the mode's eigenbasis (the frequency-independent
     parts are the mode's: :meth:`_Mode.loads`)."""
 
@@ -199,7 +200,7 @@ class _ModeAt:
             raise ValueError(f"LinearImpactFlow: forcing harmonic {k} at omega = {omega:g} is at an undamped "
                              "eigenfrequency (no periodic particular solution)")
         X = (W / den) @ m.V.T  # (n_k, 2nI)
-        self.ks, self.X, self.iw = ks, X, iw
+        self.ks, self.X, self.iw, self.G = ks, X, iw, G
         self.Yq = X @ m.Lq.T + G
         self.Yv = X @ m.Lv.T + iw[:, None] * G
         self.Ye = X @ m.Le.T + Ye0
@@ -279,11 +280,6 @@ class LinearImpactFlow:
         if d is None:
             d = self._at[closed] = _ModeAt(self, m, self.omega)
         return m, d
-
-    @property
-    def fine_step(self) -> float:
-        """Step of the fine event search of the all-open mode."""
-        return self.mode(frozenset())[1].dt
 
     def at(self, omega: float) -> "LinearImpactFlow":
         """The same model at another forcing frequency (the eigenproblems are not solved again)."""
@@ -406,8 +402,7 @@ class FlowRun:
             t = tb
         m, d = flow.mode(closed)
         tail = d.phases(t1)
-        self.x_end = np.concatenate([m.Lq @ x + np.real(tail @ (d.Yq - d.X @ m.Lq.T)),
-                                     m.Lv @ x + np.real(tail @ (d.Yv - d.X @ m.Lv.T))])
+        self.x_end = np.concatenate([m.Lq @ x + np.real(tail @ d.G), m.Lv @ x + np.real((tail * d.iw) @ d.G)])
         self.Phi = np.vstack([m.Lq, m.Lv]) @ self._Phi if variational else None
 
     @property
@@ -437,7 +432,7 @@ class FlowRun:
         m0 = max(1, int(math.ceil(span / d.coarse)))
         h = span / m0
         if h <= REFINE * fine:  # not stiff: the fine search everywhere
-            return self._fine(t, z, t1, 0.0, span)
+            return self._fine(t, z, 0.0, span)
         m = self._m
         starts = np.linspace(0.0, span, m0 + 1)[:-1]
         amp = np.abs(m.Re * z)  # (nc, 2nI) modal amplitudes of the event functions
@@ -464,19 +459,19 @@ class FlowRun:
         # the intervals left, in time order, as runs of adjacent ones: the first event found is the first
         cut = np.flatnonzero(np.diff(starts) > 1.5 * h) + 1
         for run in np.split(starts, cut):
-            hit = self._fine(t, z, t1, float(run[0]), float(run[-1]) + h)
+            hit = self._fine(t, z, float(run[0]), float(run[-1]) + h)
             if hit is not None:
                 return hit
         return None
 
-    def _fine(self, t: float, z: np.ndarray, t1: float, a: float, b: float):
+    def _fine(self, t: float, z: np.ndarray, a: float, b: float):
         """The first event in ``(t + a, t + b]`` on the fine grid (chunk by chunk)."""
         fine = self._d.dt
         m = max(2, int(math.ceil((b - a) / fine)))
         if m > CHUNK:
             edges = np.linspace(a, b, -(-m // CHUNK) + 1)
             for lo, hi in zip(edges[:-1], edges[1:]):
-                hit = self._fine(t, z, t1, lo, hi)
+                hit = self._fine(t, z, lo, hi)
                 if hit is not None:
                     return hit
             return None
