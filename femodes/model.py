@@ -610,6 +610,10 @@ class StructuralModel:
         :class:`NodalFrame` in ``dofmap.frames``; the identity elsewhere). ``M``, ``K``, ``C`` and
         the forces are the transformed ``T^T A T``, ``T^T f``. None (the default): ``q`` is
         physical.
+    damping_spec : tuple, optional
+        The arguments of the last :meth:`with_damping` as ``(name, value)`` pairs (empty when the
+        damping was given as a matrix): :meth:`with_contact` recomputes the damping from them
+        when it redistributes mass.
 
     Notes
     -----
@@ -630,6 +634,7 @@ class StructuralModel:
     mass_redistribution: tuple = ()
     C_lowrank: LowRankDamping | None = None
     frame: Any = None
+    damping_spec: tuple = ()
 
     def __post_init__(self):
         M = as_sparse_matrix(self.M, "M")
@@ -732,10 +737,15 @@ class StructuralModel:
 
         Rayleigh: ``C = alpha M + beta K`` (sparse). Modal: ``modal`` is a damping ratio (scalar)
         or a sequence of ratios ``zeta_j`` for the first ``n_modes`` modes (default: the length of
-        the sequence, or 20 modes for a scalar), ``C = M Phi diag(2 zeta_j w_j) Phi^T M`` with
-        mass-normalised modes ``Phi``. That matrix is dense, so it is kept as a low-rank part
-        ``C_lowrank = LowRankDamping(U = M Phi, d = 2 zeta w)`` next to a zero sparse ``C``; every
-        analysis uses it exactly and at the cost of a sparse one (no DOF limit).
+        the sequence, or for a scalar 20 modes, fewer if the model has fewer DOFs with mass),
+        ``C = M Phi diag(2 zeta_j w_j) Phi^T M`` with mass-normalised modes ``Phi``. That matrix is
+        dense, so it is kept as a low-rank part ``C_lowrank = LowRankDamping(U = M Phi, d = 2 zeta
+        w)`` next to a zero sparse ``C``; every analysis uses it exactly and at the cost of a
+        sparse one (no DOF limit).
+
+        The arguments are kept (``damping_spec``): a later :meth:`with_contact` that
+        redistributes the contact nodes' mass recomputes the damping from the new mass matrix (and
+        modes), so ``with_damping`` may come before or after ``with_contact``.
         """
         for name, v in (("alpha", alpha), ("beta", beta)):
             if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
@@ -749,7 +759,8 @@ class StructuralModel:
                 raise ValueError(
                     f"with_damping: alpha={alpha!r}, beta={beta!r} overflow: C = alpha M + beta K has infinite entries"
                 )
-            return self._replace(C=C, C_lowrank=None, damping_info=f"Rayleigh alpha={alpha:g}, beta={beta:g}")
+            return self._replace(C=C, C_lowrank=None, damping_info=f"Rayleigh alpha={alpha:g}, beta={beta:g}",
+                                 damping_spec=(("alpha", alpha), ("beta", beta)))
         if alpha or beta:
             raise ValueError("with_damping: give either Rayleigh coefficients (alpha, beta) or modal=, not both")
         if isinstance(modal, (str, bytes, bool, np.bool_)):
@@ -767,11 +778,15 @@ class StructuralModel:
                 raise ValueError(
                     f"with_damping: n_modes must be in [1, {self.n_dofs}] (the model has {self.n_dofs} DOFs), got {n_modes!r}"
                 )
-        if zeta.size > self.n_dofs:
+        # a DOF without mass (a contact node whose mass was redistributed) carries no mode
+        n_inertial = int(np.count_nonzero(self.M.diagonal() > 0))
+        if zeta.size > n_inertial or (n_modes is not None and n_modes > n_inertial):
+            extra = f" ({self.n_dofs - n_inertial} of its {self.n_dofs} DOFs have no mass)" if n_inertial < self.n_dofs else ""
             raise ValueError(
-                f"with_damping: modal gives {zeta.size} damping ratios but the model has only {self.n_dofs} modes"
+                f"with_damping: modal gives {max(zeta.size, n_modes or 0)} modes' damping ratios (modal=, n_modes=) "
+                f"but the model has only {n_inertial} modes{extra}; give at most {n_inertial}"
             )
-        nm = int(n_modes) if n_modes is not None else (zeta.size if zeta.size > 1 else min(self.n_dofs, 20))
+        nm = int(n_modes) if n_modes is not None else (zeta.size if zeta.size > 1 else min(n_inertial, 20))
         if zeta.size == 1:
             zeta = np.full(nm, zeta[0])
         if zeta.size != nm:
@@ -780,7 +795,9 @@ class StructuralModel:
         lowrank = LowRankDamping(self.M @ phi, 2.0 * zeta * omega, modes=np.asarray(phi), eigenvalues=omega**2)
         ratios = f"{zeta[0]:g}" if np.all(zeta == zeta[0]) else f"{zeta.min():g}..{zeta.max():g}"
         return self._replace(C=sp.csr_matrix((self.n_dofs, self.n_dofs)), C_lowrank=lowrank,
-                             damping_info=f"modal zeta={ratios} on {nm} modes")
+                             damping_info=f"modal zeta={ratios} on {nm} modes",
+                             damping_spec=(("modal", tuple(float(z) for z in np.atleast_1d(np.asarray(modal, dtype=float)))),
+                                           ("n_modes", n_modes)))
 
     def with_forcing(self, *forces: HarmonicForce) -> "StructuralModel":
         """Return a copy with these harmonic point forces added.
@@ -1188,7 +1205,17 @@ class StructuralModel:
             reports.extend(reps)
         if any(isinstance(a.item, UnilateralContact) for a in new) and any(isinstance(a.item, PenaltyContact) for a in new):
             log.info("model mixes complementarity and penalty contacts")
-        return base._replace(contacts=tuple(new), M=M, mass_redistribution=tuple(reports))
+        out = base._replace(contacts=tuple(new), M=M, mass_redistribution=tuple(reports))
+        if self.damping_spec and M is not base.M:
+            # damping given before the contact: recomputed from the redistributed mass (C = alpha M +
+            # beta K, or the new modes), which the contact node's zero mass row then also zeroes in C
+            log.info("with_contact: damping (%s) recomputed for the redistributed mass", self.damping_info)
+            spec = dict(self.damping_spec)
+            if "modal" in spec:
+                z = spec["modal"]
+                spec["modal"] = z[0] if len(z) == 1 else list(z)
+            out = out.with_damping(**spec)
+        return out
 
     def _dof_nodes(self) -> tuple[np.ndarray, np.ndarray]:
         """Node and component slot of every model DOF (node ``-1`` for DOFs on no node)."""

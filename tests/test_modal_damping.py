@@ -28,6 +28,7 @@ from femodes.hbm.linsolve import AssembledSolver, BlockSolver
 from femodes.hbm.system import HBMSystem
 from femodes.model import DENSE_DAMPING_MAX_DOFS, LowRankDamping, low_rank_solver
 from femodes.runs import model_fingerprint
+from femodes.time.exact import exact_flow_unsupported
 
 
 def bar_case(ne: int, zeta=0.02, n_modes=10):
@@ -280,14 +281,18 @@ def test_lowrank_solver_zero_gains_and_blocks():
 @pytest.mark.parametrize("path", ["modes", "modes at a resonance", "mass changed after damping", "general"])
 def test_structured_condensation_paths(path):
     """The condensation through the modes (``K Phi = U diag(w^2)``, checked), with a mode exactly
-    at ``k w`` (solved for), with the mass changed on a few rows after ``with_damping`` (the
-    contact redistributes the tip mass: case files declare damping first), and the general path
+    at ``k w`` (solved for), with the mass changed on a few rows after the modes of the low-rank
+    part were computed (the tip mass redistributed), and the general path
     (a sparse damping part besides the modal one) all give the dense answer."""
     mesh = fm.line_mesh(1.0, 200, boundaries={"clamp": 0.0, "tip": 1.0})
     bar = fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
     if path == "mass changed after damping":
-        model = (bar.with_damping(modal=0.02, n_modes=10).with_contact(fm.UnilateralContact(at="tip", gap=1e-3))
-                 .with_forcing(fm.HarmonicForce(at="tip", amplitude=1e-3)))
+        # the low-rank part of the bar before its tip mass was redistributed (with_contact now
+        # recomputes the damping: set by hand, as a user-given C_lowrank would be)
+        damped = bar.with_damping(modal=0.02, n_modes=10)
+        model = dataclasses.replace(bar.with_contact(fm.UnilateralContact(at="tip", gap=1e-3))
+                                    .with_forcing(fm.HarmonicForce(at="tip", amplitude=1e-3)),
+                                    C_lowrank=damped.C_lowrank, damping_info=damped.damping_info)
     elif path == "general":
         model = bar_case(200)
         model = dataclasses.replace(model, C=0.01 * model.M)
@@ -308,3 +313,41 @@ def test_structured_condensation_paths(path):
         assert (F.F.modes is None) == (path == "general")
         assert F.ymodal is not None  # the modal coordinates eliminated harmonic by harmonic
         assert rel(F.solve(b), J2.factorize().solve(b)) < 1e-8
+
+
+def _beam_contact():
+    mesh = fm.line_mesh(1.0, 10, boundaries={"clamp": 0.0, "tip": 1.0})
+    beam = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
+    return beam, fm.UnilateralContact(at="tip", gap=0.01)
+
+
+@pytest.mark.parametrize("damping", [dict(alpha=0.02), dict(alpha=0.02, beta=1e-3), dict(modal=0.03),
+                                     dict(modal=[0.01, 0.02, 0.03])])
+def test_damping_before_or_after_the_contact_is_the_same(damping):
+    """``with_damping`` before ``with_contact`` (which redistributes the tip's mass) is recomputed
+    from the new mass and modes: the same damping as after it (same inputs to the same
+    computation: equal to round-off of the eigensolver, 1e-12 of the largest entry)."""
+    beam, contact = _beam_contact()
+    before = beam.with_damping(**damping).with_contact(contact)
+    after = beam.with_contact(contact).with_damping(**damping)
+    Cb, Ca = before.damping_matrix().toarray(), after.damping_matrix().toarray()
+    assert np.abs(Cb - Ca).max() <= 1e-12 * np.abs(Ca).max()
+    assert before.damping_info == after.damping_info
+    tip = after.dof("tip")
+    assert after.M.diagonal()[tip] == 0.0  # redistributed: the old C = alpha M had mass on this row
+    if "beta" not in damping:  # mass-proportional and modal damping have no row at a massless DOF
+        assert not np.any(Cb[tip])
+        assert not exact_flow_unsupported(before.with_forcing(fm.HarmonicForce(at="tip", amplitude=1e-3)))
+
+
+def test_modal_damping_counts_only_the_modes_of_dofs_with_mass():
+    """A model with a massless DOF has one mode fewer than DOFs: the scalar default takes what
+    there is (it used to fail on a shape mismatch); asking for more names the count."""
+    beam, contact = _beam_contact()
+    model = beam.with_contact(contact)
+    assert model.n_dofs == 20
+    assert model.with_damping(modal=0.03).damping_info == "modal zeta=0.03 on 19 modes"
+    with pytest.raises(ValueError, match=r"only 19 modes \(1 of its 20 DOFs have no mass\); give at most 19"):
+        model.with_damping(modal=0.03, n_modes=20)
+    with pytest.raises(ValueError, match="only 19 modes"):
+        model.with_damping(modal=[0.01] * 20)

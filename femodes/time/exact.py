@@ -100,8 +100,9 @@ def exact_flow_unsupported(model: StructuralModel) -> str:
         for d in Z:
             if M[d].sum() > 0.0 or C[d].sum() > 0.0:
                 which = "mass" if M[d].sum() > 0.0 else "damping"
-                hint = (" (Rayleigh damping set before with_contact redistributed the mass keeps the old mass "
-                        "matrix's row: call with_damping after with_contact)" if which == "damping" else "")
+                hint = (" (stiffness-proportional damping beta K, or a damping matrix given directly, has a row "
+                        "there: use mass-proportional (alpha) or modal damping, or keep the node's mass with "
+                        "with_contact(..., contact_mass=fm.ConsistentMass()))" if which == "damping" else "")
                 return (f"DOF {model.dofmap.label(int(d))!r} has no mass on the diagonal but {which} coupling it to other "
                         f"DOFs: a massless DOF must have zero rows of M and C (mass-proportional damping){hint}")
         n_massless = sum(1 for a in model.contacts if not Md[a.dof] > 0.0)
