@@ -4,6 +4,7 @@ Measured numbers quoted in the comments come from the runs that set the toleranc
 """
 
 import importlib.util
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -185,6 +186,22 @@ def test_beam_with_massless_tip_contact():
     # rule on a switching condensed stiffness): max |E - E0| / E0 over t <= 20 measured
     # 1.18, 0.235, 0.127, 0.021 at dt = 1e-2, 5e-3, 2.5e-3, 1.25e-3
     assert drift[1] < drift[0] < 0.2 and drift[1] < 0.05
+
+
+def test_trapezoidal_rule_with_a_massless_contact_warns(caplog):
+    """theta = 1/2 with a contact on a massless DOF warns (the energy its switches add to
+    undamped stiff modes can grow without bound: bench_cantilever_time.py); theta = 0.55 does not,
+    nor does theta = 1/2 without a massless contact."""
+    beam, model, v0, tip = beam_with_stop()
+    with caplog.at_level(logging.WARNING, logger="femodes.time"):
+        simulate(model, 0.1, 1e-2, v0=v0)
+    assert "theta = 1/2 with a contact on a massless DOF" in caplog.text
+    assert "TimeSteppingOptions(theta=0.55)" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="femodes.time"):
+        simulate(model, 0.1, 1e-2, v0=v0, options=fm.TimeSteppingOptions(theta=0.55))
+        simulate(beam, 0.1, 1e-2, v0=v0)
+    assert "massless" not in caplog.text
 
 
 def test_craig_bampton_close_to_full():

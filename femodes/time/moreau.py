@@ -25,7 +25,12 @@ position-level Signorini condition ``0 <= g_N(q_{k+1}) \perp P_{k+1} >= 0`` (no 
 drift). Caveat, measured on a 40-element cantilever with a massless tip stop: every contact
 switch excites stiff modes that the trapezoidal rule neither resolves nor damps, so the energy
 jumps by O(dt^2) per switch (24 %, 7 %, 1.7 %, 0.6 % over five periods for dt = T/800 ... T/6400,
-examples/validation_cantilever.py); use small steps (or theta > 1/2) on such FE models.
+examples/validation_cantilever.py); use small steps (or theta > 1/2) on such FE models. Over
+long runs the energy can grow without bound: the 10-element cantilever of
+``benchmarks/bench_cantilever_time.py`` (``C = 0.02 M``) at dt = T/400 and theta = 1/2 reached
+1e76 after 480 forcing periods, whereas theta = 0.55 settles to a periodic state and dt = T/6400
+stays bounded (an irregular response, as the exact flow finds). :func:`simulate` and
+:func:`steady_state` warn when theta = 1/2 meets a contact on a massless DOF.
 With these weights the iteration matrix is ``A = M + h Theta C + h^2 Theta K Theta``; it is
 factorized once and the contact/nonlinear DOFs ``S`` are coupled through the local Delassus
 operator ``W = B_S^T A^{-1} B_S`` (``|S|`` solves), so each step is a small complementarity
