@@ -17,6 +17,9 @@
   condensed massless contact DOFs; events located to round-off by a certified search; exact
   Fourier coefficients):
   the shooting refinement of :func:`femodes.estimate_error` (``method="shooting"``).
+* :func:`exact_frequency_response` -- the forced response of such a model orbit by exact orbit:
+  continuation in the forcing frequency of the flow's periodic orbits (:class:`ExactBranch`),
+  the limit harmonic balance converges to, with its folds.
 
 Modules: ``moreau`` (the scheme, described once, and the public names), ``results`` (the two
 result classes), ``stepper`` (operators of a step, its local problem, the stepping loop),
@@ -28,8 +31,10 @@ discretisations of the same model and can be compared.
 """
 
 from .drivers import TimeSteppingOptions
+from .exact import ExactBranch, exact_frequency_response
 from .moreau import SteadyState, TimeHistory, simulate, steady_state
 from .shooting import Monodromy, ShootingResult, monodromy, shoot, trajectory
 
 __all__ = ["TimeHistory", "SteadyState", "simulate", "steady_state", "TimeSteppingOptions",
-           "Monodromy", "ShootingResult", "monodromy", "shoot", "trajectory"]
+           "Monodromy", "ShootingResult", "monodromy", "shoot", "trajectory", "ExactBranch",
+           "exact_frequency_response"]

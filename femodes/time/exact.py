@@ -48,7 +48,9 @@ event-driven integration with smooth laws is :mod:`femodes.time.shooting`.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import itertools
+import logging
 import math
 
 import numpy as np
@@ -57,10 +59,13 @@ from scipy.optimize import minimize_scalar
 
 from ..laws import UnilateralContact
 from ..model import StructuralModel
+from ..solvers import ContinuationOptions, continuation
 from .shooting import MAX_IMPACTS, unsupported
 
+log = logging.getLogger(__name__)
+
 __all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "SAMPLES", "CHUNK", "REFINE",
-           "MAX_MASSLESS_CONTACTS"]
+           "MAX_MASSLESS_CONTACTS", "ExactBranch", "exact_frequency_response", "EXACT_BRANCH_RTOL"]
 
 #: Grid points per shortest period of the flow (fastest eigenvalue or forcing harmonic) on which
 #: the events are bracketed, and of the coarse grid per period of the highest forcing harmonic.
@@ -680,3 +685,194 @@ class FlowRun:
             Zm = m.Vinv @ Phi_a  # (modes, 2n columns)
             Ic += np.einsum("mk,dm,mc->kdc", J, m.Rq, Zm)
         return self._real(Ic * (w / math.pi), H)
+
+
+# ------------------------------------------------------------------------------ the exact branch
+#: Default Newton tolerance of :func:`exact_frequency_response`, relative to the larger of the
+#: largest gap and the start state of the response without contact at the first frequency: the residual of a run
+#: stops decreasing at ~1e-9 of it on the cantilever of ``benchmarks/bench_cantilever_time.py``
+#: (stiff modes: event times to round-off still leave that much in their velocities).
+EXACT_BRANCH_RTOL = 1e-6
+
+
+class ExactBranch:
+    """Periodic orbits of a linear model with rigid stops traced by continuation in the forcing
+    frequency (:func:`exact_frequency_response`).
+
+    Attributes
+    ----------
+    omega : ndarray (n_points,)
+    states : ndarray (n_points, 2 n_dofs)
+        Start states ``[q; v]`` at ``t = 0``, periodic to the continuation's Newton tolerance
+        (massless DOFs' entries consistent with the others).
+    atol : float
+        That tolerance: ``|x(T) - x(0)|`` of the inertial entries is about that small at every
+        point (Newton also stops on a step below its ``xtol``).
+    folds : tuple of int
+        Indices of the located folds (turning points in ``omega``).
+    pieces : tuple of int
+        Start indices of the pieces: ``(0,)``, or ``(0, k)`` when the continuation stopped inside
+        the span (a grazing orbit) and points ``k:`` were traced back from the other end.
+    success, status, message
+        Whether the pieces cover the span; the status (:data:`~femodes.solvers.STATUS_MESSAGES`)
+        and message of the first continuation, and of the second if there is one.
+    runs : int
+        Runs of the flow (the cost).
+    flow : LinearImpactFlow
+    """
+
+    def __init__(self, flow: LinearImpactFlow, omega, states, results, folds, runs: int, atol: float):
+        self.flow, self.atol = flow, float(atol)
+        self.omega = np.asarray(omega, dtype=float)
+        self.states = np.asarray(states, dtype=float)
+        self.folds = tuple(sorted(int(i) for i in folds))
+        first = results[0]
+        self.pieces = (0,) if len(results) == 1 else (0, len(first.p))
+        # covered: the first run reached the end, or the second (backward) reached where it stopped
+        self.success = first.status == 0 or (len(results) == 2 and results[1].status == 0)
+        self.status = int(first.status)
+        self.message = "; ".join(f"{'forward' if k == 0 else 'back'}: {r.message}" for k, r in enumerate(results))
+        self.runs = int(runs)
+
+    def __len__(self) -> int:
+        return self.omega.size
+
+    def orbit(self, i: int) -> FlowRun:
+        """The run of point ``i`` over one forcing period (its impacts, switches, displacements)."""
+        return self.flow.at(self.omega[i]).run(self.states[i], 0.0)
+
+    def amplitude(self, dof: int, samples: int = 400) -> np.ndarray:
+        """``max_t |q_dof(t)|`` of every orbit on ``samples`` points per period (those of
+        :meth:`femodes.Branch.amplitude` are on the truncated Fourier series)."""
+        out = np.empty(len(self))
+        for i in range(len(self)):
+            t = np.linspace(0.0, 2.0 * math.pi / self.omega[i], samples)
+            out[i] = np.max(np.abs(self.orbit(i).displacement(t)[:, dof]))
+        return out
+
+    def coefficients(self, i: int, H: int) -> tuple[np.ndarray, np.ndarray]:
+        """Exact Fourier coefficients of point ``i`` to ``H`` harmonics (:meth:`FlowRun.coefficients`)."""
+        return self.orbit(i).coefficients(H)
+
+
+class _ShootingResidual:
+    """``r(x, w) = x(T) - x`` over one forcing period ``T = 2 pi / w`` from ``x(0) = x`` (the
+    inertial entries of the state), with ``dr/dx = Phi - I`` from the variational run and
+    ``dr/dw`` by a forward difference (one more run)."""
+
+    def __init__(self, flow: LinearImpactFlow):
+        self.flow, self.S = flow, flow.state_index
+        self.runs = 0
+
+    def full(self, y: np.ndarray) -> np.ndarray:
+        x = np.zeros(2 * self.flow.n)
+        x[self.S] = y
+        return x
+
+    def residual(self, y: np.ndarray, w: float):
+        S = self.S
+        x = self.full(y)
+        run = self.flow.at(w).run(x, 0.0, variational=True)
+        r = run.x_end[S] - y
+        dw = 1e-7 * w
+        r2 = self.flow.at(w + dw).run(x, 0.0).x_end[S] - y
+        self.runs += 2
+        return r, run.Phi[np.ix_(S, S)] - np.eye(S.size), (r2 - r) / dw
+
+
+def exact_frequency_response(model: StructuralModel, span, *, x0=None, restitution: float = 1.0,
+                             options=None) -> ExactBranch:
+    """The forced response of a linear model with rigid stops, orbit by exact orbit.
+
+    Pseudo-arclength continuation (:func:`femodes.solvers.continuation`) of the periodic orbits
+    of :class:`LinearImpactFlow` in the forcing frequency: the unknowns are the start state at
+    ``t = 0`` (the forcing fixes the phase), the residual ``x(T) - x(0)`` with the monodromy
+    matrix (saltation at impacts) as its Jacobian. No harmonics and no time step: every point
+    is a periodic orbit of the semi-discrete model to round-off, which is what harmonic balance
+    converges to as H grows; folds are located as turning points. The orbits need not be
+    stable (:func:`femodes.stability` or a time integration says which are).
+
+    Parameters
+    ----------
+    model : StructuralModel
+        Linear, with unilateral contacts (on DOFs with or without mass) and harmonic forcing;
+        no smooth nonlinear laws or penalty contacts (:func:`exact_flow_unsupported` says why
+        a model is refused).
+    span : (float, float)
+        Forcing frequencies ``(w_start, w_end)`` in rad/s, positive; may decrease.
+    x0 : array_like (2 n_dofs,), optional
+        Start state ``[q; v]`` at ``w_start``; default: the response without contact there
+        (right when it keeps off the stops, a first guess otherwise).
+    restitution : float
+        Newton's coefficient of the impacts on DOFs with mass (1: the limit of harmonic balance).
+    options : ContinuationOptions, optional
+        Default: ``max_points=3000`` and Newton's ``atol`` :data:`EXACT_BRANCH_RTOL` times the
+        larger of the largest gap and the size of the start state without contact at
+        ``w_start``.
+
+    Returns
+    -------
+    ExactBranch
+        ``success``/``message`` report how the continuation ended; never raises on numerical
+        failure.
+
+    Raises
+    ------
+    ValueError
+        A model the flow cannot take, a bad span or ``x0``.
+    """
+    owner = "exact_frequency_response"
+    try:
+        w0, w1 = (float(span[0]), float(span[1]))
+    except (TypeError, ValueError, IndexError):
+        raise ValueError(f"{owner}: span must be two forcing frequencies (w_start, w_end), got {span!r}") from None
+    if len(span) != 2 or not (math.isfinite(w0) and math.isfinite(w1) and w0 > 0.0 and w1 > 0.0) or w0 == w1:
+        raise ValueError(f"{owner}: span must be two different finite positive frequencies, got {span!r}")
+    if not model.forces:
+        raise ValueError(f"{owner}: the model has no harmonic forcing (add one with with_forcing)")
+    flow = LinearImpactFlow(model, w0, restitution=restitution)
+    n2 = 2 * model.n_dofs
+    particular = flow.particular(0.0)
+    if x0 is None:
+        x0 = particular
+    else:
+        x0 = np.asarray(x0, dtype=float)
+        if x0.shape != (n2,) or not np.all(np.isfinite(x0)):
+            raise ValueError(f"{owner}: x0 must be {n2} finite numbers [q; v], got shape {x0.shape}")
+    if options is None:
+        scale = max(float(np.linalg.norm(particular[flow.state_index])), float(np.max(np.abs(flow.gaps), initial=0.0)))
+        base = ContinuationOptions()
+        options = ContinuationOptions(max_points=3000, newton=dataclasses.replace(
+            base.newton, atol=EXACT_BRANCH_RTOL * max(scale, 1e-300)))
+    elif not isinstance(options, ContinuationOptions):
+        raise TypeError(f"{owner}: options must be a ContinuationOptions or None, got {type(options).__name__}")
+    problem = _ShootingResidual(flow)
+    res = continuation(problem, (w0, w1), x0=x0[flow.state_index], options=options)
+    pieces = [res]
+    if res.status == 4 and len(res.p):
+        # the corrector gave up inside the span (a grazing orbit: the flow's derivative jumps
+        # there): trace the rest back from the other end, from its response without contact
+        w_stop = float(res.p[-1])
+        back = continuation(problem, (w1, w_stop), x0=flow.at(w1).particular(0.0)[flow.state_index], options=options)
+        log.info("%s: stopped at w = %.6g (%s); traced back from w = %.6g to %.6g (%s)", owner, w_stop, res.message,
+                 w1, float(back.p[-1]) if len(back.p) else w1, back.message)
+        if len(back.p):
+            pieces.append(back)
+    omega = np.concatenate([np.asarray(r.p, dtype=float) if k == 0 else np.asarray(r.p, dtype=float)[::-1]
+                            for k, r in enumerate(pieces)])
+    ys = [np.asarray(r.x).reshape(len(r.p), -1) for r in pieces]
+    ys = np.concatenate([y if k == 0 else y[::-1] for k, y in enumerate(ys)])
+    folds = list(res.folds)
+    if len(pieces) == 2:
+        n_back = len(pieces[1].p)
+        folds += [len(res.p) + n_back - 1 - int(i) for i in sorted(pieces[1].folds, reverse=True)]
+    # the massless DOFs' entries from a run (consistent with the inertial ones, which are the
+    # continuation's own: periodic to its Newton tolerance)
+    states = np.zeros((omega.size, n2))
+    massless = np.setdiff1d(np.arange(n2), flow.state_index)
+    for i, (y, w) in enumerate(zip(ys, omega)):
+        states[i] = problem.full(y)
+        if massless.size:
+            states[i, massless] = flow.at(w).run(states[i], 0.0).x_end[massless]
+    return ExactBranch(flow, omega, states, pieces, folds, problem.runs + (len(omega) if massless.size else 0),
+                       options.newton.atol)

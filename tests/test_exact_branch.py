@@ -1,0 +1,165 @@
+"""The exact forced response by continuation of exact orbits (femodes.time.exact_frequency_response).
+
+References: the semi-analytic upper folds of tests/impact_reference.py (seed cases), the folds
+that the shooting refinement of femodes.accuracy locates on the 2-DOF massless-contact model
+(themselves checked against plain harmonic balance at H = 80 in test_exact_flow.py), and, in the
+slow test, a quasi-static sweep in the time domain (the stable orbits, period after period).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+import femodes as fm
+from femodes.accuracy import estimate_error
+from femodes.solvers import ContinuationOptions
+from femodes.time import ExactBranch, exact_frequency_response
+from femodes.time.exact import LinearImpactFlow
+
+from .impact_reference import upper_fold
+
+
+def _oscillator(c, F, g):
+    return (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[c]]).with_contact(fm.UnilateralContact(at=0, gap=g))
+            .with_forcing(fm.HarmonicForce(at=0, amplitude=F)))
+
+
+def _massless_two_dof():
+    return (fm.StructuralModel(M=[[1.0, 0.0], [0.0, 0.0]], K=[[2.0, -1.0], [-1.0, 1.0]], C=[[0.1, 0.0], [0.0, 0.0]])
+            .with_contact(fm.UnilateralContact(at=1, gap=1.0)).with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
+
+
+def _residual(b: ExactBranch, i: int) -> float:
+    """|x(T) - x(0)| of point i's inertial state."""
+    S = b.flow.state_index
+    return float(np.linalg.norm((b.orbit(i).x_end - b.states[i])[S]))
+
+
+@pytest.fixture(scope="module")
+def seed2():
+    return exact_frequency_response(_oscillator(0.2, 1.0, 2.5), (0.5, 2.0))
+
+
+def test_seed2_upper_fold_exact(seed2):
+    """Seed case 2: one piece over the span; the upper fold equals the event-driven reference to
+    1e-9 (measured 2.5e-13: the fold is located by the continuation on exact orbits); every
+    point is periodic to about the Newton tolerance (``b.atol``: EXACT_BRANCH_RTOL = 1e-6 of the
+    larger of the gap and the state without contact at the first frequency)."""
+    b = seed2
+    assert b.success and b.pieces == (0,)
+    assert b.omega[0] == 0.5 and b.omega[-1] == pytest.approx(2.0, abs=1e-12)
+    ref = upper_fold(0.2, 1.0, 2.5).w
+    w = max(b.omega[list(b.folds)])
+    assert abs(w / ref - 1.0) < 1e-9
+    assert b.atol == pytest.approx(1e-6 * 2.5)  # the gap, above |[q; v]| = 1.49 without contact at w = 0.5
+    # Newton also stops on a step below its xtol: residuals up to 1.1 atol measured
+    assert max(_residual(b, i) for i in range(len(b))) <= 10 * b.atol
+    top = []
+    for i in range(0, len(b), 3):
+        t = np.linspace(0.0, 2.0 * math.pi / b.omega[i], 2001)
+        top.append(b.orbit(i).displacement(t)[:, 0].max())
+    assert max(top) <= 2.5 * (1.0 + 1e-12)  # the orbits with impacts reach the stop, no further
+    assert max(top) > 2.5 * (1.0 - 1e-3)
+    assert b.amplitude(0).max() > 2.5  # max |q|: the far side of the swing, where there is no stop
+
+
+def test_seed1_grazing_traced_from_both_ends():
+    """Seed case 1: the impacting branch ends at the grazing of the linear response (the flow's
+    derivative is singular there), so the continuation stops there and the rest is traced back
+    from the other end: two pieces that cover the span. Upper fold within 1e-6 of the reference
+    (measured 3.2e-8); the pieces meet within 1 % of the grazing frequency 1.0808687 (the
+    linear response's amplitude reaches the gap there)."""
+    b = exact_frequency_response(_oscillator(0.1, 0.2, 1.0), (0.5, 2.0))
+    assert b.success and len(b.pieces) == 2
+    k = b.pieces[1]
+    assert abs(b.omega[k - 1] - 1.0808687) < 1e-2
+    # the back piece (reversed: in order along the branch) ends where the first one stopped
+    assert b.omega[k] == pytest.approx(b.omega[k - 1], abs=1e-12) and b.omega[-1] == pytest.approx(2.0, abs=1e-12)
+    ref = upper_fold(0.1, 0.2, 1.0).w
+    assert abs(max(b.omega[list(b.folds)]) / ref - 1.0) < 1e-6
+    assert not any(b.orbit(i).impacts for i in range(k, len(b)))  # the back piece: the linear response
+
+
+def test_massless_contact_folds_match_the_shooting_refinement():
+    """2-DOF model with its contact on the massless DOF: the exact branch's two folds equal those
+    the shooting refinement of estimate_error locates from H = 10 (to 1e-7; measured below 1e-9)."""
+    model = _massless_two_dof()
+    b = exact_frequency_response(model, (0.9, 1.3))
+    assert b.success and len(b.folds) == 2
+    est = estimate_error(fm.frequency_response(model, (0.9, 1.3), 10))
+    shot = np.sort(est.accuracy.omega_limit[list(est.folds)])
+    np.testing.assert_allclose(np.sort(b.omega[list(b.folds)]), shot, rtol=1e-7)
+    switches = [len(b.orbit(i).switches) for i in b.folds]
+    assert all(s >= 2 for s in switches)  # the folds' orbits close and open the contact
+
+
+def test_coefficients_are_those_of_the_orbit(seed2):
+    """ExactBranch.coefficients: the exact Fourier series of an impacting orbit (the upper fold's)
+    reproduces its displacement (H = 200: the tail decays like 1/k^2; atol 1e-3 of the gap)."""
+    b = seed2
+    i = max(b.folds, key=lambda j: b.omega[j])
+    assert len(b.orbit(i).impacts) == 1
+    Q, P = b.coefficients(i, 200)
+    t = np.linspace(0.0, 2.0 * math.pi / b.omega[i], 64, endpoint=False)
+    th = np.outer(b.omega[i] * t, np.arange(1, 201))
+    series = Q[0, 0] + np.cos(th) @ Q[1::2, 0] + np.sin(th) @ Q[2::2, 0]
+    np.testing.assert_allclose(series, b.orbit(i).displacement(t)[:, 0], atol=1e-3 * 2.5)
+    assert P[0, 0] > 0.0  # a compressive mean contact force (the impulse per period)
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(span=(1.0, 1.0)), ValueError, "span"),
+    (dict(span=(-1.0, 2.0)), ValueError, "span"),
+    (dict(span=1.0), ValueError, "span"),
+    (dict(span=(0.5, 2.0), x0=[0.0]), ValueError, "x0"),
+    (dict(span=(0.5, 2.0), options=3), TypeError, "options"),
+])
+def test_bad_input(kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        exact_frequency_response(_oscillator(0.2, 1.0, 2.5), **kwargs)
+
+
+def test_models_the_flow_cannot_take():
+    unforced = fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]]).with_contact(fm.UnilateralContact(at=0, gap=1.0))
+    with pytest.raises(ValueError, match="no harmonic forcing"):
+        exact_frequency_response(unforced, (0.5, 2.0))
+    duffing = _oscillator(0.1, 0.2, 1.0).with_nonlinearity(fm.CubicSpring(at=0, k3=1.0))
+    with pytest.raises(ValueError, match="LinearImpactFlow"):
+        exact_frequency_response(duffing, (0.5, 2.0))
+
+
+def test_options_passed_through():
+    b = exact_frequency_response(_oscillator(0.2, 1.0, 2.5), (0.5, 2.0), options=ContinuationOptions(max_points=10))
+    assert len(b) == 10 and not b.success and "max_points" in b.message
+
+
+@pytest.mark.slow
+def test_cantilever_fold_is_where_the_time_domain_sweep_jumps():
+    """The 10-element cantilever with a massless tip stop and 3 % modal damping
+    (benchmarks/bench_cantilever_time.py): the exact branch's upper fold (3.91530, 13 s) lies
+    where an upward quasi-static sweep of the exact flow in the time domain leaves the upper
+    branch: still on it (tip amplitude above 0.0124) at w = 3.914 and 3.915, on the lower one
+    (below 0.006) at 3.917. Harmonic balance places that fold at 3.843 (H = 20), 3.935 (H = 40)
+    and 3.909 (H = 80)."""
+    mesh = fm.line_mesh(length=1.0, n_elements=10, boundaries={"clamp": 0.0, "tip": 1.0})
+    beam = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
+    model = (beam.with_contact(fm.UnilateralContact(at="tip", gap=0.01)).with_damping(modal=0.03)
+             .with_forcing(fm.HarmonicForce(at="tip", amplitude=0.004)))
+    tip = model.dof("tip")
+    b = exact_frequency_response(model, (3.0, 4.2))
+    assert b.success
+    w_fold = max(b.omega[list(b.folds)])
+    assert 3.915 < w_fold < 3.917
+    flow = LinearImpactFlow(model, 3.5)
+    x = np.zeros(2 * model.n_dofs)
+    amp = {}
+    for k, w in enumerate(list(np.arange(3.5, 3.905, 0.01)) + [3.91, 3.914, 3.915, 3.917]):
+        f = flow.at(float(w))
+        for _ in range(300 if k == 0 or w > 3.9 else 100):
+            run = f.run(x, 0.0)
+            x = run.x_end
+        amp[round(float(w), 3)] = float(np.max(np.abs(run.displacement(
+            np.linspace(0.0, 2.0 * math.pi / w, 400))[:, tip])))
+    assert amp[3.914] > 0.0124 and amp[3.915] > 0.0124
+    assert amp[3.917] < 0.006
