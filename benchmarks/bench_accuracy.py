@@ -12,6 +12,10 @@ Cases (complementarity law ``fm.UnilateralContact`` throughout; w in rad/s):
   ``C = 0.02 M``, tip force 0.004 cos(w t), w 3.0 -> 4.2, contact-node mass redistributed); no
   exact reference: the errors are taken against the extrapolated fold of the ``rtol1e-4`` run
   (levels up to 160, its bracket stated), which is therefore not an independent check of itself.
+  Its steady state in the time domain is not periodic (``bench_cantilever_time.py``);
+* ``cant20m`` -- the same cantilever with 3 % modal damping on all its modes
+  (``with_damping(modal=0.03)``): periodic steady states; reference :data:`CANT20M_FOLD`, the
+  exact branch's upper fold, which a time-domain sweep confirms to 3e-4.
 
 Runs (``--runs``): ``plain20``, ``plain40``, ``plain80`` (``fm.frequency_response`` with that H),
 ``rtol1e-3`` and ``rtol1e-4`` (from H = 20, ``max_harmonics=160``, ``error_method="auto"``, the
@@ -64,7 +68,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-CASES = ("seed1", "seed2", "cant20")
+CASES = ("seed1", "seed2", "cant20", "cant20m")
 RUNS = {"plain20": dict(H=20), "plain40": dict(H=40), "plain80": dict(H=80),
         "rtol1e-3": dict(H=20, rtol=1e-3, max_harmonics=160), "rtol1e-4": dict(H=20, rtol=1e-4, max_harmonics=160),
         # levels up to 80 only: the folds' brackets from levels 20-40-80, points that need 160 not met
@@ -96,12 +100,21 @@ def impact_reference():
     return sys.modules[name]
 
 
+#: The upper fold of ``cant20m``: fm.time.exact_frequency_response(model, (3.0, 4.2)) on 2026-11-24
+#: (13 s; a continuation of exact orbits); an upward time-domain sweep of the exact flow
+#: (bench_cantilever_time.py sweep --damping modal) stays on the upper branch at 3.915 and leaves
+#: it at 3.916 (tests/test_exact_branch.py, slow).
+CANT20M_FOLD = 3.915300222090862
+
+
 def exact_fold(case: str) -> float | None:
     ref = impact_reference()
     if case == "seed1":
         return ref.upper_fold(0.1, 0.2, 1.0).w
     if case == "seed2":
         return ref.upper_fold(0.2, 1.0, 2.5).w
+    if case == "cant20m":
+        return CANT20M_FOLD
     return None
 
 
@@ -136,6 +149,11 @@ def child(spec: dict) -> dict:
     wall, cpu = time.perf_counter(), time.process_time()
     if case.startswith("bar"):
         model, dof, span = bar_model(*_mesh_case(case))
+    elif case == "cant20m":
+        from bench_cantilever_time import cantilever
+
+        model, dof = cantilever("modal")
+        span = (3.0, 4.2)
     else:
         from bench_peers import CASES as PEER_CASES
         from bench_peers import femodes_model

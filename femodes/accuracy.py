@@ -87,6 +87,13 @@ grazing the exact curve crosses the points' hyperplanes obliquely or backward (`
 below :data:`GLANCING_COS`, :meth:`_Shooter.crossing_cosine`): the crossing is no counterpart
 of the point and no error is stated there (method "failed"; 4 of 94 and 8 of 68 points on the
 seed cases; the levels' ratios are erratic there too). Points where Newton finds no orbit fall back to the levels.
+Folds that the fold search does not locate are taken from the exact branch over the branch's span
+(:func:`femodes.time.exact_frequency_response`, continuation of exact orbits in the frequency),
+traced once when needed (:func:`_folds_from_exact_branch`): each is paired with the nearest exact
+fold that turns the same way, one to one; a fold left without a pair is a fold of the truncation
+and gets no estimate. The cantilever with 3 % modal damping of ``benchmarks/README_accuracy.md``
+(section 5): its main fold at H = 20, 3.8431, gets the exact 3.9153002 (a time-domain sweep
+leaves the upper branch between 3.915 and 3.916), its loop of two folds at 3.822 and 3.902 none.
 That harmonic balance converges to the restitution-1 orbit is verified on the 1-DOF references
 to round-off and on the FE bar of ``benchmarks/README_accuracy.md`` against its plain folds up
 to H = 640.
@@ -577,8 +584,12 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
     finest[free] = H
     kind[free] = "shooting"
     solved, sh = _shoot_branch(lad, probe)
+    exact = _ExactBranchStarts(lad, sh)
+    for i in sorted(i for i, r in solved.items() if r is None):
+        solved[i] = exact.solve(i)
     K = 8 * H  # the exact orbit's displacement to 8 H harmonics: the error includes the tail
     hk = Harmonics(K)
+    resolved: dict = {}  # folds located by the fold search: their exact frequencies
     for i, r in solved.items():
         if r is None:
             todo[i] = True
@@ -594,6 +605,7 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
                 todo[i] = True
                 continue
             w, half = fold
+            resolved[i] = w
         else:
             half = max(r[4] / abs(w), SHOOTING_FLOOR)
         Q = r[3].coefficients(K)[0]
@@ -606,7 +618,128 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
         finest[i] = 0
         kind[i] = "shooting"
     log.info("accuracy: shooting: %d runs of the exact flow for %d points", sh.runs, len(solved))
+    unresolved = [i for i in branch.folds if todo[i]]
+    if unresolved and exact.branch() is not None:
+        _folds_from_exact_branch(lad, probe, exact.branch(), unresolved, resolved, ew, eq, rates, w_lim, w_lim_err,
+                                 finest, kind, todo, hk)
     return todo
+
+
+class _ExactBranchStarts:
+    """The exact branch over the branch's span (:func:`femodes.time.exact_frequency_response`),
+    traced once when first needed, and first guesses from it for the points where Newton from
+    the branch found no orbit: the exact orbit next to where the exact branch crosses the
+    point's hyperplane (the crossing nearest in frequency)."""
+
+    def __init__(self, lad: _Ladder, sh: _Shooter):
+        self.lad, self.sh = lad, sh
+        self._eb = None
+        self._Q = None
+        self._traced = False
+
+    def branch(self):
+        if not self._traced:
+            self._traced = True
+            from .time.exact import exact_frequency_response
+
+            b = self.lad.branch
+            span = (float(b.omega[0]), float(b.omega[-1]))
+            if span[0] != span[1]:
+                eb = exact_frequency_response(self.lad.model, span)
+                log.info("accuracy: exact branch over w %.6g -> %.6g: %d orbits, folds at %s, %d runs (%s)", *span,
+                         len(eb), np.round(eb.fold_omega, 6).tolist(), eb.runs, eb.message)
+                self._eb = eb if eb.success else None
+        return self._eb
+
+    def solve(self, i: int):
+        """The orbit on point ``i``'s hyperplane from the exact branch's crossing (as
+        :meth:`_Shooter.solve`, or None)."""
+        eb = self.branch()
+        if eb is None:
+            return None
+        H = self.sh.H
+        if self._Q is None:
+            self._Q = [eb.coefficients(j, H)[0] for j in range(len(eb))]
+        plane = self.sh.plane(i)
+        g = np.array([plane.at(Q, w) for Q, w in zip(self._Q, eb.omega)])
+        piece = np.zeros(len(eb), dtype=int)
+        for start in eb.pieces[1:]:
+            piece[start:] += 1
+        cross = [j for j in range(len(eb) - 1) if g[j] * g[j + 1] <= 0.0 and piece[j] == piece[j + 1]]
+        w_i = float(self.lad.branch.omega[i])
+        for j in sorted(cross, key=lambda j: abs(eb.omega[j] - w_i)):
+            k = j if abs(g[j]) <= abs(g[j + 1]) else j + 1
+            r = self.sh.solve(i, guess=(eb.states[k].copy(), float(eb.omega[k]), 0.0))
+            if r is not None:
+                log.info("accuracy: point %d: exact orbit from the exact branch's crossing at w = %.6g", i, eb.omega[k])
+                near_fold = any(abs(i - f) <= 1 for f in self.lad.branch.folds)  # as in _shoot_branch
+                return r if near_fold else _counterpart(self.sh, i, r)
+        return None
+
+
+def _counterpart(sh: _Shooter, i: int, r):
+    """``r``, or :data:`GLANCING` if the exact curve crosses point ``i``'s hyperplane obliquely or
+    backward (:meth:`_Shooter.glancing`, :meth:`_Shooter.crossing_cosine`)."""
+    kappa = sh.glancing(i, r)
+    if not 0.0 < kappa <= GLANCING_MAX:
+        cos = sh.crossing_cosine(i, r)
+        if cos < GLANCING_COS:
+            log.info("accuracy: point %d: the exact curve crosses its hyperplane obliquely or backward "
+                     "(kappa = %.3g, outside (0, %g]; cos = %.3g): no counterpart", i, kappa, GLANCING_MAX, cos)
+            return GLANCING
+    return r
+
+
+def _folds_from_exact_branch(lad: _Ladder, flow, eb, unresolved, resolved, ew, eq, rates, w_lim, w_lim_err, finest,
+                             kind, todo, hk) -> None:
+    """The folds the fold search did not locate (``unresolved``), from the exact branch over the
+    branch's span (:func:`femodes.time.exact_frequency_response`): each is paired with the
+    nearest exact fold that turns the same way (distance ``|dw| / w + |da| / a_max`` in
+    frequency and the largest contact-DOF amplitude), one to one, nearest pairs first; exact
+    folds that a located fold already has are not paired again. A fold left without a pair has
+    no counterpart in the limit (a loop of the truncation): no estimate (``"failed"``), and no
+    levels either. Without an exact branch over the span the folds stay for the levels."""
+    from .time.exact import fold_is_upper
+
+    branch = lad.branch
+    dofs = sorted({int(d) for d in flow.dofs})
+    amp_h = np.max([branch.amplitude(d) for d in dofs], axis=0)
+    scale = max(float(amp_h.max()), 1e-300)
+    # exact folds (positions k in eb.folds) that a located fold already has are not paired again
+    free = [k for k in range(len(eb.folds))
+            if not any(abs(eb.fold_omega[k] - w) <= (eb.fold_error[k] + SHOOTING_FOLD_SLACK) * abs(w)
+                       for w in resolved.values())]
+    amp_e = {}  # the same amplitude of the exact folds' orbits (max |q| over a fine grid)
+    for k in free:
+        j = eb.folds[k]
+        q = eb.orbit(j).displacement(np.linspace(0.0, 2.0 * math.pi / eb.omega[j], 800))[:, dofs]
+        amp_e[k] = float(np.max(np.abs(q)))
+    pairs = sorted((abs(branch.omega[i] - eb.fold_omega[k]) / eb.fold_omega[k] + abs(amp_h[i] - amp_e[k]) / scale, i, k)
+                   for i in unresolved for k in free if fold_is_upper(branch.omega, i) == eb.fold_upper[k])
+    taken_i, taken_j = set(), set()
+    for _, i, j in pairs:  # j: a position in eb.folds
+        if i in taken_i or j in taken_j:
+            continue
+        taken_i.add(i)
+        taken_j.add(j)
+        w, half = float(eb.fold_omega[j]), max(float(eb.fold_error[j]), SHOOTING_FLOOR)
+        Q = eb.coefficients(eb.folds[j], hk.n_harmonics)[0]
+        dQ = Q - lad.harmonics(branch.harmonics.n_harmonics).convert(branch.Q[i], hk)
+        w_lim[i], w_lim_err[i] = w, half
+        ew[i] = abs(branch.omega[i] - w) / lad.omega_ref(i) + half
+        eq[i] = float(np.linalg.norm(dQ)) / lad.Q_norm(i)
+        rates[i] = math.nan
+        finest[i] = 0
+        kind[i] = "shooting"
+        todo[i] = False
+        log.info("accuracy: fold %d (w = %.7g) paired with the exact fold at w = %.7g", i, branch.omega[i], w)
+    for i in unresolved:
+        if i not in taken_i:
+            todo[i] = False
+            finest[i] = 0
+            kind[i] = "failed"
+            log.info("accuracy: fold %d (w = %.7g) has no counterpart on the exact branch (folds at %s): a fold of "
+                     "the truncation, no estimate", i, branch.omega[i], np.round(eb.fold_omega, 6).tolist())
 
 
 def _probe_run(lad: _Ladder, flow):
@@ -1059,6 +1192,9 @@ GLANCING_MAX = 3.0
 #: little (the FE bar with a massless tip of README_accuracy: kappa -0.2 to -0.8 at cosines
 #: 0.5-0.95, crossings 1e-3 away). The points the seed cases reject all have cosines of 0.11-0.43.
 GLANCING_COS = 0.5
+#: Relative slack with which an exact fold of the exact branch counts as one a located fold
+#: already has (:func:`_folds_from_exact_branch`; the fold search's half-widths are below 1e-6).
+SHOOTING_FOLD_SLACK = 1e-6
 #: Marks a point whose exact crossing is no counterpart (:meth:`_Shooter.glancing`).
 GLANCING = "glancing"
 #: A lower fold with a point without contact at most this many points away may be a grazing
@@ -1528,11 +1664,5 @@ def _shoot_branch(lad: _Ladder, flow=None) -> tuple[dict, _Shooter]:
     near_fold = {j for f in lad.branch.folds for j in (f - 1, f, f + 1)}
     for i, r in out.items():
         if r is not None and i not in near_fold:
-            kappa = sh.glancing(i, r)
-            if not 0.0 < kappa <= GLANCING_MAX:
-                cos = sh.crossing_cosine(i, r)
-                if cos < GLANCING_COS:
-                    log.info("accuracy: point %d: the exact curve crosses its hyperplane obliquely or backward "
-                             "(kappa = %.3g, outside (0, %g]; cos = %.3g): no counterpart", i, kappa, GLANCING_MAX, cos)
-                    out[i] = GLANCING
+            out[i] = _counterpart(sh, i, r)
     return out, sh

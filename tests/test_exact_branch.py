@@ -134,6 +134,104 @@ def test_options_passed_through():
     assert len(b) == 10 and not b.success and "max_points" in b.message
 
 
+def _missed_folds(monkeypatch):
+    """The fold search of the shooting refinement finds nothing (as on the cantilever below)."""
+    monkeypatch.setattr(fm.accuracy._Shooter, "fold", lambda self, i, r: None)
+
+
+def test_missed_folds_taken_from_the_exact_branch(monkeypatch):
+    """Seed case 2 at H = 10 with the fold search disabled: both folds are paired with the exact
+    branch's (same turn, nearest), so the upper fold's limit is the reference to 1e-6 (the
+    stated half-width EXACT_FOLD_RTOL; measured 2.5e-13) and the error estimate covers the
+    H = 10 fold's true error (4.6 %) without overstating it by more than 2e-6."""
+    model = _oscillator(0.2, 1.0, 2.5)
+    b = fm.frequency_response(model, (0.5, 2.0), 10)
+    assert len(b.folds) == 2
+    _missed_folds(monkeypatch)
+    acc = estimate_error(b).accuracy
+    ref = upper_fold(0.2, 1.0, 2.5).w
+    up = max(b.folds, key=lambda i: b.omega[i])
+    assert acc.method[up] == "shooting" and acc.finest[up] == 0
+    assert abs(acc.omega_limit[up] / ref - 1.0) <= acc.omega_limit_error[up] == 1e-6
+    true = abs(b.omega[up] - ref) / b.omega[up]  # relative to the point's frequency, as the estimate
+    assert true <= acc.omega[up] <= true + 2e-6
+    low = min(b.folds, key=lambda i: b.omega[i])
+    assert acc.method[low] == "shooting" and abs(acc.omega_limit[low] - 1.1519541) < 1e-6
+
+
+def test_fold_without_exact_counterpart_gets_no_estimate(monkeypatch):
+    """A fold of the truncation that the exact branch does not have (here: the exact branch
+    stripped of its lower fold) is left without an estimate ("failed"), not sent to the levels;
+    the other is paired."""
+    import femodes.time.exact as exact
+
+    real = exact.exact_frequency_response
+
+    def upper_only(model, span, **kw):
+        eb = real(model, span, **kw)
+        keep = np.flatnonzero(eb.fold_upper)
+        eb.folds = tuple(eb.folds[k] for k in keep)
+        eb.fold_omega, eb.fold_error, eb.fold_upper = eb.fold_omega[keep], eb.fold_error[keep], eb.fold_upper[keep]
+        return eb
+
+    monkeypatch.setattr(exact, "exact_frequency_response", upper_only)
+    _missed_folds(monkeypatch)
+    b = fm.frequency_response(_oscillator(0.2, 1.0, 2.5), (0.5, 2.0), 10)
+    acc = estimate_error(b).accuracy
+    up, low = max(b.folds, key=lambda i: b.omega[i]), min(b.folds, key=lambda i: b.omega[i])
+    assert acc.method[up] == "shooting"
+    assert acc.method[low] == "failed" and not math.isfinite(acc.omega[low]) and acc.finest[low] == 0
+
+
+def test_points_without_an_orbit_start_from_the_exact_branch(monkeypatch):
+    """Points where Newton from the branch found no orbit are solved again from the exact branch's
+    crossing of their hyperplanes: with three points of seed case 2 (H = 10) made to fail, the
+    same exact orbits come out (omega_limit to 1e-9 relative: the same Newton solve on the same
+    hyperplane, from another start)."""
+    model = _oscillator(0.2, 1.0, 2.5)
+    b = fm.frequency_response(model, (0.5, 2.0), 10)
+    plain = estimate_error(b).accuracy
+    P = np.abs(b.P).reshape(len(b), -1).max(axis=1)
+    lose = [i for i in np.flatnonzero(P > 0.1 * P.max()) if i not in b.folds and plain.method[i] == "shooting"][::5][:3]
+    assert len(lose) == 3
+    real = fm.accuracy._shoot_branch
+
+    def losing(lad, flow=None):
+        out, sh = real(lad, flow)
+        for i in lose:
+            out[i] = None
+        return out, sh
+
+    monkeypatch.setattr(fm.accuracy, "_shoot_branch", losing)
+    again = estimate_error(b).accuracy
+    for i in lose:
+        assert again.method[i] == "shooting"
+        assert abs(again.omega_limit[i] / plain.omega_limit[i] - 1.0) < 1e-9
+
+
+@pytest.mark.slow
+def test_cantilever_rtol_folds_from_the_exact_branch():
+    """The cantilever with 3 % modal damping at H = 20: the fold search on the points' hyperplanes
+    locates the lower fold only; the main (largest-amplitude) fold, 3.843 at H = 20, is paired
+    with the exact branch's upper fold 3.91530 (the time-domain sweep's jump, slow test below),
+    and the loop of two folds at 3.822 and 3.902, which H = 40 and 80 do not have, is left
+    without an estimate."""
+    mesh = fm.line_mesh(length=1.0, n_elements=10, boundaries={"clamp": 0.0, "tip": 1.0})
+    beam = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
+    model = (beam.with_contact(fm.UnilateralContact(at="tip", gap=0.01)).with_damping(modal=0.03)
+             .with_forcing(fm.HarmonicForce(at="tip", amplitude=0.004)))
+    b = estimate_error(fm.frequency_response(model, (3.0, 4.2), 20))
+    acc = b.accuracy
+    amp = b.amplitude(model.dof("tip"))
+    main = max(b.folds, key=lambda i: amp[i])
+    assert abs(b.omega[main] - 3.8431) < 1e-3
+    assert 3.915 < acc.omega_limit[main] < 3.916 and acc.omega_limit_error[main] <= 1e-6
+    low = min(b.folds, key=lambda i: b.omega[i])
+    assert abs(acc.omega_limit[low] - 3.719312) < 1e-5
+    loop = [i for i in b.folds if i not in (main, low)]
+    assert len(loop) == 2 and all(acc.method[i] == "failed" for i in loop)
+
+
 @pytest.mark.slow
 def test_cantilever_fold_is_where_the_time_domain_sweep_jumps():
     """The 10-element cantilever with a massless tip stop and 3 % modal damping
