@@ -197,10 +197,10 @@ def test_points_without_an_orbit_start_from_the_exact_branch(monkeypatch):
     real = fm.accuracy._shoot_branch
 
     def losing(lad, flow=None):
-        out, sh = real(lad, flow)
+        out, sh, exact = real(lad, flow)
         for i in lose:
             out[i] = None
-        return out, sh
+        return out, sh, exact
 
     monkeypatch.setattr(fm.accuracy, "_shoot_branch", losing)
     again = estimate_error(b).accuracy

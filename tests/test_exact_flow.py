@@ -293,7 +293,7 @@ def test_crossing_cosine_separates_glancing_points(monkeypatch):
     way to the upper fold crosses nearly at right angles (cosine above 0.9)."""
     b = fm.frequency_response(_forced(), (0.5, 2.0), 20)
     monkeypatch.setattr(fm.accuracy, "GLANCING_MAX", math.inf)  # keep the orbits of glancing points
-    solved, sh = fm.accuracy._shoot_branch(fm.accuracy._ladder(b, None, None, "test"))
+    solved, sh, _ = fm.accuracy._shoot_branch(fm.accuracy._ladder(b, None, None, "test"))
     first = int(np.flatnonzero(~fm.accuracy._without_contact(b))[0])
     mid = (first + max(b.folds, key=lambda j: b.omega[j])) // 2
     assert sh.glancing(first, solved[first]) > 3.0
