@@ -87,13 +87,18 @@ grazing the exact curve crosses the points' hyperplanes obliquely or backward (`
 below :data:`GLANCING_COS`, :meth:`_Shooter.crossing_cosine`): the crossing is no counterpart
 of the point and no error is stated there (method "failed"; 4 of 94 and 8 of 68 points on the
 seed cases; the levels' ratios are erratic there too). Points where Newton finds no orbit fall back to the levels.
-Folds that the fold search does not locate are taken from the exact branch over the branch's span
-(:func:`femodes.time.exact_frequency_response`, continuation of exact orbits in the frequency),
-traced once when needed (:func:`_folds_from_exact_branch`): each is paired with the nearest exact
-fold that turns the same way, one to one; a fold left without a pair is a fold of the truncation
-and gets no estimate. The cantilever with 3 % modal damping of ``benchmarks/README_accuracy.md``
-(section 5): its main fold at H = 20, 3.8431, gets the exact 3.9153002 (a time-domain sweep
-leaves the upper branch between 3.915 and 3.916), its loop of two folds at 3.822 and 3.902 none.
+The exact branch over the branch's span (:func:`femodes.time.exact_frequency_response`,
+continuation of exact orbits in the frequency) is traced once when needed
+(:class:`_ExactBranchStarts`): after :data:`SHOOTING_EXACT_AFTER` points of the first pass without
+an orbit (its crossings of the later points' hyperplanes are then tried before their own starts),
+for the points still without one, and for folds the fold search does not locate. Once it is
+there, the folds are taken from it instead of the fold search (:func:`_folds_from_exact_branch`):
+each is paired with the nearest exact fold that turns the same way, one to one; a fold left
+without a pair is a fold of the truncation and gets no estimate. The cantilever with 3 % modal
+damping of ``benchmarks/README_accuracy.md`` (section 5): its main fold at H = 20, 3.8431, gets
+the exact 3.9153002 (a time-domain sweep leaves the upper branch between 3.915 and 3.916), its
+loop of two folds at 3.822 and 3.902 none; 25 s for the estimate, 8.4x the plain curve at rtol
+1e-3. The seed cases and the FE bars never need the exact branch.
 That harmonic balance converges to the restitution-1 orbit is verified on the 1-DOF references
 to round-off and on the FE bar of ``benchmarks/README_accuracy.md`` against its plain folds up
 to H = 640.

@@ -211,11 +211,12 @@ def test_points_without_an_orbit_start_from_the_exact_branch(monkeypatch):
 
 @pytest.mark.slow
 def test_cantilever_rtol_folds_from_the_exact_branch():
-    """The cantilever with 3 % modal damping at H = 20: the fold search on the points' hyperplanes
-    locates the lower fold only; the main (largest-amplitude) fold, 3.843 at H = 20, is paired
-    with the exact branch's upper fold 3.91530 (the time-domain sweep's jump, slow test below),
-    and the loop of two folds at 3.822 and 3.902, which H = 40 and 80 do not have, is left
-    without an estimate."""
+    """The cantilever with 3 % modal damping at H = 20: Newton from the points on the rising side
+    finds no orbit, so the exact branch is traced and its folds are paired with the branch's:
+    the main (largest-amplitude) fold, 3.843 at H = 20, gets the exact upper fold 3.91530 (the
+    time-domain sweep's jump, slow test below), the lower fold 3.7193164 +- 2.9e-5 (short-step
+    continuations: 3.719311942), and the loop of two folds at 3.822 and 3.902, which H = 40 and
+    80 do not have, no estimate."""
     mesh = fm.line_mesh(length=1.0, n_elements=10, boundaries={"clamp": 0.0, "tip": 1.0})
     beam = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
     model = (beam.with_contact(fm.UnilateralContact(at="tip", gap=0.01)).with_damping(modal=0.03)
@@ -227,7 +228,7 @@ def test_cantilever_rtol_folds_from_the_exact_branch():
     assert abs(b.omega[main] - 3.8431) < 1e-3
     assert 3.915 < acc.omega_limit[main] < 3.916 and acc.omega_limit_error[main] <= 1e-6
     low = min(b.folds, key=lambda i: b.omega[i])
-    assert abs(acc.omega_limit[low] - 3.719312) < 1e-5
+    assert abs(acc.omega_limit[low] - 3.719311942) <= acc.omega_limit_error[low] * acc.omega_limit[low] <= 1.1e-4
     loop = [i for i in b.folds if i not in (main, low)]
     assert len(loop) == 2 and all(acc.method[i] == "failed" for i in loop)
 
