@@ -86,8 +86,9 @@ grazing the exact curve crosses the points' hyperplanes obliquely or backward (`
 :meth:`_Shooter.glancing`, outside ``(0, GLANCING_MAX]``, and a crossing angle with a cosine
 below :data:`GLANCING_COS`, :meth:`_Shooter.crossing_cosine`): the crossing is no counterpart
 of the point and no error is stated there (method "failed"; 4 of 94 and 8 of 68 points on the
-seed cases; the levels' ratios are erratic there too). Points where Newton finds no orbit fall back to the levels.
-The exact branch over the branch's span (:func:`femodes.time.exact_frequency_response`,
+seed cases; the levels' ratios are erratic there too). Points where Newton finds no orbit start
+again from the exact branch's crossing of their hyperplanes, and fall back to the levels if that
+fails too. The exact branch over the branch's span (:func:`femodes.time.exact_frequency_response`,
 continuation of exact orbits in the frequency) is traced once when needed
 (:class:`_ExactBranchStarts`): after :data:`SHOOTING_EXACT_AFTER` points of the first pass without
 an orbit (its crossings of the later points' hyperplanes are then tried before their own starts),
