@@ -818,11 +818,18 @@ class _ShootingResidual:
     def residual(self, y: np.ndarray, w: float):
         S = self.S
         x = self.full(y)
-        run = self.flow.at(w).run(x, 0.0, variational=True)
-        r = run.x_end[S] - y
         dw = 1e-7 * w
-        r2 = self.flow.at(w + dw).run(x, 0.0).x_end[S] - y
-        self.runs += 2
+        try:
+            run = self.flow.at(w).run(x, 0.0, variational=True)
+            r2 = self.flow.at(w + dw).run(x, 0.0).x_end[S] - y
+        except ValueError:
+            # an iterate the flow cannot start from (inside an obstacle, w <= 0, an accumulation of
+            # events): a non-finite residual, which makes Newton's line search cut the step
+            nan = np.full(S.size, np.nan)
+            return nan, np.full((S.size, S.size), np.nan), nan
+        finally:
+            self.runs += 2
+        r = run.x_end[S] - y
         return r, run.Phi[np.ix_(S, S)] - np.eye(S.size), (r2 - r) / dw
 
 
