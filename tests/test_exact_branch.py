@@ -155,6 +155,13 @@ def test_iterates_inside_the_obstacle_cut_the_step(monkeypatch):
     assert abs(max(b.fold_omega) / upper_fold(0.2, 1.0, 2.5).w - 1.0) < 1e-6
 
 
+def test_start_inside_the_obstacle_reported_not_raised():
+    """x0 inside the obstacle: no point, success False and the continuation's message."""
+    b = exact_frequency_response(_oscillator(0.2, 1.0, 2.5), (0.5, 2.0), x0=[10.0, 0.0])
+    assert len(b) == 0 and not b.success and "initial correction" in b.message
+    assert b.states.shape == (0, 2) and b.fold_omega.size == 0
+
+
 def test_options_passed_through():
     b = exact_frequency_response(_oscillator(0.2, 1.0, 2.5), (0.5, 2.0), options=ContinuationOptions(max_points=10))
     assert len(b) == 10 and not b.success and "max_points" in b.message

@@ -913,7 +913,7 @@ def exact_frequency_response(model: StructuralModel, span, *, x0=None, restituti
             pieces.append(back)
     omega = np.concatenate([np.asarray(r.p, dtype=float) if k == 0 else np.asarray(r.p, dtype=float)[::-1]
                             for k, r in enumerate(pieces)])
-    ys = [np.asarray(r.x).reshape(len(r.p), -1) for r in pieces]
+    ys = [np.asarray(r.x, dtype=float).reshape(len(r.p), flow.state_index.size) for r in pieces]
     ys = np.concatenate([y if k == 0 else y[::-1] for k, y in enumerate(ys)])
     folds = list(res.folds)
     if len(pieces) == 2:
