@@ -118,6 +118,8 @@ def test_coefficients_are_those_of_the_orbit(seed2):
 def test_bad_input(kwargs, exc, match):
     with pytest.raises(exc, match=match):
         exact_frequency_response(_oscillator(0.2, 1.0, 2.5), **kwargs)
+    with pytest.raises(TypeError, match="model must be a StructuralModel"):
+        exact_frequency_response([[1.0]], (0.5, 2.0))
 
 
 def test_models_the_flow_cannot_take():

@@ -871,10 +871,14 @@ def exact_frequency_response(model: StructuralModel, span, *, x0=None, restituti
 
     Raises
     ------
+    TypeError
+        ``model`` is not a model, ``options`` not a ContinuationOptions.
     ValueError
         A model the flow cannot take, a bad span or ``x0``.
     """
     owner = "exact_frequency_response"
+    if not isinstance(model, StructuralModel):
+        raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
     try:
         w0, w1 = (float(span[0]), float(span[1]))
     except (TypeError, ValueError, IndexError):
