@@ -616,21 +616,41 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
             resolved[i] = w
         else:
             half = max(r[4] / abs(w), SHOOTING_FLOOR)
-        Q = r[3].coefficients(K)[0]
-        dQ = Q - lad.harmonics(H).convert(branch.Q[i], hk)
-        ref = lad.omega_ref(i)
-        w_lim[i], w_lim_err[i] = w, half
-        ew[i] = abs(branch.omega[i] - w) / ref + half
-        eq[i] = float(np.linalg.norm(dQ)) / lad.Q_norm(i)
-        rates[i] = math.nan
-        finest[i] = 0
-        kind[i] = "shooting"
+        _record_exact(lad, i, w, half, r[3].coefficients(K)[0], hk, ew, eq, rates, w_lim, w_lim_err, finest, kind)
     log.info("accuracy: shooting: %d runs of the exact flow for %d points", sh.runs, len(solved))
     unresolved = [i for i in branch.folds if todo[i]]
     if unresolved and exact.branch() is not None:
         _folds_from_exact_branch(lad, probe, exact.branch(), unresolved, resolved, ew, eq, rates, w_lim, w_lim_err,
                                  finest, kind, todo, hk)
     return todo
+
+
+def _record_exact(lad: _Ladder, i: int, w: float, half: float, Q: np.ndarray, hk: Harmonics, ew, eq, rates, w_lim,
+                  w_lim_err, finest, kind) -> None:
+    """Point ``i``'s estimate from an exact orbit: its frequency ``w`` (relative half-width
+    ``half``) and displacement coefficients ``Q`` on the harmonics ``hk`` (8 H: the error
+    includes the tail), into the arrays given."""
+    branch = lad.branch
+    dQ = Q - lad.harmonics(branch.harmonics.n_harmonics).convert(branch.Q[i], hk)
+    w_lim[i], w_lim_err[i] = w, half
+    ew[i] = abs(branch.omega[i] - w) / lad.omega_ref(i) + half
+    eq[i] = float(np.linalg.norm(dQ)) / lad.Q_norm(i)
+    rates[i] = math.nan
+    finest[i] = 0
+    kind[i] = "shooting"
+
+
+def _near_fold(branch: Branch, i: int) -> bool:
+    """Whether point ``i`` is a fold or next to one: the branch's dw/ds vanishes there and kappa
+    (:meth:`_Shooter.glancing`) says nothing; the plane there is across the fold's amplitude,
+    which the exact curve crosses near its own fold."""
+    return any(abs(i - f) <= 1 for f in branch.folds)
+
+
+def _contact_force_peak(branch: Branch) -> np.ndarray:
+    """The largest contact-force coefficient of every point (zeros without contacts)."""
+    P = np.abs(branch.P)
+    return P.reshape(len(branch), -1).max(axis=1) if P.size else np.zeros(len(branch))
 
 
 class _ExactBranchStarts:
@@ -666,14 +686,12 @@ class _ExactBranchStarts:
         eb = self.branch()
         if eb is None:
             return None
-        H = self.sh.H
-        if self._Q is None:
-            self._Q = [eb.coefficients(j, H)[0] for j in range(len(eb))]
+        if self._Q is None:  # the exact orbits' coefficients on the branch's harmonics, and their pieces
+            self._Q = [eb.coefficients(j, self.sh.H)[0] for j in range(len(eb))]
+            self._piece = np.searchsorted(np.asarray(eb.pieces), np.arange(len(eb)), side="right")
         plane = self.sh.plane(i)
         g = np.array([plane.at(Q, w) for Q, w in zip(self._Q, eb.omega)])
-        piece = np.zeros(len(eb), dtype=int)
-        for start in eb.pieces[1:]:
-            piece[start:] += 1
+        piece = self._piece
         cross = [j for j in range(len(eb) - 1) if g[j] * g[j + 1] <= 0.0 and piece[j] == piece[j + 1]]
         w_i = float(self.lad.branch.omega[i])
         for j in sorted(cross, key=lambda j: abs(eb.omega[j] - w_i)):
@@ -681,8 +699,7 @@ class _ExactBranchStarts:
             r = self.sh.solve(i, guess=(eb.states[k].copy(), float(eb.omega[k]), 0.0))
             if r is not None:
                 log.info("accuracy: point %d: exact orbit from the exact branch's crossing at w = %.6g", i, eb.omega[k])
-                near_fold = any(abs(i - f) <= 1 for f in self.lad.branch.folds)  # as in _shoot_branch
-                return r if near_fold or not check else _counterpart(self.sh, i, r)
+                return r if _near_fold(self.lad.branch, i) or not check else _counterpart(self.sh, i, r)
         return None
 
 
@@ -718,11 +735,8 @@ def _folds_from_exact_branch(lad: _Ladder, flow, eb, unresolved, resolved, ew, e
     free = [k for k in range(len(eb.folds))
             if not any(abs(eb.fold_omega[k] - w) <= (eb.fold_error[k] + SHOOTING_FOLD_SLACK) * abs(w)
                        for w in resolved.values())]
-    amp_e = {}  # the same amplitude of the exact folds' orbits (max |q| over a fine grid)
-    for k in free:
-        j = eb.folds[k]
-        q = eb.orbit(j).displacement(np.linspace(0.0, 2.0 * math.pi / eb.omega[j], 800))[:, dofs]
-        amp_e[k] = float(np.max(np.abs(q)))
+    # the same amplitude of the exact folds' orbits (max |q| over a fine grid)
+    amp_e = dict(zip(free, eb.amplitude(dofs, samples=800, points=[eb.folds[k] for k in free])))
     pairs = sorted((abs(branch.omega[i] - eb.fold_omega[k]) / eb.fold_omega[k] + abs(amp_h[i] - amp_e[k]) / scale, i, k)
                    for i in unresolved for k in free if fold_is_upper(branch.omega, i) == eb.fold_upper[k])
     taken_i, taken_j = set(), set()
@@ -732,14 +746,8 @@ def _folds_from_exact_branch(lad: _Ladder, flow, eb, unresolved, resolved, ew, e
         taken_i.add(i)
         taken_j.add(j)
         w, half = float(eb.fold_omega[j]), max(float(eb.fold_error[j]), SHOOTING_FLOOR)
-        Q = eb.coefficients(eb.folds[j], hk.n_harmonics)[0]
-        dQ = Q - lad.harmonics(branch.harmonics.n_harmonics).convert(branch.Q[i], hk)
-        w_lim[i], w_lim_err[i] = w, half
-        ew[i] = abs(branch.omega[i] - w) / lad.omega_ref(i) + half
-        eq[i] = float(np.linalg.norm(dQ)) / lad.Q_norm(i)
-        rates[i] = math.nan
-        finest[i] = 0
-        kind[i] = "shooting"
+        _record_exact(lad, i, w, half, eb.coefficients(eb.folds[j], hk.n_harmonics)[0], hk, ew, eq, rates, w_lim,
+                      w_lim_err, finest, kind)
         todo[i] = False
         log.info("accuracy: fold %d (w = %.7g) paired with the exact fold at w = %.7g", i, branch.omega[i], w)
     for i in unresolved:
@@ -758,8 +766,7 @@ def _probe_run(lad: _Ladder, flow):
     fastest mode near events, and everywhere where impacts excite the fast modes); its events
     show an orbit that chatters."""
     branch = lad.branch
-    P = np.abs(branch.P).reshape(len(branch), -1).max(axis=1) if branch.P.size else np.zeros(len(branch))
-    i = int(np.argmax(P))
+    i = int(np.argmax(_contact_force_peak(branch)))
     x0, theta0 = _Shooter(lad, flow).start(i)
     omega = float(branch.omega[i])
     return flow.at(omega).run(x0, theta0 / omega)
@@ -1149,13 +1156,12 @@ def _without_contact(branch: Branch) -> np.ndarray:
     the branch's own point there (the linear response, padded with zero harmonics, solves the
     equations of any level exactly). None with other nonlinear laws (penalty contacts, cubic
     springs): their points are not linear even where the complementarity forces vanish."""
-    P = np.abs(branch.P)
     model = branch.model
     others = "penalty" in branch.contacts.kinds or bool(model is not None and model.nonlinearities)
-    if not P.size or others:
+    if not branch.P.size or others:
         return np.zeros(len(branch), dtype=bool)
-    small = 1e-12 * float(P.max())  # the complementarity force below contact is zero to round-off
-    return P.reshape(len(branch), -1).max(axis=1) <= small
+    peak = _contact_force_peak(branch)
+    return peak <= 1e-12 * float(peak.max())  # the complementarity force below contact is zero to round-off
 
 
 def _free_before(branch: Branch, i: int) -> int:
@@ -1682,10 +1688,7 @@ def _shoot_branch(lad: _Ladder, flow=None) -> tuple[dict, _Shooter, "_ExactBranc
         nxt = out.get(i + 1)
         if nxt is not None:
             out[i] = sh.solve(i, guess=sh.warm(i, nxt[:3] + (i + 1,))) or sh.solve_from(i, i + 1, nxt)
-    # next to a fold the branch's dw/ds vanishes and kappa says nothing; the plane there is
-    # across the fold's amplitude, which the exact curve crosses near its own fold
-    near_fold = {j for f in lad.branch.folds for j in (f - 1, f, f + 1)}
     for i, r in out.items():
-        if r is not None and i not in near_fold:
+        if r is not None and not _near_fold(lad.branch, i):
             out[i] = _counterpart(sh, i, r)
     return out, sh, exact

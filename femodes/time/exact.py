@@ -787,14 +787,16 @@ class ExactBranch:
         """The run of point ``i`` over one forcing period (its impacts, switches, displacements)."""
         return self.flow.at(self.omega[i]).run(self.states[i], 0.0)
 
-    def amplitude(self, dof: int, samples: int = 400) -> np.ndarray:
-        """``max_t |q_dof(t)|`` of every orbit on ``samples`` points per period (those of
-        :meth:`femodes.Branch.amplitude` are on the truncated Fourier series)."""
-        out = np.empty(len(self))
-        for i in range(len(self)):
+    def amplitude(self, dof, samples: int = 400, points=None) -> np.ndarray:
+        """``max_t |q_dof(t)|`` of every orbit (or of ``points``) on ``samples`` points per period
+        (those of :meth:`femodes.Branch.amplitude` are on the truncated Fourier series); ``dof``
+        a DOF or a list of DOFs (the largest over them)."""
+        points = range(len(self)) if points is None else points
+        out = []
+        for i in points:
             t = np.linspace(0.0, 2.0 * math.pi / self.omega[i], samples)
-            out[i] = np.max(np.abs(self.orbit(i).displacement(t)[:, dof]))
-        return out
+            out.append(float(np.max(np.abs(self.orbit(i).displacement(t)[:, dof]))))
+        return np.asarray(out)
 
     def coefficients(self, i: int, H: int) -> tuple[np.ndarray, np.ndarray]:
         """Exact Fourier coefficients of point ``i`` to ``H`` harmonics (:meth:`FlowRun.coefficients`)."""
