@@ -407,6 +407,7 @@ def test_continuation_scurve_passes_two_folds(sparse):
     """x^3 - x - p over p in (-1, 1) from x0=-1.3: 2 folds at p=+-2/(3 sqrt3) (located, rtol 1e-6), ends at p=1, x=1.3247."""
     res = continuation(SCurve(sparse=sparse), (-1.0, 1.0), x0=[-1.3])
     _check_scurve(res, increasing=True)
+    assert res.located == res.folds  # both inserted as turning points
     assert res.p[0] == -1.0
     assert res.x[0, 0] == pytest.approx(-X_END, rel=1e-9)
 
@@ -421,7 +422,7 @@ def test_continuation_scurve_decreasing_span(sparse):
 def test_continuation_scurve_unlocated_folds_nearest_point():
     """Without fold localisation (max_step 0.05) the nearest points are within 1e-2 relative of the folds."""
     res = continuation(SCurve(), (-1.0, 1.0), x0=[-1.3], options=ContinuationOptions(locate_folds=False, max_step=0.05))
-    assert res.success and len(res.folds) == 2
+    assert res.success and len(res.folds) == 2 and res.located == ()  # detected only
     np.testing.assert_allclose(res.p[list(res.folds)], [P_FOLD, -P_FOLD], rtol=1e-2)
     assert res.p[-1] == 1.0
 

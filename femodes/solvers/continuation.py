@@ -344,6 +344,7 @@ class _Tracer:
         self.start = start
         self.pts: list[_Pt] = []
         self.folds: list[int] = []
+        self.located: list[int] = []  # folds located as turning points in this run
         self.n_rejected = 0
         # A resumed run keeps its start point as pts[0] (the previous point of the
         # first step) but does not return it: branch index of pts[k] is i0 + k.
@@ -664,6 +665,7 @@ class _Tracer:
                         failure=f"end point at p={bound:g} could not be computed")
         if located is not None:
             logger.info("continuation: fold located at p=%.8g", located.y[n])
+            self.located.append(self.i0 + len(self.pts))  # the index emit gives it
             if not self.emit(located, True, None):
                 raise _Stop(3)
             return False
@@ -819,5 +821,6 @@ class _Tracer:
             n_rejected=self.n_rejected,
             p_scale=self.p_scale,
             first_index=self.i0 + self.skip,
+            located=tuple(self.located),
             **arrays,
         )

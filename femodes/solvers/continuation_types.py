@@ -473,6 +473,10 @@ class ContinuationResult:
         Branch index of the first returned point: 0, or ``start.index + 1``
         for a run resumed with ``start=`` (whose arrays hold only the new
         points, while ``folds`` and the counters cover the whole branch).
+    located : tuple of int
+        The folds of this run (after ``start``) that were located as turning points (inserted
+        points where ``dp/ds`` vanishes, ``locate_folds``); the other folds were only detected:
+        the point nearer to the sign change of ``dp/ds``.
     """
 
     x: np.ndarray
@@ -490,6 +494,7 @@ class ContinuationResult:
     x_scale: np.ndarray
     p_scale: float
     first_index: int = 0
+    located: tuple[int, ...] = ()
 
     @property
     def n_points(self) -> int:
