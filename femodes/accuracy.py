@@ -1226,9 +1226,6 @@ GRAZING_POINTS = 4
 #: (:meth:`_Shooter.fold`) of a model with massless contacts, whose orbits with contact go on
 #: smoothly into the linear one past a lower fold (with impacts they end at a grazing there).
 FOLD_STEP_HALVINGS = 4
-#: Relative step of the finite differences of the shooting Jacobian (frequency column and the
-#: hyperplane row).
-_FD_STEP = 1e-7
 #: Shooting solves stop when the periodicity residual (relative to the state) and the hyperplane
 #: value are below SHOOTING_TOL and the last frequency step below SHOOTING_STEP (relative): Newton
 #: converges quadratically, so the frequency is then off by about the square of that step.
@@ -1285,9 +1282,10 @@ class _Shooter:
         return np.concatenate([e @ Q, e @ (h.derivative(float(b.omega[i])) @ Q)]), theta
 
     def evaluate(self, x0: np.ndarray, omega: float, theta0: float, plane, jac: bool):
-        """Periodicity residual, hyperplane value and (with ``jac``) their Jacobian in ``(x0, w)``:
-        the monodromy matrix and the hyperplane's gradient in ``x0`` exact (variational run),
-        the frequency column by a finite difference (one more run)."""
+        """Periodicity residual, hyperplane value and (with ``jac``) their Jacobian in ``(x0, w)``,
+        all from the variational run: the monodromy matrix, the end state's and the
+        coefficients' change with ``w`` at the fixed start phase (:attr:`FlowRun.x_end_omega`,
+        :meth:`FlowRun.coefficient_omega`) and the hyperplane's gradient."""
         flow = self.flow.at(omega)
         run = flow.run(x0, theta0 / omega, variational=jac)
         self.runs += 1
@@ -1299,11 +1297,8 @@ class _Shooter:
         J = np.zeros((n2 + 1, n2 + 1))
         J[:n2, :n2] = run.Phi - np.eye(n2)
         J[n2, :n2] = plane.gradient(run)
-        dw = _FD_STEP * omega
-        r2 = self.flow.at(omega + dw).run(x0, theta0 / (omega + dw))
-        self.runs += 1
-        J[:n2, n2] = (r2.x_end - x0 - F) / dw
-        J[n2, n2] = (plane.value(r2, omega + dw) - h) / dw
+        J[:n2, n2] = run.x_end_omega
+        J[n2, n2] = plane.omega_derivative(run)
         return F, h, J, run
 
     def plane(self, i: int, offset: float = 0.0) -> "_Plane":
@@ -1342,8 +1337,8 @@ class _Shooter:
         hyperplane and the hyperplane's normal (the branch direction), in the branch's arclength
         weights on the displacements and the frequency: 1 for a crossing at right angles, near 0
         for a glancing one. The exact curve's direction ``d(x0, w)/ds`` is the Newton Jacobian's
-        last column of its inverse; the coefficients follow exactly in ``x0`` (a variational run)
-        and by a finite difference in ``w``."""
+        last column of its inverse; the coefficients follow exactly in ``x0`` and ``w`` (a
+        variational run)."""
         x0, w, theta0, _, _, J = r[:6]
         if J is None:  # the linear orbit: the branch's own curve
             return 1.0
@@ -1353,12 +1348,9 @@ class _Shooter:
         except np.linalg.LinAlgError:
             return 0.0
         run = self.flow.at(w).run(x0, theta0 / w, variational=True)
-        h = _FD_STEP * w
-        shifted = self.flow.at(w + h).run(x0, theta0 / (w + h))
-        self.runs += 2
-        Q0 = run.coefficients(self.H)[0]
+        self.runs += 1
         dQ = (np.einsum("kdc,c->kd", run.coefficient_sensitivity(self.H), d[:n2])
-              + (shifted.coefficients(self.H)[0] - Q0) / h * d[n2])
+              + run.coefficient_omega(self.H) * d[n2])
         lad = self.lad
         W = lad.weights(self.H)
         wQ, wp = lad.problem(self.H).unpack(W[:-1], W[-1]).Q, float(W[-1])
@@ -1651,6 +1643,10 @@ class _Plane:
     def gradient(self, run) -> np.ndarray:
         """``d value / d x0`` (a variational run)."""
         return np.einsum("kd,kdc->c", self.cQ, run.coefficient_sensitivity(self.H)) / self.scale
+
+    def omega_derivative(self, run) -> float:
+        """``d value / d w`` at the run's start phase (a variational run)."""
+        return (float(np.sum(self.cQ * run.coefficient_omega(self.H))) + self.cw) / self.scale
 
 
 class _ShootingFailed(RuntimeError):
