@@ -399,6 +399,7 @@ class FlowRun:
         self._sigma = None  # d x(t) / d w at a fixed time t, the start time's move included
         self.sensitivities: list = []
         self._sigmas: list = []
+        self._J: dict = {}  # (H, segment) -> its integrals (_segment_integrals)
         closed = flow._start_mode(x, t0)
         t = t0
         while True:
@@ -446,7 +447,7 @@ class FlowRun:
         :meth:`displacement` and :meth:`coefficients` need, kept small."""
         out = copy.copy(self)
         out._Phi, out.Phi, out.x_end_omega, out._sigma = None, None, None, None
-        out.sensitivities, out._sigmas = [], []
+        out.sensitivities, out._sigmas, out._J = [], [], {}
         return out
 
     @property
@@ -703,22 +704,6 @@ class FlowRun:
             psi[small] = ser
         return ta * D * phi1 + D * D * psi
 
-    def _harmonic_t_integrals(self, H: int, ta: float, tb: float, d: _ModeAt, Y: np.ndarray) -> np.ndarray:
-        """``int_ta^tb t Re(sum_k Y_k e^{i k w t}) e^{-i j w t} dt`` for ``j = 0..H``, shape
-        ``(H + 1,) + Y.shape[1:]``."""
-        w = self.flow.omega
-        j = np.arange(H + 1)
-        k = d.ks[:, None]
-
-        def E(nu):  # int_ta^tb t e^{i nu w t} dt
-            nu = np.asarray(nu, dtype=float)
-            return np.exp(1j * nu * w * ta) * self._t_integrals(ta, tb, 1j * nu * w)
-
-        E1, E2 = E(k - j), E(-(k + j))
-        Yf = Y.reshape(len(d.ks), -1)
-        out = 0.5 * (E1.T @ Yf + E2.T @ np.conj(Yf))
-        return out.reshape((H + 1,) + Y.shape[1:])
-
     @staticmethod
     def _real(C: np.ndarray, H: int) -> np.ndarray:
         """Real coefficients ``[c0, c1, s1, ...]`` from ``(w / pi) int q e^{-ikwt} dt`` (rows k)."""
@@ -739,9 +724,9 @@ class FlowRun:
         k = np.arange(H + 1)
         Ic = np.zeros((H + 1, f.n), dtype=complex)  # int q(t) e^{-i k w t} dt
         Il = np.zeros((H + 1, len(f.dofs)), dtype=complex)  # the same for the massless contacts' forces
-        for ta, tb, z, closed in self.segments:
+        for s, (ta, tb, z, closed) in enumerate(self.segments):
             m, d = f.mode(closed)
-            J = self._integrals(H, ta, tb, m.lam)
+            J = self._segment_integrals(H, s)
             Ic += (J.T * z) @ m.Rq.T + self._harmonic_integrals(H, ta, tb, d, d.Yq)
             if closed:
                 js = sorted(closed)
@@ -762,25 +747,34 @@ class FlowRun:
         (sigma_q(t) - (t/w) q'(t)) e^{-i k w t} dt`` with ``sigma_q`` the displacements' change
         at a fixed time. On a segment ``sigma = P(t) + V e^{Lambda (t - t_a)} V^-1 (sigma(t_a) -
         P(t_a))``, ``P = d x_p / d w`` (:meth:`_ModeAt.particular_omega`): the integrals of
-        exponentials and of ``t`` times exponentials, in closed form."""
+        exponentials and of ``t`` times exponentials (:meth:`_t_integrals`), in closed form."""
         if self._Phi is None:
             raise ValueError("coefficient_omega needs a run with variational=True")
         f = self.flow
         w = f.omega
         dI = np.zeros((H + 1, f.n), dtype=complex)
-        for (ta, tb, z, closed), sig in zip(self.segments, self._sigmas):
+        kk = np.arange(H + 1)
+        for s, ((ta, tb, z, closed), sig) in enumerate(zip(self.segments, self._sigmas)):
             m, d = f.mode(closed)
-            J0 = self._integrals(H, ta, tb, m.lam)  # (2nI, H + 1)
-            kk = np.arange(H + 1)
+            J0 = self._segment_integrals(H, s)  # (2nI, H + 1)
             J1 = np.exp(-1j * kk * w * ta)[None, :] * self._t_integrals(ta, tb, np.subtract.outer(m.lam, 1j * kk * w))
-            zs = m.Vinv @ (sig - d.particular_omega(ta))
-            if d._dX is None:
-                d.particular_omega(ta)
-            ik_Yq = (1j * d.ks)[:, None] * d.Yq
-            dI += ((J0.T * zs) @ m.Rq.T + self._harmonic_integrals(H, ta, tb, d, d._dX @ m.Lq.T)
-                   + self._harmonic_t_integrals(H, ta, tb, d, ik_Yq))
-            dI -= ((J1.T * (m.lam * z)) @ m.Rq.T + self._harmonic_t_integrals(H, ta, tb, d, w * ik_Yq)) / w
+            zs = m.Vinv @ (sig - d.particular_omega(ta))  # d._dX is set from here on
+            # sigma_q's part t i k Yq_k e^{i k w t} (the phases' change at a fixed time) and the
+            # forced part of (t/w) q' are the same: they cancel and are left out
+            dI += (J0.T * zs) @ m.Rq.T + self._harmonic_integrals(H, ta, tb, d, d._dX @ m.Lq.T)
+            dI -= ((J1.T * (m.lam * z)) @ m.Rq.T) / w
         return self._real(dI * (w / math.pi), H)
+
+    def _segment_integrals(self, H: int, s: int) -> np.ndarray:
+        """:meth:`_integrals` of segment ``s`` in its mode, computed once per run and ``H``
+        (:meth:`coefficients`, :meth:`coefficient_sensitivity` and :meth:`coefficient_omega` all
+        need them)."""
+        key = (H, s)
+        J = self._J.get(key)
+        if J is None:
+            ta, tb, _, closed = self.segments[s]
+            J = self._J[key] = self._integrals(H, ta, tb, self.flow.mode(closed)[0].lam)
+        return J
 
     def coefficient_sensitivity(self, H: int) -> np.ndarray:
         """``d Q / d x0`` of :meth:`coefficients`, shape ``(2H + 1, n, 2n)`` (a variational run):
@@ -792,9 +786,9 @@ class FlowRun:
         f = self.flow
         w = f.omega
         Ic = np.zeros((H + 1, f.n, 2 * f.n), dtype=complex)
-        for (ta, tb, _, closed), Phi_a in zip(self.segments, self.sensitivities):
+        for s, ((ta, tb, _, closed), Phi_a) in enumerate(zip(self.segments, self.sensitivities)):
             m, _ = f.mode(closed)
-            J = self._integrals(H, ta, tb, m.lam)
+            J = self._segment_integrals(H, s)
             Zm = m.Vinv @ Phi_a  # (modes, 2n columns)
             Ic += (m.Rq[None, :, :] * J.T[:, None, :]) @ Zm  # sum over m of J[m, k] Rq[d, m] Zm[m, c]
         return self._real(Ic * (w / math.pi), H)
