@@ -611,9 +611,10 @@ class StructuralModel:
         the forces are the transformed ``T^T A T``, ``T^T f``. None (the default): ``q`` is
         physical.
     damping_spec : tuple, optional
-        The arguments of the last :meth:`with_damping` as ``(name, value)`` pairs (empty when the
-        damping was given as a matrix): :meth:`with_contact` recomputes the damping from them
-        when it redistributes mass.
+        The arguments of the last :meth:`with_damping` as ``(name, value)`` pairs and the
+        ``"fingerprint"`` of the matrices it made (empty when the damping was given as a matrix):
+        :meth:`with_contact` recomputes the damping from them when it redistributes mass, unless
+        the matrices were replaced since (a warning; they are then kept).
 
     Notes
     -----
@@ -760,7 +761,7 @@ class StructuralModel:
                     f"with_damping: alpha={alpha!r}, beta={beta!r} overflow: C = alpha M + beta K has infinite entries"
                 )
             return self._replace(C=C, C_lowrank=None, damping_info=f"Rayleigh alpha={alpha:g}, beta={beta:g}",
-                                 damping_spec=(("alpha", alpha), ("beta", beta)))
+                                 damping_spec=(("alpha", alpha), ("beta", beta)))._fingerprinted()
         if alpha or beta:
             raise ValueError("with_damping: give either Rayleigh coefficients (alpha, beta) or modal=, not both")
         if isinstance(modal, (str, bytes, bool, np.bool_)):
@@ -797,7 +798,21 @@ class StructuralModel:
         return self._replace(C=sp.csr_matrix((self.n_dofs, self.n_dofs)), C_lowrank=lowrank,
                              damping_info=f"modal zeta={ratios} on {nm} modes",
                              damping_spec=(("modal", tuple(float(z) for z in np.atleast_1d(np.asarray(modal, dtype=float)))),
-                                           ("n_modes", n_modes)))
+                                           ("n_modes", n_modes)))._fingerprinted()
+
+    def _damping_fingerprint(self) -> tuple:
+        """Sums that change when the damping matrices are replaced: ``sum |C|`` and the low-rank
+        part's ``sum d`` and ``sum |U|``."""
+        lr = self.C_lowrank
+        return (float(abs(self.C).sum()), 0.0 if lr is None else float(np.sum(lr.d)),
+                0.0 if lr is None else float(np.sum(np.abs(lr.U))))
+
+    def _fingerprinted(self) -> "StructuralModel":
+        """This new model (just built by :meth:`with_damping`) with its damping matrices'
+        fingerprint in ``damping_spec``: a later change of ``C`` by ``dataclasses.replace`` makes
+        the spec stale, and :meth:`with_contact` then keeps the matrices as they are."""
+        object.__setattr__(self, "damping_spec", self.damping_spec + (("fingerprint", self._damping_fingerprint()),))
+        return self
 
     def with_forcing(self, *forces: HarmonicForce) -> "StructuralModel":
         """Return a copy with these harmonic point forces added.
@@ -1206,11 +1221,17 @@ class StructuralModel:
         if any(isinstance(a.item, UnilateralContact) for a in new) and any(isinstance(a.item, PenaltyContact) for a in new):
             log.info("model mixes complementarity and penalty contacts")
         out = base._replace(contacts=tuple(new), M=M, mass_redistribution=tuple(reports))
-        if self.damping_spec and M is not base.M:
+        spec = dict(self.damping_spec)
+        stale = spec.pop("fingerprint", None) != self._damping_fingerprint()
+        if spec and M is not base.M and stale:
+            log.warning("with_contact: the damping matrices changed after with_damping(%s) (dataclasses.replace?): "
+                        "kept as they are, not recomputed for the redistributed mass; call with_damping again",
+                        ", ".join(f"{k}={v}" for k, v in spec.items()))
+            out = out._replace(damping_spec=())
+        elif spec and M is not base.M:
             # damping given before the contact: recomputed from the redistributed mass (C = alpha M +
             # beta K, or the new modes), which the contact node's zero mass row then also zeroes in C
             log.info("with_contact: damping (%s) recomputed for the redistributed mass", self.damping_info)
-            spec = dict(self.damping_spec)
             if "modal" in spec:
                 z = spec["modal"]
                 spec["modal"] = z[0] if len(z) == 1 else list(z)

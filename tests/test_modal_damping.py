@@ -351,3 +351,18 @@ def test_modal_damping_counts_only_the_modes_of_dofs_with_mass():
         model.with_damping(modal=0.03, n_modes=20)
     with pytest.raises(ValueError, match="only 19 modes"):
         model.with_damping(modal=[0.01] * 20)
+
+
+def test_damping_replaced_after_with_damping_is_kept_with_a_warning(caplog):
+    """A damping matrix put in by ``dataclasses.replace`` after ``with_damping`` is not overwritten
+    by the spec when ``with_contact`` redistributes mass: it is kept, the spec dropped, and a
+    warning says so; without the replace the spec is applied (the test above)."""
+    beam, contact = _beam_contact()
+    damped = beam.with_damping(alpha=0.02)
+    own = sp.identity(beam.n_dofs, format="csr") * 0.5
+    replaced = dataclasses.replace(damped, C=own)
+    with caplog.at_level("WARNING", logger="femodes.model"):
+        out = replaced.with_contact(contact)
+    assert "damping matrices changed after with_damping(alpha=0.02, beta=0.0)" in caplog.text
+    assert abs(out.C - own).max() == 0.0 and out.damping_spec == ()
+    assert dict(beam.with_damping(alpha=0.02).with_contact(contact).damping_spec)["alpha"] == 0.02
