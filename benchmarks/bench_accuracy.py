@@ -101,7 +101,8 @@ def impact_reference():
 
 
 #: The upper fold of ``cant20m``: fm.time.exact_frequency_response(model, (3.0, 4.2)) on 2026-11-24
-#: (13 s; a continuation of exact orbits); an upward time-domain sweep of the exact flow
+#: (13 s; a continuation of exact orbits, then with a finite-difference dr/dw; the analytic one
+#: since puts it 5.3e-10 lower, in 7 s); an upward time-domain sweep of the exact flow
 #: (bench_cantilever_time.py sweep --damping modal) stays on the upper branch at 3.915 and leaves
 #: it at 3.916 (tests/test_exact_branch.py, slow).
 CANT20M_FOLD = 3.915300222090862
