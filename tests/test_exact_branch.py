@@ -199,8 +199,13 @@ def test_start_inside_the_obstacle_reported_not_raised():
 
 
 def test_options_passed_through():
-    b = exact_frequency_response(_oscillator(0.2, 1.0, 2.5), (0.5, 2.0), options=ContinuationOptions(max_points=10))
+    """max_points and the user's callback reach the continuation (the callback sees every point;
+    the branch's own bookkeeping of the points' runs goes on behind it)."""
+    seen = []
+    b = exact_frequency_response(_oscillator(0.2, 1.0, 2.5), (0.5, 2.0),
+                                 options=ContinuationOptions(max_points=10, callback=lambda pt: seen.append(pt.p)))
     assert len(b) == 10 and not b.success and "max_points" in b.message
+    assert np.array_equal(seen, b.omega) and all(o is not None for o in b._orbits)
 
 
 def _missed_folds(monkeypatch):

@@ -47,6 +47,7 @@ event-driven integration with smooth laws is :mod:`femodes.time.shooting`.
 
 from __future__ import annotations
 
+import collections
 import copy
 import dataclasses
 import itertools
@@ -921,18 +922,37 @@ class ExactBranch:
         return self.orbit(i).coefficients(H)
 
 
+#: Runs of the continuation's residual kept until it accepts a point (the corrector's last
+#: iterate is evaluated last, or nearly: fold location and tangents come between).
+RECENT_RUNS = 32
+
+
 class _ShootingResidual:
     """``r(x, w) = x(T) - x`` over one forcing period ``T = 2 pi / w`` from ``x(0) = x`` (the
     inertial entries of the state), with ``dr/dx = Phi - I`` and ``dr/dw`` from the variational
-    run (:attr:`FlowRun.x_end_omega`). ``orbits`` keeps every run (:meth:`FlowRun.plain`) by
-    its start state and frequency: the continuation's points' orbits, and their massless DOFs'
-    entries."""
+    run (:attr:`FlowRun.x_end_omega`). The last :data:`RECENT_RUNS` runs (:meth:`FlowRun.plain`)
+    are kept by start state and frequency; :meth:`keep` (the continuation's callback) moves an
+    accepted point's into ``orbits``: its orbit and its massless DOFs' entries."""
 
     def __init__(self, flow: LinearImpactFlow):
         self.flow, self.S = flow, flow.state_index
         self.massless = np.setdiff1d(np.arange(2 * flow.n), flow.state_index)
         self.runs = 0
+        self.recent: collections.OrderedDict = collections.OrderedDict()
         self.orbits: dict = {}
+
+    def keep(self, y: np.ndarray, w: float) -> None:
+        key = (np.asarray(y, dtype=float).tobytes(), float(w))
+        run = self.recent.get(key)
+        if run is not None:
+            self.orbits[key] = run
+
+    def callback(self, then=None):
+        """A continuation callback that keeps every accepted point's run, then calls ``then``."""
+        def cb(point):
+            self.keep(point.x, point.p)
+            return None if then is None else then(point)
+        return cb
 
     def full(self, y: np.ndarray) -> np.ndarray:
         x = np.zeros(2 * self.flow.n)
@@ -950,7 +970,9 @@ class _ShootingResidual:
             # events): a non-finite residual, which makes Newton's line search cut the step
             nan = np.full(S.size, np.nan)
             return nan, np.full((S.size, S.size), np.nan), nan
-        self.orbits[(y.tobytes(), float(w))] = run.plain()
+        self.recent[(y.tobytes(), float(w))] = run.plain()
+        if len(self.recent) > RECENT_RUNS:
+            self.recent.popitem(last=False)
         r = run.x_end[S] - y
         return r, run.Phi[np.ix_(S, S)] - np.eye(S.size), run.x_end_omega[S]
 
@@ -1026,6 +1048,7 @@ def exact_frequency_response(model: StructuralModel, span, *, x0=None, restituti
     elif not isinstance(options, ContinuationOptions):
         raise TypeError(f"{owner}: options must be a ContinuationOptions or None, got {type(options).__name__}")
     problem = _ShootingResidual(flow)
+    options = dataclasses.replace(options, callback=problem.callback(options.callback))
     res = continuation(problem, (w0, w1), x0=x0[flow.state_index], options=options)
     pieces = [res]
     if res.status == 4 and len(res.p):
@@ -1067,6 +1090,7 @@ def exact_frequency_response(model: StructuralModel, span, *, x0=None, restituti
         orbits.append(run)
         states[i, problem.massless] = run.x_end[problem.massless]
     problem.orbits.clear()
+    problem.recent.clear()
     return ExactBranch(flow, omega, states, pieces, folds, problem.runs, options.newton.atol, refined, orbits)
 
 
@@ -1091,7 +1115,7 @@ def _refine_fold(problem: _ShootingResidual, omega: np.ndarray, ys: np.ndarray, 
     if lo == j or hi == j:
         return None
     step = max(0.25 * float(np.max(steps[j - 1:j + 2])), options.min_step)  # the steps into and out of j
-    opt = dataclasses.replace(options, step=step, max_step=step, max_points=REFINE_FOLD_POINTS)
+    opt = dataclasses.replace(options, step=step, max_step=step, max_points=REFINE_FOLD_POINTS, callback=None)
     ext = []
     for k in (lo, hi):
         reach = 10.0 * abs(omega[k] - omega[j]) + EXACT_FOLD_RTOL * abs(omega[j])
