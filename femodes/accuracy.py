@@ -66,8 +66,8 @@ period from the point with the largest contact force) evaluates more than
 :data:`SHOOTING_AUTO_MAX_EVENTS` events at one contact: a chattering orbit). The limit itself is computed
 instead of extrapolated: the orbit of the exact flow with restitution 1 (closed form between
 contact events, :class:`femodes.time.exact.LinearImpactFlow`) on each point's hyperplane, by Newton on
-the start state and the frequency (monodromy matrix and the hyperplane's gradient exact, the
-frequency column by one finite difference), each point from its predecessor's orbit. The
+the start state and the frequency (monodromy matrix, the hyperplane's gradient and the frequency
+column exact, from one variational run), each point from its predecessor's orbit. The
 hyperplane is the levels' without its contact-force part (:class:`_Plane`: the exact contact
 forces are impulses, whose coefficients the truncated forces do not resemble), so a point's
 ``omega_limit`` may differ from the levels' by the change of section (seed case 1: up to 0.6 %
@@ -85,8 +85,12 @@ seed's forced cases 1.4191583461 and 1.4227515912, equal to the event-driven ref
 grazing the exact curve crosses the points' hyperplanes obliquely or backward (``kappa``,
 :meth:`_Shooter.glancing`, outside ``(0, GLANCING_MAX]``, and a crossing angle with a cosine
 below :data:`GLANCING_COS`, :meth:`_Shooter.crossing_cosine`): the crossing is no counterpart
-of the point and no error is stated there (method "failed"; 4 of 94 and 8 of 68 points on the
-seed cases; the levels' ratios are erratic there too). Points where Newton finds no orbit start
+of the point; the exact orbit at the point's own frequency is (:class:`_FrequencyPlane`: its
+``omega_limit`` is the point's frequency, the error is in the amplitude). Seed cases at H = 20:
+3 of 94 and 8 of 68 points are taken so (their amplitude errors 2.3e-3 to 2.0e-2, equal to
+those of the orbits found independently at those frequencies, tests/test_exact_branch.py); 1
+point of seed case 1 keeps no estimate (method "failed": Newton at its frequency finds no orbit
+near it; the levels' ratios are erratic there too). Points where Newton finds no orbit start
 again from the exact branch's crossing of their hyperplanes, and fall back to the levels if that
 fails too. The exact branch over the branch's span (:func:`femodes.time.exact_frequency_response`,
 continuation of exact orbits in the frequency) is traced once when needed
@@ -1649,6 +1653,27 @@ class _Plane:
         return (float(np.sum(self.cQ * run.coefficient_omega(self.H))) + self.cw) / self.scale
 
 
+class _FrequencyPlane:
+    """The plane ``w = w_a`` for :meth:`_Shooter.solve`: the exact orbit at a point's own
+    frequency, the counterpart of a point where the exact curve crosses the branch's hyperplane
+    obliquely (just above grazing)."""
+
+    def __init__(self, omega: float):
+        self.wa = float(omega)
+
+    def at(self, Q: np.ndarray, omega: float) -> float:
+        return (omega - self.wa) / self.wa
+
+    def value(self, run, omega: float) -> float:
+        return (omega - self.wa) / self.wa
+
+    def gradient(self, run) -> np.ndarray:
+        return np.zeros(2 * run.flow.n)
+
+    def omega_derivative(self, run) -> float:
+        return 1.0 / self.wa
+
+
 class _ShootingFailed(RuntimeError):
     pass
 
@@ -1687,4 +1712,10 @@ def _shoot_branch(lad: _Ladder, flow=None) -> tuple[dict, _Shooter, "_ExactBranc
     for i, r in out.items():
         if r is not None and not _near_fold(lad.branch, i):
             out[i] = _counterpart(sh, i, r)
+            if out[i] is GLANCING:  # the exact orbit at the point's own frequency instead
+                at_w = sh.solve(i, plane=_FrequencyPlane(float(lad.branch.omega[i])))
+                if at_w is not None:
+                    log.info("accuracy: point %d: the exact orbit at its frequency w = %.6g instead", i,
+                             lad.branch.omega[i])
+                    out[i] = at_w
     return out, sh, exact
