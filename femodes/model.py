@@ -808,10 +808,12 @@ class StructuralModel:
                 0.0 if lr is None else float(np.sum(np.abs(lr.U))))
 
     def _fingerprinted(self) -> "StructuralModel":
-        """This new model (just built by :meth:`with_damping`) with its damping matrices'
-        fingerprint in ``damping_spec``: a later change of ``C`` by ``dataclasses.replace`` makes
-        the spec stale, and :meth:`with_contact` then keeps the matrices as they are."""
-        object.__setattr__(self, "damping_spec", self.damping_spec + (("fingerprint", self._damping_fingerprint()),))
+        """This new model (just built by :meth:`with_damping`, or rotated into nodal frames) with
+        its damping matrices' fingerprint in ``damping_spec``: a later change of ``C`` by
+        ``dataclasses.replace`` makes the spec stale, and :meth:`with_contact` then keeps the
+        matrices as they are."""
+        spec = tuple(kv for kv in self.damping_spec if kv[0] != "fingerprint")
+        object.__setattr__(self, "damping_spec", spec + (("fingerprint", self._damping_fingerprint()),))
         return self
 
     def with_forcing(self, *forces: HarmonicForce) -> "StructuralModel":
@@ -1222,8 +1224,8 @@ class StructuralModel:
             log.info("model mixes complementarity and penalty contacts")
         out = base._replace(contacts=tuple(new), M=M, mass_redistribution=tuple(reports))
         spec = dict(self.damping_spec)
-        stale = spec.pop("fingerprint", None) != self._damping_fingerprint()
-        if spec and M is not base.M and stale:
+        fingerprint = spec.pop("fingerprint", None)
+        if spec and M is not base.M and fingerprint != self._damping_fingerprint():
             log.warning("with_contact: the damping matrices changed after with_damping(%s) (dataclasses.replace?): "
                         "kept as they are, not recomputed for the redistributed mass; call with_damping again",
                         ", ".join(f"{k}={v}" for k, v in spec.items()))
@@ -1294,8 +1296,11 @@ class StructuralModel:
         dofmap = dataclasses.replace(dm, frames={**dm.frames, **pending}, labels=tuple(labels))
         frame = T if self.frame is None else (self.frame @ T).tocsr()
         log.info("with_contact: %d nodes rotated into the nodal frames of their contact normals", len(nodes))
-        return self._replace(M=rotate(self.M), K=rotate(self.K), C=rotate(self.C) if self.C.nnz else self.C,
-                             C_lowrank=lr, forces=tuple(forces), dofmap=dofmap, frame=frame)
+        out = self._replace(M=rotate(self.M), K=rotate(self.K), C=rotate(self.C) if self.C.nnz else self.C,
+                            C_lowrank=lr, forces=tuple(forces), dofmap=dofmap, frame=frame)
+        # the spec's matrices in the new frame: its fingerprint follows them (a stale one stays stale)
+        fresh = dict(self.damping_spec).get("fingerprint") == self._damping_fingerprint()
+        return out._fingerprinted() if out.damping_spec and fresh else out
 
     def _redistribute_in_frame(self, strategy, M, dofs, frame: NodalFrame):
         """Contact mass ``strategy`` on the normal DOFs ``dofs`` of nodes with nodal frame

@@ -461,3 +461,21 @@ def test_mirror_symmetric_p2_tet_box_keeps_its_symmetry():
     assert r @ M1 @ r == pytest.approx(r @ M0 @ r, rel=1e-12)
     for x in xyz:
         assert abs(r @ M1 @ x - r @ M0 @ x) < 1e-12 * (r @ M0 @ r)
+
+
+def test_damping_spec_follows_the_rotation_into_nodal_frames(caplog):
+    """``with_damping`` before an inclined contact that keeps its nodes' mass (the matrices are
+    rotated into the nodal frames, nothing redistributed), then a contact that redistributes
+    mass: the damping is recomputed from the spec without the replaced-matrix warning (the
+    fingerprint follows the rotation), the same as ``with_damping`` after both contacts (to
+    round-off of the largest entry)."""
+    R = rotation_2d(0.4)
+    c1 = fm.UnilateralContact(at="top", gap=GAP, direction=tuple(R @ np.array([0.0, 1.0])))
+    c2 = fm.UnilateralContact(at="bottom", gap=GAP, direction=tuple(R @ np.array([0.0, -1.0])))
+    base = strip(R)
+    with caplog.at_level("WARNING", logger="femodes.model"):
+        before = base.with_damping(alpha=0.02).with_contact(c1, contact_mass=fm.ConsistentMass()).with_contact(c2)
+    assert "changed after with_damping" not in caplog.text
+    after = base.with_contact(c1, contact_mass=fm.ConsistentMass()).with_contact(c2).with_damping(alpha=0.02)
+    Cb, Ca = before.damping_matrix().toarray(), after.damping_matrix().toarray()
+    assert np.abs(Cb - Ca).max() <= 1e-12 * np.abs(Ca).max()
