@@ -807,6 +807,11 @@ class StructuralModel:
         return (float(abs(self.C).sum()), 0.0 if lr is None else float(np.sum(lr.d)),
                 0.0 if lr is None else float(np.sum(np.abs(lr.U))))
 
+    def _damping_spec_fresh(self) -> bool:
+        """Whether ``damping_spec``'s fingerprint is that of the damping matrices (they were not
+        replaced since :meth:`with_damping`)."""
+        return dict(self.damping_spec).get("fingerprint") == self._damping_fingerprint()
+
     def _fingerprinted(self) -> "StructuralModel":
         """This new model (just built by :meth:`with_damping`, or rotated into nodal frames) with
         its damping matrices' fingerprint in ``damping_spec``: a later change of ``C`` by
@@ -1224,8 +1229,8 @@ class StructuralModel:
             log.info("model mixes complementarity and penalty contacts")
         out = base._replace(contacts=tuple(new), M=M, mass_redistribution=tuple(reports))
         spec = dict(self.damping_spec)
-        fingerprint = spec.pop("fingerprint", None)
-        if spec and M is not base.M and fingerprint != self._damping_fingerprint():
+        spec.pop("fingerprint", None)
+        if spec and M is not base.M and not self._damping_spec_fresh():
             log.warning("with_contact: the damping matrices changed after with_damping(%s) (dataclasses.replace?): "
                         "kept as they are, not recomputed for the redistributed mass; call with_damping again",
                         ", ".join(f"{k}={v}" for k, v in spec.items()))
@@ -1299,8 +1304,7 @@ class StructuralModel:
         out = self._replace(M=rotate(self.M), K=rotate(self.K), C=rotate(self.C) if self.C.nnz else self.C,
                             C_lowrank=lr, forces=tuple(forces), dofmap=dofmap, frame=frame)
         # the spec's matrices in the new frame: its fingerprint follows them (a stale one stays stale)
-        fresh = dict(self.damping_spec).get("fingerprint") == self._damping_fingerprint()
-        return out._fingerprinted() if out.damping_spec and fresh else out
+        return out._fingerprinted() if out.damping_spec and self._damping_spec_fresh() else out
 
     def _redistribute_in_frame(self, strategy, M, dofs, frame: NodalFrame):
         """Contact mass ``strategy`` on the normal DOFs ``dofs`` of nodes with nodal frame

@@ -210,7 +210,7 @@ class _ModeAt:
         X = (W / den) @ m.V.T  # (n_k, 2nI)
         self.ks, self.X, self.iw, self.G = ks, X, iw, G
         self._W, self._den, self._V = W, den, m.V
-        self._dX = None
+        self._dX = None  # dX, when first asked for
         self.Yq = X @ m.Lq.T + G
         self.Yv = X @ m.Lv.T + iw[:, None] * G
         self.Ye = X @ m.Le.T + Ye0
@@ -224,13 +224,17 @@ class _ModeAt:
     def particular(self, t) -> np.ndarray:
         return np.real(self.phases(t) @ self.X)
 
-    def particular_omega(self, t: float) -> np.ndarray:
-        """``d x_p(t) / d w`` at a fixed time ``t``: ``Re sum_k (X_k' + i k t X_k) e^{i k w t}``
-        with ``X_k' = V (-i k W_k / (i k w - lambda)^2)``."""
+    @property
+    def dX(self) -> np.ndarray:
+        """``X_k' = d X_k / d w = V (-i k W_k / (i k w - lambda)^2)`` per harmonic (computed once)."""
         if self._dX is None:
             self._dX = (self._W * (-1j * self.ks[:, None]) / self._den ** 2) @ self._V.T
+        return self._dX
+
+    def particular_omega(self, t: float) -> np.ndarray:
+        """``d x_p(t) / d w`` at a fixed time ``t``: ``Re sum_k (X_k' + i k t X_k) e^{i k w t}``."""
         ph = self.phases(t)
-        return np.real(ph @ self._dX + (ph * (1j * self.ks * t)) @ self.X)
+        return np.real(ph @ self.dX + (ph * (1j * self.ks * t)) @ self.X)
 
 
 class LinearImpactFlow:
@@ -759,10 +763,10 @@ class FlowRun:
             m, d = f.mode(closed)
             J0 = self._segment_integrals(H, s)  # (2nI, H + 1)
             J1 = np.exp(-1j * kk * w * ta)[None, :] * self._t_integrals(ta, tb, np.subtract.outer(m.lam, 1j * kk * w))
-            zs = m.Vinv @ (sig - d.particular_omega(ta))  # d._dX is set from here on
+            zs = m.Vinv @ (sig - d.particular_omega(ta))
             # sigma_q's part t i k Yq_k e^{i k w t} (the phases' change at a fixed time) and the
             # forced part of (t/w) q' are the same: they cancel and are left out
-            dI += (J0.T * zs) @ m.Rq.T + self._harmonic_integrals(H, ta, tb, d, d._dX @ m.Lq.T)
+            dI += (J0.T * zs) @ m.Rq.T + self._harmonic_integrals(H, ta, tb, d, d.dX @ m.Lq.T)
             dI -= ((J1.T * (m.lam * z)) @ m.Rq.T) / w
         return self._real(dI * (w / math.pi), H)
 
@@ -838,15 +842,17 @@ class ExactBranch:
         That tolerance: ``|x(T) - x(0)|`` of the inertial entries is about that small at every
         point (Newton also stops on a step below its ``xtol``).
     folds : tuple of int
-        Indices of the folds (turning points in ``omega``) the continuation located.
+        Indices of the folds (turning points in ``omega``) the continuation located, or only
+        detected (the point nearer to the sign change of ``dw/ds``).
     fold_omega, fold_error : ndarray (len(folds),)
         The folds' frequencies and relative errors: a located fold that is the extreme frequency
         of the :data:`FOLD_WINDOW` points on either side is taken as it is, with the error
         :data:`EXACT_FOLD_RTOL`; otherwise the extreme frequency of those points, with their
         range as the error. A fold the continuation detected but did not locate (a grazing at
         the turn: the corrector fails there) is refined by short-step continuations toward it
-        from both sides (:func:`_refine_fold`): the extreme frequency they reach, with their
-        difference (at least :data:`EXACT_FOLD_RTOL`) as the error.
+        from both sides (:func:`_refine_fold`): the extreme frequency they and the branch reach,
+        with the larger distance of either side's extreme from it (at least
+        :data:`EXACT_FOLD_RTOL`) as the error.
     fold_upper : ndarray of bool (len(folds),)
         Whether a fold is a largest frequency (the branch turns back from increasing ``omega``;
         :func:`fold_is_upper`).
@@ -1060,18 +1066,16 @@ def exact_frequency_response(model: StructuralModel, span, *, x0=None, restituti
                  w1, float(back.p[-1]) if len(back.p) else w1, back.message)
         if len(back.p):
             pieces.append(back)
-    omega = np.concatenate([np.asarray(r.p, dtype=float) if k == 0 else np.asarray(r.p, dtype=float)[::-1]
-                            for k, r in enumerate(pieces)])
-    ys = [np.asarray(r.x, dtype=float).reshape(len(r.p), flow.state_index.size) for r in pieces]
-    ys = np.concatenate([y if k == 0 else y[::-1] for k, y in enumerate(ys)])
-    folds = list(res.folds)
-    located = set(res.located)
-    if len(pieces) == 2:
-        n_back = len(pieces[1].p)
-        folds += [len(res.p) + n_back - 1 - int(i) for i in sorted(pieces[1].folds, reverse=True)]
-        located |= {len(res.p) + n_back - 1 - int(i) for i in pieces[1].located}
-    steps = np.concatenate([np.asarray(r.step, dtype=float) if k == 0 else np.asarray(r.step, dtype=float)[::-1]
-                            for k, r in enumerate(pieces)])
+    def joined(arrays):  # the pieces' arrays in the branch's order: the back piece reversed
+        return np.concatenate([np.asarray(a, dtype=float)[::1 if k == 0 else -1] for k, a in enumerate(arrays)])
+
+    omega = joined([r.p for r in pieces])
+    ys = joined([np.reshape(r.x, (len(r.p), flow.state_index.size)) for r in pieces])
+    steps = joined([r.step for r in pieces])
+    folds, located = list(res.folds), set(res.located)
+    if len(pieces) == 2:  # the back piece's index i is the branch's omega.size - 1 - i
+        folds += [omega.size - 1 - int(i) for i in sorted(pieces[1].folds, reverse=True)]
+        located |= {omega.size - 1 - int(i) for i in pieces[1].located}
     # the refinement steps in the first run's arclength norm (scales), comparable with its steps
     scaled = dataclasses.replace(options, x_scale=np.asarray(res.x_scale), p_scale=float(res.p_scale))
     refined = {j: got for j in folds if j not in located
