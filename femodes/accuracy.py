@@ -87,10 +87,10 @@ grazing the exact curve crosses the points' hyperplanes obliquely or backward (`
 below :data:`GLANCING_COS`, :meth:`_Shooter.crossing_cosine`): the crossing is no counterpart
 of the point; the exact orbit at the point's own frequency is (:class:`_FrequencyPlane`: its
 ``omega_limit`` is the point's frequency, the error is in the amplitude). Seed cases at H = 20:
-3 of 94 and 8 of 68 points are taken so (their amplitude errors 2.3e-3 to 2.0e-2, equal to
-those of the orbits found independently at those frequencies, tests/test_exact_branch.py); 1
-point of seed case 1 keeps no estimate (method "failed": Newton at its frequency finds no orbit
-near it; the levels' ratios are erratic there too). Points where Newton finds no orbit start
+4 of 94 and 8 of 68 points are taken so (their amplitude errors 5.7e-4 to 2.0e-2, equal to
+those of the orbits found independently at those frequencies, tests/test_exact_branch.py); where
+Newton from the point stalls (6.3e-5 above the grazing), it starts from the linear orbit at the
+point's frequency (:meth:`_Shooter.at_frequency`). Points where Newton finds no orbit start
 again from the exact branch's crossing of their hyperplanes, and fall back to the levels if that
 fails too. The exact branch over the branch's span (:func:`femodes.time.exact_frequency_response`,
 continuation of exact orbits in the frequency) is traced once when needed
@@ -603,8 +603,8 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
         if r is None:
             todo[i] = True
             continue
-        if r is GLANCING:  # no counterpart on the exact curve: not estimated (the levels' ratios are
-            kind[i] = "failed"  # erratic there as well: seed case 1, points just above grazing)
+        if r is GLANCING:  # no counterpart on the exact curve, and no orbit at the point's frequency
+            kind[i] = "failed"  # either: not estimated (the levels' ratios are erratic just above grazing)
             finest[i] = 0
             continue
         w = r[1]
@@ -1409,6 +1409,23 @@ class _Shooter:
             return None
         return None
 
+    def at_frequency(self, i: int):
+        """The exact orbit at point ``i``'s own frequency (:class:`_FrequencyPlane`), from the point
+        itself, else from the linear orbit at that frequency and the point's start phase: just
+        above grazing the exact orbit is near the linear one, while Newton from the point may
+        stall (seed case 1 at H = 20, w = 0.906552, 6.3e-5 above the grazing: three steps cut below
+        2^-8 from the point; 15 Newton iterations from the linear orbit). Same return as :meth:`solve`, or
+        None."""
+        omega = float(self.branch.omega[i])
+        plane = _FrequencyPlane(omega)
+        r = self.solve(i, plane=plane)
+        if r is None:
+            theta0 = self.start(i)[1]
+            x = self.flow.at(omega).particular(theta0 / omega)
+            if self.flow.admissible(x):
+                r = self.solve(i, guess=(x, omega, theta0), plane=plane)
+        return r
+
     def solve_from(self, i: int, j: int, at_j, pieces: int = 8):
         """The orbit on point ``i``'s hyperplane by a continuation over the planes between a
         neighbour ``j``'s (solved: ``at_j``) and ``i``'s, in ``pieces`` steps: just above
@@ -1713,7 +1730,7 @@ def _shoot_branch(lad: _Ladder, flow=None) -> tuple[dict, _Shooter, "_ExactBranc
         if r is not None and not _near_fold(lad.branch, i):
             out[i] = _counterpart(sh, i, r)
             if out[i] is GLANCING:  # the exact orbit at the point's own frequency instead
-                at_w = sh.solve(i, plane=_FrequencyPlane(float(lad.branch.omega[i])))
+                at_w = sh.at_frequency(i)
                 if at_w is not None:
                     log.info("accuracy: point %d: the exact orbit at its frequency w = %.6g instead", i,
                              lad.branch.omega[i])

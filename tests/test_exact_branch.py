@@ -342,25 +342,33 @@ def test_cantilever_fold_is_where_the_time_domain_sweep_jumps():
     assert amp[3.917] < 0.006
 
 
-def test_points_just_above_grazing_get_the_exact_orbit_at_their_frequency(seed2):
-    """Seed case 2 at H = 20: just above the rising side's grazing the exact curve crosses the
-    points' hyperplanes obliquely (8 points that had no estimate); each now gets the exact orbit
-    at its own frequency: omega_limit is its frequency and the amplitude error is the distance
-    of its coefficients to that orbit's (8 H harmonics). Checked against the orbit at that
-    frequency found independently (Newton on x(T) = x at phase 0 from the exact branch's
-    nearest state): the same error to 1e-6 (both Newton solves converge to 1e-11; measured
-    1.02e-3 to 1.96e-2)."""
-    model = _oscillator(0.2, 1.0, 2.5)
+@pytest.fixture(scope="module")
+def seed1():
+    return exact_frequency_response(_oscillator(0.1, 0.2, 1.0), (0.5, 2.0))
+
+
+@pytest.mark.parametrize("case, count, low", [("seed1", 4, 5e-4), ("seed2", 6, 1e-3)])
+def test_points_just_above_grazing_get_the_exact_orbit_at_their_frequency(case, count, low, request):
+    """The seed cases at H = 20: just above the rising side's grazing the exact curve crosses the
+    points' hyperplanes obliquely (4 and 8 points that had no estimate); each now gets the exact
+    orbit at its own frequency: omega_limit is its frequency and the amplitude error is the
+    distance of its coefficients to that orbit's (8 H harmonics). Seed case 1's point at
+    w = 0.906552, 6.3e-5 above the grazing, where Newton from the point stalls, from the linear
+    orbit at its frequency. Checked against the orbit at that frequency found independently
+    (Newton on x(T) = x at phase 0 from the exact branch's nearest state): the same error to 1e-6
+    (both Newton solves converge to 1e-11; measured 5.7e-4 to 2.0e-2)."""
+    eb = request.getfixturevalue(case)
+    model = _oscillator(*{"seed1": (0.1, 0.2, 1.0), "seed2": (0.2, 1.0, 2.5)}[case])
     b = fm.frequency_response(model, (0.5, 2.0), 20)
     acc = estimate_error(b).accuracy
     assert not np.any(acc.method == "failed")
     at_w = [i for i in range(len(b)) if acc.omega_limit[i] == b.omega[i] and acc.amplitude[i] > 1e-6]
-    assert len(at_w) >= 6
+    assert len(at_w) >= count
     hk = fm.Harmonics(160)
     for i in at_w:
         w = float(b.omega[i])
-        flow = seed2.flow.at(w)
-        x = seed2.states[int(np.argmin(np.abs(seed2.omega - w)))].copy()
+        flow = eb.flow.at(w)
+        x = eb.states[int(np.argmin(np.abs(eb.omega - w)))].copy()
         run = flow.run(x, 0.0, variational=True)
         F = run.x_end - x
         for _ in range(50):  # Newton, steps halved until |F| decreases (the flow is only piecewise smooth)
@@ -379,4 +387,4 @@ def test_points_just_above_grazing_get_the_exact_orbit_at_their_frequency(seed2)
         assert np.max(np.abs(F)) < 1e-12 and run.impacts
         dQ = fm.Harmonics(20).convert(b.Q[i], hk) - run.coefficients(160)[0]
         ref = np.linalg.norm(dQ) / np.linalg.norm(b.Q[i])
-        assert abs(acc.amplitude[i] - ref) <= 1e-6 and 1e-3 <= ref <= 0.05
+        assert abs(acc.amplitude[i] - ref) <= 1e-6 and low <= ref <= 0.05
