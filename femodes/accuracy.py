@@ -541,6 +541,12 @@ def _estimate_by_levels(lad: _Ladder, rtol, max_harmonics: int, todo: np.ndarray
         while 2 * top <= max_harmonics:
             err = np.where(np.isfinite(w_lim_err), w_lim_err, ew)
             need = todo & ~(np.isfinite(err) & (err <= rtol)) & (finest == top)
+            stays = np.array([need[i] and not _contracting(chains[i], lad.Q_norm(i), lad.omega_ref(i))
+                              for i in range(n)], dtype=bool)
+            if stays.any():
+                log.info("accuracy: %d point(s) above rtol = %g whose last levels do not contract (or are missing): "
+                         "no level H = %d for them (no convergence to extrapolate)", int(stays.sum()), rtol, 2 * top)
+            need &= ~stays
             if not need.any():
                 break
             top *= 2
@@ -553,6 +559,25 @@ def _estimate_by_levels(lad: _Ladder, rtol, max_harmonics: int, todo: np.ndarray
                 lv = _Levels(chains[i], lad.Q_norm(i), lad.omega_ref(i))
                 w_lim[i], w_lim_err[i] = lv.frequency_bracket()
                 finest[i] = top
+
+
+def _contracting(chain: list, Q_norm: float, omega_ref: float) -> bool:
+    """Whether a point's last three levels contract: all solved, and the change from the middle
+    to the finest smaller than the one before (:meth:`_Levels.distance`). Only then does a
+    further level of the refinement extend a convergence the levels show; where the changes
+    grow, the truncation is not in its asymptotic range there (just above a grazing) or the limit
+    is not an orbit the levels resolve. Seed case 2 from H = 20 by the levels: three points just
+    above the rising grazing whose levels 10-20-40 grow got brackets from levels 80 and 160
+    (0.79591 +- 4e-6 to 0.79663 +- 2.7e-5) that said "met" while the exact curve crosses their
+    hyperplanes at 0.7936 or 0.86 and above; seed case 1 one such point (0.90837 +- 6.2e-4, the
+    crossings at 0.956 and 1.407). ``cant20`` of benchmarks/README_accuracy.md (exact orbits that
+    chatter): 152 of 257 points above rtol 1e-3 after level 40 and 23 of 81 after level 80 do
+    not contract or miss a level; the run still brackets none of its folds (459 s instead of 511 s,
+    most of it the continuation of level 80)."""
+    if len(chain) < 3 or any(st is None for st in chain[-3:]):
+        return False
+    lv = _Levels(chain[-3:], Q_norm, omega_ref)
+    return lv.distance(2) < lv.distance(1)
 
 
 def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest, kind,

@@ -9,6 +9,8 @@ below the asymptotic 2 there), allowed here up to 3x (the largest factor r / (r 
 with the clamped ratio RATE_MIN = 1.5).
 """
 
+import math
+
 import numpy as np
 import pytest
 from scipy.special import ellipk
@@ -233,6 +235,44 @@ def test_rtol_forced_fold_within_tolerance():
     assert acc.met[f]
     assert abs(acc.omega_limit[f] / ref - 1.0) <= acc.omega_limit_error[f] <= 1e-3
     assert abs(b.omega[f] / ref - 1.0) > 0.03
+
+
+def test_contracting_levels():
+    """A point gets a further level only if its last three levels are solved and the change to
+    the finest is smaller than the one before (frequency and displacement, relative)."""
+    from femodes.accuracy import _contracting, _State
+
+    def st(w, q):
+        return _State(Q=np.array([[q]]), P=np.zeros((1, 1)), omega=w, xi=0.0, p=w, H=1)
+
+    assert _contracting([st(1.0, 1.0), st(1.1, 1.0), st(1.15, 1.0)], 1.0, 1.0)
+    assert not _contracting([st(1.0, 1.0), st(1.1, 1.0), st(1.25, 1.0)], 1.0, 1.0)  # the change grows
+    assert not _contracting([st(1.0, 1.0), st(1.1, 1.0), st(1.1, 1.3)], 1.0, 1.0)  # in the displacement
+    assert not _contracting([st(1.0, 1.0), None, st(1.15, 1.0)], 1.0, 1.0)  # a level missing
+    assert not _contracting([st(1.0, 1.0), st(1.1, 1.0)], 1.0, 1.0)  # two levels
+
+
+def test_rtol_levels_not_refined_where_they_do_not_contract(caplog):
+    """Seed case 2 from H = 10 at rtol 1e-3 by the levels: the points whose levels 5-10-20 do not
+    contract get no level 40 (their later brackets were wrong: from H = 20, three such points
+    just above the rising grazing had brackets 0.79591 +- 4e-6 ... 0.79663 +- 2.7e-5 said "met",
+    while the exact curve crosses their hyperplanes at 0.7936 or 0.86 and above). They are the
+    points left unmet at the base level 20 (3), all within 1 % of a grazing (the rising side's,
+    and the lower fold's)."""
+    import logging
+
+    m = _forced(0.2, 1.0, 2.5)
+    with caplog.at_level(logging.INFO, logger="femodes.accuracy"):
+        b = fm.frequency_response(m, (0.5, 2.0), 10, rtol=1e-3, error_method="levels")
+    assert "whose last levels do not contract" in caplog.text
+    acc = b.accuracy
+    stuck = np.flatnonzero(~acc.met & (acc.finest == 20))
+    c, F, g = 0.2, 1.0, 2.5  # the grazings: F / |1 - w^2 + i c w| = g
+    bq = 2.0 - c * c
+    root = math.sqrt(bq * bq - 4.0 * (1.0 - (F / g) ** 2))
+    w_graze = np.sqrt(0.5 * np.array([bq - root, bq + root]))
+    assert 1 <= stuck.size <= 4
+    assert np.all(np.min(np.abs(b.omega[stuck, None] / w_graze - 1.0), axis=1) < 0.01)
 
 
 def test_level_traced_for_some_points_stops_past_the_last(caplog):
