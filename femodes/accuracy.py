@@ -99,7 +99,7 @@ an orbit (its crossings of the later points' hyperplanes are then tried before t
 for the points still without one, and for folds the fold search does not locate. Once it is
 there, the folds are taken from it instead of the fold search (:func:`_folds_from_exact_branch`):
 each is paired with the nearest exact fold that turns the same way, one to one; a fold left
-without a pair is a fold of the truncation and gets no estimate. The cantilever with 3 % modal
+without a pair is a fold of the truncation: no estimate, method ``"truncation"`` (never met). The cantilever with 3 % modal
 damping of ``benchmarks/README_accuracy.md`` (section 5): its main fold at H = 20, 3.8431, gets
 the exact 3.9153002 (a time-domain sweep leaves the upper branch between 3.915 and 3.916), its
 loop of two folds at 3.822 and 3.902 none; 13.5 s for the estimate, 4.3-4.5x the plain curve at
@@ -496,7 +496,7 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     if todo.any():
         _estimate_by_levels(lad, rtol, max_harmonics, todo, ew, eq, rates, w_lim, w_lim_err, finest)
     pen, ten = branch.contact_quality()
-    kind = np.where(np.isfinite(ew), kind, "failed")
+    kind = np.where(np.isfinite(ew) | (kind == "truncation"), kind, "failed")
     branch.set_accuracy(ErrorEstimate(omega=ew, amplitude=eq, penetration=pen, tension=ten,
                                       harmonics=np.full(n, H), rate=rates, method=kind.astype(str), rtol=rtol,
                                       omega_limit=w_lim, omega_limit_error=w_lim_err, finest=finest))
@@ -752,8 +752,8 @@ def _folds_from_exact_branch(lad: _Ladder, flow, eb, unresolved, resolved, ew, e
     nearest exact fold that turns the same way (distance ``|dw| / w + |da| / a_max`` in
     frequency and the largest contact-DOF amplitude), one to one, nearest pairs first; exact
     folds that a located fold already has are not paired again. A fold left without a pair has
-    no counterpart in the limit (a loop of the truncation): no estimate (``"failed"``), and no
-    levels either. Without an exact branch over the span the folds stay for the levels."""
+    no counterpart in the limit (a loop of the truncation): no estimate (method
+    ``"truncation"``), and no levels either. Without an exact branch over the span the folds stay for the levels."""
     from .time.exact import fold_is_upper
 
     branch = lad.branch
@@ -783,7 +783,7 @@ def _folds_from_exact_branch(lad: _Ladder, flow, eb, unresolved, resolved, ew, e
         if i not in taken_i:
             todo[i] = False
             finest[i] = 0
-            kind[i] = "failed"
+            kind[i] = "truncation"
             log.info("accuracy: fold %d (w = %.7g) has no counterpart on the exact branch (folds at %s): a fold of "
                      "the truncation, no estimate", i, branch.omega[i], np.round(eb.fold_omega, 6).tolist())
 

@@ -78,8 +78,10 @@ class Bifurcation:
 #: levels of harmonics (``"doubling"``), from the exact orbit of the flow with rigid stops
 #: (``"shooting"``, :func:`femodes.estimate_error` with ``method="shooting"``), or not at all
 #: (``"failed"``: a level had no solution near the point, e.g. next to a fold that moves by more
-#: than the branch's curvature allows).
-ERROR_METHODS = ("doubling", "shooting", "failed")
+#: than the branch's curvature allows); ``"truncation"``: a fold of the branch that the converged
+#: answer does not have (no fold of the exact branch turns the same way near it: a loop of the
+#: truncation), so no error can be stated for it as a fold (NaN, never met).
+ERROR_METHODS = ("doubling", "shooting", "failed", "truncation")
 
 
 @dataclass(frozen=True, eq=False)

@@ -236,8 +236,8 @@ def test_missed_folds_taken_from_the_exact_branch(monkeypatch):
 
 def test_fold_without_exact_counterpart_gets_no_estimate(monkeypatch):
     """A fold of the truncation that the exact branch does not have (here: the exact branch
-    stripped of its lower fold) is left without an estimate ("failed"), not sent to the levels;
-    the other is paired."""
+    stripped of its lower fold) is left without an estimate and marked "truncation" (never met),
+    not sent to the levels; the other is paired."""
     import femodes.time.exact as exact
 
     real = exact.exact_frequency_response
@@ -255,7 +255,9 @@ def test_fold_without_exact_counterpart_gets_no_estimate(monkeypatch):
     acc = estimate_error(b).accuracy
     up, low = max(b.folds, key=lambda i: b.omega[i]), min(b.folds, key=lambda i: b.omega[i])
     assert acc.method[up] == "shooting"
-    assert acc.method[low] == "failed" and not math.isfinite(acc.omega[low]) and acc.finest[low] == 0
+    assert acc.method[low] == "truncation" and not math.isfinite(acc.omega[low]) and acc.finest[low] == 0
+    acc_r = estimate_error(b, rtol=1e-3).accuracy
+    assert acc_r.method[low] == "truncation" and not acc_r.met[low] and acc_r.met[up]
 
 
 def test_points_without_an_orbit_start_from_the_exact_branch(monkeypatch):
@@ -308,7 +310,7 @@ def test_cantilever_rtol_folds_from_the_exact_branch():
     assert abs(acc.omega_limit[low] - 3.719311942) <= acc.omega_limit_error[low] * acc.omega_limit[low]
     assert acc.omega_limit_error[low] <= 1e-6
     loop = [i for i in b.folds if i not in (main, low)]
-    assert len(loop) == 2 and all(acc.method[i] == "failed" for i in loop)
+    assert len(loop) == 2 and all(acc.method[i] == "truncation" for i in loop)
 
 
 @pytest.mark.slow
