@@ -123,7 +123,7 @@ import numpy as np
 
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
-from .results import Branch, ErrorEstimate
+from .results import ERROR_METHODS, Branch, ErrorEstimate
 from .solvers import ContinuationOptions, NewtonOptions, continuation
 from .solvers.threads import limit_blas_threads
 from .solvers.arclength import ArclengthSystem
@@ -853,16 +853,35 @@ def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun
                     branch.message)
         return branch
     if "complementarity" in branch.contacts.kinds:
-        return estimate_error(branch, rtol=rtol, max_harmonics=max_harmonics, projection=projection, newton=newton,
-                              method=method)
+        estimate_error(branch, rtol=rtol, max_harmonics=max_harmonics, projection=projection, newton=newton,
+                       method=method)
+        _warn_unmet(branch, max_harmonics)
+        return branch
     while True:
         estimate_error(branch, rtol=rtol, projection=projection, newton=newton)
         H = branch.harmonics.n_harmonics
         if branch.accuracy.met.all() or 4 * H > max_harmonics:  # the estimate of 2 H needs level 4 H
+            _warn_unmet(branch, max_harmonics)
             return branch
         log.info("accuracy: %d point(s) above rtol = %g with H = %d; again with H = %d",
                  int((~branch.accuracy.met).sum()), rtol, H, 2 * H)
         branch = rerun(2 * H)
+
+
+def _warn_unmet(branch: Branch, max_harmonics: int) -> None:
+    """A warning that says where ``rtol`` is not met (points, folds and why), if anywhere."""
+    acc = branch.accuracy
+    miss = ~acc.met
+    if not miss.any():
+        return
+    why = {"doubling": f"by the levels (bracket or estimate wider than rtol up to H = {max_harmonics}, or levels "
+                       "that do not contract)", "shooting": "by the exact orbit (the point's error above rtol)",
+           "failed": "without an estimate", "truncation": "folds of the truncation (none in the limit)"}
+    counts = {k: int(np.sum(miss & (acc.method == k))) for k in ERROR_METHODS}
+    folds = [f"w = {float(branch.omega[i]):.6g} ({acc.method[i]})" for i in branch.folds if miss[i]]
+    log.warning("accuracy: rtol = %g not met at %d of %d points%s: %s; branch.accuracy.met tells which",
+                acc.rtol, int(miss.sum()), len(branch), f", including the folds at {', '.join(folds)}" if folds else "",
+                "; ".join(f"{n} {why[k]}" for k, n in counts.items() if n))
 
 
 def refinement_options(rtol, max_harmonics, H: int, owner: str = "estimate_error") -> tuple[float | None, int]:

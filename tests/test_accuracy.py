@@ -258,7 +258,7 @@ def test_rtol_levels_not_refined_where_they_do_not_contract(caplog):
     just above the rising grazing had brackets 0.79591 +- 4e-6 ... 0.79663 +- 2.7e-5 said "met",
     while the exact curve crosses their hyperplanes at 0.7936 or 0.86 and above). They are the
     points left unmet at the base level 20 (3), all within 1 % of a grazing (the rising side's,
-    and the lower fold's)."""
+    and the lower fold's). A warning says how many points miss rtol."""
     import logging
 
     m = _forced(0.2, 1.0, 2.5)
@@ -273,6 +273,9 @@ def test_rtol_levels_not_refined_where_they_do_not_contract(caplog):
     w_graze = np.sqrt(0.5 * np.array([bq - root, bq + root]))
     assert 1 <= stuck.size <= 4
     assert np.all(np.min(np.abs(b.omega[stuck, None] / w_graze - 1.0), axis=1) < 0.01)
+    # the run says where rtol is not met
+    warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert any(f"not met at {int((~acc.met).sum())} of {len(b)} points" in m for m in warned)
 
 
 def test_level_traced_for_some_points_stops_past_the_last(caplog):
