@@ -101,6 +101,14 @@ _INITIAL_MAX_ITER = 50
 #: Iterations and tolerance of the fold localisation (regula falsi on dp/ds).
 _FOLD_MAX_ITER = 12
 _FOLD_TOL = 1e-9
+#: Further evaluations, with bisection where regula falsi does not halve the bracket, for a fold
+#: that ``_FOLD_MAX_ITER`` did not locate although every corrector converged (a sharp fold:
+#: ``dp/ds`` turns within a small part of the step). The exact branch of the cantilever with 3 %
+#: modal damping (benchmarks/README_accuracy.md, section 5) turns at its lower fold within about
+#: 1e-4 of the step: regula falsi left ``|dp/ds|`` at 0.035 of 0.04 after 12 evaluations, and
+#: the step was halved nine times before a step short enough located it (1380 runs of the exact
+#: flow for the branch); with 16 more evaluations it is located after one halving (996 runs).
+_FOLD_SHARP_ITER = 16
 #: A fold counts as located when ``|dp/ds|`` at the best point found is at most this fraction of
 #: the larger ``|dp/ds|`` at the two ends of the step (regula falsi converged, not stopped by a
 #: failed corrector). Seed case 1, penalty law, H = 40, phase predictor: a step of 0.83 across the
@@ -692,11 +700,17 @@ class _Tracer:
             found.append(_Pt(y=np.array(res.x), t=t, nit=res.nit, rnorm=float(np.max(np.abs(res.fun[:n]))), step=s))
             return t[n]
 
-        illinois(dp_ds, 0.0, ds, a.t[n], b.t[n], max_iter=_FOLD_MAX_ITER, ftol=_FOLD_TOL, xtol=1e-12 * ds)
-        best = min(found, key=lambda q: abs(q.t[n])) if found else None
-        if best is None or abs(best.t[n]) > _FOLD_ACCEPT * max(abs(a.t[n]), abs(b.t[n])):
-            return None
-        return best
+        def best() -> _Pt | None:
+            q = min(found, key=lambda q: abs(q.t[n])) if found else None
+            return None if q is None or abs(q.t[n]) > _FOLD_ACCEPT * max(abs(a.t[n]), abs(b.t[n])) else q
+
+        br = illinois(dp_ds, 0.0, ds, a.t[n], b.t[n], max_iter=_FOLD_MAX_ITER, ftol=_FOLD_TOL, xtol=1e-12 * ds)
+        if best() is None and br.nfev == _FOLD_MAX_ITER and len(found) == br.nfev:
+            # a sharp fold: dp/ds turns within a small part of the step and looks like a jump on its
+            # scale, where regula falsi crawls; bisection narrows the bracket down to where it turns
+            illinois(dp_ds, br.lo, br.hi, br.f_lo, br.f_hi, max_iter=_FOLD_SHARP_ITER, ftol=_FOLD_TOL,
+                     xtol=1e-12 * ds, bisect_if_slow=True)
+        return best()
 
     # -- span end ---------------------------------------------------------- #
     def crossed(self, p: float) -> float | None:
