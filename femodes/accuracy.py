@@ -102,8 +102,8 @@ each is paired with the nearest exact fold that turns the same way, one to one; 
 without a pair is a fold of the truncation: no estimate, method ``"truncation"`` (never met). The cantilever with 3 % modal
 damping of ``benchmarks/README_accuracy.md`` (section 5): its main fold at H = 20, 3.8431, gets
 the exact 3.9153002 (a time-domain sweep leaves the upper branch between 3.915 and 3.916), its
-loop of two folds at 3.822 and 3.902 none; 13.5 s for the estimate, 4.3-4.5x the plain curve at
-rtol 1e-3 and 1e-4. The seed cases and the FE bars never need the exact branch.
+loop of two folds at 3.822 and 3.902 none; 3.9-4.1x the plain curve at rtol 1e-3 and 1e-4
+(medians of three, README_accuracy section 6). The seed cases and the FE bars never need the exact branch.
 That harmonic balance converges to the restitution-1 orbit is verified on the 1-DOF references
 to round-off and on the FE bar of ``benchmarks/README_accuracy.md`` against its plain folds up
 to H = 640.

@@ -291,11 +291,11 @@ def test_cantilever_rtol_folds_from_the_exact_branch():
     """The cantilever with 3 % modal damping at H = 20: Newton from the points on the rising side
     finds no orbit, so the exact branch is traced and its folds are paired with the branch's:
     the main (largest-amplitude) fold, 3.843 at H = 20, gets the exact upper fold 3.91530 (the
-    time-domain sweep's jump, slow test below), the lower fold 3.7193119 +- 1e-6 (detected at
-    3.7193283 by the continuation, refined from both sides by short-step continuations;
-    separate short-step continuations give 3.719311942, the fold search 3.7193120 +- 2.3e-7),
-    and the loop of two folds at 3.822 and 3.902, which H = 40 and 80 do not have, no
-    estimate."""
+    time-domain sweep's jump, slow test below), the lower fold 3.7193120 +- 1e-6 (a sharp fold,
+    located by the continuation after one halving of its step; separate short-step
+    continuations give 3.719311942, the fold search 3.7193120 +- 2.3e-7), and the loop of two
+    folds at 3.822 and 3.902, which H = 40 and 80 do not have, no estimate (method
+    "truncation")."""
     mesh = fm.line_mesh(length=1.0, n_elements=10, boundaries={"clamp": 0.0, "tip": 1.0})
     beam = fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
     model = (beam.with_contact(fm.UnilateralContact(at="tip", gap=0.01)).with_damping(modal=0.03)

@@ -1111,9 +1111,10 @@ def _refine_fold(problem: _ShootingResidual, omega: np.ndarray, ys: np.ndarray, 
     extreme frequency of theirs and the branch's points, the larger distance of either side's
     extreme from it relative to it (at least EXACT_FOLD_RTOL))``, or None if a side gets no
     point (the sampled window then stands). On the cantilever of ``benchmarks/bench_cantilever_time.py``
-    (3 % modal damping) the lower fold was detected at 3.7193283; the two sides reach
-    3.71931195 and 3.7193120 (233 runs), 4.4e-6 lower, where the fold search of
-    :mod:`femodes.accuracy` puts it (3.7193120 +- 2.3e-7)."""
+    (3 % modal damping) the lower fold was detected at 3.7193283 before the continuation located
+    sharp folds (``_FOLD_SHARP_ITER``); the two sides reached 3.71931195 and 3.7193120 (233 runs),
+    4.4e-6 lower, where the fold search of :mod:`femodes.accuracy` puts it (3.7193120 +- 2.3e-7).
+    Seed case 2's lower fold, a grazing where the corrector fails, is still refined so."""
     upper = fold_is_upper(omega, j)
     lo, hi = max(j - 2, 0), min(j + 2, omega.size - 1)
     if lo == j or hi == j:
