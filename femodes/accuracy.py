@@ -878,7 +878,8 @@ def _warn_unmet(branch: Branch, max_harmonics: int) -> None:
                        "that do not contract)", "shooting": "by the exact orbit (the point's error above rtol)",
            "failed": "without an estimate", "truncation": "folds of the truncation (none in the limit)"}
     counts = {k: int(np.sum(miss & (acc.method == k))) for k in ERROR_METHODS}
-    folds = [f"w = {float(branch.omega[i]):.6g} ({acc.method[i]})" for i in branch.folds if miss[i]]
+    short = {"doubling": "levels", "shooting": "exact orbit", "failed": "no estimate", "truncation": "truncation"}
+    folds = [f"w = {float(branch.omega[i]):.6g} ({short[str(acc.method[i])]})" for i in branch.folds if miss[i]]
     log.warning("accuracy: rtol = %g not met at %d of %d points%s: %s; branch.accuracy.met tells which",
                 acc.rtol, int(miss.sum()), len(branch), f", including the folds at {', '.join(folds)}" if folds else "",
                 "; ".join(f"{n} {why[k]}" for k, n in counts.items() if n))
@@ -1142,16 +1143,29 @@ def _trace_segment(lad: _Ladder, H: int, idx: np.ndarray, forward: bool, out: li
 PAST_LAST = 2
 
 
+#: A level traced for some points stops once it has taken more than LEVEL_POINTS_PER_POINT
+#: continuation points per branch point it has passed, plus LEVEL_POINTS_SLACK (:class:`_Progress`):
+#: it then follows loops the branch does not have, and its later crossings would not converge
+#: either. The seed cases' levels 80 and 160 take at most 3 per point; on ``cant20`` of
+#: benchmarks/README_accuracy.md (exact orbits that chatter) level 80 took 1272 points (269 s CPU)
+#: to pass 99 branch points, level 160 343 points (170 s) for 19.
+LEVEL_POINTS_PER_POINT, LEVEL_POINTS_SLACK = 8, 100
+
+
 class _Progress:
     """Callback of a level's continuation: follows which branch point the level is nearest to
     (in the direction ``step`` of the trace only, a few points ahead, in displacements and
     frequency) and stops the run once that is past branch point ``last``. On the seed's forced case from H = 20 at rtol 1e-3 the needed
     points of levels 80 and 160 end at w = 1.11 on the lower branch; the rest of the branch up to
     w = 2 was 24 of the 122 points of level 80 and 24 of the 215 of level 160 (few contacts there,
-    cheap points: about 1 s of the 25 s run). Without the stop a level is traced to the end."""
+    cheap points: about 1 s of the 25 s run). Without the stop a level is traced to the end. It
+    also stops a level that takes too many points for the branch points it passes
+    (:data:`LEVEL_POINTS_PER_POINT`)."""
 
     def __init__(self, lad: _Ladder, H: int, near: np.ndarray, first: int, last: int, step: int = 1):
         self.lad, self.H, self.near, self.at, self.last, self.step = lad, H, near, first, last, step
+        self.first = first
+        self.points = 0
         self.vectors: dict = {}
 
     def _vector(self, i: int) -> np.ndarray:
@@ -1169,6 +1183,13 @@ class _Progress:
         self.at = ahead[int(np.argmin([float(((y - self._vector(i)) ** 2) @ self.near) for i in ahead]))]
         for i in [k for k in self.vectors if (k - self.at) * self.step < 0]:
             del self.vectors[i]
+        self.points += 1
+        passed = (self.at - self.first) * self.step
+        if self.points > LEVEL_POINTS_PER_POINT * passed + LEVEL_POINTS_SLACK:
+            log.info("accuracy: level H = %d stopped after %d continuation points for %d points of the branch (more "
+                     "than %d per point: it follows loops the branch does not have)", self.H, self.points, passed,
+                     LEVEL_POINTS_PER_POINT)
+            return False
         return (self.last - self.at) * self.step >= 0
 
 

@@ -278,6 +278,32 @@ def test_rtol_levels_not_refined_where_they_do_not_contract(caplog):
     assert any(f"not met at {int((~acc.met).sum())} of {len(b)} points" in m for m in warned)
 
 
+def test_level_trace_stops_when_it_does_not_pass_the_branch():
+    """A level traced for some points stops once it takes more than LEVEL_POINTS_PER_POINT
+    continuation points per branch point passed (plus LEVEL_POINTS_SLACK): a level that stays
+    at one branch point is stopped after exactly that many; one that passes a branch point per
+    continuation point is not."""
+    from types import SimpleNamespace
+
+    from femodes.accuracy import LEVEL_POINTS_SLACK, _anchor, _ladder, _Progress
+
+    b = fm.frequency_response(_forced(), (0.5, 2.0), 10)
+    lad = _ladder(b, None, None, "test")
+    H = 10
+    near = lad.weights(H)
+
+    def point(i):
+        a = _anchor(b, i)
+        v = lad.vector(H, a.Q, a.P, a.omega, a.xi, a.p)
+        return SimpleNamespace(x=v[:-1], p=float(v[-1]))
+
+    stuck = _Progress(lad, H, near, 5, len(b) - 3)
+    answers = [stuck(point(5)) for _ in range(LEVEL_POINTS_SLACK + 1)]
+    assert all(answers[:-1]) and answers[-1] is False
+    moving = _Progress(lad, H, near, 5, len(b) - 3)
+    assert all(moving(point(i)) for i in range(6, len(b) - 3))
+
+
 def test_level_traced_for_some_points_stops_past_the_last(caplog):
     """A refinement level traced for some points only stops a few points past the last of them
     (``_Progress``), with the same states for those points as a trace of the whole branch (each
