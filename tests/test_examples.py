@@ -38,12 +38,18 @@ def test_cantilever_reduction_example(tmp_path):
     assert png.stat().st_size > 10_000
 
 
-def test_cli_demo_and_help(tmp_path):
+@pytest.mark.slow
+def test_cli_demo(tmp_path):
+    """``femodes demo`` end to end through the CLI in its own process (about 35 s; the demo
+    itself is checked in the fast suite by tests/test_demo.py, which runs it in-process)."""
     out = tmp_path / "demo"
     r = subprocess.run([sys.executable, "-m", "femodes.app.cli", "demo", "--out", str(out)], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert (out / "cantilever_modes.png").is_file() and (out / "summary.txt").is_file()
     assert "outputs written to" in r.stdout
+
+
+def test_cli_help_and_bad_command():
     h = subprocess.run([sys.executable, "-m", "femodes.app.cli", "--help"], capture_output=True, text=True, timeout=60)
     assert h.returncode == 0 and "demo" in h.stdout
     bad = subprocess.run([sys.executable, "-m", "femodes.app.cli", "nonsense"], capture_output=True, text=True, timeout=60)
