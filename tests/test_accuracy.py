@@ -254,11 +254,11 @@ def test_contracting_levels():
 
 def test_rtol_levels_not_refined_where_they_do_not_contract(caplog):
     """Seed case 2 from H = 10 at rtol 1e-3 by the levels: the points whose levels 5-10-20 do not
-    contract get no level 40 (their later brackets were wrong: from H = 20, three such points
-    just above the rising grazing had brackets 0.79591 +- 4e-6 ... 0.79663 +- 2.7e-5 said "met",
-    while the exact curve crosses their hyperplanes at 0.7936 or 0.86 and above). They are the
-    points left unmet at the base level 20 (3), all within 1 % of a grazing (the rising side's,
-    and the lower fold's). A warning says how many points miss rtol."""
+    contract get no level 40. (Their later brackets were wrong: from H = 20, three such points
+    just above the rising grazing got brackets from 0.79591 +- 4e-6 to 0.79663 +- 2.7e-5 that
+    said "met", while the exact curve crosses their hyperplanes at 0.7936 or at 0.86 and above.)
+    They are the points left unmet at the base level 20 (3 here), all within 1 % of a grazing
+    (the rising side's, and the lower fold's). A warning says how many points miss rtol."""
     import logging
 
     m = _forced(0.2, 1.0, 2.5)
