@@ -572,8 +572,9 @@ def _contracting(chain: list, Q_norm: float, omega_ref: float) -> bool:
     hyperplanes at 0.7936 or 0.86 and above; seed case 1 one such point (0.90837 +- 6.2e-4, the
     crossings at 0.956 and 1.407). ``cant20`` of benchmarks/README_accuracy.md (exact orbits that
     chatter): 152 of 257 points above rtol 1e-3 after level 40 and 23 of 81 after level 80 do
-    not contract or miss a level; the run still brackets none of its folds (459 s instead of 511 s,
-    most of it the continuation of level 80)."""
+    not contract or miss a level; that alone took its estimate from 511 s to 459 s, most of it
+    still the continuation of level 80, which :data:`LEVEL_POINTS_PER_POINT` now stops (280 s); it
+    brackets none of its folds either way."""
     if len(chain) < 3 or any(st is None for st in chain[-3:]):
         return False
     lv = _Levels(chain[-3:], Q_norm, omega_ref)
@@ -874,15 +875,17 @@ def _warn_unmet(branch: Branch, max_harmonics: int) -> None:
     miss = ~acc.met
     if not miss.any():
         return
-    why = {"doubling": f"by the levels (bracket or estimate wider than rtol up to H = {max_harmonics}, or levels "
-                       "that do not contract)", "shooting": "by the exact orbit (the point's error above rtol)",
-           "failed": "without an estimate", "truncation": "folds of the truncation (none in the limit)"}
+    # per method: its name in the fold list, and why its points miss rtol
+    words = {"doubling": ("levels", f"by the levels (bracket or estimate wider than rtol up to H = {max_harmonics}, "
+                                    "or levels that do not contract)"),
+             "shooting": ("exact orbit", "by the exact orbit (the point's error above rtol)"),
+             "failed": ("no estimate", "without an estimate"),
+             "truncation": ("truncation", "folds of the truncation (none in the limit)")}
     counts = {k: int(np.sum(miss & (acc.method == k))) for k in ERROR_METHODS}
-    short = {"doubling": "levels", "shooting": "exact orbit", "failed": "no estimate", "truncation": "truncation"}
-    folds = [f"w = {float(branch.omega[i]):.6g} ({short[str(acc.method[i])]})" for i in branch.folds if miss[i]]
+    folds = [f"w = {float(branch.omega[i]):.6g} ({words[str(acc.method[i])][0]})" for i in branch.folds if miss[i]]
     log.warning("accuracy: rtol = %g not met at %d of %d points%s: %s; branch.accuracy.met tells which",
                 acc.rtol, int(miss.sum()), len(branch), f", including the folds at {', '.join(folds)}" if folds else "",
-                "; ".join(f"{n} {why[k]}" for k, n in counts.items() if n))
+                "; ".join(f"{n} {words[k][1]}" for k, n in counts.items() if n))
 
 
 def refinement_options(rtol, max_harmonics, H: int, owner: str = "estimate_error") -> tuple[float | None, int]:
