@@ -15,9 +15,10 @@ Newton cannot jump between levels from the branch's own point (the truncated or 
 forces are outside its basin), so each level is traced: with impacts by a continuation of the
 level itself from a point without contact, each point being the crossing of that curve with its
 hyperplane (:func:`_trace_level_by_continuation`; points it misses are walked from their
-predecessor; points without contact force are every level's own point, nothing is solved for
-them, so the continuation runs from the last of them before the first contact to two points
-after the last contact), for smooth laws along the branch, point after point (:func:`_trace_level`). A
+predecessor, and a continuation that stopped short starts again from a walked point; points
+without contact force are every level's own point, nothing is solved for them, so the
+continuation runs from the last of them before the first contact to two points after the last
+contact), for smooth laws along the branch, point after point (:func:`_trace_level`). A
 located fold is the level's nearest fold, so fold frequencies of the levels are compared
 directly.
 
@@ -254,9 +255,12 @@ class _Ladder:
         x = self.problem(H).pack(Qw, Pw, 1.0 / self.sw ** 2, 1.0 / self.sw ** 2)
         return np.append(x, 1.0 / self.sp ** 2)
 
-    def solve(self, H: int, anchor: _State, normal: _State, guess: _State | None = None) -> _State | None:
+    def solve(self, H: int, anchor: _State, normal: _State, guess: _State | None = None,
+              deadline: int | None = None) -> _State | None:
         """The level-``H`` solution on the hyperplane through ``anchor`` normal to ``normal``
-        (both on the branch's harmonics), Newton from ``guess`` (default: the anchor)."""
+        (both on the branch's harmonics), Newton from ``guess`` (default: the anchor); with
+        ``deadline``, abandoned as the continuation abandons a corrector
+        (:meth:`~femodes.solvers.arclength.ArclengthSystem.correct`)."""
         prob = self.problem(H)
         a = self.vector(H, anchor.Q, anchor.P, anchor.omega, anchor.xi, anchor.p)
         c = self.weights(H) * self.vector(H, normal.Q, normal.P, normal.omega, normal.xi, normal.p)
@@ -267,7 +271,7 @@ class _Ladder:
             g = g - (c @ (g - a)) / (c @ c) * c  # onto the hyperplane
         sysa = ArclengthSystem(prob, prob.size, self.newton, bordered_solver)
         with np.errstate(all="ignore"):
-            res = sysa.correct(g, c)
+            res = sysa.correct(g, c, deadline)
         if not res.success:
             log.debug("level H=%d: no solution on the hyperplane (%s)", H, res.message)
             return None
@@ -573,7 +577,7 @@ def _contracting(chain: list, Q_norm: float, omega_ref: float) -> bool:
     crossings at 0.956 and 1.407). ``cant20`` of benchmarks/README_accuracy.md (exact orbits that
     chatter): 152 of 257 points above rtol 1e-3 after level 40 and 23 of 81 after level 80 do
     not contract or miss a level; that alone took its estimate from 511 s to 459 s, most of it
-    still the continuation of level 80, which :data:`LEVEL_POINTS_PER_POINT` now stops (280 s); it
+    still the continuation of level 80, which :data:`LEVEL_POINTS_PER_POINT` now stops; it
     brackets none of its folds either way."""
     if len(chain) < 3 or any(st is None for st in chain[-3:]):
         return False
@@ -915,6 +919,12 @@ def _ladder(branch, projection, newton, owner: str) -> _Ladder:
 MIN_FRACTION = 1.0 / 16.0
 
 
+#: A step of a walk (:func:`_walk`) whose Newton has not halved the residual of its guess after this
+#: many iterations is abandoned and halved, as a step of the continuation is
+#: (``ContinuationOptions.corrector_deadline``).
+WALK_DEADLINE = 3
+
+
 def _walk(lad: _Ladder, H: int, prev: tuple, anchor: _State, t0: _State, t1: _State) -> _State | None:
     """The level-``H`` point of ``anchor`` from the level's point ``prev = (anchor0, state0)`` of
     the previous branch point: in one step, or in fractions of it (halved down to
@@ -927,7 +937,7 @@ def _walk(lad: _Ladder, H: int, prev: tuple, anchor: _State, t0: _State, t1: _St
         theta = done + frac
         target = anchor if theta >= 1.0 else lad.blend(a0, anchor, theta)
         tangent = t1 if theta >= 1.0 else lad.blend(t0, t1, theta)
-        st = lad.solve(H, target, tangent, lad.moved(H, s0, lad.blend(a0, anchor, done), target))
+        st = lad.solve(H, target, tangent, lad.moved(H, s0, lad.blend(a0, anchor, done), target), WALK_DEADLINE)
         if st is None:
             if frac <= MIN_FRACTION:
                 return None
@@ -945,7 +955,7 @@ def _level_point(lad: _Ladder, H: int, i: int, anchor: _State, prev: tuple | Non
     tangents = lad.tangents
     st = _walk(lad, H, prev, anchor, tangents[i - 1], tangents[i]) if prev is not None else None
     if st is None:
-        st = lad.solve(H, anchor, tangents[i], None)
+        st = lad.solve(H, anchor, tangents[i], None, WALK_DEADLINE)
     if st is None:
         log.info("accuracy: point %d has no solution with H = %d near it", i, H)
     return st
@@ -990,7 +1000,17 @@ def _trace_level_by_continuation(lad: _Ladder, H: int) -> list:
     Walking level 2H along every point costs more than tracing it: on the seed's forced case at
     H = 20, 230 hyperplane solves (26 failing, halved) and 33 s of CPU for level 40, against
     10 s by continuation with the same fold bracket; at H = 40 the walk lost level 80 one point
-    before the upper fold and never recovered (NaN at the fold after 15 minutes)."""
+    before the upper fold and never recovered (NaN at the fold after 15 minutes).
+
+    So a continuation that stops short is started again from the first point walked after the
+    stop that has :data:`RESTART_MIN_POINTS` unsolved points after it (at most
+    :data:`LEVEL_RESTARTS` times), and the walk's Newton solves are abandoned early
+    (:data:`WALK_DEADLINE`). ``cant20`` of benchmarks/README_accuracy.md (exact orbits that
+    chatter) from H = 20: level 40's continuation stops at w = 3.63913, where its corrector makes
+    no progress (residual 8e-8 at best); walking the 121 points left took 87 s of CPU and solved
+    44 of them; with one restart from point 186 and the deadline, 49 points are walked and the
+    level has 277 of the 316 points with contact instead of 246, in 39 s instead of 103 s for the
+    whole level."""
     branch = lad.branch
     n = len(branch)
     if H == branch.harmonics.n_harmonics:
@@ -1000,18 +1020,24 @@ def _trace_level_by_continuation(lad: _Ladder, H: int) -> list:
     for i in np.flatnonzero(free):  # the branch's point is the level's (padded): nothing to solve
         out[i] = lad.padded(H, i)
     folds = set(branch.folds)
-    missed = 0
+    missed = restarts = 0
     for i in range(n):
         if out[i] is not None or i in folds:
             continue
         missed += 1
         prev = (_anchor(branch, i - 1), out[i - 1]) if i > 0 and out[i - 1] is not None and i - 1 not in folds else None
         out[i] = _level_point(lad, H, i, _anchor(branch, i), prev)
+        if (out[i] is not None and restarts < LEVEL_RESTARTS and i + RESTART_MIN_POINTS < n
+                and all(out[k] is None and k not in folds for k in range(i + 1, i + 1 + RESTART_MIN_POINTS))):
+            restarts += 1  # the level's own continuation again, from the point just walked
+            _trace_segment(lad, H, np.array([k for k in range(i + 1, n) if out[k] is None and k not in folds]),
+                           True, out, start=(i, out[i]))
     for f in branch.folds:
         if out[f] is None:
             out[f] = lad.locate_fold(H, out, f)
     if missed:
-        log.info("accuracy: level H = %d: %d of %d points not on its continuation, walked", H, missed, n)
+        log.info("accuracy: level H = %d: %d of %d points not on its continuation, walked (%d restarts of the "
+                 "continuation)", H, missed, n, restarts)
     return out
 
 
@@ -1078,17 +1104,26 @@ def _plan_traces(branch: Branch, need: np.ndarray) -> list[tuple[np.ndarray, boo
     return [(first, True), (second, False)]
 
 
-def _trace_segment(lad: _Ladder, H: int, idx: np.ndarray, forward: bool, out: list) -> None:
+def _trace_segment(lad: _Ladder, H: int, idx: np.ndarray, forward: bool, out: list,
+                   start: tuple[int, _State] | None = None) -> None:
     """One continuation of level ``H`` for the needed points ``idx`` (:func:`_trace_by_continuation`):
     forward from the last point without contact before ``idx[0]``, or backward from the branch's
-    last point (without contact); the level points of ``idx`` are written into ``out``."""
+    last point (without contact), or forward from ``start = (i, state)``, the level's point of
+    branch point ``i`` (in the direction the branch goes there, up to the branch's extreme
+    parameter that way); the level points of ``idx`` are written into ``out``."""
     branch = lad.branch
     n = len(branch)
-    start = _free_before(branch, int(idx[0])) if forward else n - 1
-    a0 = _anchor(branch, start)
     prob = lad.problem(H)
-    x0 = lad.vector(H, a0.Q, a0.P, a0.omega, a0.xi, a0.p)[:-1]
-    span = (a0.p, float(branch.parameter[-1] if forward else branch.parameter[0]))
+    if start is None:
+        start_i = _free_before(branch, int(idx[0])) if forward else n - 1
+        a0 = _anchor(branch, start_i)
+        x0 = lad.vector(H, a0.Q, a0.P, a0.omega, a0.xi, a0.p)[:-1]
+        span = (a0.p, float(branch.parameter[-1] if forward else branch.parameter[0]))
+    else:
+        start_i, s0 = start
+        x0 = lad.vector(H, s0.Q, s0.P, s0.omega, s0.xi, s0.p)[:-1]
+        up = lad.tangents[start_i].p > 0
+        span = (s0.p, float(np.max(branch.parameter) if up else np.min(branch.parameter)))
     if span[1] == span[0]:
         return
     w = lad.weights(H)
@@ -1101,7 +1136,7 @@ def _trace_segment(lad: _Ladder, H: int, idx: np.ndarray, forward: bool, out: li
                         0.0) != 0] = 0.0
     if forward:
         last = int(idx[-1]) + PAST_LAST
-        progress = _Progress(lad, H, near, start, last) if last < n - 1 else None
+        progress = _Progress(lad, H, near, start_i, last) if last < n - 1 or start is not None else None
     else:  # followed from the first point without contact after the group (the level's own point
         # up to there, wherever the long contact-free steps land)
         last = int(idx[0]) - PAST_LAST
@@ -1116,8 +1151,9 @@ def _trace_segment(lad: _Ladder, H: int, idx: np.ndarray, forward: bool, out: li
                                locate_folds=locate)
     with np.errstate(all="ignore"):
         res = continuation(prob, span, x0=x0, options=opts)
-    log.info("accuracy: level H = %d traced by continuation %s from point %d: %d points (%s)", H,
-             "forward" if forward else "backward", start, len(res.p), res.message)
+    log.info("accuracy: level H = %d traced by continuation %s from point %d%s: %d points (%s)", H,
+             "forward" if forward else "backward", start_i, "" if start is None else " (walked, restart)",
+             len(res.p), res.message)
     Y = np.column_stack([res.x, res.p])
     tangents = lad.tangents
     for i in idx:
@@ -1141,6 +1177,13 @@ def _trace_segment(lad: _Ladder, H: int, idx: np.ndarray, forward: bool, out: li
             out[f] = lad.state(H, Y[k])
 
 
+#: A level whose continuation stopped short (:func:`_trace_level_by_continuation`) is traced again
+#: by continuation from a point walked after the stop when the RESTART_MIN_POINTS points after it
+#: are unsolved, at most LEVEL_RESTARTS times per level (a walked point costs several hyperplane
+#: solves, a point of the continuation one corrector).
+LEVEL_RESTARTS, RESTART_MIN_POINTS = 4, 3
+
+
 #: A level traced for some points only (:func:`_trace_by_continuation`) stops once it is nearest
 #: to the branch point this many points after the last point it is traced for.
 PAST_LAST = 2
@@ -1149,10 +1192,14 @@ PAST_LAST = 2
 #: A level traced for some points stops once it has taken more than LEVEL_POINTS_PER_POINT
 #: continuation points per branch point it has passed, plus LEVEL_POINTS_SLACK (:class:`_Progress`):
 #: it then follows loops the branch does not have, and its later crossings would not converge
-#: either. The seed cases' levels 80 and 160 take at most 3 per point; on ``cant20`` of
-#: benchmarks/README_accuracy.md (exact orbits that chatter) level 80 took 1272 points (269 s CPU)
-#: to pass 99 branch points, level 160 343 points (170 s) for 19.
-LEVEL_POINTS_PER_POINT, LEVEL_POINTS_SLACK = 8, 100
+#: either. Measured at every point of every trace (levels 5-160) of the seed cases from H = 10
+#: and 20 at rtol 1e-3 and 1e-4, and of the bars with 10 and 20 elements by the levels: the
+#: points taken exceed 4 per branch point passed by at most 48 (seed case 2, level 160). On
+#: ``cant20`` of benchmarks/README_accuracy.md (exact orbits that chatter) level 80 is stopped
+#: after 177 points for 19 branch points, level 160 after 137 for 9; with 8 per point they took
+#: 597 points for 62 and 189 for 11 (100 s and 60 s of CPU), and without the stop 1272 points
+#: (269 s) and 343 (170 s).
+LEVEL_POINTS_PER_POINT, LEVEL_POINTS_SLACK = 4, 100
 
 
 class _Progress:

@@ -9,6 +9,7 @@ below the asymptotic 2 there), allowed here up to 3x (the largest factor r / (r 
 with the clamped ratio RATE_MIN = 1.5).
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -364,3 +365,66 @@ def test_level_traced_backward_for_the_far_side(caplog):
     stiff = _forced().with_nonlinearity(fm.CubicSpring(at=0, k3=0.5))
     low = fm.frequency_response(stiff, (0.5, 0.7), 6)
     assert np.all(low.P == 0) and _without_contact(branch).any() and not _without_contact(low).any()
+
+
+def test_level_continuation_restarts_after_a_stop(caplog, monkeypatch):
+    """A level whose continuation stops short (here: its points after the first few contact
+    points dropped, as a corrector that fails at a nonsmooth point leaves them) walks the next
+    point and restarts its continuation from there, instead of walking every point left: one
+    point walked, one restart, and the same states as the uninterrupted trace (each the level's
+    solution on the point's hyperplane, polished by Newton to atol 1e-9: equal to 1e-9)."""
+    import logging
+
+    from femodes import accuracy as am
+
+    branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
+    lad = am._ladder(branch, None, None, "test")
+    n = len(branch)
+    every = am._trace_level_by_continuation(lad, 20)
+    cut = int(np.flatnonzero(~am._without_contact(branch))[0]) + 5
+    whole = am._trace_by_continuation
+
+    def short(lad_, H, need):
+        out = whole(lad_, H, need)
+        return out[: cut + 1] + [None] * (n - cut - 1)
+
+    monkeypatch.setattr(am, "_trace_by_continuation", short)
+    with caplog.at_level(logging.INFO, logger="femodes.accuracy"):
+        again = am._trace_level_by_continuation(lad, 20)
+    assert f"traced by continuation forward from point {cut + 1} (walked, restart)" in caplog.text
+    assert f"1 of {n} points not on its continuation, walked (1 restarts" in caplog.text
+    for i in range(n):
+        assert again[i] is not None and every[i] is not None
+        assert abs(again[i].omega - every[i].omega) <= 1e-9
+        np.testing.assert_allclose(again[i].Q, every[i].Q, rtol=0, atol=1e-9)
+
+
+def test_walk_deadline_abandons_a_stalling_solve(caplog):
+    """Newton from the branch's own point does not reach level 2H near the upper fold (module
+    docstring): with WALK_DEADLINE the hyperplane solve is abandoned (the continuation's rule:
+    the residual not halved after that many iterations) instead of running to max_iter; from a
+    guess next to the level's solution it still converges, to the same point (atol 1e-9 of the
+    Newton options: equal to 1e-8)."""
+    import logging
+
+    from femodes.accuracy import WALK_DEADLINE, _anchor, _contact_force_peak, _ladder
+
+    b = fm.frequency_response(_forced(), (0.5, 2.0), 20)
+    lad = _ladder(b, None, None, "test")
+    peak = _contact_force_peak(b)
+    peak[list(b.folds)] = -np.inf  # a fold's level point is the level's fold, not on the point's hyperplane
+    i = int(np.argmax(peak))
+    a, t = _anchor(b, i), lad.tangents[i]
+    with caplog.at_level(logging.DEBUG, logger="femodes.accuracy"):
+        assert lad.solve(40, a, t, None, WALK_DEADLINE) is None
+    assert "abandoned" in caplog.text
+    # the level's point, from the level's continuation, then disturbed and solved with the deadline
+    from femodes.accuracy import _trace_level_by_continuation
+
+    exact = _trace_level_by_continuation(lad, 40)[i]
+    assert exact is not None
+    guess = dataclasses.replace(exact, Q=exact.Q * (1 + 1e-4), P=exact.P * (1 + 1e-4))
+    again = lad.solve(40, a, t, guess, WALK_DEADLINE)
+    assert again is not None
+    assert abs(again.omega - exact.omega) <= 1e-8
+    np.testing.assert_allclose(again.Q, exact.Q, rtol=0, atol=1e-8)
