@@ -4,6 +4,8 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN     = $(VENV)/bin
 STAMP   = $(VENV)/.installed
+# test workers (pytest-xdist): the suite on both cores of the reference machine; JOBS=0 runs it serially
+JOBS   ?= 2
 
 .PHONY: demo test test-slow bench clean venv
 
@@ -20,10 +22,10 @@ demo: $(STAMP)
 	$(BIN)/femodes demo
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(JOBS)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -q -m slow || [ $$? -eq 5 ]
+	$(BIN)/python -m pytest -q -n $(JOBS) -m slow || [ $$? -eq 5 ]
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_models.py
