@@ -828,6 +828,14 @@ def fold_is_upper(omega: np.ndarray, j: int) -> bool:
     return bool(omega[j] >= 0.5 * (omega[lo] + omega[hi]))
 
 
+def _fold_window(omega: np.ndarray, j: int) -> tuple[np.ndarray, bool, float]:
+    """The frequencies of fold ``j`` and of the :data:`FOLD_WINDOW` points on either side of it,
+    whether it is an upper fold (:func:`fold_is_upper`), and their extreme frequency that way."""
+    win = omega[max(j - FOLD_WINDOW, 0):min(j + FOLD_WINDOW + 1, omega.size)]
+    upper = fold_is_upper(omega, j)
+    return win, upper, float(win.max() if upper else win.min())
+
+
 class ExactBranch:
     """Periodic orbits of a linear model with rigid stops traced by continuation in the forcing
     frequency (:func:`exact_frequency_response`).
@@ -895,10 +903,7 @@ class ExactBranch:
         out_w, out_e = np.zeros(len(self.folds)), np.zeros(len(self.folds))
         out_u = np.zeros(len(self.folds), dtype=bool)
         for k, j in enumerate(self.folds):
-            lo, hi = max(j - FOLD_WINDOW, 0), min(j + FOLD_WINDOW + 1, w.size)
-            win = w[lo:hi]
-            upper = out_u[k] = fold_is_upper(w, j)
-            extreme = win.max() if upper else win.min()
+            win, out_u[k], extreme = _fold_window(w, j)
             if w[j] == extreme:  # the located fold is the extreme frequency around it
                 out_w[k], out_e[k] = w[j], EXACT_FOLD_RTOL
             else:  # it is not (a kink of the branch next to it): the sampled extreme, and the window's range
@@ -1131,7 +1136,7 @@ def _refine_fold(problem: _ShootingResidual, omega: np.ndarray, ys: np.ndarray, 
         p = np.asarray(r.p, dtype=float)
         ext.append(float(p.max() if upper else p.min()))
     # the branch's own points bound the fold too: the extreme of all, and how far each side fell short
-    win = omega[max(j - FOLD_WINDOW, 0):j + FOLD_WINDOW + 1]
-    best = max(ext + [float(win.max())]) if upper else min(ext + [float(win.min())])
+    extreme = _fold_window(omega, j)[2]
+    best = max(ext + [extreme]) if upper else min(ext + [extreme])
     log.info("exact branch: fold %d detected at w = %.8g, refined from both sides to %.8g and %.8g", j, omega[j], *ext)
     return best, max(max(abs(best - e) for e in ext) / abs(best), EXACT_FOLD_RTOL)
