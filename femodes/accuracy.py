@@ -1405,18 +1405,18 @@ class _Shooter:
         all from the variational run: the monodromy matrix, the end state's and the
         coefficients' change with ``w`` at the fixed start phase (:attr:`FlowRun.x_end_omega`,
         :meth:`FlowRun.coefficient_omega`) and the hyperplane's gradient."""
-        flow = self.flow.at(omega)
-        run = flow.run(x0, theta0 / omega, variational=jac)
+        from .time.exact import periodicity_residual
+
+        F, dFdx, dFdw, run = periodicity_residual(self.flow, x0, omega, theta0 / omega, variational=jac)
         self.runs += 1
-        F = run.x_end - x0
         h = plane.value(run, omega)
         if not jac:
             return F, h, None, run
         n2 = 2 * self.n
         J = np.zeros((n2 + 1, n2 + 1))
-        J[:n2, :n2] = run.Phi - np.eye(n2)
+        J[:n2, :n2] = dFdx
         J[n2, :n2] = plane.gradient(run)
-        J[:n2, n2] = run.x_end_omega
+        J[:n2, n2] = dFdw
         J[n2, n2] = plane.omega_derivative(run)
         return F, h, J, run
 

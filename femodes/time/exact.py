@@ -938,6 +938,21 @@ class ExactBranch:
 RECENT_RUNS = 32
 
 
+def periodicity_residual(flow: LinearImpactFlow, x: np.ndarray, omega: float, t0: float = 0.0,
+                         variational: bool = True):
+    """``(r, dr/dx, dr/dw, run)`` of ``r = x(t0 + T) - x``, one forcing period ``T = 2 pi / w`` of
+    the exact flow from ``x(t0) = x``: ``dr/dx = Phi - I`` with the monodromy matrix and ``dr/dw``
+    the end state's change with ``w`` at the fixed start time (:attr:`FlowRun.x_end_omega`), both
+    from the variational run; without ``variational`` the two derivatives are None. The one
+    periodicity residual of the exact branch (:class:`_ShootingResidual`, inertial entries) and
+    of the shooting refinement of :mod:`femodes.accuracy` (full state, bordered by a hyperplane)."""
+    run = flow.at(omega).run(x, t0, variational=variational)
+    r = run.x_end - x
+    if not variational:
+        return r, None, None, run
+    return r, run.Phi - np.eye(x.size), run.x_end_omega, run
+
+
 class _ShootingResidual:
     """``r(x, w) = x(T) - x`` over one forcing period ``T = 2 pi / w`` from ``x(0) = x`` (the
     inertial entries of the state), with ``dr/dx = Phi - I`` and ``dr/dw`` from the variational
@@ -975,7 +990,7 @@ class _ShootingResidual:
         x = self.full(y)
         self.runs += 1
         try:
-            run = self.flow.at(w).run(x, 0.0, variational=True)
+            r, drdx, drdw, run = periodicity_residual(self.flow, x, w)
         except ValueError:
             # an iterate the flow cannot start from (inside an obstacle, w <= 0, an accumulation of
             # events): a non-finite residual, which makes Newton's line search cut the step
@@ -984,8 +999,7 @@ class _ShootingResidual:
         self.recent[(y.tobytes(), float(w))] = run.plain()
         if len(self.recent) > RECENT_RUNS:
             self.recent.popitem(last=False)
-        r = run.x_end[S] - y
-        return r, run.Phi[np.ix_(S, S)] - np.eye(S.size), run.x_end_omega[S]
+        return r[S], drdx[np.ix_(S, S)], drdw[S]
 
 
 def exact_frequency_response(model: StructuralModel, span, *, x0=None, restitution: float = 1.0,
