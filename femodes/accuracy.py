@@ -129,6 +129,8 @@ from .solvers import ContinuationOptions, NewtonOptions, continuation
 from .solvers.threads import limit_blas_threads
 from .solvers.arclength import ArclengthSystem
 from .solvers.bordered import bordered_solver
+from .time.exact import (LinearImpactFlow, exact_flow_unsupported, exact_frequency_response, fold_is_upper,
+                         periodicity_residual)
 
 __all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "refinement_options", "check_estimate_method",
            "shooting_unsupported", "ESTIMATE_METHODS", "RATE_MIN", "BRACKET_RATE_MAX"]
@@ -594,8 +596,6 @@ def _estimate_by_shooting(lad: _Ladder, ew, eq, rates, w_lim, w_lim_err, finest,
     evaluates more than :data:`SHOOTING_AUTO_MAX_WORK` modal terms, or the probe orbit has more
     than :data:`SHOOTING_AUTO_MAX_EVENTS` events at one contact (:func:`_probe_run`)."""
     branch = lad.branch
-    from .time.exact import LinearImpactFlow
-
     probe = LinearImpactFlow(lad.model, float(np.min(branch.omega)))
     if auto:
         if probe.I.size > SHOOTING_AUTO_MAX_DOFS:
@@ -702,8 +702,6 @@ class _ExactBranchStarts:
     def branch(self):
         if not self.traced:
             self.traced = True
-            from .time.exact import exact_frequency_response
-
             b = self.lad.branch
             span = (float(b.omega[0]), float(b.omega[-1]))
             if span[0] != span[1]:
@@ -759,8 +757,6 @@ def _folds_from_exact_branch(lad: _Ladder, flow, eb, unresolved, resolved, ew, e
     folds that a located fold already has are not paired again. A fold left without a pair has
     no counterpart in the limit (a loop of the truncation): no estimate (method
     ``"truncation"``), and no levels either. Without an exact branch over the span the folds stay for the levels."""
-    from .time.exact import fold_is_upper
-
     branch = lad.branch
     dofs = sorted({int(d) for d in flow.dofs})
     amp_h = np.max([branch.amplitude(d) for d in dofs], axis=0)
@@ -1363,8 +1359,6 @@ def shooting_unsupported(branch: Branch, projection=None) -> str:
     """Why the shooting refinement cannot take ``branch`` (``""`` if it can): it needs a forced
     branch (period one) of a linear model whose only contacts are rigid stops
     (:func:`femodes.time.exact.exact_flow_unsupported`), computed with the exact projection."""
-    from .time.exact import exact_flow_unsupported
-
     if branch.kind != "forced":
         return "nonlinear modes are compared at the same energy (levels only)"
     if branch.harmonics.subharmonic != 1:
@@ -1383,8 +1377,6 @@ class _Shooter:
     1.2, 0.67 % fold errors at H = 10-80 against the event-driven reference converge to it)."""
 
     def __init__(self, lad: _Ladder, flow=None):
-        from .time.exact import LinearImpactFlow
-
         self.lad = lad
         self.branch = lad.branch
         self.H = lad.h0.n_harmonics
@@ -1405,8 +1397,6 @@ class _Shooter:
         all from the variational run: the monodromy matrix, the end state's and the
         coefficients' change with ``w`` at the fixed start phase (:attr:`FlowRun.x_end_omega`,
         :meth:`FlowRun.coefficient_omega`) and the hyperplane's gradient."""
-        from .time.exact import periodicity_residual
-
         F, dFdx, dFdw, run = periodicity_residual(self.flow, x0, omega, theta0 / omega, variational=jac)
         self.runs += 1
         h = plane.value(run, omega)

@@ -239,9 +239,9 @@ def test_fold_without_exact_counterpart_gets_no_estimate(monkeypatch):
     """A fold of the truncation that the exact branch does not have (here: the exact branch
     stripped of its lower fold) is left without an estimate and marked "truncation" (never met),
     not sent to the levels; the other is paired."""
-    import femodes.time.exact as exact
+    import femodes.accuracy as accuracy
 
-    real = exact.exact_frequency_response
+    real = accuracy.exact_frequency_response
 
     def upper_only(model, span, **kw):
         eb = real(model, span, **kw)
@@ -250,7 +250,7 @@ def test_fold_without_exact_counterpart_gets_no_estimate(monkeypatch):
         eb.fold_omega, eb.fold_error, eb.fold_upper = eb.fold_omega[keep], eb.fold_error[keep], eb.fold_upper[keep]
         return eb
 
-    monkeypatch.setattr(exact, "exact_frequency_response", upper_only)
+    monkeypatch.setattr(accuracy, "exact_frequency_response", upper_only)
     _missed_folds(monkeypatch)
     b = fm.frequency_response(_oscillator(0.2, 1.0, 2.5), (0.5, 2.0), 10)
     acc = estimate_error(b).accuracy

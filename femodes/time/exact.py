@@ -1134,7 +1134,7 @@ def _refine_fold(problem: _ShootingResidual, omega: np.ndarray, ys: np.ndarray, 
     sharp folds (``_FOLD_SHARP_ITER``); the two sides reached 3.71931195 and 3.7193120 (233 runs),
     4.4e-6 lower, where the fold search of :mod:`femodes.accuracy` puts it (3.7193120 +- 2.3e-7).
     Seed case 2's lower fold, a grazing where the corrector fails, is still refined so."""
-    upper = fold_is_upper(omega, j)
+    upper, extreme = _fold_window(omega, j)[1:]
     lo, hi = max(j - 2, 0), min(j + 2, omega.size - 1)
     if lo == j or hi == j:
         return None
@@ -1150,7 +1150,6 @@ def _refine_fold(problem: _ShootingResidual, omega: np.ndarray, ys: np.ndarray, 
         p = np.asarray(r.p, dtype=float)
         ext.append(float(p.max() if upper else p.min()))
     # the branch's own points bound the fold too: the extreme of all, and how far each side fell short
-    extreme = _fold_window(omega, j)[2]
     best = max(ext + [extreme]) if upper else min(ext + [extreme])
     log.info("exact branch: fold %d detected at w = %.8g, refined from both sides to %.8g and %.8g", j, omega[j], *ext)
     return best, max(max(abs(best - e) for e in ext) / abs(best), EXACT_FOLD_RTOL)
