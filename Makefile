@@ -7,7 +7,7 @@ STAMP   = $(VENV)/.installed
 # test workers (pytest-xdist): the suite on both cores of the reference machine; JOBS=0 runs it serially
 JOBS   ?= 2
 
-.PHONY: demo test test-slow bench clean venv
+.PHONY: demo test test-slow test-kernels bench clean venv
 
 $(STAMP): pyproject.toml
 	@sh tools/sysdeps.sh
@@ -26,6 +26,10 @@ test: $(STAMP)
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -n $(JOBS) -m slow || [ $$? -eq 5 ]
+
+# the round-off-sensitive tests (marker `numerics`) again under other OpenBLAS kernels, 1 and 2 threads
+test-kernels: $(STAMP)
+	sh tools/blas_kernels.sh $(BIN)/python
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_models.py
