@@ -4,8 +4,11 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN     = $(VENV)/bin
 STAMP   = $(VENV)/.installed
-# test workers (pytest-xdist): the suite on both cores of the reference machine; JOBS=0 runs it serially
+# test workers (pytest-xdist): the suite on both cores of the reference machine; JOBS=0 runs it serially.
+# --dist loadscope keeps each module on one worker, so its module-scoped fixtures (the demo run,
+# shared models and branches) are computed once: 3:07 -> 2:11 on this machine
 JOBS   ?= 2
+DIST    = $(if $(filter 0,$(JOBS)),,--dist loadscope)
 
 .PHONY: demo test test-slow test-kernels bench clean venv
 
@@ -22,10 +25,10 @@ demo: $(STAMP)
 	$(BIN)/femodes demo
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(JOBS)
+	$(BIN)/python -m pytest -q -n $(JOBS) $(DIST)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(JOBS) -m slow || [ $$? -eq 5 ]
+	$(BIN)/python -m pytest -q -n $(JOBS) $(DIST) -m slow || [ $$? -eq 5 ]
 
 # the round-off-sensitive tests (marker `numerics`) again under other OpenBLAS kernels, 1 and 2 threads
 test-kernels: $(STAMP)

@@ -13,7 +13,7 @@ case "$flags" in *" avx512f"*) kernels="$kernels SkylakeX" ;; esac
 for k in $kernels; do
     for t in 1 2; do
         # one thread: two pytest workers; two threads: one worker (no oversubscription of 2 cores)
-        if [ "$t" = 1 ]; then n=2; else n=0; fi
+        if [ "$t" = 1 ]; then n="2 --dist loadscope"; else n=0; fi
         arch=$(OPENBLAS_CORETYPE=$k "$PY" -c "import numpy, threadpoolctl; print(threadpoolctl.threadpool_info()[0].get('architecture'))")
         echo "== OpenBLAS kernel $k (reported: $arch), $t BLAS thread(s)"
         OPENBLAS_CORETYPE=$k OPENBLAS_NUM_THREADS=$t OMP_NUM_THREADS=$t FEMODES_BLAS_THREADS=$t \

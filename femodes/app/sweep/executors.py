@@ -89,11 +89,15 @@ def local_cluster(n_workers: int = 2, **kwargs):
     env.update(WORKER_ENVIRON)
     with restored_environ(), dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
         # A value already in os.environ wins over the config and is inherited by the spawned
-        # workers (e.g. exported by an earlier default cluster's nanny): drop it while they start.
+        # workers (e.g. exported by an earlier default cluster's nanny, or OPENBLAS_NUM_THREADS=2
+        # exported by the user): replace it while they start (restored_environ puts it back).
         for k, v in WORKER_ENVIRON.items():
-            if v is None and k in os.environ:
-                log.info("sweep workers start without %s=%s (slows numpy-heavy tasks)", k, os.environ[k])
-                del os.environ[k]
+            if k in os.environ and os.environ[k] != v:
+                log.info("sweep workers start with %s=%s instead of %s (single-threaded workers)", k, v, os.environ[k])
+                if v is None:
+                    del os.environ[k]
+                else:
+                    os.environ[k] = v
         return LocalCluster(**opts)
 
 
