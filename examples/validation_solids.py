@@ -32,11 +32,10 @@ into ``validation_solids.png``; ``python examples/validation_solids.py`` prints 
    impacts (peak force 1.3 EA g / L) branches off near grazing, and which one a continuation
    follows is decided by details: at 20 elements the redistributed strip takes the impacting
    family, the bar the vertical one (figure, top left). So backbones of this model cannot be
-   compared at fixed energy beyond grazing. The irregular changes per refinement of
-   ``examples/bar_contact_refinement.py`` (1.7e-2, 2.2e-3, 2.5e-5) come from it: beyond grazing
-   those backbones are near-vertical lines whose frequency is the mesh's own (here 1.2 % above
-   pi/2 at 10 elements, 1e-4 at 40). The damped forced response is well posed and its folds are
-   compared instead.
+   compared at fixed energy beyond grazing by an energy continuation; ``fm.nonlinear_mode`` now
+   traces the impacting family past grazing by frequency (``examples/bar_contact_refinement.py``
+   compares it with the continuum). This study compares the folds of the damped forced response,
+   which is well posed.
 
 2. **Bending blade against the Euler-Bernoulli beam** (``bending``, ``bending_table``).
    Cantilever strips with L/h = 20, 40, 80 (Q2 quadrilaterals, one element through the height,

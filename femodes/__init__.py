@@ -8,7 +8,7 @@ reduction, linear, eigen), discretise (hbm, time), results (results, store), ana
 from .fe import Material, Section, bar, beam, box_mesh, line_mesh, load_mesh, rectangle_mesh, solid
 from .fe.redistribution import ConsistentMass, RedistributeMass
 from .laws import CubicSpring, PenaltyContact, UnilateralContact
-from .linear import IllConditionedWarning, LinearModes, LinearResponse, linear_modes, linear_response
+from .linear import IllConditionedWarning, LinearModes, LinearResponse, grazing_energy, linear_modes, linear_response
 from .model import DofMap, HarmonicForce, StructuralModel
 from .reduction import ReducedModel, craig_bampton
 from .hbm import ForcedResponseProblem, Harmonics, NonlinearModeProblem
@@ -16,6 +16,8 @@ from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState
                       continuation, semismooth_newton)
 from .results import Bifurcation, Branch, ErrorEstimate, PeriodicSolution, load_branch
 from .analyses import StaticContactResult, frequency_response, nonlinear_mode, static_contact
+from .nonsmooth_modes import InternalResonance, PeriodDriven
+from .resonance import ResonancePeak, compare_resonance
 from .floquet import StabilityResult, stability
 from .accuracy import estimate_error
 from .switching import switch_branch
@@ -45,6 +47,11 @@ __all__ = [
     "LinearResponse",
     "linear_modes",
     "linear_response",
+    "grazing_energy",
+    "PeriodDriven",
+    "InternalResonance",
+    "ResonancePeak",
+    "compare_resonance",
     "DofMap",
     "HarmonicForce",
     "StructuralModel",

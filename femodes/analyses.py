@@ -28,6 +28,7 @@ from .solvers import ContinuationOptions, NewtonOptions, continuation, semismoot
 from .solvers.threads import limit_blas_threads
 from .accuracy import check_estimate_method, meet_tolerance, refinement_options
 from .floquet import METHODS, annotate_branch
+from .nonsmooth_modes import PeriodDriven, captured_past_grazing, compose, period_driven_sweep
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
            "branch_from_continuation", "model_fingerprint"]
@@ -332,6 +333,7 @@ def nonlinear_mode(
     stability: bool | str = False,
     rtol: float | None = None,
     max_harmonics: int | None = None,
+    past_grazing: PeriodDriven | None = PeriodDriven(),
 ) -> Branch:
     """Nonlinear mode (frequency-energy backbone) by the extended periodic motion concept.
 
@@ -347,6 +349,17 @@ def nonlinear_mode(
     ``rtol`` and ``max_harmonics`` are as for :func:`frequency_response` (levels compared at equal
     energy).
 
+    Past grazing (models with unilateral contacts): the returned family is the one whose motions
+    have a contact phase in every period and keep most of their energy in mode ``mode``; it is the
+    family that the forced, damped structure's resonance follows. When the continuation in the
+    energy is caught at grazing by an internal resonance (a clamped bar hitting a stop: its spectrum
+    is commensurate, and mode 4 takes the energy while the tip only grazes), the part past the
+    grazing energy is traced again by frequency (``past_grazing``, a
+    :class:`~femodes.nonsmooth_modes.PeriodDriven`), which steps over the tongues of internal
+    resonance; they are listed in ``branch.internal_resonances`` with the modes that take the energy.
+    ``branch.meta["energy_continuation"]`` says why. ``past_grazing=None`` keeps the energy
+    continuation's branch whatever it follows.
+
     Returns
     -------
     Branch
@@ -357,6 +370,8 @@ def nonlinear_mode(
     h = _harmonics(harmonics, "nonlinear_mode")
     _options(options, "nonlinear_mode")
     refinement_options(rtol, max_harmonics, h.n_harmonics, "nonlinear_mode")
+    if past_grazing is not None and not isinstance(past_grazing, PeriodDriven):
+        raise TypeError(f"nonlinear_mode: past_grazing must be a femodes.PeriodDriven or None, got {past_grazing!r}")
     e0, e1 = _span(energy, "energy", "nonlinear_mode", positive=True)
     if e1 < e0:
         raise ValueError(f"nonlinear_mode: energy must increase, got energy={tuple(energy)!r}: the backbone starts "
@@ -385,15 +400,36 @@ def nonlinear_mode(
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
     branch = run_continuation(problem, span, options, "nonlinear_mode", progress, x0=lambda o: (x0, o), wrap=wrap,
                               model=model, checkpoint=checkpoint, description=description)
+    if past_grazing is not None:
+        branch = _past_grazing(branch, problem, model, past_grazing, e1, options)
     branch = _with_stability(branch, problem, model, method, options)
     if rtol is None:
         return branch
 
     def rerun(H: int) -> Branch:
         return nonlinear_mode(model, mode, energy, Harmonics(H, subharmonic=h.subharmonic), options=user_options,
-                              projection=projection, progress=progress, stability=stability)
+                              projection=projection, progress=progress, stability=stability, past_grazing=past_grazing)
 
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection)
+
+
+def _past_grazing(branch: Branch, problem: NonlinearModeProblem, model: StructuralModel, strategy: PeriodDriven,
+                  energy_max: float, options: ContinuationOptions) -> Branch:
+    """The branch, or its part up to grazing followed by the period-driven sweep when the energy
+    continuation left the contact-phase family (:mod:`femodes.nonsmooth_modes`)."""
+    if not any(isinstance(c.item, UnilateralContact) for c in model.contacts) or not len(branch):
+        return branch
+    why = captured_past_grazing(branch, problem, model, strategy, energy_max)
+    if why is None:
+        return branch
+    log.info("nonlinear_mode: %s; tracing the contact-phase family by frequency instead", why)
+    orbits, tongues, message = period_driven_sweep(model, problem, energy_max, strategy, options.newton)
+    if not orbits:
+        log.warning("nonlinear_mode: %s, and the period-driven continuation found no orbit (%s); returning the "
+                    "energy continuation's branch", why, message)
+        branch.meta["energy_continuation"] = why
+        return branch
+    return compose(branch, problem, model, orbits, tongues, message, why, Branch)
 
 
 def stability_method(stability: Any, owner: str) -> str | None:

@@ -16,7 +16,7 @@ from .eigen import IllConditionedWarning, normal_modes
 from .model import StructuralModel, low_rank_solver
 from .solvers.checks import check_int
 
-__all__ = ["LinearModes", "LinearResponse", "linear_modes", "linear_response", "IllConditionedWarning"]
+__all__ = ["LinearModes", "LinearResponse", "linear_modes", "linear_response", "grazing_energy", "IllConditionedWarning"]
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +49,32 @@ def _check_n(n, n_max: int, owner: str) -> int:
     if n > n_max:
         raise ValueError(f"{owner}: n={n} modes requested but the model has only {n_max} DOFs")
     return int(n)
+
+
+def grazing_energy(model: StructuralModel, mode: int = 1) -> float:
+    """Energy at which linear mode ``mode`` first touches a contact: ``E_g = w^2 a_g^2 / 2``.
+
+    With the mass-normalised shape ``phi``, the modal amplitude ``a`` moves contact ``c`` (gap
+    ``g_c`` along its DOF) by ``a |phi_c|``; the first contact reached sets
+    ``a_g = min_c g_c / |phi_c|``. Backbones of a structure with contacts are naturally given in
+    multiples of it: ``nonlinear_mode(model, energy=(0.5 * E_g, 25 * E_g))``. For a clamped bar
+    with a stop at the tip (``E = rho = A = L = 1``) it tends to ``pi^2 g^2 / 16``.
+    """
+    if not isinstance(model, StructuralModel):
+        raise TypeError(f"grazing_energy: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
+    mode = check_int("mode", mode, 1, owner="grazing_energy")
+    gapped = [(c.dof, float(c.item.gap)) for c in model.contacts
+              if isinstance(getattr(c.item, "gap", None), (int, float, np.floating)) and float(c.item.gap) > 0.0]
+    if not gapped:
+        raise ValueError("grazing_energy: the model has no contact with a positive gap; declare one with "
+                         "model.with_contact(fm.UnilateralContact(at=..., gap=...))")
+    modes = linear_modes(model, n=mode)
+    w, phi = float(modes.omega[-1]), modes.shapes[:, -1]
+    amp = [g / abs(phi[d]) for d, g in gapped if abs(phi[d]) > 1e-12 * float(np.max(np.abs(phi)))]
+    if not amp:
+        raise ValueError(f"grazing_energy: linear mode {mode} does not move any contact DOF (a node of the mode "
+                         "shape sits on every contact); choose another mode")
+    return 0.5 * w * w * min(amp) ** 2
 
 
 def linear_modes(model: StructuralModel, n: int = 6, *, sigma: float | None = None) -> LinearModes:

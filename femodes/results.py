@@ -393,6 +393,12 @@ class Branch:
     ``multipliers`` and ``stability_method`` are ``None`` and ``bifurcations`` is empty.
     """
 
+    @property
+    def internal_resonances(self) -> list[dict]:
+        """Tongues of internal resonance that a period-driven nonlinear mode stepped over (frequencies,
+        energies, the modes that took the energy and ``w_k / w``); empty otherwise."""
+        return list(self.meta.get("internal_resonances", []))
+
     def __init__(self, *, kind: str, harmonics: Harmonics, contacts: ContactInfo, omega, Q, P, energy, xi,
                  residual_norm, nit, parameter, folds=(), success=True, status=0, message="", model=None,
                  meta: dict | None = None):

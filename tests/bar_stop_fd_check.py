@@ -1,4 +1,5 @@
-r"""Independent finite-difference check of the bar-on-a-stop nonsmooth mode (``bar_stop_reference``).
+r"""Independent finite-difference check of the bar-on-a-stop nonsmooth mode
+(``bar_stop_reference``).
 
 Shares no code with :mod:`tests.bar_stop_reference` (nor with :mod:`femodes`): plain numpy.
 
@@ -76,14 +77,14 @@ def leapfrog_signorini(u0, v0, gap: float, n_steps: int, record_steps=()):
     if 0 in want:
         states[0] = (u0.copy(), v0.copy())
     prev, cur = u0, u1
-    el[0] = np.sum(w * (u1 - u0) ** 2) / (2 * h) + np.sum(np.diff(u1) * np.diff(u0)) / (2 * h)
+    el[0] = (np.sum(w * (u1 - u0) ** 2) + np.sum(np.diff(u1) * np.diff(u0))) / (2 * h)
     for n in range(1, n_steps):
         nxt = np.empty_like(cur)
         nxt[1:N] = cur[2:] + cur[:-2] - prev[1:N]
         nxt[0] = 0.0
         nxt[N] = min(2.0 * cur[N - 1] - prev[N], gap)
         tip[n + 1] = nxt[N]
-        el[n] = np.sum(w * (nxt - cur) ** 2) / (2 * h) + np.sum(np.diff(nxt) * np.diff(cur)) / (2 * h)
+        el[n] = (np.sum(w * (nxt - cur) ** 2) + np.sum(np.diff(nxt) * np.diff(cur))) / (2 * h)
         v = (nxt - prev) / (2.0 * h)
         ub = 0.25 * (prev + 2.0 * cur + nxt)
         vm = 0.5 * (v[1:] + v[:-1])
@@ -116,7 +117,8 @@ def contact_events(tip, h, gap, fit_span=0.4, skip=3, merge_gap=0.05):
     # merge contact runs split by short spurious releases (chatter of the clipped scheme)
     gap_steps = max(int(merge_gap / h), 1)
     if starts.size and ends.size:
-        keep_s = np.r_[True, [not np.any((ends < st) & (ends >= st - gap_steps)) for st in starts[1:]]]
+        keep_s = np.r_[True, [not np.any((ends < st) & (ends >= st - gap_steps))
+                              for st in starts[1:]]]
         keep_e = np.array([not np.any((starts > en) & (starts <= en + gap_steps)) for en in ends])
         starts, ends = starts[keep_s], ends[keep_e]
     for s in starts:
@@ -142,7 +144,7 @@ def fd_period_and_return_error(energy_ratio: float, n_cells: int, n_periods: int
     energy / E), ``leapfrog_energy_change`` (last / first leapfrog energy - 1).
     Cost: ``~ n_periods * 3.6 * n_cells`` vector steps of size ``n_cells`` (N = 800: < 1 s).
     """
-    x, u0, v0 = uniform_strain_start(energy_ratio, n_cells, gap)
+    _, u0, v0 = uniform_strain_start(energy_ratio, n_cells, gap)
     h = 1.0 / n_cells
     E = energy_ratio * grazing_energy(gap)
     lam = np.sqrt(2.0 * E)
@@ -158,7 +160,10 @@ def fd_period_and_return_error(energy_ratio: float, n_cells: int, n_periods: int
     n_steps2 = max(k_steps) + 2
     run = leapfrog_signorini(u0, v0, gap, n_steps2, record_steps=k_steps)
     scale = np.max(np.abs(u0))
-    l2 = lambda f: np.sqrt(h * (np.sum(f**2) - 0.5 * f[-1] ** 2))  # noqa: E731 (trapezoid, f0=0 side)
+
+    def l2(f):  # trapezoid L2 norm (f[0] = 0 at the clamp)
+        return np.sqrt(h * (np.sum(f**2) - 0.5 * f[-1] ** 2))
+
     rd = max(np.max(np.abs(run["states"][k][0] - u0)) / scale for k in k_steps)
     rd2 = max(l2(run["states"][k][0] - u0) / l2(u0) for k in k_steps)
     rv2 = max(l2(run["states"][k][1] - v0) / lam for k in k_steps)

@@ -81,14 +81,18 @@ already at ``w = 1.0256 w1`` (contact fraction 2.6 %); a discretised / truncated
 backbone that starts exactly at ``(E_g, w1)`` can only agree with this reference up to that
 kind of offset near grazing.
 
-Non-uniqueness (both checked numerically, see the report that came with this file): at every
+Non-uniqueness (checked numerically when this file was written): at every
 period with ``(T - 2) / T = p / q`` rational the cocycle allows ``|phi|`` to be any positive
 ``T/q``-periodic function, giving a *vertical ray* of periodic motions with the same period,
 contact set and tip law and energies from the value above up to infinity (the constant-``|phi|``
-member is the minimum-energy one). Other constant-``|phi|`` families with one contact per period
-and more sign switches of ``phi`` exist too (subharmonic branches of higher modes, e.g. one on
-``3.0 < T < 3.2`` with the *same* ``E(T)`` as this one but a different contact fraction, one on
-``10/3 < T < 3.43`` with ``7.3 <= rho <= 39``); none of them starts at ``w1``.
+member is the minimum-energy one). Other constant-``|phi|`` solutions with one finite contact
+phase per period and more sign switches of ``phi`` (switch points ``p, p - r, ..., p - (2m-1) r``)
+exist too, e.g. ``m = 4`` on ``3.0 < T < 3.2`` (same ``E(T)`` as here, smaller contact fraction),
+``m = 6`` on ``10/3 < T < 3.43`` (``7.3 <= rho <= 39``), ``m = 8`` on ``3.5 < T < 3.56``, and
+``m = 2, 3, ...`` at ``w > 1.5 w1``; but every one of them also *touches* the stop (``U = g``
+at isolated instants) during its free flight, so they are non-generic (the leapfrog turns the
+touches into short contacts) and none of them starts at ``w1``. The ``m = 1`` family here has
+no such touch: ``U < g`` on the whole free flight.
 
 Sources (facts only, no code copied): C. Yoong, A. Thorin, M. Legrand, "Nonsmooth modal analysis
 of an elastic bar subject to a unilateral contact constraint", Nonlinear Dynamics 91 (2018),
@@ -188,8 +192,55 @@ def tip_extremes(energy_ratio, gap: float = 0.01):
     return -gap / (T - 3.0), gap + 0.0 * T
 
 
-# Values at a few energy ratios (g = 0.01), from the closed form, and the agreement measured
-# with the independent CFL = 1 leapfrog of bar_stop_fd_check.py (start: uniform strain at rest,
-# 3 periods). 'fd' keys: n_cells -> (relative period error, relative contact-duration error,
-# displacement return error after 3 periods / max|u0|, filtered-energy drift / E).
-REFERENCE = {}  # filled below
+# Values at a few energy ratios (g = 0.01) from the closed form (literal numbers, so a test can
+# also check the functions above), with the agreement measured by the independent CFL = 1
+# leapfrog of bar_stop_fd_check.fd_period_and_return_error (start: uniform strain at rest,
+# 3 periods). 'fd': n_cells -> (period_fd / T - 1, contact_duration_fd / (4 - T) - 1,
+# max displacement return error over the 3 returns / max|u0|, filtered-energy drift / E).
+# All four are O(h): the clipped scheme releases the tip one step late and loses about
+# h * E per contact phase. 'fd_period_richardson_rel_err' is (2 T_1600 - T_800) / T - 1.
+# Direct comparison FD vs exact_state over 3 periods: max|u_fd - u| / max|u0| = 2.2e-2, 2.5e-2,
+# 1.5e-2 (N = 200) and 5.2e-3, 6.3e-3, 2.6e-3 (N = 800) for rho = 2, 5, 20; FD runs started at
+# mid contact (t = T/2) or at t = 0.37 T from initial_profiles give the same period to <= 4.6e-4
+# (N = 800).
+REFERENCE = {
+    2: dict(
+        period=3.6366197723675815, omega=1.727754260954531, omega_ratio=1.0999225243159925,
+        contact_fraction=0.09992252431599243, contact_duration=0.3633802276324185,
+        wave_amplitude=0.007853981633974483,
+        tip_min=-0.015707963267948963,
+        fd={
+            200: (1.44e-03, -6.05e-03, 1.34e-02, 2.38e-02),
+            400: (7.34e-04, -2.79e-03, 6.90e-03, 1.16e-02),
+            800: (3.54e-04, -1.20e-03, 3.38e-03, 5.72e-03),
+            1600: (1.90e-04, -6.64e-04, 1.90e-03, 2.99e-03),
+        },
+        fd_period_richardson_rel_err=2.6e-05,
+    ),
+    5: dict(
+        period=3.4026336968358963, omega=1.8465652982342209, omega_ratio=1.1755599798237446,
+        contact_fraction=0.17555997982374466, contact_duration=0.5973663031641037,
+        wave_amplitude=0.012418235332245127,
+        tip_min=-0.02483647066449025,
+        fd={
+            200: (1.36e-03, -1.27e-03, 1.68e-02, 1.94e-02),
+            400: (4.65e-04, -9.63e-04, 3.44e-03, 6.41e-03),
+            800: (2.44e-04, -3.89e-04, 2.90e-03, 5.65e-03),
+            1600: (1.35e-04, -1.07e-04, 1.65e-03, 2.91e-03),
+        },
+        fd_period_richardson_rel_err=2.5e-05,
+    ),
+    20: dict(
+        period=3.201316848417948, omega=1.9626877327949153, omega_ratio=1.2494858176805432,
+        contact_fraction=0.24948581768054334, contact_duration=0.7986831515820518,
+        wave_amplitude=0.024836470664490254,
+        tip_min=-0.0496729413289805,
+        fd={
+            200: (5.04e-04, 1.36e-03, 1.13e-02, 2.57e-02),
+            400: (2.06e-04, 6.69e-04, 6.05e-03, 1.49e-02),
+            800: (6.94e-05, 2.38e-04, 1.45e-03, 4.04e-03),
+            1600: (4.25e-05, 1.54e-04, 1.45e-03, 2.90e-03),
+        },
+        fd_period_richardson_rel_err=1.6e-05,
+    ),
+}

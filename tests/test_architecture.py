@@ -30,6 +30,8 @@ LAYERS = {
     "femodes.store": 4,
     "femodes.results": 4,
     "femodes.analyses": 5,
+    "femodes.nonsmooth_modes": 5,
+    "femodes.resonance": 5,
     "femodes.runs": 5,
     "femodes.floquet": 5,
     "femodes.accuracy": 5,

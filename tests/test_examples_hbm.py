@@ -32,13 +32,18 @@ def test_contact_forced_cases_trace_both_folds(contact):
         assert br.nit.mean() <= 4.0 and br.nit.max() <= 8
 
 
-def test_bar_refinement_settles_with_mass_redistribution():
+@pytest.mark.slow
+def test_bar_refinement_against_the_continuum():
+    """The bar's backbone (contact-phase family, mass redistributed) at 2 E_g within 0.5 % of the
+    continuum's first nonsmooth mode on 20, 40 and 80 elements (0.38, 0.07, 0.03 % measured: the
+    error falls with the mesh there); at 5 and 20 E_g, where reached, within 1 % (the harmonic
+    truncation and the gaps the tongues leave dominate: no rate is claimed there)."""
     ex = load("bar_contact_refinement")
-    with_r = ex.change_per_refinement[True]
-    without = ex.change_per_refinement[False]
-    # measured: 1.7e-2, 2.2e-3, 2.5e-5 with redistribution; 1.6e-2, 3.9e-3, 9.5e-4 without
-    assert with_r[-1] < 1e-4 and without[-1] > 3e-4
-    assert np.all(np.diff(with_r) < 0)
+    err = ex.errors[True]
+    assert np.all(np.abs(err[:, 0]) < 5e-3) and np.all(np.diff(np.abs(err[:, 0])) < 0)
+    assert np.isfinite(err[:, 1]).sum() >= 2  # 5 E_g reached on at least two meshes
+    finite = np.isfinite(err)
+    assert np.all(np.abs(err[finite]) < 1e-2)
 
 
 def test_cantilever_reduced_and_full_backbones_agree(tmp_path):

@@ -3,10 +3,10 @@
 from .harmonics import Harmonics
 from .linsolve import AssembledSolver, BlockSolver, HarmonicBlockJacobian
 from .positive_part import ExactProjection, SampledProjection
-from .problems import ForcedResponseProblem, HBMUnknowns, NonlinearModeProblem
+from .problems import ForcedResponseProblem, HBMUnknowns, NonlinearModeProblem, PeriodDrivenModeProblem
 from .system import HBMSystem, default_contact_parameter
 from .trigroots import ColleagueRoots, CompanionRoots, GridRoots
 
-__all__ = ["Harmonics", "HarmonicBlockJacobian", "ForcedResponseProblem", "NonlinearModeProblem", "HBMUnknowns",
+__all__ = ["Harmonics", "HarmonicBlockJacobian", "ForcedResponseProblem", "NonlinearModeProblem", "PeriodDrivenModeProblem", "HBMUnknowns",
            "HBMSystem", "default_contact_parameter", "ExactProjection", "SampledProjection", "BlockSolver",
            "AssembledSolver", "ColleagueRoots", "CompanionRoots", "GridRoots"]

@@ -22,7 +22,7 @@ from ..model import StructuralModel
 from .harmonics import Harmonics
 from .system import HBMSystem
 
-__all__ = ["ForcedResponseProblem", "NonlinearModeProblem", "HBMUnknowns"]
+__all__ = ["ForcedResponseProblem", "NonlinearModeProblem", "PeriodDrivenModeProblem", "HBMUnknowns"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,20 +194,25 @@ class NonlinearModeProblem:
         r0, J0, dr_dw, dr_dxi = s.residual(y, omega, xi=xi, forced=False)
         E, dE, dE_dw = s.energy(y, omega)
         E = max(E, 1e-300)
-        ln10 = math.log(10.0)
         fs = 1.0 / self.force_scale
         r0, J0, dr_dw, dr_dxi = r0 * fs, J0 * fs, dr_dw * fs, dr_dxi * fs
         # phase condition: first-harmonic sine part along the linear mode shape (M-orthogonal)
         gphase = np.zeros(s.size)
         gphase[self._phase_idx] = self._Mphi / self.phase_scale
-        r = np.concatenate([r0, [gphase @ y, math.log10(E) - p]])
-        gE = dE / (E * ln10)
+        value, grad, d_w, d_p = self._parameter_row(E, dE, dE_dw, omega, p)
+        r = np.concatenate([r0, [gphase @ y, value]])
         cols = np.column_stack([dr_dw, dr_dxi])
-        rows = np.vstack([np.append(gphase, [0.0, 0.0]), np.append(gE, [dE_dw / (E * ln10), 0.0])])
+        rows = np.vstack([np.append(gphase, [0.0, 0.0]), np.append(grad, [d_w, 0.0])])
         J = J0.bordered(cols, rows[:, : s.size], rows[:, s.size:])  # the two extra unknowns: its border
         dr_dp = np.zeros(self.size)
-        dr_dp[-1] = -1.0
+        dr_dp[-1] = d_p
         return r, J, dr_dp
+
+    def _parameter_row(self, E: float, dE: np.ndarray, dE_dw: float, omega: float, p: float):
+        """The equation that fixes the parameter, ``log10(E) - p``, with its gradient in ``y`` and its
+        ``w`` and ``p`` derivatives (:class:`PeriodDrivenModeProblem` fixes the frequency instead)."""
+        ln10 = math.log(10.0)
+        return math.log10(E) - p, dE / (E * ln10), dE_dw / (E * ln10), -1.0
 
     def initial_guess(self, p: float) -> np.ndarray:
         """Starting point for :func:`~femodes.continuation` at ``p = log10(E)``: the linear mode."""
@@ -229,3 +234,18 @@ class NonlinearModeProblem:
     def pack(self, Q: np.ndarray, P: np.ndarray, omega: float, xi: float = 0.0) -> np.ndarray:
         """The unknowns ``x = [y; w; xi]`` of a point from its parts (the inverse of :meth:`unpack`)."""
         return np.concatenate([self.system.join(Q, P), [float(omega), float(xi)]])
+
+
+class PeriodDrivenModeProblem(NonlinearModeProblem):
+    """The periodic motions of :class:`NonlinearModeProblem` at a given frequency: parameter
+    ``p = w`` (rad/s), energy free.
+
+    The same unknowns ``x = [y; w; xi]`` and equations (harmonic balance with artificial damping
+    ``xi``, phase condition) but the last one, ``(w - p) / w0 = 0``. Solved point by point at
+    increasing ``w`` (the period-driven continuation of nonsmooth modes, Lu & Legrand's sweep of
+    the period), it steps over the near-vertical internal-resonance tongues that a continuation in
+    the energy climbs (:mod:`femodes.nonsmooth_modes`).
+    """
+
+    def _parameter_row(self, E: float, dE: np.ndarray, dE_dw: float, omega: float, p: float):
+        return (omega - p) / self.omega0, np.zeros_like(dE), 1.0 / self.omega0, -1.0 / self.omega0

@@ -1,0 +1,354 @@
+"""Analyses layer: nonsmooth modes past grazing by a period-driven continuation.
+
+Above the energy at which a linear mode first touches a unilateral contact (its grazing energy,
+:func:`femodes.grazing_energy`), the free periodic motions split into families: motions with a
+contact phase of finite duration in each period, whose frequency rises with the energy and which
+predict the forced resonance, and grazing motions that stay at the linear frequency while an
+internal resonance takes their energy into another mode. On a structure with a commensurate
+spectrum (a clamped bar: ``w_k = (2k - 1) w_1``; a P1 mesh keeps ``w_4 / w_1 = 7.01``) a
+continuation in the energy is caught at grazing by such a resonance and climbs it: the tip only
+grazes the stop while mode 4 takes 95 % of the energy.
+
+The contact-phase family is followed here by its frequency instead: harmonic balance solved at
+given ``w`` (:class:`~femodes.hbm.PeriodDrivenModeProblem`), ``w`` increased step by step from
+just above the linear frequency, each solve started from the secant through the last two orbits.
+This is the period sweep of the wave-equation harmonic balance of Lu & Legrand; it steps over
+the near-vertical tongues of internal resonance that an energy continuation climbs, because a
+tongue is only a narrow band of frequencies. A solve that fails, or whose orbit has given most of
+its energy to other modes, is such a tongue: it is left out of the branch and listed with the
+modes that took the energy (:class:`InternalResonance`).
+
+Checked against the continuum's first nonsmooth mode of the bar (d'Alembert, ``tests/
+bar_stop_reference.py``; Yoong, Thorin & Legrand, Nonlinear Dynamics 91, 2018): see
+``tests/test_nonsmooth_modes.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+
+import numpy as np
+
+from .hbm.problems import NonlinearModeProblem, PeriodDrivenModeProblem
+from .linear import grazing_energy, linear_modes
+from .model import StructuralModel
+from .solvers import NewtonOptions, semismooth_newton
+
+__all__ = ["PeriodDriven", "InternalResonance", "modal_energy_fractions", "period_driven_sweep"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class PeriodDriven:
+    """Strategy of :func:`femodes.nonlinear_mode` past grazing: the period-driven continuation.
+
+    Parameters
+    ----------
+    start : float
+        First frequency of the sweep, relative to the linear one: ``w = (1 + start) w0``. Closer
+        to 1, Newton falls back onto the trivial orbit (zero motion solves every frequency).
+    step, max_step : float
+        First and largest frequency step, relative to ``w0``; a step grows by 1.5 after a solve
+        in at most 4 Newton iterations.
+    min_fraction : float
+        Smallest share of the energy the traced mode keeps on the branch; an orbit below it has
+        given its energy to other modes (an internal-resonance tongue) and is left out.
+    max_points : int
+        Largest number of frequencies tried.
+    max_skips : int
+        Consecutive tongue points after which the sweep stops.
+    n_modes : int
+        Linear modes used to tell which modes take the energy in a tongue.
+    grazing_shift : float
+        Largest relative frequency shift of an energy continuation's orbits past ``1.5 E_g`` for
+        which that branch is taken for a grazing family (:func:`captured_past_grazing`): the
+        bar's grazing families shift by 0.14 % (20-160 elements) to 1.2 % (10 elements), the
+        contact-phase families of the bar and of a cantilever by 10 % and 5 %.
+    always : bool
+        Trace past grazing by frequency even when the energy continuation reached the end of its
+        span without grazing (by default its branch is kept then).
+    off_curve : float
+        Relative departure of an orbit's energy from the smooth curve through its neighbours
+        beyond which it is taken for a tongue's orbit (the family's own curvature between
+        neighbours stays below 3 % on the bar; the tongues' orbits that the lower envelope keeps lie
+        10-40 % off).
+    """
+
+    start: float = 0.02
+    step: float = 0.005
+    max_step: float = 0.01
+    min_fraction: float = 0.25
+    max_points: int = 400
+    max_skips: int = 30
+    n_modes: int = 12
+    off_curve: float = 0.1
+    grazing_shift: float = 0.03
+    always: bool = False
+
+    def __post_init__(self):
+        for name in ("start", "step", "max_step"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v < 1):
+                raise ValueError(f"PeriodDriven: {name} must be a number in (0, 1) (relative to the linear frequency), "
+                                 f"got {v!r}")
+        if not (0 < self.min_fraction < 1 and 0 < self.off_curve < 1 and 0 < self.grazing_shift < 1):
+            raise ValueError(f"PeriodDriven: min_fraction, off_curve and grazing_shift must be in (0, 1), got "
+                             f"{self.min_fraction!r}, {self.off_curve!r} and {self.grazing_shift!r}")
+        for name in ("max_points", "max_skips", "n_modes"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"PeriodDriven: {name} must be a positive integer, got {v!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class InternalResonance:
+    """A tongue of internal resonance met by the period-driven sweep (its orbits are not on the
+    branch).
+
+    ``omega``: the frequencies (rad/s) of the sweep's orbits that fell in it (or ``nan`` energy for
+    failed solves); ``energy``: their energies; ``modes``: the linear modes (1-based) holding the
+    largest share of the energy there, with ``shares``; ``ratios``: for each, the harmonic ``j``
+    nearest to ``w_k / w`` (a ``j:1`` resonance with mode ``k``).
+    """
+
+    omega: tuple[float, ...]
+    energy: tuple[float, ...]
+    modes: tuple[int, ...]
+    shares: tuple[float, ...]
+    ratios: tuple[float, ...]
+
+    def as_dict(self) -> dict:
+        return {k: list(v) for k, v in dataclasses.asdict(self).items()}
+
+
+def modal_energy_fractions(problem: NonlinearModeProblem, x: np.ndarray, omegas: np.ndarray,
+                           shapes: np.ndarray) -> np.ndarray:
+    """Share of the period-averaged energy of each linear mode (mass-normalised ``shapes``,
+    frequencies ``omegas``) in the orbit ``x``: ``E_k = <eta_k'^2 + w_k^2 eta_k^2> / 2`` with the
+    modal coordinate ``eta_k = phi_k^T M q``, divided by the sum over the modes given."""
+    s = problem.system
+    u = problem.unpack(x, 0.0)
+    eta = u.Q @ np.asarray(s.M @ shapes)                 # (n_coef, n_modes) modal coefficients
+    w = s.w[:, None]
+    kinetic = 0.5 * u.omega ** 2 * np.sum(w * (s.D1 @ eta) ** 2, axis=0)
+    potential = 0.5 * omegas ** 2 * np.sum(w * eta ** 2, axis=0)
+    e = kinetic + potential
+    total = float(np.sum(e))
+    return e / total if total > 0 else np.zeros_like(e)
+
+
+def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, energy_max: float,
+                        strategy: PeriodDriven, newton: NewtonOptions | None = None
+                        ) -> tuple[list[np.ndarray], list[InternalResonance], str]:
+    """Orbits of the contact-phase family of ``problem``'s mode from just above grazing up to
+    ``energy_max``, by increasing frequency; returns ``(orbits, tongues, message)`` (orbits as
+    unknown vectors of ``problem``, frequencies increasing)."""
+    w0 = problem.omega0
+    mode = problem.mode
+    pd = PeriodDrivenModeProblem(model, problem.system.h, mode, reference_energy=problem.reference_energy,
+                                 projection=problem.system.projection)
+    n_modes = int(min(max(strategy.n_modes, mode + 1), model.n_dofs))
+    lm = linear_modes(model, n=n_modes)
+    eg = grazing_energy(model, mode)
+    newton = newton or NewtonOptions(atol=1e-9, max_iter=30)
+    orbits: list[np.ndarray] = []
+    tongues: list[InternalResonance] = []
+    pending: list[tuple[float, float, np.ndarray | None]] = []
+
+    def close_tongue():
+        if not pending:
+            return
+        shares = np.mean([f for _, _, f in pending if f is not None] or [np.zeros(n_modes)], axis=0)
+        order = [k for k in np.argsort(shares)[::-1] if k != mode - 1 and shares[k] > 0.05][:3]
+        wm = float(np.mean([w for w, _, _ in pending]))
+        tongues.append(InternalResonance(
+            omega=tuple(float(w) for w, _, _ in pending), energy=tuple(float(e) for _, e, _ in pending),
+            modes=tuple(int(k) + 1 for k in order), shares=tuple(float(shares[k]) for k in order),
+            ratios=tuple(float(lm.omega[k] / wm) for k in order)))
+        pending.clear()
+
+    w = (1.0 + strategy.start) * w0
+    step = strategy.step * w0
+    message = f"reached the energy {energy_max:g}"
+    skips = 0
+    seed = problem.linear_guess(eg * (1.0 + strategy.start))
+    for _ in range(strategy.max_points):
+        if len(orbits) >= 2:
+            (xa, xb) = orbits[-2], orbits[-1]
+            wa, wb = float(xa[problem.system.size]), float(xb[problem.system.size])
+            guess = xb + (xb - xa) * (w - wb) / (wb - wa)
+        elif orbits:
+            guess = orbits[-1].copy()
+        else:
+            guess = seed.copy()
+        guess[problem.system.size] = w
+        res = semismooth_newton(lambda z, w=w: pd.residual(z, w)[:2], guess, options=newton)
+        x = res.x
+        E = float(problem.system.energy(x[: problem.system.size], w)[0]) if res.success else math.nan
+        fractions = modal_energy_fractions(problem, x, lm.omega, lm.shapes) if res.success else None
+        log.debug("w = %.6g: success %s, E = %.4g, share of mode %d %.3f", w, res.success, E, mode,
+                  fractions[mode - 1] if fractions is not None else math.nan)
+        on_family = (res.success and E > eg * (1.0 - strategy.start)
+                     and fractions[mode - 1] >= strategy.min_fraction)
+        if on_family:
+            close_tongue()
+            skips = 0
+            orbits.append(x)
+            # past the end once the orbits left after removing the tongues' (_drop_off_curve) are
+            if E >= energy_max and len(orbits) >= 2 and _energy(problem, orbits[-2]) >= energy_max:
+                kept, _ = _drop_off_curve(problem, orbits, [], lm, strategy)
+                if sum(_energy(problem, k) >= energy_max for k in kept) >= 2:
+                    break
+            if res.nit <= 4:
+                step = min(1.5 * step, strategy.max_step * w0)
+        else:
+            if not orbits and not res.success:
+                return [], [], (f"no periodic motion with a contact phase found at w = {w:.6g} rad/s, just above "
+                                f"linear mode {mode}'s frequency {w0:.6g} ({res.message})")
+            pending.append((w, E, fractions))
+            skips += 1
+            if skips > strategy.max_skips:
+                close_tongue()
+                message = (f"stopped at w = {w:.6g} rad/s: {skips} consecutive frequencies in internal-resonance "
+                           f"tongues or without a solution")
+                break
+            step = max(strategy.step * w0, 0.5 * step)
+        w += step
+    else:
+        message = f"stopped after {strategy.max_points} frequencies (PeriodDriven.max_points)"
+    close_tongue()
+    orbits, tongues = _drop_off_curve(problem, orbits, tongues, lm, strategy)
+    past = [i for i, x in enumerate(orbits) if _energy(problem, x) >= energy_max]
+    if past:  # the branch ends at the first orbit past the end of the span...
+        orbits = orbits[: past[0] + 1]
+        # ...if it continues the two before it (the tail of the sweep has no later orbits to judge
+        # it by, and the family's energy is steep there)
+        if len(orbits) >= 3:
+            n = problem.system.size
+            (xa, xb, xc) = orbits[-3:]
+            la, lb, lc = (math.log(_energy(problem, x)) for x in (xa, xb, xc))
+            line = lb + (lb - la) * (float(xc[n]) - float(xb[n])) / (float(xb[n]) - float(xa[n]))
+            if abs(lc - line) > math.log1p(strategy.off_curve):
+                orbits = orbits[:-1]
+                message = f"reached {_energy(problem, orbits[-1]):g} of the energy {energy_max:g} (the next orbit is a tongue's)"
+        tongues = [t for t in tongues if t.omega[0] < float(orbits[-1][problem.system.size])]
+    log.info("period-driven sweep of mode %d: %d orbits, %d tongues; %s", mode, len(orbits), len(tongues), message)
+    return orbits, tongues, message
+
+
+def _drop_off_curve(problem, orbits, tongues, lm, strategy):
+    """Orbits of a tongue that the sweep solved without noticing: the family's energy is a smooth,
+    increasing function of the frequency, while a tongue's orbits lie off it by 10-40 % (an
+    internal resonance feeds energy into another mode at nearly the same frequency). An orbit
+    with more energy than one of the next three, then one whose ``log E`` departs by more than
+    ``log(1 + strategy.off_curve)`` from the straight line through its accepted neighbours (in
+    ``w``), the worst first, is moved to the tongues."""
+    if len(orbits) < 3:
+        return orbits, tongues
+    s = problem.system
+    w = np.array([float(x[s.size]) for x in orbits])
+    logE = np.log([_energy(problem, x) for x in orbits])
+    # first the lower envelope: a tongue's orbits carry the energy another mode took, above the
+    # family's at the same frequency, and the family's energy rises with its frequency, so an orbit
+    # with more energy than a later one is a tongue's
+    # (judged against the next three orbits only: one low orbit far on must not cut the family)
+    nxt = np.array([logE[i + 1: i + 4].min() if i + 1 < logE.size else np.inf for i in range(logE.size)])
+    keep = logE <= nxt + 1e-12
+    tol = math.log1p(strategy.off_curve)
+    while keep.sum() >= 4:
+        idx = np.flatnonzero(keep)
+        dev = np.zeros(idx.size)
+        for j in range(idx.size):
+            # neighbours: the nearest kept orbits on each side (two on one side at the ends)
+            nb = [idx[j - 1], idx[j + 1]] if 0 < j < idx.size - 1 else (idx[1:3] if j == 0 else idx[-3:-1])
+            a, b = nb
+            line = logE[a] + (logE[b] - logE[a]) * (w[idx[j]] - w[a]) / (w[b] - w[a])
+            dev[j] = abs(logE[idx[j]] - line)
+        worst = int(np.argmax(dev))
+        if dev[worst] <= tol:
+            break
+        keep[idx[worst]] = False
+    if keep.all():
+        return orbits, tongues
+    extra = []
+    for i in np.flatnonzero(~keep):
+        f = modal_energy_fractions(problem, orbits[i], lm.omega, lm.shapes)
+        order = [k for k in np.argsort(f)[::-1] if k != problem.mode - 1 and f[k] > 0.05][:3]
+        extra.append(InternalResonance(omega=(float(w[i]),), energy=(float(np.exp(logE[i])),),
+                                       modes=tuple(int(k) + 1 for k in order), shares=tuple(float(f[k]) for k in order),
+                                       ratios=tuple(float(lm.omega[k] / w[i]) for k in order)))
+    tongues = sorted(tongues + extra, key=lambda t: t.omega[0])
+    return [x for x, k in zip(orbits, keep) if k], tongues
+
+
+def _energy(problem: NonlinearModeProblem, x: np.ndarray) -> float:
+    s = problem.system
+    return float(s.energy(x[: s.size], float(x[s.size]))[0])
+
+
+def captured_past_grazing(branch, problem: NonlinearModeProblem, model: StructuralModel, strategy: PeriodDriven,
+                          energy_max: float) -> str | None:
+    """Why an energy continuation's branch is a grazing family past grazing, or None.
+
+    Motions with a contact phase stiffen: at twice the grazing energy their frequency is several
+    percent above the linear one (10 % for the clamped bar, 5 % for a cantilever, 1-DOF impact
+    oscillators more). A branch whose orbits from ``1.5 E_g`` on all stay within
+    ``strategy.grazing_shift`` of the linear frequency while their energy at least doubles past
+    grazing only grazes the stop: an internal resonance takes the energy (on the bar, mode 4)."""
+    eg = grazing_energy(model, problem.mode)
+    if energy_max <= 1.05 * eg or not len(branch):
+        return None
+    if strategy.always:
+        return "PeriodDriven(always=True)"
+    if not branch.success and branch.energy.max() > 1.05 * eg:
+        return f"the energy continuation stopped past grazing ({branch.message})"
+    if energy_max <= 2.0 * eg or branch.energy.max() < 2.0 * eg:
+        return None
+    above = np.flatnonzero(branch.energy >= 1.5 * eg)
+    shift = np.abs(branch.omega[above] / problem.omega0 - 1.0)
+    if np.max(shift) >= strategy.grazing_shift:
+        return None
+    n_modes = int(min(max(strategy.n_modes, problem.mode + 1), model.n_dofs))
+    lm = linear_modes(model, n=n_modes)
+    i = int(above[-1])
+    x = problem.pack(branch.Q[i], branch.P[i], branch.omega[i], branch.xi[i])
+    f = modal_energy_fractions(problem, x, lm.omega, lm.shapes)
+    k = int(np.argmax(f))
+    return (f"the energy continuation grazed past grazing: from 1.5 to {branch.energy[i] / eg:.3g} E_g its frequency "
+            f"stayed within {np.max(shift):.1e} of linear mode {problem.mode}'s, and at the end mode {k + 1} held "
+            f"{100 * f[k]:.0f} % of the energy (an internal resonance)")
+
+
+def compose(below, problem: NonlinearModeProblem, model: StructuralModel, orbits: list[np.ndarray],
+            tongues: list[InternalResonance], message: str, why: str, branch_cls):
+    """One branch: the energy continuation's orbits up to grazing, then the period sweep's."""
+    s = problem.system
+    eg = grazing_energy(model, problem.mode)
+    keep = np.flatnonzero(below.energy <= eg)
+    omega, Q, P, energy, xi, res, nit, par = ([] for _ in range(8))
+    for i in keep:
+        omega.append(below.omega[i]), Q.append(below.Q[i]), P.append(below.P[i]), energy.append(below.energy[i])
+        xi.append(below.xi[i]), res.append(below.residual_norm[i]), nit.append(below.nit[i])
+        par.append(below.parameter[i])
+    for x in orbits:
+        u = problem.unpack(x, 0.0)
+        E = _energy(problem, x)
+        omega.append(u.omega), Q.append(u.Q), P.append(u.P), energy.append(E), xi.append(u.xi)
+        res.append(float(np.max(np.abs(problem.residual(x, math.log10(E))[0]))))
+        nit.append(0), par.append(math.log10(E))
+    meta = dict(below.meta)
+    meta.update({
+        "family": "contact phase",
+        "path": f"energy continuation up to the grazing energy {eg:.6g}, then period-driven continuation",
+        "grazing_energy": eg,
+        "energy_continuation": why,
+        "internal_resonances": [t.as_dict() for t in tongues],
+    })
+    success = bool(orbits) and message.startswith("reached")
+    return branch_cls(
+        kind=below.kind, harmonics=below.harmonics, contacts=below.contacts, omega=omega, Q=Q, P=P, energy=energy,
+        xi=xi, residual_norm=res, nit=nit, parameter=par, folds=(), success=success, status=0 if success else 4,
+        message=f"period-driven past grazing: {message}", model=below.model, meta=meta)

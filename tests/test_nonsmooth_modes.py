@@ -1,0 +1,125 @@
+"""Nonsmooth modes of a continuous structure (issue 35): the clamped bar whose tip hits a stop.
+
+Reference: the continuum's first nonsmooth mode from d'Alembert's solution with the Signorini end
+(``tests/bar_stop_reference.py``: ``w / w1 = 4 / (3 + 2 sqrt(2) / (pi sqrt(E / E_g)))``),
+confirmed by a CFL-1 finite-difference integration of the wave equation that shares no code with
+it nor with femodes (``tests/bar_stop_fd_check.py``).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+import femodes as fm
+
+from .bar_stop_fd_check import fd_period_and_return_error
+from .bar_stop_reference import REFERENCE, first_nonsmooth_mode, period
+
+GAP = 0.01
+W1 = math.pi / 2
+
+
+def bar(n_elements=20, beta=None, force=None):
+    mesh = fm.line_mesh(length=1.0, n_elements=n_elements, boundaries={"clamp": 0.0, "tip": 1.0})
+    model = fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
+    model = model.with_contact(fm.UnilateralContact(at="tip", gap=GAP))
+    if beta is not None:
+        model = model.with_damping(beta=beta)
+    if force is not None:
+        model = model.with_forcing(fm.HarmonicForce(at="tip", amplitude=force))
+    return model
+
+
+@pytest.fixture(scope="module")
+def model():
+    return bar(20)
+
+
+@pytest.fixture(scope="module")
+def backbone(model):
+    eg = fm.grazing_energy(model)
+    return fm.nonlinear_mode(model, mode=1, energy=(0.5 * eg, 25 * eg), harmonics=10)
+
+
+def test_reference_formula_against_its_finite_difference_check():
+    """The closed-form period against the leapfrog's at 400 cells: the scheme releases the tip one
+    step late, a first-order error in h = 1/400 (measured 7.3e-4 at E = 2 E_g, 4.7e-4 at 5 E_g);
+    2.5e-3 = 1/400 is the step itself."""
+    for rho in (2, 5):
+        fd = fd_period_and_return_error(rho, 400, n_periods=2)
+        assert fd["period"] / period(rho) - 1 == pytest.approx(0.0, abs=1.0 / 400)
+        assert REFERENCE[rho]["omega"] == pytest.approx(first_nonsmooth_mode(rho)[0], rel=1e-12)
+
+
+def test_grazing_energy_of_the_bar():
+    """pi^2 g^2 / 16 for the continuum; the P1 mesh's mode 1 is 1e-3 stiff at 20 elements and its
+    mass-normalised tip amplitude 1e-3 off: 1 % covers both."""
+    assert fm.grazing_energy(bar(20)) == pytest.approx(math.pi ** 2 * GAP ** 2 / 16, rel=1e-2)
+    with pytest.raises(ValueError, match="no contact with a positive gap"):
+        fm.grazing_energy(fm.StructuralModel(M=[[1.0]], K=[[1.0]]))
+
+
+def test_backbone_is_the_contact_phase_family(model, backbone):
+    """Past grazing the default backbone follows the motions with a contact phase (their frequency
+    rises with energy), not the grazing family at w1 that a continuation in the energy climbs.
+    Every point from 1.5 to 25 E_g within 1 % of the continuum's mode (20 P1 elements, H = 10:
+    the truncation of the velocity jump at contact and the mesh; 0.7 % measured, largest just
+    above grazing where the contact phase is shortest)."""
+    eg = fm.grazing_energy(model)
+    assert backbone.meta["family"] == "contact phase" and backbone.success
+    assert "grazed" in backbone.meta["energy_continuation"]
+    past = backbone.energy >= 1.5 * eg
+    assert past.sum() >= 10 and backbone.energy.max() >= 25 * eg
+    ref = first_nonsmooth_mode(backbone.energy[past] / eg)[0]
+    err = backbone.omega[past] / ref - 1
+    assert np.max(np.abs(err)) < 1e-2, err
+    # the tongues stepped over are listed, with the modes that take the energy there
+    assert backbone.internal_resonances
+    assert all(t["modes"] and all(k != 1 for k in t["modes"]) for t in backbone.internal_resonances
+               if np.isfinite(t["energy"][0]))
+
+
+def test_energy_continuation_alone_grazes(model):
+    """past_grazing=None keeps the energy continuation's branch: the grazing family, at w1 within
+    1e-2 at every energy (issue 35 measured 1.4e-3), frequency far below the forced peak."""
+    eg = fm.grazing_energy(model)
+    grazing = fm.nonlinear_mode(model, mode=1, energy=(0.5 * eg, 25 * eg), harmonics=10, past_grazing=None)
+    assert "family" not in grazing.meta
+    assert np.max(np.abs(grazing.omega / W1 - 1)) < 1e-2
+
+
+def test_forced_peak_lies_on_the_backbone(backbone):
+    """The bar with beta = 0.02 (examples/cases/bar_stop_frc.toml's damping, 20 elements here):
+    its peak is within 1 % of the backbone at the peak's energy (0.3 % measured; against 10-20 %
+    for the grazing family)."""
+    forced = fm.frequency_response(bar(20, beta=0.02, force=0.004), omega=(1.0, 2.3), harmonics=10)
+    (peak,) = fm.compare_resonance(backbone, forced)
+    assert peak.omega > 1.15 * W1  # the resonance bends right...
+    assert abs(peak.distance) < 1e-2, peak  # ...onto the backbone
+
+
+@pytest.mark.slow
+def test_forced_peaks_approach_the_backbone_as_damping_decreases(backbone):
+    """beta = 0.02, 0.01, 0.005 (force scaled with beta): peaks within 0.5 % of the backbone
+    (0.28, 0.39, 0.17 % measured)."""
+    forced = [fm.frequency_response(bar(20, beta=b, force=0.2 * b), omega=(1.0, 2.3), harmonics=10)
+              for b in (0.02, 0.01, 0.005)]
+    peaks = fm.compare_resonance(backbone, forced)
+    assert all(abs(p.distance) < 5e-3 for p in peaks), peaks
+
+
+def test_compare_resonance_bad_input(backbone):
+    with pytest.raises(TypeError, match="backbone must be a Branch from femodes.nonlinear_mode"):
+        fm.compare_resonance("x", backbone)
+    with pytest.raises(TypeError, match="forced must be a Branch from femodes.frequency_response"):
+        fm.compare_resonance(backbone, backbone)
+
+
+def test_period_driven_options_are_checked():
+    with pytest.raises(ValueError, match="step must be a number in"):
+        fm.PeriodDriven(step=0.0)
+    with pytest.raises(TypeError, match="past_grazing must be a femodes.PeriodDriven or None"):
+        m = bar(10)
+        eg = fm.grazing_energy(m)
+        fm.nonlinear_mode(m, 1, (0.5 * eg, 4 * eg), 5, past_grazing="period")
