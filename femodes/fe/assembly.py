@@ -22,8 +22,9 @@ import scipy.sparse as sp
 import skfem
 
 from ..model import DofMap, StructuralModel
+from .quadrature import orders
 
-__all__ = ["FEInfo", "element_property", "build_fe_model", "checked_basis"]
+__all__ = ["FEInfo", "element_property", "build_fe_model", "checked_basis", "form_bases"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,17 +88,33 @@ def check_mesh(mesh: Any, owner: str) -> None:
         )
 
 
-def checked_basis(mesh: Any, element: Any, owner: str) -> Any:
-    """``skfem.Basis(mesh, element)``, with a degenerate mesh reported as a ValueError naming it."""
+def checked_basis(mesh: Any, element: Any, owner: str, **options: Any) -> Any:
+    """``skfem.Basis(mesh, element, **options)``, with a degenerate mesh reported as a ValueError naming it."""
     with np.errstate(all="ignore"):
         try:
-            return skfem.Basis(mesh, element)
+            return skfem.Basis(mesh, element, **options)
         except np.linalg.LinAlgError as exc:
             h = np.diff(np.asarray(mesh.p[0]))
             raise ValueError(
                 f"{owner}: mesh element lengths {h.min():.3g}..{h.max():.3g} are too small for the "
                 f"{type(element).__name__} basis (its element map is numerically singular); rescale the length unit"
             ) from exc
+
+
+def form_bases(mesh: Any, element: Any, owner: str) -> tuple[Any, Any]:
+    """Bases of the mass and of the stiffness form, each with the lowest quadrature exact on affine
+    elements (:func:`femodes.fe.quadrature.orders`; scikit-fem's default rule on curved meshes).
+
+    The stiffness basis shares the mass basis's DOF numbering and geometry map; it is the mass
+    basis itself when both forms take the same rule (Q1/Q2 quadrilaterals and hexahedra).
+    """
+    o = orders(mesh, element)
+    mass = checked_basis(mesh, element, owner, intorder=None if o is None else o.mass)
+    if o is None or o.stiffness == o.mass:
+        return mass, mass
+    stiffness = checked_basis(mesh, element, owner, intorder=o.stiffness, mapping=mass.mapping, dofs=mass.dofs,
+                              disable_doflocs=True)
+    return mass, stiffness
 
 
 def _check_assembled(owner: str, mesh: Any, M: sp.spmatrix, K: sp.spmatrix) -> None:

@@ -9,7 +9,7 @@ import skfem
 from skfem.helpers import dot, grad
 
 from ..model import StructuralModel
-from .assembly import check_mesh, support_names, build_fe_model, checked_basis, element_property, quad_field
+from .assembly import check_mesh, support_names, build_fe_model, element_property, form_bases, quad_field
 from .material import Material, Section
 
 __all__ = ["bar"]
@@ -70,11 +70,11 @@ def bar(
     mats = element_property(mesh, material, Material, "bar", "material")
     secs = element_property(mesh, section, Section, "bar", "section")
     element = skfem.ElementLineP1() if order == 1 else skfem.ElementLineP2()
-    basis = checked_basis(mesh, element, "bar")
+    basis, kbasis = form_bases(mesh, element, "bar")  # quadrature exact on each element (femodes.fe.quadrature)
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
-        EA = quad_field(basis, [m.E * s.area for m, s in zip(mats, secs)])
+        EA = quad_field(kbasis, [m.E * s.area for m, s in zip(mats, secs)])
         rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])
-        K = _stiffness.assemble(basis, EA=EA)
+        K = _stiffness.assemble(kbasis, EA=EA)
         M = _mass.assemble(basis, rhoA=rhoA)
     if lumped:
         import scipy.sparse as sp

@@ -9,7 +9,7 @@ import skfem
 from skfem.helpers import dd, ddot, dot, grad
 
 from ..model import StructuralModel
-from .assembly import check_mesh, support_names, build_fe_model, checked_basis, element_property, quad_field
+from .assembly import check_mesh, support_names, build_fe_model, element_property, form_bases, quad_field
 from .material import Material, Section
 
 __all__ = ["beam"]
@@ -66,12 +66,13 @@ def beam(
     for s in set(secs):
         if s.inertia is None:
             raise ValueError("beam: section.inertia is required for beams, got Section(inertia=None)")
-    basis = checked_basis(mesh, skfem.ElementLineHermite(), "beam")
+    # quadrature exact on each element (femodes.fe.quadrature): 4-point Gauss for M, 2-point for K
+    basis, kbasis = form_bases(mesh, skfem.ElementLineHermite(), "beam")
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
-        EI = quad_field(basis, [m.E * s.inertia for m, s in zip(mats, secs)])
+        EI = quad_field(kbasis, [m.E * s.inertia for m, s in zip(mats, secs)])
         rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])
         rhoI = quad_field(basis, [m.rho * s.inertia if s.rotary_inertia else 0.0 for m, s in zip(mats, secs)])
-        K = _stiffness.assemble(basis, EI=EI)
+        K = _stiffness.assemble(kbasis, EI=EI)
         M = _mass.assemble(basis, rhoA=rhoA, rhoI=rhoI)
     return build_fe_model(
         owner="beam",

@@ -15,9 +15,10 @@ import skfem
 from skfem.helpers import ddot, dot, sym_grad, trace
 
 from ..model import StructuralModel
-from .assembly import build_fe_model, checked_basis, element_property, quad_field, support_names
+from .assembly import build_fe_model, element_property, form_bases, quad_field, support_names
 from .material import Material
 from .mesh import named_points
+from .quadrature import facet_order
 
 __all__ = ["solid", "POINT_RTOL"]
 
@@ -88,7 +89,9 @@ def _groups(mesh: Any, basis: Any, nodal: np.ndarray, node_of_full: np.ndarray) 
         if facets.size == 0:
             continue
         nodes = np.unique(node_of_full[np.asarray(basis.get_dofs(facets).all())])
-        b = _boundary_measure.assemble(skfem.FacetBasis(mesh, basis.elem, facets=facets))
+        # int N_k ds has the degree of N_k: exact on flat facets with that rule (femodes.fe.quadrature)
+        fb = skfem.FacetBasis(mesh, basis.elem, facets=facets, intorder=facet_order(mesh, basis.elem))
+        b = _boundary_measure.assemble(fb)
         w = b[nodal[0, nodes]]
         total = w.sum()
         groups[name] = nodes
@@ -224,12 +227,13 @@ def solid(
     plane, t = _plane_options(dim, plane, thickness)
     components = _COMPONENTS[dim]
     mats = element_property(mesh, material, Material, "solid", "material")
-    basis = checked_basis(mesh, skfem.ElementVector(scalar), "solid")
+    # quadrature exact for M and K on affine elements (femodes.fe.quadrature: Q2 hexahedra 27 points, not 343)
+    basis, kbasis = form_bases(mesh, skfem.ElementVector(scalar), "solid")
     lam, mu = np.array([m.lame for m in mats]).T
     if plane == "stress":  # sigma_zz = 0 eliminates eps_zz: lambda* = 2 lambda mu / (lambda + 2 mu) = E nu / (1 - nu^2)
         lam = 2.0 * lam * mu / (lam + 2.0 * mu)
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
-        K = _stiffness.assemble(basis, lam=quad_field(basis, lam), mu=quad_field(basis, mu), t=t)
+        K = _stiffness.assemble(kbasis, lam=quad_field(kbasis, lam), mu=quad_field(kbasis, mu), t=t)
         M = _mass.assemble(basis, rho=quad_field(basis, [m.rho for m in mats]), t=t)
     nodal = _lagrange_nodes(basis, dim)
     node_of_full = np.empty(basis.N, dtype=int)
