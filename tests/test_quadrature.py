@@ -167,3 +167,23 @@ def test_distorted_cells_frequencies_move_less_than_discretisation_error(hexahed
     # measured: the quadrature change is 2e-4 to 2e-3 of the discretisation error (7e-7..8e-4 relative)
     assert np.all(quadrature < 0.01 * discretisation), (quadrature, discretisation)
     assert np.all(quadrature > 0)  # non-affine: the rules differ (else the check would be vacuous)
+
+
+@skfem.LinearForm
+def _first_component(v, w):
+    return v[0]
+
+
+@pytest.mark.parametrize("kind, order", sorted(POINTS))
+def test_group_weights_from_the_scalar_element_equal_the_vector_elements(kind, order):
+    """fm.solid integrates int N_k ds with the scalar element's facet basis and maps node k to
+    scalar DOF nodal[0, k] // dim; the vector element's first component, scikit-fem's default
+    rule, gives the same weights (they sum to 1: 64 eps, as round_off_bound)."""
+    mesh = AFFINE[kind]()
+    model = fm.solid(mesh, MAT, order=order)
+    fe, groups = model.fe, model.dofmap.groups
+    assert set(groups) == set(mesh.boundaries)
+    for name, nodes in groups.items():
+        b = _first_component.assemble(skfem.FacetBasis(mesh, fe.basis.elem, facets=mesh.boundaries[name]))
+        w = b[fe.nodal[0, nodes]]
+        np.testing.assert_allclose(model.dofmap.group_weights[name], w / w.sum(), rtol=0, atol=64 * EPS)

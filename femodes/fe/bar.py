@@ -59,6 +59,11 @@ def bar(
     -------
     StructuralModel
         DOF component ``"u"`` (alias ``"u_x"``) at each node; P2 interior DOFs are unnamed.
+
+    Notes
+    -----
+    Quadrature (:mod:`femodes.fe.quadrature`), exact on every element: Gauss with 2 (P1) or 3
+    (P2) points for the mass (``u v``: degree 2 p), 2 points for the stiffness (degree 2 p - 2).
     """
     check_mesh(mesh, "bar")
     if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer)) or order not in (1, 2):

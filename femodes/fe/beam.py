@@ -59,6 +59,9 @@ def beam(
     cond(K) grows like ``(N/2)^4`` with the number of DOFs N: near 1e5 DOFs it exceeds 1/eps and
     eigenvalues lose all accuracy (:func:`femodes.linear_modes` warns). Use bars for the largest
     scaling studies.
+
+    Quadrature (:mod:`femodes.fe.quadrature`), exact on every element: 4-point Gauss for the
+    mass (``w v``: degree 6), 2-point for the stiffness (``w'' v''``: degree 2).
     """
     check_mesh(mesh, "beam")
     mats = element_property(mesh, material, Material, "beam", "material")
