@@ -24,9 +24,10 @@ the mesh built before the timed region:
 ``femodes``  ``fm.solid(mesh, material, clamped="left", order=2)``: the whole model (bases, K, M,
              boundary groups and weights, supports, DOF map and labels, checks of the matrices).
 ``bare``     what a scikit-fem user writes for the same matrices: ``Basis`` of the same vector
-             element with the same quadrature (``intorder`` of ``femodes.fe.quadrature``; the
-             stiffness basis shares the DOFs and the map of the mass basis), the same bilinear
-             forms with constant coefficients, ``.assemble`` to CSR. No supports, no DOF names.
+             element with the same quadrature (``intorder`` of ``femodes.fe.quadrature``; K first,
+             then the mass basis sharing the DOFs and the map of the stiffness basis, as
+             ``fm.solid`` does), the same bilinear forms with constant coefficients, ``.assemble``
+             to CSR. No supports, no DOF names, no boundary weights.
 ``before``   ``fm.solid`` of the tree given by ``--before`` (with ``PYTHONPATH``).
 
 The variants alternate within each round (side by side, so that the load of the shared machine
@@ -81,10 +82,13 @@ def bare_build(mesh, material):
     def mass(u, v, w):
         return material.rho * dot(u, v)
 
-    mbasis = skfem.Basis(mesh, element, intorder=o.mass)
-    kbasis = mbasis if o.stiffness == o.mass else skfem.Basis(
-        mesh, element, intorder=o.stiffness, mapping=mbasis.mapping, dofs=mbasis.dofs, disable_doflocs=True)
-    return stiffness.assemble(kbasis), mass.assemble(mbasis)
+    # as fm.solid: K first, its basis dropped before the mass basis (sharing its DOFs and map) is built
+    same = o.stiffness == o.mass
+    kbasis = skfem.Basis(mesh, element, intorder=o.stiffness, disable_doflocs=not same)
+    K = stiffness.assemble(kbasis)
+    mbasis = kbasis if same else skfem.Basis(mesh, element, intorder=o.mass, mapping=kbasis.mapping, dofs=kbasis.dofs)
+    del kbasis
+    return K, mass.assemble(mbasis)
 
 
 def child(case: str, variant: str, trace: bool) -> dict:

@@ -24,7 +24,7 @@ import skfem
 from ..model import DofMap, StructuralModel
 from .quadrature import orders
 
-__all__ = ["FEInfo", "element_property", "build_fe_model", "checked_basis", "form_bases"]
+__all__ = ["FEInfo", "element_property", "build_fe_model", "checked_basis", "stiffness_basis", "mass_basis"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,20 +101,29 @@ def checked_basis(mesh: Any, element: Any, owner: str, **options: Any) -> Any:
             ) from exc
 
 
-def form_bases(mesh: Any, element: Any, owner: str) -> tuple[Any, Any]:
-    """Bases of the mass and of the stiffness form, each with the lowest quadrature exact on affine
-    elements (:func:`femodes.fe.quadrature.orders`; scikit-fem's default rule on curved meshes).
+def stiffness_basis(mesh: Any, element: Any, owner: str) -> Any:
+    """Basis of the stiffness form with the lowest quadrature exact on affine elements
+    (:func:`femodes.fe.quadrature.orders`; scikit-fem's default rule on curved meshes).
 
-    The stiffness basis shares the mass basis's DOF numbering and geometry map; it is the mass
-    basis itself when both forms take the same rule (Q1/Q2 quadrilaterals and hexahedra).
+    Assemble K with it first and drop it before :func:`mass_basis` builds the (larger) mass
+    basis, so that the two sets of shape-function values are never held together: the peak
+    memory of a build stays that of the mass basis alone.
     """
     o = orders(mesh, element)
-    mass = checked_basis(mesh, element, owner, intorder=None if o is None else o.mass)
     if o is None or o.stiffness == o.mass:
-        return mass, mass
-    stiffness = checked_basis(mesh, element, owner, intorder=o.stiffness, mapping=mass.mapping, dofs=mass.dofs,
-                              disable_doflocs=True)
-    return mass, stiffness
+        return checked_basis(mesh, element, owner, intorder=None if o is None else o.mass)
+    return checked_basis(mesh, element, owner, intorder=o.stiffness, disable_doflocs=True)
+
+
+def mass_basis(stiffness: Any, owner: str) -> Any:
+    """Basis of the mass form: the stiffness basis itself when both forms take the same rule
+    (Q1/Q2 quadrilaterals and hexahedra, curved meshes), else one with the mass rule that shares
+    its DOF numbering and geometry map."""
+    o = orders(stiffness.mesh, stiffness.elem)
+    if o is None or o.stiffness == o.mass:
+        return stiffness
+    return checked_basis(stiffness.mesh, stiffness.elem, owner, intorder=o.mass, mapping=stiffness.mapping,
+                         dofs=stiffness.dofs)
 
 
 def _check_assembled(owner: str, mesh: Any, M: sp.spmatrix, K: sp.spmatrix) -> None:

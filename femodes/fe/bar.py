@@ -9,7 +9,7 @@ import skfem
 from skfem.helpers import dot, grad
 
 from ..model import StructuralModel
-from .assembly import check_mesh, support_names, build_fe_model, element_property, form_bases, quad_field
+from .assembly import check_mesh, support_names, build_fe_model, element_property, mass_basis, quad_field, stiffness_basis
 from .material import Material, Section
 
 __all__ = ["bar"]
@@ -75,7 +75,8 @@ def bar(
     mats = element_property(mesh, material, Material, "bar", "material")
     secs = element_property(mesh, section, Section, "bar", "section")
     element = skfem.ElementLineP1() if order == 1 else skfem.ElementLineP2()
-    basis, kbasis = form_bases(mesh, element, "bar")  # quadrature exact on each element (femodes.fe.quadrature)
+    kbasis = stiffness_basis(mesh, element, "bar")  # quadrature exact on each element (femodes.fe.quadrature)
+    basis = mass_basis(kbasis, "bar")
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
         EA = quad_field(kbasis, [m.E * s.area for m, s in zip(mats, secs)])
         rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])

@@ -9,7 +9,7 @@ import skfem
 from skfem.helpers import dd, ddot, dot, grad
 
 from ..model import StructuralModel
-from .assembly import check_mesh, support_names, build_fe_model, element_property, form_bases, quad_field
+from .assembly import check_mesh, support_names, build_fe_model, element_property, mass_basis, quad_field, stiffness_basis
 from .material import Material, Section
 
 __all__ = ["beam"]
@@ -70,7 +70,8 @@ def beam(
         if s.inertia is None:
             raise ValueError("beam: section.inertia is required for beams, got Section(inertia=None)")
     # quadrature exact on each element (femodes.fe.quadrature): 4-point Gauss for M, 2-point for K
-    basis, kbasis = form_bases(mesh, skfem.ElementLineHermite(), "beam")
+    kbasis = stiffness_basis(mesh, skfem.ElementLineHermite(), "beam")
+    basis = mass_basis(kbasis, "beam")
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
         EI = quad_field(kbasis, [m.E * s.inertia for m, s in zip(mats, secs)])
         rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])

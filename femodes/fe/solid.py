@@ -15,7 +15,7 @@ import skfem
 from skfem.helpers import ddot, div, dot, grad, transpose
 
 from ..model import StructuralModel
-from .assembly import build_fe_model, element_property, form_bases, quad_field, support_names
+from .assembly import build_fe_model, element_property, mass_basis, quad_field, stiffness_basis, support_names
 from .material import Material
 from .mesh import named_points
 from .quadrature import facet_order
@@ -246,13 +246,16 @@ def solid(
     plane, t = _plane_options(dim, plane, thickness)
     components = _COMPONENTS[dim]
     mats = element_property(mesh, material, Material, "solid", "material")
-    # quadrature exact for M and K on affine elements (femodes.fe.quadrature: Q2 hexahedra 27 points, not 343)
-    basis, kbasis = form_bases(mesh, skfem.ElementVector(scalar), "solid")
     lam, mu = np.array([m.lame for m in mats]).T
     if plane == "stress":  # sigma_zz = 0 eliminates eps_zz: lambda* = 2 lambda mu / (lambda + 2 mu) = E nu / (1 - nu^2)
         lam = 2.0 * lam * mu / (lam + 2.0 * mu)
+    # quadrature exact for K and M on affine elements (femodes.fe.quadrature: Q2 hexahedra 27 points, not 343);
+    # K first, its basis dropped before the mass basis is built (peak memory: one basis)
+    kbasis = stiffness_basis(mesh, skfem.ElementVector(scalar), "solid")
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
         K = _stiffness.assemble(kbasis, lam=quad_field(kbasis, lam), mu=quad_field(kbasis, mu), t=t)
+        basis = mass_basis(kbasis, "solid")
+        del kbasis
         M = _mass.assemble(basis, rho=quad_field(basis, [m.rho for m in mats]), t=t)
     nodal = _lagrange_nodes(basis, dim)
     node_of_full = np.empty(basis.N, dtype=int)
