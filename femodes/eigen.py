@@ -89,7 +89,14 @@ def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigm
                 # modes are then the dominant ones and get relative accuracy ~eps instead of
                 # ~eps * lambda_max / lambda_1 (1e-7..1e-6 for fine Hermite beams).
                 mu, vec = sla.eigh(Md, Kd, subset_by_index=[N - n, N - 1])
-                if np.all(mu > 0):
+                # A singular K (free structure) may pass Cholesky by round-off (tiny positive
+                # pivots; whether it does flips with the assembly's rounding): then 1/mu_max sits at
+                # the round-off floor of K's eigenvalues, eps * lambda_max, and the other mu carry
+                # absolute errors ~eps * mu_max, i.e. no digits. max K_ii / M_ii <= lambda_max
+                # (Rayleigh quotients of unit vectors), so this floor test errs towards the inverse
+                # problem only for cond(K) > 1 / (1e3 eps) = 4.5e12.
+                floor = 1e3 * np.finfo(float).eps * float(np.max(np.diag(Kd) / np.diag(Md)))
+                if np.all(mu > 0) and 1.0 / mu[-1] > floor:
                     return 1.0 / mu[::-1], vec[:, ::-1]
             except (np.linalg.LinAlgError, ValueError):
                 pass  # K singular (free structure): direct problem below

@@ -22,8 +22,9 @@ import scipy.sparse as sp
 import skfem
 
 from ..model import DofMap, StructuralModel
+from .quadrature import orders
 
-__all__ = ["FEInfo", "element_property", "build_fe_model", "checked_basis"]
+__all__ = ["FEInfo", "element_property", "build_fe_model", "checked_basis", "stiffness_basis", "mass_basis"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,17 +88,42 @@ def check_mesh(mesh: Any, owner: str) -> None:
         )
 
 
-def checked_basis(mesh: Any, element: Any, owner: str) -> Any:
-    """``skfem.Basis(mesh, element)``, with a degenerate mesh reported as a ValueError naming it."""
+def checked_basis(mesh: Any, element: Any, owner: str, **options: Any) -> Any:
+    """``skfem.Basis(mesh, element, **options)``, with a degenerate mesh reported as a ValueError naming it."""
     with np.errstate(all="ignore"):
         try:
-            return skfem.Basis(mesh, element)
+            return skfem.Basis(mesh, element, **options)
         except np.linalg.LinAlgError as exc:
             h = np.diff(np.asarray(mesh.p[0]))
             raise ValueError(
                 f"{owner}: mesh element lengths {h.min():.3g}..{h.max():.3g} are too small for the "
                 f"{type(element).__name__} basis (its element map is numerically singular); rescale the length unit"
             ) from exc
+
+
+def stiffness_basis(mesh: Any, element: Any, owner: str) -> Any:
+    """Basis of the stiffness form with the lowest quadrature exact on affine elements
+    (:func:`femodes.fe.quadrature.orders`; scikit-fem's default rule on curved meshes).
+
+    Assemble K with it first and drop it before :func:`mass_basis` builds the (larger) mass
+    basis, so that the two sets of shape-function values are never held together: the peak
+    memory of a build stays that of the mass basis alone.
+    """
+    o = orders(mesh, element)
+    if o is None or o.stiffness == o.mass:
+        return checked_basis(mesh, element, owner, intorder=None if o is None else o.mass)
+    return checked_basis(mesh, element, owner, intorder=o.stiffness, disable_doflocs=True)
+
+
+def mass_basis(stiffness: Any, owner: str) -> Any:
+    """Basis of the mass form: the stiffness basis itself when both forms take the same rule
+    (Q1/Q2 quadrilaterals and hexahedra, curved meshes), else one with the mass rule that shares
+    its DOF numbering and geometry map."""
+    o = orders(stiffness.mesh, stiffness.elem)
+    if o is None or o.stiffness == o.mass:
+        return stiffness
+    return checked_basis(stiffness.mesh, stiffness.elem, owner, intorder=o.mass, mapping=stiffness.mapping,
+                         dofs=stiffness.dofs)
 
 
 def _check_assembled(owner: str, mesh: Any, M: sp.spmatrix, K: sp.spmatrix) -> None:

@@ -9,7 +9,7 @@ import skfem
 from skfem.helpers import dot, grad
 
 from ..model import StructuralModel
-from .assembly import check_mesh, support_names, build_fe_model, checked_basis, element_property, quad_field
+from .assembly import check_mesh, support_names, build_fe_model, element_property, mass_basis, quad_field, stiffness_basis
 from .material import Material, Section
 
 __all__ = ["bar"]
@@ -59,6 +59,11 @@ def bar(
     -------
     StructuralModel
         DOF component ``"u"`` (alias ``"u_x"``) at each node; P2 interior DOFs are unnamed.
+
+    Notes
+    -----
+    Quadrature (:mod:`femodes.fe.quadrature`), exact on every element: Gauss with 2 (P1) or 3
+    (P2) points for the mass (``u v``: degree 2 p), 2 points for the stiffness (degree 2 p - 2).
     """
     check_mesh(mesh, "bar")
     if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer)) or order not in (1, 2):
@@ -70,11 +75,12 @@ def bar(
     mats = element_property(mesh, material, Material, "bar", "material")
     secs = element_property(mesh, section, Section, "bar", "section")
     element = skfem.ElementLineP1() if order == 1 else skfem.ElementLineP2()
-    basis = checked_basis(mesh, element, "bar")
+    kbasis = stiffness_basis(mesh, element, "bar")  # quadrature exact on each element (femodes.fe.quadrature)
+    basis = mass_basis(kbasis, "bar")
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
-        EA = quad_field(basis, [m.E * s.area for m, s in zip(mats, secs)])
+        EA = quad_field(kbasis, [m.E * s.area for m, s in zip(mats, secs)])
         rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])
-        K = _stiffness.assemble(basis, EA=EA)
+        K = _stiffness.assemble(kbasis, EA=EA)
         M = _mass.assemble(basis, rhoA=rhoA)
     if lumped:
         import scipy.sparse as sp
