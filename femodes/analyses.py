@@ -11,6 +11,7 @@ import dataclasses
 import logging
 import math
 import os
+import warnings
 from typing import Any, Callable
 
 import numpy as np
@@ -63,6 +64,17 @@ def _options(options: Any, owner: str) -> ContinuationOptions | None:
     if options is not None and not isinstance(options, ContinuationOptions):
         raise TypeError(f"{owner}: options must be a femodes.ContinuationOptions or None, got {type(options).__name__}")
     return options
+
+
+def _warn_undamped(model: StructuralModel) -> None:
+    """A forced model without damping has no finite resonance peak: each resonance is a pole the
+    curve runs to infinity on, with no folds (a user's blade: 9 points, no fold)."""
+    undamped = model.C is None or (sp.issparse(model.C) and model.C.count_nonzero() == 0) or (
+        not sp.issparse(model.C) and not np.any(np.asarray(model.C)))
+    if model.forces and undamped and getattr(model, "C_lowrank", None) is None:
+        warnings.warn("frequency_response: the model has no damping, so its forced response has no finite resonance "
+                      "peak (the curve runs to infinity at each resonance); add damping, e.g. "
+                      "model.with_damping(modal=0.01) or model.with_damping(beta=...)", UserWarning, stacklevel=4)
 
 
 def _check_model(model: Any, owner: str) -> StructuralModel:
@@ -172,6 +184,7 @@ def frequency_response(
         end of the span (valid points, ``success`` True, a warning in the log).
     """
     model = _check_model(model, "frequency_response")
+    _warn_undamped(model)
     checkpoint = checkpoint_spec(checkpoint, "frequency_response")
     h = _harmonics(harmonics, "frequency_response")
     _options(options, "frequency_response")
@@ -402,6 +415,12 @@ def nonlinear_mode(
                               model=model, checkpoint=checkpoint, description=description)
     if past_grazing is not None:
         branch = _past_grazing(branch, problem, model, past_grazing, e1, options)
+    elif any(isinstance(c.item, UnilateralContact) for c in model.contacts) and len(branch):
+        why = captured_past_grazing(branch, problem, model, PeriodDriven(), e1)
+        if why is not None:  # kept as asked, but said: it does not predict the forced resonance
+            branch.meta["energy_continuation"] = why
+            log.warning("nonlinear_mode: %s; this branch grazes past grazing and does not predict the forced "
+                        "resonance (past_grazing=None keeps it; the default traces the contact-phase family)", why)
     branch = _with_stability(branch, problem, model, method, options)
     if rtol is None:
         return branch

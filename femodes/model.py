@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
@@ -974,6 +975,13 @@ class StructuralModel:
                 raise ValueError(f"{owner}: direction= needs a named location (boundary or point), not a DOF index")
             at = (at, dm.components[comp])
         group = self._group_of(at)
+        if law.direction is None and isinstance(at, str) and group is not None and len(dm.displacement) > 1:
+            # a boundary of a 2-D/3-D solid without a direction: the contact acts along +x, which is
+            # rarely what was meant (a stop above a blade tip is along z)
+            warnings.warn(f"{owner}: no direction= for boundary {at!r} of a {len(dm.displacement)}-D solid; the contact "
+                          f"acts along +x ({dm.displacement[0]!r}). Give the stop's direction, e.g. "
+                          f"direction={tuple(1.0 if i == len(dm.displacement) - 1 else 0.0 for i in range(len(dm.displacement)))}, "
+                          f"or at=({at!r}, {dm.displacement[0]!r}) to keep +x and silence this", UserWarning, stacklevel=4)
         if group is None:
             dof = self.dof(at, owner)
             nodes, dofs = None, np.array([dof])

@@ -6,6 +6,8 @@ confirmed by a CFL-1 finite-difference integration of the wave equation that sha
 it nor with femodes (``tests/bar_stop_fd_check.py``).
 """
 
+import contextlib
+import logging
 import math
 
 import numpy as np
@@ -18,6 +20,23 @@ from .bar_stop_reference import REFERENCE, first_nonsmooth_mode, period
 
 GAP = 0.01
 W1 = math.pi / 2
+
+
+@contextlib.contextmanager
+def caplog_warning():
+    """The warnings femodes.analyses logs inside the block."""
+    records = []
+
+    class Keep(logging.Handler):
+        def emit(self, record):
+            records.append(record)
+
+    handler, logger = Keep(level=logging.WARNING), logging.getLogger("femodes.analyses")
+    logger.addHandler(handler)
+    try:
+        yield records
+    finally:
+        logger.removeHandler(handler)
 
 
 def bar(n_elements=20, beta=None, force=None):
@@ -82,10 +101,13 @@ def test_backbone_is_the_contact_phase_family(model, backbone):
 
 def test_energy_continuation_alone_grazes(model):
     """past_grazing=None keeps the energy continuation's branch: the grazing family, at w1 within
-    1e-2 at every energy (issue 35 measured 1.4e-3), frequency far below the forced peak."""
+    1e-2 at every energy (issue 35 measured 1.4e-3), frequency far below the forced peak; the
+    branch says so (meta and a logged warning)."""
     eg = fm.grazing_energy(model)
-    grazing = fm.nonlinear_mode(model, mode=1, energy=(0.5 * eg, 25 * eg), harmonics=10, past_grazing=None)
-    assert "family" not in grazing.meta
+    with caplog_warning() as records:
+        grazing = fm.nonlinear_mode(model, mode=1, energy=(0.5 * eg, 25 * eg), harmonics=10, past_grazing=None)
+    assert "family" not in grazing.meta and "grazed" in grazing.meta["energy_continuation"]
+    assert any("does not predict the forced resonance" in r.getMessage() for r in records)
     assert np.max(np.abs(grazing.omega / W1 - 1)) < 1e-2
 
 
