@@ -10,6 +10,7 @@ Files are written by :mod:`femodes.store` (atomic writes; the checkpoint journal
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -19,7 +20,7 @@ import numpy as np
 
 from .hbm.harmonics import Harmonics
 from .laws import PenaltyContact, UnilateralContact
-from .store import RECORD_SUFFIXES, read_record, write_record
+from .store import RECORD_SUFFIXES, model_signature, read_record, signature_differences, write_record
 
 __all__ = ["PeriodicSolution", "Branch", "Bifurcation", "ErrorEstimate", "load_branch", "FORMAT_VERSION", "BIFURCATION_KINDS"]
 
@@ -418,6 +419,9 @@ class Branch:
         self.stability_method: np.ndarray | None = None
         self.bifurcations: tuple = ()
         self.accuracy: ErrorEstimate | None = None
+        #: :func:`~femodes.store.model_signature` of the model the branch was solved on, as read
+        #: from its file (None: not stored, a file of an older femodes; or computed from ``model``)
+        self.model_signature: dict | None = None
 
     def set_accuracy(self, accuracy: ErrorEstimate) -> "Branch":
         """Attach the error estimate of every point (used by :mod:`femodes.accuracy`)."""
@@ -526,15 +530,56 @@ class Branch:
         return pen / np.where(amp > 0, amp, 1.0), np.where(touching, ten / np.where(touching, fmax, 1.0), 0.0)
 
     def attach(self, model) -> "Branch":
-        """Attach the model (after :func:`load_branch`) so solutions can expand to the full field."""
+        """Attach the model (after :func:`load_branch`) so solutions can expand to the full field.
+
+        The model must be the one the branch was solved on: its contacts (DOF, law, gap,
+        stiffness) are compared with those the branch stores, and its matrices, damping, forcing
+        and laws with the hashes the branch file stores (:func:`~femodes.store.model_signature`);
+        a difference is a ValueError naming it. A file of an older femodes stores no hashes:
+        only its contacts are checked, with a warning.
+        """
         from .model import StructuralModel
 
         if not isinstance(model, StructuralModel):
             raise TypeError(f"attach: model must be the StructuralModel the branch was solved on, got {type(model).__name__}")
         if model.n_dofs != self.Q.shape[2]:
             raise ValueError(f"attach: model has {model.n_dofs} DOFs but the branch was solved on {self.Q.shape[2]}")
+        if model is not self.model:
+            diff = self._contact_differences(model)
+            saved = self.model_signature if self.model_signature is not None else (
+                model_signature(self.model) if self.model is not None else None)
+            if saved is not None:
+                diff += [d for d in signature_differences(saved, model_signature(model))
+                         if not (d == "contact laws" and diff)]
+            if diff:
+                raise ValueError(f"attach: this model differs from the one the branch was solved on "
+                                 f"({'; '.join(diff)}); attach the model the branch was solved on, or compute the "
+                                 "branch again on this model")
+            if saved is None:
+                warnings.warn("attach: the branch file stores no fingerprint of its model (saved by an older "
+                              "femodes), so the model's matrices, damping and forcing cannot be checked; only its "
+                              "contacts were compared; save the branch again to store one", UserWarning, stacklevel=3)
         self.model = model
         return self
+
+    def _contact_differences(self, model) -> list[str]:
+        """How the contacts of ``model`` differ from those the branch stores (DOF, law, gap, stiffness)."""
+        ci = self.contacts
+        if len(model.contacts) != len(ci.kinds):
+            return [f"{len(ci.kinds)} contacts in the branch, {len(model.contacts)} in this model"]
+        out = []
+        for j, (a, kind, dof, gap, k) in enumerate(zip(model.contacts, ci.kinds, ci.dofs, ci.gaps, ci.stiffness)):
+            mkind = "penalty" if isinstance(a.item, PenaltyContact) else "complementarity"
+            where = f"contact {j} (DOF {dof})"
+            if int(a.dof) != int(dof):
+                out.append(f"contact {j}: DOF {dof} in the branch, {int(a.dof)} in this model")
+            elif mkind != kind:
+                out.append(f"{where}: {kind} in the branch, {mkind} in this model")
+            elif float(a.item.gap) != float(gap):
+                out.append(f"{where}: gap {gap:g} in the branch, {float(a.item.gap):g} in this model")
+            elif kind == "penalty" and float(a.item.stiffness) != float(k):
+                out.append(f"{where}: stiffness {k:g} in the branch, {float(a.item.stiffness):g} in this model")
+        return out
 
     def __repr__(self) -> str:
         return (f"Branch({self.kind}, {len(self)} points, omega in [{self.omega.min() if len(self) else np.nan:.6g}, "
@@ -568,6 +613,7 @@ class Branch:
             "harmonics": [self.harmonics.n_harmonics, self.harmonics.n_time, self.harmonics.subharmonic],
             "contacts": self.contacts.to_json(), "success": self.success, "status": self.status,
             "message": self.message, "meta": self.meta,
+            "model": model_signature(self.model) if self.model is not None else self.model_signature,
             "accuracy": None if self.accuracy is None else {
                 "method": [str(m) for m in self.accuracy.method], "rtol": self.accuracy.rtol},
             "stability": None if self.stable is None else {
@@ -608,6 +654,11 @@ def load_branch(path, model=None) -> Branch:
         folds=arrays["folds"].tolist(), success=header["success"], status=header["status"], message=header["message"],
         meta=header.get("meta"),
     )
+    sig = header.get("model")
+    if not isinstance(sig, dict):  # older files: the finished branch of a checkpointed run has a fingerprint
+        ck = (header.get("meta") or {}).get("checkpoint")
+        sig = ck.get("model") if isinstance(ck, dict) and isinstance(ck.get("model"), dict) else None
+    br.model_signature = sig
     acc = header.get("accuracy")
     if acc is not None:
         br.set_accuracy(ErrorEstimate(**{k: arrays[f"accuracy_{k}"] for k in ("omega", "amplitude", "penetration",

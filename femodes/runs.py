@@ -13,7 +13,6 @@ branch holds every point exactly once and equals the branch of an uninterrupted 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import logging
 import os
@@ -21,11 +20,10 @@ import time
 from typing import Any, Callable
 
 import numpy as np
-import scipy.sparse as sp
 
 from .model import StructuralModel
 from .results import Branch, load_branch
-from .store import Checkpoint, CheckpointStore
+from .store import Checkpoint, CheckpointStore, model_fingerprint
 from .solvers import ContinuationOptions, continuation
 from .solvers.continuation import ContinuationResult, ContinuationState
 
@@ -54,52 +52,6 @@ def _run(problem, span, x0, options: ContinuationOptions, label: str, progress, 
 # ------------------------------------------------------------------------------------------------
 # checkpoints: what a run is (to refuse resuming a different one) and what a point stores
 # ------------------------------------------------------------------------------------------------
-def _digest(*parts: bytes) -> str:
-    h = hashlib.sha256()
-    for part in parts:
-        h.update(len(part).to_bytes(8, "little"))
-        h.update(part)
-    return h.hexdigest()[:20]
-
-
-def _matrix_bytes(A) -> list[bytes]:
-    A = sp.csr_matrix(A, dtype=float, copy=True)
-    A.sum_duplicates()
-    A.sort_indices()
-    return [np.asarray(A.shape, dtype=np.int64).tobytes(), A.indptr.astype(np.int64).tobytes(),
-            A.indices.astype(np.int64).tobytes(), A.data.tobytes()]
-
-
-def _declarations(items) -> bytes:
-    """Canonical bytes of attached laws (type, DOF and parameters; ``at`` is the DOF)."""
-    out = []
-    for a in items:
-        law = a.item
-        params = {f.name: repr(getattr(law, f.name)) for f in dataclasses.fields(law) if f.name != "at"} \
-            if dataclasses.is_dataclass(law) else {"repr": repr(law)}
-        out.append([type(law).__name__, int(a.dof), params])
-    return json.dumps(out, sort_keys=True).encode()
-
-
-def model_fingerprint(model: StructuralModel) -> dict:
-    """Short hashes of what defines a model's equations: matrices, forcing, contacts, nonlinearities.
-
-    Stored in checkpoints (and their final branch files) so that resuming with another model is
-    refused with a message saying which part differs.
-    """
-    forces = model.force_vectors()
-    lr = model.C_lowrank  # modal damping's low-rank part (hashed only when present: older digests hold)
-    lr_bytes = [] if lr is None else [np.asarray(lr.U.shape, dtype=np.int64).tobytes(), lr.U.tobytes(), lr.d.tobytes()]
-    force_bytes = [np.int64(k).tobytes() + np.asarray(forces[k], dtype=complex).tobytes() for k in sorted(forces)]
-    return {
-        "n_dofs": int(model.n_dofs),
-        "matrices": _digest(*_matrix_bytes(model.M), *_matrix_bytes(model.K), *_matrix_bytes(model.C), *lr_bytes),
-        "forcing": _digest(*force_bytes),
-        "contacts": _digest(_declarations(model.contacts)),
-        "nonlinearities": _digest(_declarations(model.nonlinearities)),
-    }
-
-
 def _differences(saved: Any, current: Any, prefix: str = "") -> list[str]:
     if isinstance(saved, dict) and isinstance(current, dict):
         out = []

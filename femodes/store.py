@@ -12,6 +12,7 @@ is what a user passes to ``checkpoint=`` of the long analyses (a file name, and 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
 import tempfile
@@ -21,9 +22,10 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import scipy.sparse as sp
 
 __all__ = ["atomic_write", "write_record", "read_record", "Checkpoint", "CheckpointStore", "CHECKPOINT_VERSION",
-           "RECORD_SUFFIXES"]
+           "RECORD_SUFFIXES", "model_fingerprint", "model_signature", "signature_differences"]
 
 #: Version of the checkpoint journal layout (header.json + one .npz per point).
 CHECKPOINT_VERSION = 1
@@ -113,6 +115,83 @@ def read_record(path) -> tuple[dict, dict]:
             return json.loads(f.attrs["header"]), {k: f[k][()] for k in f.keys()}
     except READ_ERRORS as exc:
         raise ValueError(str(exc)) from exc
+
+
+# ------------------------------------------------------------------------------------------------
+# what a saved result is tied to: hashes of the model it was solved on
+# ------------------------------------------------------------------------------------------------
+def _digest(*parts: bytes) -> str:
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(len(part).to_bytes(8, "little"))
+        h.update(part)
+    return h.hexdigest()[:20]
+
+
+def _matrix_bytes(A) -> list[bytes]:
+    A = sp.csr_matrix(A, dtype=float, copy=True)
+    A.sum_duplicates()
+    A.sort_indices()
+    return [np.asarray(A.shape, dtype=np.int64).tobytes(), A.indptr.astype(np.int64).tobytes(),
+            A.indices.astype(np.int64).tobytes(), A.data.tobytes()]
+
+
+def _declarations(items) -> bytes:
+    """Canonical bytes of attached laws (type, DOF and parameters; ``at`` is the DOF)."""
+    out = []
+    for a in items:
+        law = a.item
+        params = {f.name: repr(getattr(law, f.name)) for f in dataclasses.fields(law) if f.name != "at"} \
+            if dataclasses.is_dataclass(law) else {"repr": repr(law)}
+        out.append([type(law).__name__, int(a.dof), params])
+    return json.dumps(out, sort_keys=True).encode()
+
+
+def model_fingerprint(model) -> dict:
+    """Short hashes of what defines a model's equations: matrices, forcing, contacts, nonlinearities.
+
+    Stored in checkpoints (and their final branch files) so that resuming with another model is
+    refused with a message saying which part differs. ``model`` is a
+    :class:`~femodes.StructuralModel` (or a reduced model): only its matrices, force vectors and
+    attached laws are read.
+    """
+    forces = model.force_vectors()
+    lr = model.C_lowrank  # modal damping's low-rank part (hashed only when present: older digests hold)
+    lr_bytes = [] if lr is None else [np.asarray(lr.U.shape, dtype=np.int64).tobytes(), lr.U.tobytes(), lr.d.tobytes()]
+    force_bytes = [np.int64(k).tobytes() + np.asarray(forces[k], dtype=complex).tobytes() for k in sorted(forces)]
+    return {
+        "n_dofs": int(model.n_dofs),
+        "matrices": _digest(*_matrix_bytes(model.M), *_matrix_bytes(model.K), *_matrix_bytes(model.C), *lr_bytes),
+        "forcing": _digest(*force_bytes),
+        "contacts": _digest(_declarations(model.contacts)),
+        "nonlinearities": _digest(_declarations(model.nonlinearities)),
+    }
+
+#: The parts of :func:`model_signature` in the words of the messages that name a difference.
+_SIGNATURE_PARTS = {"n_dofs": "number of DOFs", "mass": "mass matrix M", "stiffness": "stiffness matrix K",
+                    "damping": "damping (C, Rayleigh or modal)", "forcing": "forcing",
+                    "contacts": "contact laws", "nonlinearities": "nonlinear laws (springs)"}
+
+
+def model_signature(model) -> dict:
+    """:func:`model_fingerprint` plus one hash per matrix (``mass``, ``stiffness``, ``damping``):
+    what a saved branch stores of the model it was solved on, so that attaching another model
+    is refused naming the part that differs (:meth:`femodes.Branch.attach`)."""
+    lr = model.C_lowrank
+    lr_bytes = [] if lr is None else [np.asarray(lr.U.shape, dtype=np.int64).tobytes(), lr.U.tobytes(), lr.d.tobytes()]
+    return dict(model_fingerprint(model), mass=_digest(*_matrix_bytes(model.M)),
+                stiffness=_digest(*_matrix_bytes(model.K)), damping=_digest(*_matrix_bytes(model.C), *lr_bytes))
+
+
+def signature_differences(saved: dict, current: dict) -> list[str]:
+    """The parts (in words) in which two :func:`model_signature` dicts differ; parts that one of
+    them lacks are not compared (``matrices`` only when neither names its matrices)."""
+    keys = [k for k in _SIGNATURE_PARTS if k in saved and k in current]
+    out = [_SIGNATURE_PARTS[k] for k in keys if saved[k] != current[k]]
+    if not any(k in keys for k in ("mass", "stiffness", "damping")) and "matrices" in saved and "matrices" in current \
+            and saved["matrices"] != current["matrices"]:
+        out.append("matrices (M, K or C)")
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
