@@ -69,3 +69,75 @@ def test_old_branch_file_without_fingerprint_loads_with_a_warning(saved, tmp_pat
     assert br.model is not None
     with pytest.raises(ValueError, match="gap"):  # the contacts stored in every file are still compared
         fm.load_branch(old, model=contact_oscillator(gap=0.5))
+
+
+# -- item 2: a sweep never overwrites another sweep's study -----------------------------------------
+def _sweep_args(out, gaps):
+    from pathlib import Path
+
+    frc = Path(__file__).resolve().parents[1] / "examples" / "cases" / "oscillator_frc.toml"
+    return ["sweep", str(frc), "--set", f"contact.0.gap={gaps}", "--set", "analysis.harmonics=3",
+            "--set", "analysis.max_points=6", "--scheduler", "threads", "--out", str(out), "--no-progress"]
+
+
+@pytest.fixture
+def thread_executor(monkeypatch):
+    """`--scheduler threads` runs the sweep on a thread pool (no Dask cluster in a unit test)."""
+    import concurrent.futures as cf
+
+    from femodes.app.sweep import run as sweep_run
+
+    real = sweep_run.run_sweep
+
+    def run_sweep(case, params, *, executor=None, **kw):
+        if executor == "threads":
+            with cf.ThreadPoolExecutor(1) as ex:
+                return real(case, params, executor=ex, **kw)
+        return real(case, params, executor=executor, **kw)
+
+    monkeypatch.setattr(sweep_run, "run_sweep", run_sweep)
+    import femodes.app.sweep as sweep_pkg
+
+    monkeypatch.setattr(sweep_pkg, "run_sweep", run_sweep)
+    return run_sweep
+
+
+def test_second_sweep_into_the_same_out_is_refused(tmp_path, capsys, thread_executor):
+    from femodes.app.cli import main
+    from femodes.app.sweep import load_study
+
+    assert main(_sweep_args(tmp_path, "0.5,1.0")) == 0
+    first = load_study(tmp_path / "study.npz")
+    capsys.readouterr()
+    assert main(_sweep_args(tmp_path, "2.0")) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("femodes sweep: run_sweep: out") and "already holds another sweep" in err
+    assert "choose another output folder (--out)" in err and "Traceback" not in err
+    again = load_study(tmp_path / "study.npz")  # the first study is untouched
+    assert [r.parameters for r in again] == [r.parameters for r in first]
+    assert sorted(p.name for p in (tmp_path / "cases").iterdir()) == ["c000", "c001"]
+
+
+def test_same_sweep_into_the_same_out_resumes(tmp_path):
+    import concurrent.futures as cf
+
+    from femodes.app.sweep import load_study, run_sweep
+    from pathlib import Path
+
+    frc = Path(__file__).resolve().parents[1] / "examples" / "cases" / "oscillator_frc.toml"
+    params = [{"contact.0.gap": g, "analysis.harmonics": 3, "analysis.max_points": 6} for g in (0.5, 1.0, 2.0)]
+
+    def stop(rec, k, n):
+        if k == 1:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt), cf.ThreadPoolExecutor(1) as ex:
+        run_sweep(frc, params, out=tmp_path, executor=ex, progress=stop)
+    before = load_study(tmp_path / "study.npz")
+    done = [r.id for r in before if r.ok]
+    assert len(done) == 1
+    seen = []
+    with cf.ThreadPoolExecutor(1) as ex:
+        res = run_sweep(frc, params, out=tmp_path, executor=ex, progress=lambda r, k, n: seen.append(r.id))
+    assert res.success and sorted(seen) == sorted(set(r.id for r in res) - set(done))  # only the others ran
+    assert res[done[0]].wall_time == before[done[0]].wall_time

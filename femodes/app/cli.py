@@ -110,7 +110,9 @@ running cluster at --scheduler ADDRESS (the output folder must then be shared wi
 Each case writes DIR/cases/<id>/ (case.toml, branch.npz, summary.txt); the study (parameters,
 status, errors and summary numbers of every case) is DIR/study.npz (femodes.app.sweep.load_study).
 A failed case is reported with its error and the others complete; exit code 1 if any case did not
-finish, 2 for mistakes in the case file or in --set.
+finish, 2 for mistakes in the case file or in --set. The same sweep run again into the same --out
+resumes it (finished cases are kept); a folder holding another sweep is refused (exit 2), never
+overwritten.
 """
 
 
