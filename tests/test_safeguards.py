@@ -141,3 +141,13 @@ def test_same_sweep_into_the_same_out_resumes(tmp_path):
         res = run_sweep(frc, params, out=tmp_path, executor=ex, progress=lambda r, k, n: seen.append(r.id))
     assert res.success and sorted(seen) == sorted(set(r.id for r in res) - set(done))  # only the others ran
     assert res[done[0]].wall_time == before[done[0]].wall_time
+
+
+# -- item 3: switch_branch takes only a bifurcation of the branch it switches from ------------------
+def test_switch_branch_refuses_a_bifurcation_of_another_branch():
+    model = contact_oscillator(gap=1.0)
+    a = fm.frequency_response(model, (0.9, 1.05), 5, stability=True)
+    pd = next(z for z in a.bifurcations if z.kind == "period_doubling")
+    b = fm.frequency_response(model, (0.8, 0.9), 5)
+    with pytest.raises(ValueError, match=r"period_doubling at w = 0\.996204 .* is not one of branch\.bifurcations"):
+        fm.switch_branch(b, pd, omega=(0.8, 1.05))
