@@ -151,3 +151,18 @@ def test_switch_branch_refuses_a_bifurcation_of_another_branch():
     b = fm.frequency_response(model, (0.8, 0.9), 5)
     with pytest.raises(ValueError, match=r"period_doubling at w = 0\.996204 .* is not one of branch\.bifurcations"):
         fm.switch_branch(b, pd, omega=(0.8, 1.05))
+
+
+# -- item 4: time steps that cannot resolve the forcing period are refused ---------------------------
+def test_steady_state_refuses_three_steps_per_period():
+    model = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]])
+             .with_forcing(fm.HarmonicForce(at=0, amplitude=0.05)))
+    with pytest.raises(ValueError, match=r"steady_state: dt=2\.0 gives 2\.62 steps per forcing period .* fewer than "
+                                         r"the 20 .* use dt <= 0\.2618"):
+        fm.steady_state(model, omega=1.2, dt=2.0)
+    with pytest.raises(ValueError, match=r"simulate: dt=0\.5 gives"):
+        fm.simulate(model, 20.0, 0.5, omega=1.2)
+    ok = fm.steady_state(model, omega=1.2, dt=0.2)  # 27 steps per period: accepted
+    assert ok.success
+    free = fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]])
+    assert fm.simulate(free, 5.0, 0.5, u0=[1.0]).success  # unforced: no forcing period to resolve
