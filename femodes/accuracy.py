@@ -132,7 +132,7 @@ from .solvers.bordered import bordered_solver
 from .time.exact import (LinearImpactFlow, exact_flow_unsupported, exact_frequency_response, fold_is_upper,
                          periodicity_residual)
 
-__all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "refinement_options", "check_estimate_method",
+__all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "shooting_unsupported_for", "refinement_options", "check_estimate_method",
            "shooting_unsupported", "ESTIMATE_METHODS", "RATE_MIN", "BRACKET_RATE_MAX"]
 
 log = logging.getLogger(__name__)
@@ -859,7 +859,7 @@ def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun
         _warn_unmet(branch, max_harmonics)
         return branch
     while True:
-        estimate_error(branch, rtol=rtol, projection=projection, newton=newton)
+        estimate_error(branch, rtol=rtol, projection=projection, newton=newton, method=method)
         H = branch.harmonics.n_harmonics
         if branch.accuracy.met.all() or 4 * H > max_harmonics:  # the estimate of 2 H needs level 4 H
             _warn_unmet(branch, max_harmonics)
@@ -1361,13 +1361,19 @@ def shooting_unsupported(branch: Branch, projection=None) -> str:
     (:func:`femodes.time.exact.exact_flow_unsupported`), computed with the exact projection."""
     if branch.kind != "forced":
         return "nonlinear modes are compared at the same energy (levels only)"
-    if branch.harmonics.subharmonic != 1:
-        return "sub-harmonic branch"
-    if projection is not None and type(projection).__name__ != "ExactProjection":
-        return "the branch was computed with a sampled projection"
     if branch.model is None:
         return "the branch has no model"
-    return exact_flow_unsupported(branch.model)
+    return shooting_unsupported_for(branch.model, branch.harmonics, projection)
+
+
+def shooting_unsupported_for(model, harmonics, projection=None) -> str:
+    """:func:`shooting_unsupported` of the forced branch that ``model`` would give on ``harmonics``
+    (checked by :func:`femodes.frequency_response` before it runs, for ``error_method="shooting"``)."""
+    if harmonics.subharmonic != 1:
+        return "sub-harmonic branch"
+    if projection is not None and type(projection).__name__ != "ExactProjection":
+        return "the branch is computed with a sampled projection"
+    return exact_flow_unsupported(model)
 
 
 class _Shooter:

@@ -26,7 +26,7 @@ from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.threads import limit_blas_threads
-from .accuracy import check_estimate_method, meet_tolerance, refinement_options
+from .accuracy import check_estimate_method, meet_tolerance, refinement_options, shooting_unsupported_for
 from .floquet import METHODS, annotate_branch
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
@@ -161,7 +161,10 @@ def frequency_response(
         How ``rtol`` is met with complementarity contacts (:func:`femodes.estimate_error`):
         ``"auto"`` computes the converged orbits themselves by shooting on the exact flow with
         rigid stops where the model is linear with unilateral contacts only (mass at the contact
-        DOFs), and uses the levels of harmonics elsewhere.
+        DOFs), and uses the levels of harmonics elsewhere. ``"shooting"`` and ``"levels"`` use
+        that method only: one that cannot apply (shooting on a penalty model, say) is a
+        ValueError before anything runs, as in :func:`femodes.estimate_error`; only ``"auto"``
+        picks. Without ``rtol`` only ``"auto"`` is accepted.
 
     Returns
     -------
@@ -177,6 +180,13 @@ def frequency_response(
     refinement_options(rtol, max_harmonics, h.n_harmonics, "frequency_response")
     check_estimate_method(error_method, "frequency_response", "error_method")
     span = _span(omega, "omega", "frequency_response", positive=True)
+    if error_method != "auto" and rtol is None:
+        raise ValueError(f"frequency_response: error_method={error_method!r} chooses how rtol= is met, but rtol is not "
+                         "given; pass rtol=..., or leave error_method at 'auto'")
+    why = shooting_unsupported_for(model, h, projection) if error_method == "shooting" else ""
+    if why:  # an explicit method that does not apply is refused, as estimate_error(method="shooting") does
+        raise ValueError(f"frequency_response: error_method='shooting' cannot take this model: {why}; use "
+                         "error_method='levels' (or 'auto', which picks)")
     problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
 
