@@ -166,3 +166,54 @@ def test_steady_state_refuses_three_steps_per_period():
     assert ok.success
     free = fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]])
     assert fm.simulate(free, 5.0, 0.5, u0=[1.0]).success  # unforced: no forcing period to resolve
+
+
+# -- item 5: one rule for an explicit error method -------------------------------------------------
+def test_explicit_shooting_is_refused_alike_by_frequency_response_and_estimate_error():
+    penalty = (fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_damping(alpha=0.1)
+               .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2))
+               .with_contact(fm.PenaltyContact(at=0, gap=1.0, stiffness=10.0)))
+    with pytest.raises(ValueError, match="frequency_response: error_method='shooting' cannot take this model: the "
+                                         "model has penalty contacts"):
+        fm.frequency_response(penalty, (0.8, 1.0), 5, rtol=1e-3, error_method="shooting")
+    br = fm.frequency_response(penalty, (0.8, 1.0), 5)
+    with pytest.raises(ValueError, match="estimate_error: method='shooting' cannot take this branch: the model has "
+                                         "penalty contacts"):
+        fm.estimate_error(br, method="shooting")
+    with pytest.raises(ValueError, match="error_method='levels' chooses how rtol= is met, but rtol is not given"):
+        fm.frequency_response(penalty, (0.8, 1.0), 5, error_method="levels")
+
+
+# -- item 6: the dense Schur complement is estimated before the first solve -------------------------
+def strip_with_contacts(n_contacts=9):
+    mesh = fm.rectangle_mesh(length=1.0, height=0.1, nx=n_contacts - 1, ny=1)
+    model = fm.solid(mesh, fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left", plane="stress")
+    return (model.with_damping(alpha=0.01)
+            .with_forcing(fm.HarmonicForce(at=("right", "u_y"), amplitude=1e-3))
+            .with_contact(fm.UnilateralContact(at="top", gap=0.01, direction=(0.0, 1.0))))
+
+
+def test_schur_complement_too_large_for_memory_is_refused_before_solving(monkeypatch):
+    from femodes.solvers import checks
+
+    monkeypatch.setattr(checks, "available_memory", lambda: 0.5 * 2**30)  # a machine with 0.5 GiB free
+    model = strip_with_contacts()
+    with pytest.raises(ValueError, match=r"harmonics: H = 200 with \d+ nonlinear DOFs \(\d+ complementarity contacts\) "
+                                         r"gives a dense Schur complement of size \d+ whose factorisation needs about "
+                                         r"[\d.]+ GiB, more than the 0\.5 GiB available; use fewer harmonics"):
+        fm.frequency_response(model, (0.1, 0.2), 200)
+
+
+def test_cli_run_reports_memory_in_one_line(monkeypatch, tmp_path, capsys):
+    from femodes.app.cli import main
+    from femodes.solvers import checks
+
+    monkeypatch.setattr(checks, "available_memory", lambda: 1e6)
+    case = tmp_path / "osc.toml"
+    case.write_text('[model]\nkind = "discrete"\nM = [[1.0]]\nK = [[1.0]]\n[damping]\nalpha = 0.1\n'
+                    '[[contact]]\nat = 0\ngap = 1.0\n[[force]]\nat = 0\namplitude = 0.2\n'
+                    '[analysis]\ntype = "frequency_response"\nomega = [0.8, 1.0]\nharmonics = 400\n')
+    assert main(["run", str(case), "--out", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "needs about" in err and "GiB" in err and "use fewer harmonics" in err
