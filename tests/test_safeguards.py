@@ -217,3 +217,109 @@ def test_cli_run_reports_memory_in_one_line(monkeypatch, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert "needs about" in err and "GiB" in err and "use fewer harmonics" in err
+
+
+# -- item 7: Ctrl-C keeps the work and exits 130 ---------------------------------------------------
+CASE = ('[model]\nkind = "discrete"\nM = [[1.0]]\nK = [[1.0]]\n[damping]\nalpha = 0.1\n'
+        '[[contact]]\nat = 0\ngap = 1.0\n[[force]]\nat = 0\namplitude = 0.2\n'
+        '[analysis]\ntype = "frequency_response"\nomega = [0.8, 1.6]\nharmonics = 5\n'
+        '[outputs]\nplot = false\nanimation = false\n')
+
+
+def test_ctrl_c_in_femodes_run_keeps_the_points_and_the_same_command_resumes(tmp_path, capsys, monkeypatch):
+    from femodes.app import progress
+    from femodes.app.cli import main
+
+    case = tmp_path / "osc.toml"
+    case.write_text(CASE)
+    out = tmp_path / "out"
+    real = progress.BranchProgress.update
+    calls = {"n": 0}
+
+    def ctrl_c_at_point_6(self, point):
+        calls["n"] += 1
+        if calls["n"] == 6:
+            raise KeyboardInterrupt
+        return real(self, point)
+
+    monkeypatch.setattr(progress.BranchProgress, "update", ctrl_c_at_point_6)
+    assert main(["run", str(case), "--out", str(out), "--progress"]) == 130
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    line = err.strip().splitlines()[-1]
+    assert line.startswith("femodes run: interrupted; 6 points kept in") and "run the same command again to resume" in line
+    assert len(list((out / "checkpoint.npz.points").glob("*.npz"))) == 6
+    monkeypatch.setattr(progress.BranchProgress, "update", real)
+    assert main(["run", str(case), "--out", str(out), "--no-progress"]) == 0
+    resumed = fm.load_branch(out / "branch.npz")
+    ref = fm.frequency_response(contact_oscillator(), SPAN, 5)
+    assert len(resumed) == len(ref) and np.allclose(resumed.omega, ref.omega, atol=1e-9)
+    assert not (out / "checkpoint.npz").exists() and not (out / "checkpoint.npz.points").exists()
+
+
+def test_ctrl_c_in_femodes_sweep_exits_130_in_one_line(tmp_path, capsys, monkeypatch, thread_executor):
+    from femodes.app.cli import main
+
+    real = thread_executor
+
+    def interrupted(case, params, *, progress=False, **kw):
+        def stop(rec, k, n):
+            raise KeyboardInterrupt
+        return real(case, params, progress=stop, **kw)
+
+    import femodes.app.sweep as sweep_pkg
+
+    monkeypatch.setattr(sweep_pkg, "run_sweep", interrupted)
+    assert main(_sweep_args(tmp_path, "0.5,1.0")) == 130
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.strip().splitlines() == [
+        f"femodes sweep: interrupted; 1 finished case kept in {str(tmp_path / 'study.npz')!r}; run the same command "
+        "again to resume"]
+
+
+# -- item 8: one run per checkpoint ------------------------------------------------------------------
+def test_second_run_on_a_locked_checkpoint_is_refused(tmp_path):
+    from femodes.store import CheckpointInUse, CheckpointStore
+
+    path = tmp_path / "frc.npz"
+    with CheckpointStore(path).lock("other run"):  # as another process running this checkpoint holds it
+        with pytest.raises(CheckpointInUse, match=r"frequency_response: checkpoint .*frc\.npz' is in use by another "
+                                                  r"run \(process \d+\); wait for that run to finish, or use another "
+                                                  r"checkpoint file"):
+            fm.frequency_response(contact_oscillator(), (0.8, 1.0), 5, checkpoint=fm.Checkpoint(path, resume=True))
+        assert not (tmp_path / "frc.npz.points").exists()  # nothing of the other run touched
+    br = fm.frequency_response(contact_oscillator(), (0.8, 1.0), 5, checkpoint=fm.Checkpoint(path, resume=True))
+    assert br.success and path.is_file() and not (tmp_path / "frc.npz.lock").exists()
+
+
+@pytest.mark.slow  # two Python processes: ~5 s on a loaded machine
+def test_two_processes_on_one_checkpoint(tmp_path):
+    """A second process started on a running checkpoint fails at once with the one-sentence error."""
+    import subprocess
+    import sys
+    import textwrap
+    import time
+
+    path = tmp_path / "frc.npz"
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+        import time
+        from femodes.store import CheckpointStore
+        with CheckpointStore({str(path)!r}).lock():
+            print("locked", flush=True)
+            time.sleep(30)
+        """)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        t0 = time.perf_counter()
+        second = subprocess.run([sys.executable, "-c", textwrap.dedent(f"""
+            import femodes as fm
+            m = (fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_damping(alpha=0.1)
+                 .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)).with_contact(fm.UnilateralContact(at=0, gap=1.0)))
+            fm.frequency_response(m, (0.8, 1.0), 5, checkpoint=fm.Checkpoint({str(path)!r}, resume=True))
+            """)], capture_output=True, text=True, timeout=60)
+        assert second.returncode != 0 and time.perf_counter() - t0 < 20
+        assert f"CheckpointInUse: frequency_response: checkpoint {str(path)!r} is in use by another run (process " \
+               f"{holder.pid})" in second.stderr
+    finally:
+        holder.kill()
+        holder.wait()

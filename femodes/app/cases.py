@@ -793,14 +793,17 @@ def analysis_span(case: Case) -> tuple[float, float]:
     return float(a), float(b)
 
 
-def run_case(case: Case, out: Path, *, progress: bool | Callable = False) -> CaseResult:
+def run_case(case: Case, out: Path, *, progress: bool | Callable = False, checkpoint=None) -> CaseResult:
     """Build the model, run the analysis, write the outputs to ``out``.
 
     ``progress`` goes to the analysis: ``True`` logs points at INFO, a callable receives every
     accepted continuation point (the command line's :class:`~femodes.app.progress.BranchProgress`).
+    ``checkpoint`` (a :class:`femodes.Checkpoint`, optional) journals the points as they are found,
+    so that an interrupted run keeps them and the same case run again continues from them
+    (``femodes run`` uses ``out/checkpoint.npz``, removed once the outputs are written).
     """
     model, _full = build_model(case)
-    branch = _run_analysis(case, model, progress)
+    branch = _run_analysis(case, model, progress, checkpoint)
     outs = {"plot": True, "branch": "branch.npz", "animation": True, "gif": False}
     outs.update(case.data.get("outputs", {}))
     out.mkdir(parents=True, exist_ok=True)
@@ -813,10 +816,12 @@ def run_case(case: Case, out: Path, *, progress: bool | Callable = False) -> Cas
     summary = out / "summary.txt"
     files.append(summary)
     summary.write_text("\n".join(lines) + "\n")
+    if checkpoint is not None:  # the outputs hold the branch now: the run's journal is not needed
+        Path(checkpoint.path).unlink(missing_ok=True)
     return CaseResult(branch=branch, model=model, files=files, lines=lines)
 
 
-def _run_analysis(case: Case, model, progress):
+def _run_analysis(case: Case, model, progress, checkpoint=None):
     """The [analysis] of the case on ``model``: its branch."""
     import femodes as fm
     from ..analyses import frequency_response_options
@@ -833,10 +838,10 @@ def _run_analysis(case: Case, model, progress):
         if an["type"] == "nonlinear_mode":
             return api("analysis", ["mode", "energy", "harmonics", "stability"], fm.nonlinear_mode, model,
                        an.get("mode", 1), energy=tuple(an["energy"]), harmonics=H, progress=progress,
-                       stability=stability)
+                       stability=stability, checkpoint=checkpoint)
         options = frequency_response_options(**opts) if opts else None
         return api("analysis", ["omega", "harmonics", "stability"], fm.frequency_response, model, tuple(an["omega"]),
-                   H, options=options, progress=progress, stability=stability)
+                   H, options=options, progress=progress, stability=stability, checkpoint=checkpoint)
     except ShootingError as exc:  # stability = "shooting" that does not converge (the message says: use "hill")
         raise case.error("analysis", "stability", str(exc)) from None
 
