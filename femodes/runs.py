@@ -176,6 +176,13 @@ def run_continuation(problem, span, options: ContinuationOptions, label: str, pr
         start_x, start_options = x0(options)
         return finish(_run(problem, span, start_x, start_options, label, progress), {})
     ck = CheckpointStore(checkpoint.path)
+    with ck.lock(label):  # a second run on the same checkpoint is refused, not raced
+        return _run_checkpointed(problem, span, options, label, progress, x0, finish, model, checkpoint, ck,
+                                 description)
+
+
+def _run_checkpointed(problem, span, options, label, progress, x0, finish, model, checkpoint, ck, description):
+    """:func:`run_continuation` with a checkpoint, under its lock."""
     desc = json.loads(json.dumps(description))  # as it reads back from the JSON header
     if not checkpoint.resume and (ck.path.exists() or ck.journal.exists()):
         raise FileExistsError(f"{label}: checkpoint {str(ck.path)!r} (or its journal {ck.journal.name}/) exists; "

@@ -11,6 +11,7 @@ is what a user passes to ``checkpoint=`` of the long analyses (a file name, and 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -24,7 +25,8 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["atomic_write", "write_record", "read_record", "Checkpoint", "CheckpointStore", "CHECKPOINT_VERSION",
+__all__ = ["atomic_write", "write_record", "read_record", "Checkpoint", "CheckpointStore", "CheckpointInUse",
+           "CHECKPOINT_VERSION",
            "RECORD_SUFFIXES", "model_fingerprint", "model_signature", "signature_differences"]
 
 #: Version of the checkpoint journal layout (header.json + one .npz per point).
@@ -233,6 +235,10 @@ class Checkpoint:
         object.__setattr__(self, "path", path)
 
 
+class CheckpointInUse(RuntimeError):
+    """Another process runs the checkpoint (it holds the lock :meth:`CheckpointStore.lock`)."""
+
+
 class CheckpointStore:
     """Journal of a running continuation next to its final branch file ``path``.
 
@@ -264,6 +270,49 @@ class CheckpointStore:
 
     def __repr__(self) -> str:
         return f"CheckpointStore({str(self.path)!r})"
+
+    @property
+    def lock_path(self) -> Path:
+        return self.path.with_name(self.path.name + ".lock")
+
+    @contextlib.contextmanager
+    def lock(self, label: str = "checkpoint"):
+        """Hold an exclusive lock on the checkpoint for a run (``fcntl.flock`` on ``<path>.lock``,
+        POSIX; a no-op elsewhere): a second run on the same checkpoint raises
+        :class:`CheckpointInUse` at once instead of reading a journal the first one removes."""
+        try:
+            import fcntl
+        except ImportError:  # not POSIX: no lock (the journal's atomic writes still hold)
+            yield
+            return
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        while True:
+            f = open(self.lock_path, "a+")
+            try:
+                fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                f.seek(0)
+                holder = f.read().strip() or "?"
+                f.close()
+                raise CheckpointInUse(f"{label}: checkpoint {str(self.path)!r} is in use by another run (process "
+                                      f"{holder}); wait for that run to finish, or use another checkpoint file") from None
+            try:  # the holder before us may have removed the file after we opened it: lock the current one
+                same = os.stat(self.lock_path).st_ino == os.fstat(f.fileno()).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            f.close()
+        try:
+            f.seek(0)
+            f.truncate()
+            f.write(str(os.getpid()))
+            f.flush()
+            yield
+        finally:
+            with contextlib.suppress(OSError):
+                os.remove(self.lock_path)  # while still locked: a waiting opener sees another inode and retries
+            f.close()
 
     @property
     def header_path(self) -> Path:
