@@ -323,3 +323,49 @@ def test_two_processes_on_one_checkpoint(tmp_path):
     finally:
         holder.kill()
         holder.wait()
+
+
+# -- item 9: load_branch validates the whole schema ---------------------------------------------------
+@pytest.mark.parametrize("drop, message", [
+    (("header", "harmonics"), "its header has no 'harmonics'"),
+    (("header", "kind"), "its header has no 'kind'"),
+    (("array", "Q"), "it has no array 'Q'"),
+    (("array", "folds"), "it has no array 'folds'"),
+    (("contacts", "gaps"), "header field 'contacts' has no list 'gaps'"),
+    (("accuracy", "accuracy_rate"), "it has an error estimate but no array 'accuracy_rate'"),
+    (("shape", "P"), r"arrays 'Q' \(\d+, 11, 1\) and 'P' \(\d+, 3, 1\) do not fit 5 harmonics \(11 coefficients\) "
+                     "and 1 complementarity contacts"),
+])
+def test_load_branch_names_the_missing_field(saved, tmp_path, drop, message):
+    from femodes.store import read_record, write_record
+
+    _, _, path = saved
+    header, arrays = read_record(path)
+    where, key = drop
+    if where == "header":
+        header.pop(key)
+    elif where == "array":
+        arrays.pop(key)
+    elif where == "contacts":
+        header["contacts"].pop(key)
+    elif where == "accuracy":
+        header["accuracy"] = {"method": ["doubling"] * len(arrays["omega"]), "rtol": None}
+        arrays.update({f"accuracy_{k}": np.zeros(len(arrays["omega"]))
+                       for k in ("omega", "amplitude", "penetration", "tension", "harmonics")})
+    elif where == "shape":
+        arrays["P"] = arrays["P"][:, :3]
+    bad = write_record(tmp_path / "bad.npz", header, arrays)
+    with pytest.raises(ValueError, match=f"load_branch: .*bad.npz' is incomplete or damaged: {message}; it cannot be "
+                                         "read as a branch"):
+        fm.load_branch(bad)
+
+
+def test_load_study_names_what_an_incomplete_study_lacks(tmp_path):
+    import json
+
+    from femodes.app.sweep import load_study
+
+    path = tmp_path / "study.npz"
+    np.savez(path, header=np.array(json.dumps({"format": "femodes.Study", "version": 2, "parameters": []})))
+    with pytest.raises(ValueError, match="load_study: .* is incomplete or damaged: its header has no list 'records'"):
+        load_study(path)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +102,14 @@ def load_study_header(path) -> dict:
     if header.get("version") not in READABLE_VERSIONS:
         raise ValueError(f"load_study: {str(path)!r} has study version {header.get('version')}, this femodes reads "
                          f"versions {', '.join(map(str, READABLE_VERSIONS))}")
+    for key in ("records", "parameters"):
+        if not isinstance(header.get(key), list):
+            raise ValueError(f"load_study: {str(path)!r} is incomplete or damaged: its header has no list {key!r}")
+    known = {f.name for f in fields(CaseRecord)}
+    for r in header["records"]:
+        if not isinstance(r, dict) or not {"id", "parameters", "status"} <= set(r) or not set(r) <= known:
+            raise ValueError(f"load_study: {str(path)!r} is incomplete or damaged: a record is {r!r}, not the "
+                             f"fields of a CaseRecord")
     return header
 
 
