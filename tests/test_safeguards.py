@@ -369,3 +369,13 @@ def test_load_study_names_what_an_incomplete_study_lacks(tmp_path):
     np.savez(path, header=np.array(json.dumps({"format": "femodes.Study", "version": 2, "parameters": []})))
     with pytest.raises(ValueError, match="load_study: .* is incomplete or damaged: its header has no list 'records'"):
         load_study(path)
+
+
+# -- item 10: structured meshes check the product of their sizes -------------------------------------
+def test_huge_structured_meshes_are_refused_naming_the_divisions():
+    with pytest.raises(ValueError, match=r"rectangle_mesh: nx \* ny = 100000 \* 100000 = 1e\+10 grid cells, more than "
+                                         r"1e\+07 .*; use fewer divisions"):
+        fm.rectangle_mesh(1, 1, 100000, 100000)
+    with pytest.raises(ValueError, match=r"box_mesh: nx \* ny \* nz = 1000 \* 1000 \* 100 = 1e\+08 grid cells"):
+        fm.box_mesh(1, 1, 1, 1000, 1000, 100)
+    assert fm.rectangle_mesh(1, 1, 4, 4).p.shape == (2, 25)
