@@ -379,3 +379,18 @@ def test_huge_structured_meshes_are_refused_naming_the_divisions():
     with pytest.raises(ValueError, match=r"box_mesh: nx \* ny \* nz = 1000 \* 1000 \* 100 = 1e\+08 grid cells"):
         fm.box_mesh(1, 1, 1, 1000, 1000, 100)
     assert fm.rectangle_mesh(1, 1, 4, 4).p.shape == (2, 25)
+
+
+# -- item 11: a zero-area element is named as such ---------------------------------------------------
+def test_zero_area_triangle_is_named_not_called_an_overflow():
+    import skfem
+
+    p = np.array([[0.0, 1.0, 1.0, 0.0, 0.5], [0.0, 0.0, 1.0, 1.0, 0.0]])
+    t = np.array([[0, 1, 2], [0, 2, 3], [0, 4, 1]]).T  # the third triangle is flat (y = 0)
+    mesh = skfem.MeshTri(p, t).with_boundaries({"left": lambda x: x[0] < 1e-9})
+    with pytest.raises(ValueError, match=r"solid: mesh element 2 has zero area \(vertices \[0, 1, 4\] at \(0, 0\), "
+                                         r"\(1, 0\), \(0\.5, 0\) are collinear; 1 such element\); remove or repair"):
+        fm.solid(mesh, fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left")
+    tiny = skfem.MeshTri(1e-6 * p[:, :4], np.array([[0, 1, 2], [0, 2, 3]]).T).with_boundaries(
+        {"left": lambda x: x[0] < 1e-15})
+    assert fm.solid(tiny, fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left").n_dofs > 0  # small is not flat

@@ -166,6 +166,26 @@ def _supports(clamped: Any, supports: Any, components: tuple) -> list:
     return out
 
 
+def _check_element_measures(basis, dim: int) -> None:
+    """ValueError naming the first degenerate element (zero or non-finite area or volume: collinear
+    or coplanar vertices), whose singular element map would otherwise show as an "overflow" of the
+    assembled matrices. Zero means below 1e-12 of the median element's measure: the data's own
+    scale, so a mesh in any length unit passes."""
+    with np.errstate(all="ignore"):
+        measure = np.abs(np.asarray(basis.dx)).sum(axis=1)
+    ok = np.isfinite(measure)
+    ref = float(np.median(measure[ok])) if ok.any() else 0.0
+    bad = np.flatnonzero(~ok | (measure <= 1e-12 * ref))
+    if bad.size:
+        i = int(bad[0])
+        verts = np.asarray(basis.mesh.t[:, i])
+        coords = ", ".join("(" + ", ".join(f"{v:.6g}" for v in basis.mesh.p[:, j]) + ")" for j in verts)
+        what = "area" if dim == 2 else "volume"
+        raise ValueError(f"solid: mesh element {i} has zero {what} (vertices {verts.tolist()} at {coords} are "
+                         f"{'collinear' if dim == 2 else 'coplanar'}; {bad.size} such element{'s' * (bad.size != 1)}); "
+                         "remove or repair the degenerate elements of the mesh")
+
+
 def solid(
     mesh: Any,
     material: Material | Mapping[str, Material],
@@ -225,6 +245,7 @@ def solid(
     components = _COMPONENTS[dim]
     mats = element_property(mesh, material, Material, "solid", "material")
     basis = checked_basis(mesh, skfem.ElementVector(scalar), "solid")
+    _check_element_measures(basis, dim)
     lam, mu = np.array([m.lame for m in mats]).T
     if plane == "stress":  # sigma_zz = 0 eliminates eps_zz: lambda* = 2 lambda mu / (lambda + 2 mu) = E nu / (1 - nu^2)
         lam = 2.0 * lam * mu / (lam + 2.0 * mu)
