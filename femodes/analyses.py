@@ -189,6 +189,10 @@ def frequency_response(
                          "error_method='levels' (or 'auto', which picks)")
     problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
+    if x0 is not None:
+        x0 = _start_vector(x0, problem.size, f"{model.n_dofs} DOFs x {h.n_coef} coefficients"
+                           + (f" + {problem.size - model.n_dofs * h.n_coef} contact-force coefficients"
+                              if problem.size > model.n_dofs * h.n_coef else ""), "frequency_response")
 
     def start(run_options: ContinuationOptions) -> tuple[np.ndarray, ContinuationOptions]:
         if x0 is not None:
@@ -224,6 +228,21 @@ def frequency_response(
                                   projection=projection, progress=progress, stability=stability)
 
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method)
+
+
+def _start_vector(x0, size: int, layout: str, label: str) -> np.ndarray:
+    """``x0`` as a finite float vector of ``size`` unknowns, else a ValueError naming ``x0`` (not a
+    derived quantity such as the scales computed from it)."""
+    try:
+        x = np.asarray(x0, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{label}: x0 must be a real vector of {size} unknowns ({layout}), got {x0!r}") from None
+    if x.shape != (size,):
+        raise ValueError(f"{label}: x0 has shape {x.shape}, this problem has {size} unknowns ({layout}); pass an x0 "
+                         "of that size (e.g. a point's unknowns from a branch on the same model and harmonics)")
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"{label}: x0 contains non-finite values (nan or inf)")
+    return x
 
 
 def frequency_response_options(**changes) -> ContinuationOptions:
@@ -494,7 +513,8 @@ def static_contact(model: StructuralModel, force: np.ndarray | None = None, *, x
         J = sp.block_diag([K, sp.csr_matrix((m, m))], format="csr") + sp.csr_matrix((vals, (rows, cols)), shape=(n + m, n + m))
         return r, J
 
-    x_init = np.zeros(n + m) if x0 is None else np.asarray(x0, dtype=float)
+    x_init = np.zeros(n + m) if x0 is None else _start_vector(x0, n + m, f"{n} DOFs + {m} contact forces",
+                                                             "static_contact")
     res = semismooth_newton(fun, x_init, options=options or NewtonOptions(atol=1e-10, max_iter=50))
     q = res.x[:n]
     forces = np.zeros(len(model.contacts))

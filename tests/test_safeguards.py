@@ -394,3 +394,16 @@ def test_zero_area_triangle_is_named_not_called_an_overflow():
     tiny = skfem.MeshTri(1e-6 * p[:, :4], np.array([[0, 1, 2], [0, 2, 3]]).T).with_boundaries(
         {"left": lambda x: x[0] < 1e-15})
     assert fm.solid(tiny, fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left").n_dofs > 0  # small is not flat
+
+
+# -- item 12: an x0 of the wrong size is named as such -----------------------------------------------
+def test_x0_of_the_wrong_size_is_named():
+    model = contact_oscillator()
+    with pytest.raises(ValueError, match=r"frequency_response: x0 has shape \(3,\), this problem has 22 unknowns "
+                                         r"\(1 DOFs x 11 coefficients \+ 11 contact-force coefficients\)"):
+        fm.frequency_response(model, (0.8, 1.0), 5, x0=np.zeros(3))
+    problem = fm.ForcedResponseProblem(model, fm.Harmonics(5))
+    with pytest.raises(ValueError, match=r"continuation: x0 has 3 values, the problem has 22 unknowns"):
+        fm.continuation(problem, (0.8, 1.0), x0=np.zeros(3))
+    with pytest.raises(ValueError, match=r"static_contact: x0 has shape \(5,\), this problem has 2 unknowns"):
+        fm.static_contact(model, x0=np.zeros(5))

@@ -312,6 +312,10 @@ def _first_guess(problem: Any, x0: Any, p_start: float, options: ContinuationOpt
         x0 = guess(p_start)
     x_init = start_vector(x0)
     n = x_init.size
+    size = getattr(problem, "size", None)
+    if isinstance(size, (int, np.integer)) and not isinstance(size, bool) and n != size:
+        raise ValueError(f"continuation: x0 has {n} values, the problem has {int(size)} unknowns (problem.size); pass "
+                         "an x0 of the problem's size")
     if options.x_scale is not None and not is_real_number(options.x_scale):
         if np.shape(options.x_scale) != (n,):
             raise ValueError(f"x_scale has shape {np.shape(options.x_scale)}, expected ({n},) matching x0")
