@@ -407,3 +407,14 @@ def test_x0_of_the_wrong_size_is_named():
         fm.continuation(problem, (0.8, 1.0), x0=np.zeros(3))
     with pytest.raises(ValueError, match=r"static_contact: x0 has shape \(5,\), this problem has 2 unknowns"):
         fm.static_contact(model, x0=np.zeros(5))
+
+
+# -- item 13: a case file with a UTF-8 byte-order mark reads ------------------------------------------
+def test_case_file_with_byte_order_mark_reads(tmp_path):
+    from femodes.app.cases import load_case, parse_case
+
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf" + CASE.encode("utf-8"))
+    case = load_case(path)
+    assert case.data["analysis"]["harmonics"] == 5 and not case.text.startswith("\ufeff")
+    assert parse_case("\ufeff" + CASE, path).data["model"]["kind"] == "discrete"

@@ -281,6 +281,7 @@ def parse_case(text: str, path: str | Path = "case.toml") -> Case:
     """Parse and check the text of a case file (syntax, tables, keys, types, simple values)."""
     path = Path(path)
     name = str(path)
+    text = text.removeprefix("\ufeff")  # a byte-order mark (Windows editors) is not a TOML statement
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -556,7 +557,7 @@ def load_case(path: str | Path) -> Case:
     """Read and check a case file; raises CaseError (file missing, syntax, schema)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a UTF-8 byte-order mark is dropped
     except FileNotFoundError:
         raise CaseError("case file not found", str(path)) from None
     except (OSError, UnicodeDecodeError) as exc:
