@@ -418,3 +418,14 @@ def test_case_file_with_byte_order_mark_reads(tmp_path):
     case = load_case(path)
     assert case.data["analysis"]["harmonics"] == 5 and not case.text.startswith("\ufeff")
     assert parse_case("\ufeff" + CASE, path).data["model"]["kind"] == "discrete"
+
+
+# -- item 14: a --set value of the wrong type exits 2 before anything runs -----------------------------
+def test_set_value_of_the_wrong_type_exits_2(tmp_path, capsys):
+    from femodes.app.cli import main
+
+    args = _sweep_args(tmp_path, "abc")
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == "femodes sweep: --set 'contact.0.gap=abc': gap must be a number, got 'abc'"
+    assert not (tmp_path / "study.npz").exists()

@@ -95,7 +95,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-__all__ = ["CaseError", "Case", "SCHEMA", "load_case", "parse_case", "build_model", "run_case", "key_line"]
+__all__ = ["CaseError", "Case", "SCHEMA", "load_case", "parse_case", "build_model", "run_case", "key_line",
+           "schema_type_error"]
 
 # table -> {key: description of the expected type}; ARRAY_TABLES are [[...]] tables.
 SCHEMA: dict[str, dict[str, str]] = {
@@ -247,6 +248,17 @@ def _check_type(v: Any, kind: str) -> bool:
         return ((isinstance(v, int) and not isinstance(v, bool)) or isinstance(v, str)
                 or (isinstance(v, list) and len(v) == 2 and all(isinstance(x, str) for x in v)))
     return True
+
+
+def schema_type_error(table: str, key: str, value: Any) -> str:
+    """Why ``value`` cannot be ``[table] key`` by its type (``"gap must be a number, got 'abc'"``),
+    ``""`` if it can; the type checks of :func:`parse_case` (values are checked there too)."""
+    kind = SCHEMA[table][key]
+    if not _check_type(value, kind):
+        return f"{key} must be {_TYPE_TEXT[kind]}, got {_fmt(value)}"
+    if not _all_finite(value):
+        return f"{key} must be finite (no nan or inf), got {_fmt(value)}"
+    return ""
 
 
 def _all_finite(v: Any) -> bool:
