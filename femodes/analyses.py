@@ -200,10 +200,7 @@ def frequency_response(
         else:
             with np.errstate(all="ignore"):
                 xs = _starting_point(problem, span[0], run_options.newton)
-            if not np.all(np.isfinite(xs)):
-                raise ValueError(f"frequency_response: the response at omega = {span[0]:g} is not finite in floating "
-                                 "point: the forcing amplitude (HarmonicForce amplitude) is too large for these units; "
-                                 "rescale them")
+            _check_response_scale(problem, xs, span[0])
         if run_options.x_scale is None:
             run_options = dataclasses.replace(run_options, x_scale=_response_scale(problem, span, xs))
         return xs, run_options
@@ -242,6 +239,10 @@ def _start_vector(x0, size: int, layout: str, label: str) -> np.ndarray:
                          "of that size (e.g. a point's unknowns from a branch on the same model and harmonics)")
     if not np.all(np.isfinite(x)):
         raise ValueError(f"{label}: x0 contains non-finite values (nan or inf)")
+    if np.max(np.abs(x), initial=0.0) > _largest_unknown(size):
+        raise ValueError(f"{label}: x0 has entries up to {np.max(np.abs(x)):.3g}, whose squares overflow floating point "
+                         f"(above {_largest_unknown(size):.3g} for {size} unknowns); pass an x0 of the solution's size, "
+                         "or rescale the units")
     return x
 
 
@@ -279,7 +280,42 @@ def _response_scale(problem: ForcedResponseProblem, span: tuple[float, float], x
     sq = max(good) if good else 1.0
     s = problem.system
     cmax = max([ct.c for ct in s.unilateral] or [1.0])
+    _check_law_scales(problem, sq, "frequency_response")
     return s.join(np.full((s.h.n_coef, s.n), sq), np.full((s.h.n_coef, s.n_uc), cmax * sq))
+
+
+def _check_law_scales(problem, sq: float, label: str) -> None:
+    """ValueError naming the law parameter (complementarity ``c``, penalty ``stiffness``) whose
+    product with the response scale ``sq`` makes forces whose squares overflow floating point:
+    every step would otherwise fail as a "non-finite residual" that names nothing."""
+    s, big = problem.system, _largest_unknown(problem.size)
+    for ct in s.unilateral:
+        if ct.c * sq > big:
+            raise ValueError(f"{label}: the contact parameter c = {ct.c:.3g} (UnilateralContact c, DOF {ct.dof}) times "
+                             f"the response scale {sq:.3g} gives contact forces whose squares overflow floating point; "
+                             "leave c=None (chosen from the model's stiffness) or rescale the units")
+    for law, dof in s.penalty:
+        if law.stiffness * sq > big:
+            raise ValueError(f"{label}: the penalty stiffness {law.stiffness:.3g} (PenaltyContact stiffness, DOF {dof}) "
+                             f"times the response scale {sq:.3g} gives contact forces whose squares overflow floating "
+                             "point; use a stiffness of the order of the structure's, or rescale the units")
+
+
+def _check_response_scale(problem, x: np.ndarray, omega: float) -> None:
+    """ValueError naming the forcing amplitude when the (linear or converged) response at ``omega``
+    is not finite, or so large that its square overflows (:func:`_largest_unknown`)."""
+    big = float(np.max(np.abs(x), initial=0.0)) if np.all(np.isfinite(x)) else math.inf
+    if big > _largest_unknown(problem.size):
+        raise ValueError(f"frequency_response: the response at omega = {omega:g} is {big:.3g}, too large for floating "
+                         "point (its square overflows the norms of Newton and the arclength): the forcing amplitude "
+                         "(HarmonicForce amplitude) is too large for these units; rescale them")
+
+
+def _largest_unknown(size: int) -> float:
+    """Largest magnitude of an unknown whose square, summed over ``size`` unknowns, stays finite:
+    the Newton merit ``|r|^2 / 2`` and the arclength norm square the unknowns (above it they
+    overflow to inf and every step fails as a "non-finite residual")."""
+    return math.sqrt(np.finfo(float).max / max(int(size), 1)) / 10.0
 
 
 def _harmonics_key(h: Harmonics) -> list:
@@ -305,7 +341,9 @@ def _starting_point(problem: ForcedResponseProblem, omega: float, newton: Newton
     at w = 0.5, H = 5); growing the forcing from 1 % by continuation from the linear solution
     (nonlinear terms negligible at small amplitude) reaches the solution.
     """
-    x0 = problem.linear_guess(omega)
+    with np.errstate(all="ignore"):
+        x0 = problem.linear_guess(omega)
+    _check_response_scale(problem, x0, omega)  # before Newton and the homotopy square it
     res = semismooth_newton(lambda x: problem.residual(x, omega)[:2], x0, options=newton)
     if res.success:
         return res.x
@@ -335,6 +373,7 @@ def nonlinear_mode_options(problem: NonlinearModeProblem, x0: np.ndarray,
     ``x_scale`` themselves.
     """
     scale = problem.arclength_scale(x0)
+    _check_law_scales(problem, float(np.max(np.abs(x0), initial=0.0)) or 1.0, "nonlinear_mode")
     if options is None:
         # the step control of issue 16 is not used by default here yet: with it the end orbits of
         # examples/validation_cantilever.py move by ~1e-7 and its time-stepping energy drift

@@ -429,3 +429,30 @@ def test_set_value_of_the_wrong_type_exits_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.strip() == "femodes sweep: --set 'contact.0.gap=abc': gap must be a number, got 'abc'"
     assert not (tmp_path / "study.npz").exists()
+
+
+# -- items 15, 16: absurd scales name their cause ------------------------------------------------------
+def test_forcing_amplitude_1e200_is_named():
+    with pytest.raises(ValueError, match=r"frequency_response: the response at omega = 0\.8 is 2\.65e\+200, too large "
+                                         r"for floating point .* the forcing amplitude \(HarmonicForce amplitude\) is "
+                                         r"too large for these units; rescale them"):
+        fm.frequency_response(contact_oscillator(amplitude=1e200), (0.8, 1.0), 5)
+
+
+def test_contact_parameter_and_x0_of_1e300_are_named():
+    model = (fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_damping(alpha=0.1)
+             .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2))
+             .with_contact(fm.UnilateralContact(at=0, gap=1.0, c=1e300)))
+    with pytest.raises(ValueError, match=r"frequency_response: the contact parameter c = 1e\+300 \(UnilateralContact "
+                                         r"c, DOF 0\) .* leave c=None"):
+        fm.frequency_response(model, (0.8, 1.0), 5)
+    free = fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_contact(fm.UnilateralContact(at=0, gap=1.0, c=1e300))
+    with pytest.raises(ValueError, match=r"nonlinear_mode: the contact parameter c = 1e\+300"):
+        fm.nonlinear_mode(free, 1, energy=(0.1, 2.0), harmonics=5)
+    with pytest.raises(ValueError, match=r"frequency_response: x0 has entries up to 1e\+300, whose squares overflow"):
+        fm.frequency_response(contact_oscillator(), (0.8, 1.0), 5, x0=np.full(22, 1e300))
+    penalty = (fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_damping(alpha=0.1)
+               .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2))
+               .with_contact(fm.PenaltyContact(at=0, gap=1.0, stiffness=1e300)))
+    with pytest.raises(ValueError, match=r"frequency_response: the penalty stiffness 1e\+300"):
+        fm.frequency_response(penalty, (0.8, 1.0), 5)
