@@ -129,7 +129,7 @@ from .solvers import ContinuationOptions, NewtonOptions, continuation
 from .solvers.threads import limit_blas_threads
 from .solvers.arclength import ArclengthSystem
 from .solvers.bordered import bordered_solver
-from .time.exact import (LinearImpactFlow, exact_flow_unsupported, exact_frequency_response, fold_is_upper,
+from .time.exact import (LinearImpactFlow, exact_flow_unsupported, exact_frequency_response, fold_is_upper, undamped,
                          periodicity_residual)
 
 __all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "shooting_unsupported_for", "refinement_options", "check_estimate_method",
@@ -704,7 +704,9 @@ class _ExactBranchStarts:
             self.traced = True
             b = self.lad.branch
             span = (float(b.omega[0]), float(b.omega[-1]))
-            if span[0] != span[1]:
+            if span[0] != span[1] and undamped(self.lad.model):
+                log.info("accuracy: no exact branch of an undamped model (its orbits are unbounded at resonances)")
+            elif span[0] != span[1]:
                 eb = exact_frequency_response(self.lad.model, span)
                 log.info("accuracy: exact branch over w %.6g -> %.6g: %d orbits, folds at %s, %d runs (%s)", *span,
                          len(eb), np.round(eb.fold_omega, 6).tolist(), eb.runs, eb.message)

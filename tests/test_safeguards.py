@@ -456,3 +456,18 @@ def test_contact_parameter_and_x0_of_1e300_are_named():
                .with_contact(fm.PenaltyContact(at=0, gap=1.0, stiffness=1e300)))
     with pytest.raises(ValueError, match=r"frequency_response: the penalty stiffness 1e\+300"):
         fm.frequency_response(penalty, (0.8, 1.0), 5)
+
+
+# -- item 17: an undamped exact branch names the missing damping at once --------------------------------
+def test_undamped_exact_frequency_response_names_the_missing_damping():
+    import time
+
+    model = (fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_forcing(fm.HarmonicForce(at=0, amplitude=0.2))
+             .with_contact(fm.UnilateralContact(at=0, gap=1.0)))
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=r"exact_frequency_response: the model has no damping \(C = 0\) and "
+                                         r"restitution = 1: nothing dissipates.*add damping"):
+        fm.time.exact_frequency_response(model, (0.5, 2.0))
+    assert time.perf_counter() - t0 < 1.0
+    damped = model.with_damping(alpha=0.1)
+    assert fm.time.exact_frequency_response(damped, (0.5, 0.6)).success
