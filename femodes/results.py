@@ -22,7 +22,7 @@ from .hbm.harmonics import Harmonics
 from .laws import PenaltyContact, UnilateralContact
 from .store import RECORD_SUFFIXES, model_signature, read_record, signature_differences, write_record
 
-__all__ = ["PeriodicSolution", "Branch", "Bifurcation", "ErrorEstimate", "load_branch", "FORMAT_VERSION", "BIFURCATION_KINDS"]
+__all__ = ["PeriodicSolution", "Branch", "Bifurcation", "ErrorEstimate", "load_branch", "contact_differences", "FORMAT_VERSION", "BIFURCATION_KINDS"]
 
 FORMAT_VERSION = 1
 
@@ -225,6 +225,27 @@ class ContactInfo:
     @classmethod
     def from_json(cls, d: dict) -> "ContactInfo":
         return cls(*(tuple(d[k]) for k in ("kinds", "dofs", "gaps", "stiffness", "slots", "c")))
+
+
+def contact_differences(contacts: ContactInfo, model) -> list[str]:
+    """How the contacts of ``model`` differ from those a result stores (DOF, law, gap, penalty
+    stiffness), in words; empty if they agree."""
+    ci = contacts
+    if len(model.contacts) != len(ci.kinds):
+        return [f"{len(ci.kinds)} contacts in the result, {len(model.contacts)} in this model"]
+    out = []
+    for j, (a, kind, dof, gap, k) in enumerate(zip(model.contacts, ci.kinds, ci.dofs, ci.gaps, ci.stiffness)):
+        mkind = "penalty" if isinstance(a.item, PenaltyContact) else "complementarity"
+        where = f"contact {j} (DOF {dof})"
+        if int(a.dof) != int(dof):
+            out.append(f"contact {j}: DOF {dof} in the result, {int(a.dof)} in this model")
+        elif mkind != kind:
+            out.append(f"{where}: {kind} in the result, {mkind} in this model")
+        elif float(a.item.gap) != float(gap):
+            out.append(f"{where}: gap {gap:g} in the result, {float(a.item.gap):g} in this model")
+        elif kind == "penalty" and float(a.item.stiffness) != float(k):
+            out.append(f"{where}: stiffness {k:g} in the result, {float(a.item.stiffness):g} in this model")
+    return out
 
 
 def _fine_points(harmonics: Harmonics) -> int:
@@ -545,7 +566,7 @@ class Branch:
         if model.n_dofs != self.Q.shape[2]:
             raise ValueError(f"attach: model has {model.n_dofs} DOFs but the branch was solved on {self.Q.shape[2]}")
         if model is not self.model:
-            diff = self._contact_differences(model)
+            diff = contact_differences(self.contacts, model)
             saved = self.model_signature if self.model_signature is not None else (
                 model_signature(self.model) if self.model is not None else None)
             if saved is not None:
@@ -561,25 +582,6 @@ class Branch:
                               "contacts were compared; save the branch again to store one", UserWarning, stacklevel=3)
         self.model = model
         return self
-
-    def _contact_differences(self, model) -> list[str]:
-        """How the contacts of ``model`` differ from those the branch stores (DOF, law, gap, stiffness)."""
-        ci = self.contacts
-        if len(model.contacts) != len(ci.kinds):
-            return [f"{len(ci.kinds)} contacts in the branch, {len(model.contacts)} in this model"]
-        out = []
-        for j, (a, kind, dof, gap, k) in enumerate(zip(model.contacts, ci.kinds, ci.dofs, ci.gaps, ci.stiffness)):
-            mkind = "penalty" if isinstance(a.item, PenaltyContact) else "complementarity"
-            where = f"contact {j} (DOF {dof})"
-            if int(a.dof) != int(dof):
-                out.append(f"contact {j}: DOF {dof} in the branch, {int(a.dof)} in this model")
-            elif mkind != kind:
-                out.append(f"{where}: {kind} in the branch, {mkind} in this model")
-            elif float(a.item.gap) != float(gap):
-                out.append(f"{where}: gap {gap:g} in the branch, {float(a.item.gap):g} in this model")
-            elif kind == "penalty" and float(a.item.stiffness) != float(k):
-                out.append(f"{where}: stiffness {k:g} in the branch, {float(a.item.stiffness):g} in this model")
-        return out
 
     def __repr__(self) -> str:
         return (f"Branch({self.kind}, {len(self)} points, omega in [{self.omega.min() if len(self) else np.nan:.6g}, "

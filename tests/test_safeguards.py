@@ -33,7 +33,7 @@ def saved(tmp_path_factory):
 # -- item 1: a saved branch is tied to its model --------------------------------------------------
 def test_load_branch_refuses_a_model_with_another_gap(saved):
     model, _, path = saved
-    with pytest.raises(ValueError, match=r"contact 0 \(DOF 0\): gap 1 .* 0\.5"):
+    with pytest.raises(ValueError, match=r"contact 0 \(DOF 0\): gap 1 in the result, 0\.5 in this model"):
         fm.load_branch(path, model=contact_oscillator(gap=0.5))
 
 
@@ -471,3 +471,14 @@ def test_undamped_exact_frequency_response_names_the_missing_damping():
     assert time.perf_counter() - t0 < 1.0
     damped = model.with_damping(alpha=0.1)
     assert fm.time.exact_frequency_response(damped, (0.5, 0.6)).success
+
+
+# -- same class: outputs take the model a solution was solved on -----------------------------------
+def test_animation_refuses_a_model_other_than_the_solutions(saved, tmp_path):
+    _, br, path = saved
+    with pytest.raises(ValueError, match=r"write_animation: model differs from the one the solution was solved on "
+                                         r"\(contact 0 \(DOF 0\): gap 1 in the result, 0\.5 in this model\)"):
+        fm.io.write_animation(br[0], contact_oscillator(gap=0.5), tmp_path / "anim", n_frames=4)
+    loaded = fm.load_branch(path)  # no model: the stored contacts are still compared
+    with pytest.raises(ValueError, match="gap 1 in the result"):
+        fm.io.write_animation(loaded[0], contact_oscillator(gap=0.5), tmp_path / "anim", n_frames=4)
