@@ -482,3 +482,13 @@ def test_animation_refuses_a_model_other_than_the_solutions(saved, tmp_path):
     loaded = fm.load_branch(path)  # no model: the stored contacts are still compared
     with pytest.raises(ValueError, match="gap 1 in the result"):
         fm.io.write_animation(loaded[0], contact_oscillator(gap=0.5), tmp_path / "anim", n_frames=4)
+
+
+def test_craig_bampton_basis_too_large_for_memory_is_refused(monkeypatch):
+    from femodes.solvers import checks
+
+    monkeypatch.setattr(checks, "available_memory", lambda: 1e3)
+    model = strip_with_contacts()
+    with pytest.raises(ValueError, match=r"craig_bampton: the dense reduction basis of \d+ DOFs x \d+ kept DOFs \+ 4 "
+                                         r"modes needs about .* GiB, more than the .* GiB available; keep fewer DOFs"):
+        fm.craig_bampton(model, n_modes=4)
