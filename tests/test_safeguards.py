@@ -492,3 +492,21 @@ def test_craig_bampton_basis_too_large_for_memory_is_refused(monkeypatch):
     with pytest.raises(ValueError, match=r"craig_bampton: the dense reduction basis of \d+ DOFs x \d+ kept DOFs \+ 4 "
                                          r"modes needs about .* GiB, more than the .* GiB available; keep fewer DOFs"):
         fm.craig_bampton(model, n_modes=4)
+
+
+# -- same class: a scaling study does not replace another one -----------------------------------------
+def test_scaling_study_into_the_folder_of_another_is_refused(tmp_path, capsys):
+    from femodes.app.cli import main
+
+    case = tmp_path / "osc.toml"
+    case.write_text(CASE)
+    out = tmp_path / "scaling"
+    args = ["scaling", str(case), "--harmonics", "3", "--repeat", "1", "--points", "0", "--out", str(out),
+            "--no-progress"]
+    assert main(args) == 0
+    first = (out / "scaling.json").read_text()
+    capsys.readouterr()
+    assert main(args[:3] + ["5"] + args[4:]) == 2
+    err = capsys.readouterr().err
+    assert "already holds the scaling study of other settings (harmonics differ)" in err and "Traceback" not in err
+    assert (out / "scaling.json").read_text() == first
