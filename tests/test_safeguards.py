@@ -510,3 +510,26 @@ def test_scaling_study_into_the_folder_of_another_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "already holds the scaling study of other settings (harmonics differ)" in err and "Traceback" not in err
     assert (out / "scaling.json").read_text() == first
+
+
+def test_interrupted_sweep_case_resumes_from_its_journal(tmp_path, monkeypatch, caplog):
+    from femodes import runs
+    from femodes.app.sweep import run_sweep_case
+
+    real = runs._progress_callback
+
+    def ctrl_c_at_point_5(user_cb, span, label, progress):
+        def cb(point):
+            if point.index == 5:
+                raise KeyboardInterrupt
+        return cb
+
+    monkeypatch.setattr(runs, "_progress_callback", ctrl_c_at_point_5)
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep_case("c000", CASE, str(tmp_path / "c000"))
+    assert len(list((tmp_path / "c000" / "checkpoint.npz.points").glob("*.npz"))) == 6
+    monkeypatch.setattr(runs, "_progress_callback", real)
+    with caplog.at_level("INFO", logger="femodes.runs"):
+        rec = run_sweep_case("c000", CASE, str(tmp_path / "c000"))
+    assert rec["status"] == "ok" and any("resuming" in r.getMessage() for r in caplog.records)
+    assert not (tmp_path / "c000" / "checkpoint.npz.points").exists()
