@@ -533,3 +533,17 @@ def test_interrupted_sweep_case_resumes_from_its_journal(tmp_path, monkeypatch, 
         rec = run_sweep_case("c000", CASE, str(tmp_path / "c000"))
     assert rec["status"] == "ok" and any("resuming" in r.getMessage() for r in caplog.records)
     assert not (tmp_path / "c000" / "checkpoint.npz.points").exists()
+
+
+# -- same class: FE assembly is estimated before the basis is built ------------------------------------
+def test_fe_assembly_too_large_for_memory_is_refused(monkeypatch):
+    from femodes.solvers import checks
+
+    monkeypatch.setattr(checks, "available_memory", lambda: 1e5)
+    mesh = fm.rectangle_mesh(1.0, 0.1, 40, 4)
+    with pytest.raises(ValueError, match=r"solid: assembling M and K on 320 elements of 6 DOFs each needs about "
+                                         r".* GiB, more than the .* GiB available; use a coarser mesh or order=1"):
+        fm.solid(mesh, fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left")
+    with pytest.raises(ValueError, match=r"beam: assembling M and K on 2000 elements of 4 DOFs each"):
+        fm.beam(fm.line_mesh(length=1.0, n_elements=2000, boundaries={"clamp": 0.0}), fm.Material(E=1.0, rho=1.0),
+                fm.Section(area=1.0, inertia=1.0), clamped="clamp")
