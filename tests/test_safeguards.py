@@ -547,3 +547,25 @@ def test_fe_assembly_too_large_for_memory_is_refused(monkeypatch):
     with pytest.raises(ValueError, match=r"beam: assembling M and K on 2000 elements of 4 DOFs each"):
         fm.beam(fm.line_mesh(length=1.0, n_elements=2000, boundaries={"clamp": 0.0}), fm.Material(E=1.0, rho=1.0),
                 fm.Section(area=1.0, inertia=1.0), clamped="clamp")
+
+
+def test_femodes_run_of_an_edited_case_after_ctrl_c_says_how_to_start_over(tmp_path, capsys, monkeypatch):
+    from femodes.app import progress
+    from femodes.app.cli import main
+
+    case = tmp_path / "osc.toml"
+    case.write_text(CASE)
+    out = tmp_path / "out"
+
+    def ctrl_c(self, point):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(progress.BranchProgress, "update", ctrl_c)
+    assert main(["run", str(case), "--out", str(out), "--progress"]) == 130
+    monkeypatch.undo()
+    case.write_text(CASE.replace("gap = 1.0", "gap = 0.5"))
+    capsys.readouterr()
+    assert main(["run", str(case), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "was written by a different run" in err and "to start this case over" in err
+    assert (out / "checkpoint.npz.points").is_dir()  # the other case's points are not thrown away

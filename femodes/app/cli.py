@@ -99,8 +99,9 @@ def run_case_cli(path: Path, out: Path | None, progress: bool | None) -> int:
                 store.remove_journal()
                 store.path.unlink(missing_ok=True)
             raise
-    except CaseError as exc:
-        print(f"femodes run: {exc}", file=sys.stderr)
+    except CaseError as exc:  # an interrupted run of another case left its journal: say how to start over
+        print(f"femodes run: {exc}".replace("or use another checkpoint file", f"or delete {str(store.journal)!r} to "
+                                            "start this case over"), file=sys.stderr)
         return 2
     except CheckpointInUse as exc:  # another `femodes run` writes to this --out
         print(f"femodes run: {exc}".replace("or use another checkpoint file", "or choose another --out"),
