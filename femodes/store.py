@@ -26,6 +26,7 @@ import numpy as np
 import scipy.sparse as sp
 
 __all__ = ["atomic_write", "write_record", "read_record", "Checkpoint", "CheckpointStore", "CheckpointInUse",
+           "FileInUse", "file_lock",
            "CHECKPOINT_VERSION",
            "RECORD_SUFFIXES", "model_fingerprint", "model_signature", "signature_differences"]
 
@@ -235,8 +236,53 @@ class Checkpoint:
         object.__setattr__(self, "path", path)
 
 
-class CheckpointInUse(RuntimeError):
+class FileInUse(RuntimeError):
+    """Another process holds the lock (:func:`file_lock`) of what this one was to write."""
+
+
+class CheckpointInUse(FileInUse):
     """Another process runs the checkpoint (it holds the lock :meth:`CheckpointStore.lock`)."""
+
+
+@contextlib.contextmanager
+def file_lock(path, refuse: Callable[[str], Exception]):
+    """Hold an exclusive lock (``fcntl.flock``, POSIX; a no-op elsewhere) on the file ``path``,
+    which holds the holder's process id and is removed on release; if another process holds it,
+    raise ``refuse(holder_pid)`` at once (never wait: a second run on the same files is a mistake
+    to report, not to queue)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock (atomic writes still hold)
+        yield
+        return
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        f = open(path, "a+")
+        try:
+            fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.seek(0)
+            holder = f.read().strip() or "?"
+            f.close()
+            raise refuse(holder) from None
+        try:  # the holder before us may have removed the file after we opened it: lock the current one
+            same = os.stat(path).st_ino == os.fstat(f.fileno()).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        f.close()
+    try:
+        f.seek(0)
+        f.truncate()
+        f.write(str(os.getpid()))
+        f.flush()
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.remove(path)  # while still locked: an opener of the old file sees another inode and retries
+        f.close()
 
 
 class CheckpointStore:
@@ -275,44 +321,13 @@ class CheckpointStore:
     def lock_path(self) -> Path:
         return self.path.with_name(self.path.name + ".lock")
 
-    @contextlib.contextmanager
     def lock(self, label: str = "checkpoint"):
-        """Hold an exclusive lock on the checkpoint for a run (``fcntl.flock`` on ``<path>.lock``,
-        POSIX; a no-op elsewhere): a second run on the same checkpoint raises
-        :class:`CheckpointInUse` at once instead of reading a journal the first one removes."""
-        try:
-            import fcntl
-        except ImportError:  # not POSIX: no lock (the journal's atomic writes still hold)
-            yield
-            return
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        while True:
-            f = open(self.lock_path, "a+")
-            try:
-                fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                f.seek(0)
-                holder = f.read().strip() or "?"
-                f.close()
-                raise CheckpointInUse(f"{label}: checkpoint {str(self.path)!r} is in use by another run (process "
-                                      f"{holder}); wait for that run to finish, or use another checkpoint file") from None
-            try:  # the holder before us may have removed the file after we opened it: lock the current one
-                same = os.stat(self.lock_path).st_ino == os.fstat(f.fileno()).st_ino
-            except FileNotFoundError:
-                same = False
-            if same:
-                break
-            f.close()
-        try:
-            f.seek(0)
-            f.truncate()
-            f.write(str(os.getpid()))
-            f.flush()
-            yield
-        finally:
-            with contextlib.suppress(OSError):
-                os.remove(self.lock_path)  # while still locked: a waiting opener sees another inode and retries
-            f.close()
+        """Hold an exclusive lock on the checkpoint for a run (:func:`file_lock` on ``<path>.lock``):
+        a second run on the same checkpoint raises :class:`CheckpointInUse` at once instead of
+        reading a journal the first one removes."""
+        return file_lock(self.lock_path, lambda holder: CheckpointInUse(
+            f"{label}: checkpoint {str(self.path)!r} is in use by another run (process {holder}); wait for that run "
+            "to finish, or use another checkpoint file"))
 
     @property
     def header_path(self) -> Path:

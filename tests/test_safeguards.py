@@ -196,8 +196,8 @@ def strip_with_contacts(n_contacts=9):
 def test_schur_complement_too_large_for_memory_is_refused_before_solving(monkeypatch):
     from femodes.solvers import checks
 
-    monkeypatch.setattr(checks, "available_memory", lambda: 0.5 * 2**30)  # a machine with 0.5 GiB free
     model = strip_with_contacts()
+    monkeypatch.setattr(checks, "available_memory", lambda: 0.5 * 2**30)  # a machine with 0.5 GiB free
     with pytest.raises(ValueError, match=r"harmonics: H = 200 with \d+ nonlinear DOFs \(\d+ complementarity contacts\) "
                                          r"gives a dense Schur complement of size \d+ whose factorisation needs about "
                                          r"[\d.]+ GiB, more than the 0\.5 GiB available; use fewer harmonics"):
@@ -487,8 +487,8 @@ def test_animation_refuses_a_model_other_than_the_solutions(saved, tmp_path):
 def test_craig_bampton_basis_too_large_for_memory_is_refused(monkeypatch):
     from femodes.solvers import checks
 
-    monkeypatch.setattr(checks, "available_memory", lambda: 1e3)
     model = strip_with_contacts()
+    monkeypatch.setattr(checks, "available_memory", lambda: 1e3)
     with pytest.raises(ValueError, match=r"craig_bampton: the dense reduction basis of \d+ DOFs x \d+ kept DOFs \+ 4 "
                                          r"modes needs about .* GiB, more than the .* GiB available; keep fewer DOFs"):
         fm.craig_bampton(model, n_modes=4)
@@ -569,3 +569,16 @@ def test_femodes_run_of_an_edited_case_after_ctrl_c_says_how_to_start_over(tmp_p
     err = capsys.readouterr().err
     assert "was written by a different run" in err and "to start this case over" in err
     assert (out / "checkpoint.npz.points").is_dir()  # the other case's points are not thrown away
+
+
+def test_second_sweep_while_one_runs_in_the_same_out_is_refused(tmp_path, capsys, thread_executor):
+    from femodes.app.cli import main
+    from femodes.store import FileInUse, file_lock
+
+    with file_lock(tmp_path / "study.npz.lock", lambda holder: FileInUse(holder)):  # as a running sweep holds it
+        assert main(_sweep_args(tmp_path, "0.5")) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"femodes sweep: run_sweep: out {str(tmp_path)!r} is in use by another sweep (process ")
+    assert err.endswith("wait for it to finish, or choose another output folder (--out)")
+    assert not (tmp_path / "study.npz").exists()
+    assert main(_sweep_args(tmp_path, "0.5")) == 0 and not (tmp_path / "study.npz.lock").exists()

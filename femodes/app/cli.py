@@ -154,6 +154,7 @@ overwritten.
 
 def run_sweep_cli(args) -> int:
     """``femodes sweep``: returns the exit code (2 for mistakes in the case file or in ``--set``)."""
+    from ..store import FileInUse
     from .cases import CaseError, command_out_folder, load_case
     from .sweep import parse_set, run_sweep
 
@@ -205,6 +206,9 @@ def run_sweep_cli(args) -> int:
     except MemoryError:
         print("femodes sweep: out of memory in this process; use fewer --workers or smaller cases", file=sys.stderr)
         return 1
+    except FileInUse as exc:  # another sweep runs in this --out
+        print(f"femodes sweep: {exc}", file=sys.stderr)
+        return 2
     except (ValueError, TypeError) as exc:
         print(f"femodes sweep: {exc}", file=sys.stderr)
         return 2

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
+from ...store import FileInUse, file_lock
 from ..cases import Case, CaseError, load_case, parse_case
 from .executors import check_main_guarded, check_where, open_executor
 from .overrides import case_text, sweep_cases
@@ -241,11 +242,15 @@ def run_sweep(case, parameters, *, out, executor=None, n_workers: int = 2, study
     _check_arguments(out=out, study=study, progress=progress, executor=executor, n_workers=n_workers)
     plan = _plan(_base_case(case), parameters)
     out = Path(out).resolve()
-    kept = _earlier_records(plan, out, out / study)  # another sweep in `out`: refused before anything runs
-    (out / "cases").mkdir(parents=True, exist_ok=True)
-    ledger = _Ledger(plan, out / study, t_start=t_start, progress=progress)
-    ledger.records.update(kept)
-    jobs = _checked_jobs(plan, out, ledger)
-    if jobs:
-        _execute(jobs, out, ledger, executor=executor, n_workers=n_workers)
-    return ledger.save()
+    # one sweep at a time in `out`: a second one (even the same) would rewrite the study under the first
+    with file_lock(out / (study + ".lock"), lambda holder: FileInUse(
+            f"run_sweep: out {str(out)!r} is in use by another sweep (process {holder}); wait for it to finish, or "
+            "choose another output folder (--out)")):
+        kept = _earlier_records(plan, out, out / study)  # another sweep in `out`: refused before anything runs
+        (out / "cases").mkdir(parents=True, exist_ok=True)
+        ledger = _Ledger(plan, out / study, t_start=t_start, progress=progress)
+        ledger.records.update(kept)
+        jobs = _checked_jobs(plan, out, ledger)
+        if jobs:
+            _execute(jobs, out, ledger, executor=executor, n_workers=n_workers)
+        return ledger.save()
