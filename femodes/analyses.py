@@ -52,7 +52,8 @@ def _span(value: Any, name: str, owner: str, *, positive: bool) -> tuple[float, 
         raise TypeError(f"{owner}: {name} must be a pair (start, end) of numbers, got {value!r}") from None
     if not (math.isfinite(a) and math.isfinite(b)) or a == b or (positive and (a <= 0 or b <= 0)):
         raise ValueError(f"{owner}: {name} must be two distinct finite{' positive' if positive else ''} numbers, got {value!r}")
-    if not math.isfinite((b - a) ** 2) or (b - a) ** 2 == 0.0 or (positive and not 1e-150 < min(a, b) <= max(a, b) < 1e150):
+    # (b - a) * (b - a): a Python float's ** raises OverflowError where * gives inf
+    if not math.isfinite((b - a) * (b - a)) or (b - a) * (b - a) == 0.0 or (positive and not 1e-150 < min(a, b) <= max(a, b) < 1e150):
         raise ValueError(f"{owner}: {name} = {value!r} is out of the representable range (its width squared under- or "
                          "overflows); rescale the units")
     return a, b

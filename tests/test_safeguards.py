@@ -582,3 +582,13 @@ def test_second_sweep_while_one_runs_in_the_same_out_is_refused(tmp_path, capsys
     assert err.endswith("wait for it to finish, or choose another output folder (--out)")
     assert not (tmp_path / "study.npz").exists()
     assert main(_sweep_args(tmp_path, "0.5")) == 0 and not (tmp_path / "study.npz.lock").exists()
+
+
+def test_huge_spans_are_named_not_an_overflow_error():
+    free = fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_contact(fm.UnilateralContact(at=0, gap=1.0))
+    with pytest.raises(ValueError, match=r"nonlinear_mode: energy = \(1e\+250, 1e\+280\) is out of the representable "
+                                         r"range"):
+        fm.nonlinear_mode(free, 1, energy=(1e250, 1e280), harmonics=5)
+    problem = fm.ForcedResponseProblem(contact_oscillator(), fm.Harmonics(3))
+    with pytest.raises(ValueError, match=r"p_span \(-1e\+200, 1e\+200\): its width squared under- or overflows"):
+        fm.continuation(problem, (-1e200, 1e200))

@@ -177,7 +177,8 @@ def _validate_span(p_span: Any) -> tuple[float, float]:
         raise ValueError(
             f"p_span must be a pair of distinct finite numbers (p_start, p_end), got {show(p_span)}"
         )
-    if not math.isfinite((p1 - p0) ** 2) or (p1 - p0) ** 2 == 0.0:
+    # (p1 - p0) * (p1 - p0): a Python float's ** raises OverflowError where * gives inf
+    if not math.isfinite((p1 - p0) * (p1 - p0)) or (p1 - p0) * (p1 - p0) == 0.0:
         raise ValueError(f"p_span {show(p_span)}: its width squared under- or overflows; rescale the parameter")
     return p0, p1
 
