@@ -592,3 +592,13 @@ def test_huge_spans_are_named_not_an_overflow_error():
     problem = fm.ForcedResponseProblem(contact_oscillator(), fm.Harmonics(3))
     with pytest.raises(ValueError, match=r"p_span \(-1e\+200, 1e\+200\): its width squared under- or overflows"):
         fm.continuation(problem, (-1e200, 1e200))
+
+
+# -- same class: the points a continuation keeps are bounded by the memory available ------------------
+def test_continuation_stops_with_its_points_before_memory_runs_out(monkeypatch):
+    from femodes import runs
+
+    monkeypatch.setattr(runs, "available_memory", lambda: 2 * 10 * runs.POINT_COPIES * 8 * 22)  # room for 10 points
+    br = fm.frequency_response(contact_oscillator(), SPAN, 5)
+    assert len(br) == 10 and br.omega[-1] < SPAN[1]
+    assert br.message.startswith("stopped at p = ") and "would outgrow the memory available (10 points)" in br.message
