@@ -910,6 +910,12 @@ def _ladder(branch, projection, newton, owner: str) -> _Ladder:
         raise TypeError(f"{owner}: branch must be a femodes.Branch, got {type(branch).__name__}")
     if len(branch) < 2:
         raise ValueError(f"{owner}: the branch has {len(branch)} point(s); at least 2 are needed (its direction)")
+    used = branch.meta.get("projection")
+    given = type(projection).__name__ if projection is not None else "ExactProjection"
+    if isinstance(used, str) and used != given:
+        raise ValueError(f"{owner}: the branch was computed with {used} but projection={projection!r} means {given}: "
+                         "its levels would be another discretisation than the branch; pass the projection the branch "
+                         f"was computed with (projection={used}(...))")
     return _Ladder(branch, projection, newton)
 
 

@@ -87,7 +87,8 @@ def branch_from_continuation(problem, result, *, kind: str, model: StructuralMod
     return Branch(
         kind=kind, harmonics=s.h, contacts=ContactInfo.from_system(s), omega=omega, Q=Q, P=P, energy=energy, xi=xi,
         residual_norm=result.residual_norm, nit=result.nit, parameter=result.p, folds=result.folds,
-        success=result.success, status=result.status, message=result.message, model=model, meta=meta,
+        success=result.success, status=result.status, message=result.message, model=model,
+        meta={"projection": type(s.projection).__name__, **(meta or {})},  # what estimate_error must use again
     )
 
 

@@ -602,3 +602,14 @@ def test_continuation_stops_with_its_points_before_memory_runs_out(monkeypatch):
     br = fm.frequency_response(contact_oscillator(), SPAN, 5)
     assert len(br) == 10 and br.omega[-1] < SPAN[1]
     assert br.message.startswith("stopped at p = ") and "would outgrow the memory available (10 points)" in br.message
+
+
+# -- same class: an error estimate uses the projection the branch was computed with -------------------
+def test_estimate_error_refuses_another_projection_than_the_branchs():
+    from femodes.hbm import SampledProjection
+
+    br = fm.frequency_response(contact_oscillator(), (0.8, 1.0), 5, projection=SampledProjection())
+    assert br.meta["projection"] == "SampledProjection"
+    with pytest.raises(ValueError, match=r"estimate_error: the branch was computed with SampledProjection but "
+                                         r"projection=None means ExactProjection"):
+        fm.estimate_error(br)
