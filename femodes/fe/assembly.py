@@ -22,7 +22,6 @@ import scipy.sparse as sp
 import skfem
 
 from ..model import DofMap, StructuralModel
-from ..solvers.checks import check_memory
 
 __all__ = ["FEInfo", "element_property", "build_fe_model", "checked_basis"]
 
@@ -88,34 +87,8 @@ def check_mesh(mesh: Any, owner: str) -> None:
         )
 
 
-#: Bytes per element and per pair of its local DOFs that assembling M and K takes: scikit-fem's
-#: COO triplets (an 8-byte value and two 8-byte indices) for each of the two matrices, twice for
-#: the conversion to CSR.
-_ASSEMBLY_BYTES_PER_PAIR = 2 * 24 * 2
-
-
-def assembly_memory(mesh: Any, element: Any) -> float:
-    """Bytes that building the basis and assembling M and K of ``mesh`` with ``element`` allocate,
-    estimated from the counts of elements, local DOFs and quadrature points before anything is
-    built: the COO triplets (:data:`_ASSEMBLY_BYTES_PER_PAIR`) and the basis' values, gradients
-    and second derivatives of every local function at every quadrature point."""
-    n_el = int(np.asarray(mesh.t).shape[1])
-    nb = int(np.asarray(element.doflocs).shape[0])
-    dim = int(np.asarray(mesh.p).shape[0])
-    try:  # scikit-fem's default rule: exact for products of two basis functions
-        n_qp = int(np.asarray(skfem.quadrature.get_quadrature(mesh.refdom, 2 * element.maxdeg)[1]).size)
-    except Exception:  # noqa: BLE001 - an element without maxdeg or an unknown domain: a generous count
-        n_qp = 27
-    per_function = n_qp * 8 * dim * (1 + dim + dim * dim)
-    return float(n_el) * (nb * nb * _ASSEMBLY_BYTES_PER_PAIR + nb * per_function)
-
-
 def checked_basis(mesh: Any, element: Any, owner: str) -> Any:
-    """``skfem.Basis(mesh, element)``, with a degenerate mesh reported as a ValueError naming it,
-    and one too large for the available memory refused before it is built."""
-    n_el, nb = int(np.asarray(mesh.t).shape[1]), int(np.asarray(element.doflocs).shape[0])
-    check_memory(assembly_memory(mesh, element), f"assembling M and K on {n_el} elements of {nb} DOFs each",
-                 "use a coarser mesh" + (" or order=1" if owner == "solid" else ""), owner=owner)
+    """``skfem.Basis(mesh, element)``, with a degenerate mesh reported as a ValueError naming it."""
     with np.errstate(all="ignore"):
         try:
             return skfem.Basis(mesh, element)

@@ -11,6 +11,7 @@ from skfem.helpers import dd, ddot, dot, grad
 from ..model import StructuralModel
 from .assembly import check_mesh, support_names, build_fe_model, checked_basis, element_property, quad_field
 from .material import Material, Section
+from .checks import check_assembly
 
 __all__ = ["beam"]
 
@@ -61,6 +62,7 @@ def beam(
     scaling studies.
     """
     check_mesh(mesh, "beam")
+    check_assembly(mesh, skfem.ElementLineHermite(), "beam")
     mats = element_property(mesh, material, Material, "beam", "material")
     secs = element_property(mesh, section, Section, "beam", "section")
     for s in set(secs):

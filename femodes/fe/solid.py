@@ -17,6 +17,7 @@ from skfem.helpers import ddot, dot, sym_grad, trace
 from ..model import StructuralModel
 from .assembly import build_fe_model, checked_basis, element_property, quad_field, support_names
 from .material import Material
+from .checks import check_assembly, check_element_measures
 from .mesh import named_points
 
 __all__ = ["solid", "POINT_RTOL"]
@@ -166,26 +167,6 @@ def _supports(clamped: Any, supports: Any, components: tuple) -> list:
     return out
 
 
-def _check_element_measures(basis, dim: int) -> None:
-    """ValueError naming the first degenerate element (zero or non-finite area or volume: collinear
-    or coplanar vertices), whose singular element map would otherwise show as an "overflow" of the
-    assembled matrices. Zero means below 1e-12 of the median element's measure: the data's own
-    scale, so a mesh in any length unit passes."""
-    with np.errstate(all="ignore"):
-        measure = np.abs(np.asarray(basis.dx)).sum(axis=1)
-    ok = np.isfinite(measure)
-    ref = float(np.median(measure[ok])) if ok.any() else 0.0
-    bad = np.flatnonzero(~ok | (measure <= 1e-12 * ref))
-    if bad.size:
-        i = int(bad[0])
-        verts = np.asarray(basis.mesh.t[:, i])
-        coords = ", ".join("(" + ", ".join(f"{v:.6g}" for v in basis.mesh.p[:, j]) + ")" for j in verts)
-        what = "area" if dim == 2 else "volume"
-        raise ValueError(f"solid: mesh element {i} has zero {what} (vertices {verts.tolist()} at {coords} are "
-                         f"{'collinear' if dim == 2 else 'coplanar'}; {bad.size} such element{'s' * (bad.size != 1)}); "
-                         "remove or repair the degenerate elements of the mesh")
-
-
 def solid(
     mesh: Any,
     material: Material | Mapping[str, Material],
@@ -243,9 +224,10 @@ def solid(
     dim, scalar = _elements(mesh, int(order))
     plane, t = _plane_options(dim, plane, thickness)
     components = _COMPONENTS[dim]
+    check_assembly(mesh, skfem.ElementVector(scalar), "solid")  # refused before anything large is built
+    check_element_measures(mesh, "solid")  # a flat element is named, not left to look like an overflow
     mats = element_property(mesh, material, Material, "solid", "material")
     basis = checked_basis(mesh, skfem.ElementVector(scalar), "solid")
-    _check_element_measures(basis, dim)
     lam, mu = np.array([m.lame for m in mats]).T
     if plane == "stress":  # sigma_zz = 0 eliminates eps_zz: lambda* = 2 lambda mu / (lambda + 2 mu) = E nu / (1 - nu^2)
         lam = 2.0 * lam * mu / (lam + 2.0 * mu)
