@@ -7,7 +7,9 @@ front of the user's callback. With ``checkpoint=path`` (or ``checkpoint=femodes.
 found (one small file per point, written atomically, see :class:`~femodes.store.CheckpointStore`)
 and the finished branch to ``path``; ``checkpoint=femodes.Checkpoint(path, resume=True)``
 continues a killed run from its last saved point (``continuation(start=...)``), so that the final
-branch holds every point exactly once and equals the branch of an uninterrupted run.
+branch holds every point exactly once and equals the branch of an uninterrupted run. A checkpoint
+is locked while a run uses it, and a run stops (keeping its points) before the points it holds
+would outgrow the memory available at its start (:class:`_MemoryGuard`).
 """
 
 from __future__ import annotations

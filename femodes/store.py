@@ -6,7 +6,10 @@ and renamed over the target, so a crash or a full disk never leaves a half-writt
 target's name, and readers see either the old or the new file. :func:`write_record` and
 :func:`read_record` store a JSON header with named arrays (``.npz`` or ``.h5``). :class:`Checkpoint`
 is what a user passes to ``checkpoint=`` of the long analyses (a file name, and whether to resume);
-:class:`CheckpointStore` is the journal of a running continuation next to that file.
+:class:`CheckpointStore` is the journal of a running continuation next to that file, locked while
+a run uses it (:func:`file_lock`: a second run is refused, not raced). :func:`model_fingerprint`
+and :func:`model_signature` hash what defines a model's equations, so that a checkpoint or a saved
+branch is only ever resumed or reattached with the model that produced it.
 """
 
 from __future__ import annotations
@@ -26,9 +29,8 @@ import numpy as np
 import scipy.sparse as sp
 
 __all__ = ["atomic_write", "write_record", "read_record", "Checkpoint", "CheckpointStore", "CheckpointInUse",
-           "FileInUse", "file_lock",
-           "CHECKPOINT_VERSION",
-           "RECORD_SUFFIXES", "model_fingerprint", "model_signature", "signature_differences"]
+           "FileInUse", "file_lock", "CHECKPOINT_VERSION", "RECORD_SUFFIXES", "model_fingerprint", "model_signature",
+           "signature_differences"]
 
 #: Version of the checkpoint journal layout (header.json + one .npz per point).
 CHECKPOINT_VERSION = 1
