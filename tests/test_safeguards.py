@@ -635,3 +635,15 @@ def test_assembly_memory_estimate_is_near_the_measured_peak(quad):
     # measured 1.6 (triangles) and ~1 (quadrilaterals) with scikit-fem's default rule; a lower
     # quadrature (fewer points than the estimate assumes) only lowers the peak: on the safe side
     assert 0.5 < estimate / peak < 6.0
+
+
+def test_animation_over_a_longer_one_leaves_no_stale_frames(tmp_path):
+    mesh = fm.line_mesh(length=1.0, n_elements=4, boundaries={"clamp": 0.0, "tip": 1.0})
+    model = (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp").with_damping(alpha=0.1)
+             .with_forcing(fm.HarmonicForce(at="tip", amplitude=0.01)))
+    sol = fm.frequency_response(model, (0.5, 0.6), 3)[0]
+    fm.io.write_animation(sol, model, tmp_path / "anim", n_frames=8)
+    (tmp_path / "anim_other_0000.vtu").write_text("not ours")
+    fm.io.write_animation(sol, model, tmp_path / "anim", n_frames=4)
+    assert sorted(p.name for p in tmp_path.glob("anim_*.vtu")) == [f"anim_{j:04d}.vtu" for j in range(4)] + [
+        "anim_other_0000.vtu"]
