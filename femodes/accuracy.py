@@ -129,10 +129,10 @@ from .solvers import ContinuationOptions, NewtonOptions, continuation
 from .solvers.threads import limit_blas_threads
 from .solvers.arclength import ArclengthSystem
 from .solvers.bordered import bordered_solver
-from .time.exact import (LinearImpactFlow, exact_flow_unsupported, exact_frequency_response, fold_is_upper,
+from .time.exact import (LinearImpactFlow, exact_flow_unsupported, exact_frequency_response, fold_is_upper, undamped,
                          periodicity_residual)
 
-__all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "refinement_options", "check_estimate_method",
+__all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "shooting_unsupported_for", "refinement_options", "check_estimate_method",
            "shooting_unsupported", "ESTIMATE_METHODS", "RATE_MIN", "BRACKET_RATE_MAX"]
 
 log = logging.getLogger(__name__)
@@ -704,7 +704,9 @@ class _ExactBranchStarts:
             self.traced = True
             b = self.lad.branch
             span = (float(b.omega[0]), float(b.omega[-1]))
-            if span[0] != span[1]:
+            if span[0] != span[1] and undamped(self.lad.model):
+                log.info("accuracy: no exact branch of an undamped model (its orbits are unbounded at resonances)")
+            elif span[0] != span[1]:
                 eb = exact_frequency_response(self.lad.model, span)
                 log.info("accuracy: exact branch over w %.6g -> %.6g: %d orbits, folds at %s, %d runs (%s)", *span,
                          len(eb), np.round(eb.fold_omega, 6).tolist(), eb.runs, eb.message)
@@ -859,7 +861,7 @@ def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun
         _warn_unmet(branch, max_harmonics)
         return branch
     while True:
-        estimate_error(branch, rtol=rtol, projection=projection, newton=newton)
+        estimate_error(branch, rtol=rtol, projection=projection, newton=newton, method=method)
         H = branch.harmonics.n_harmonics
         if branch.accuracy.met.all() or 4 * H > max_harmonics:  # the estimate of 2 H needs level 4 H
             _warn_unmet(branch, max_harmonics)
@@ -908,6 +910,12 @@ def _ladder(branch, projection, newton, owner: str) -> _Ladder:
         raise TypeError(f"{owner}: branch must be a femodes.Branch, got {type(branch).__name__}")
     if len(branch) < 2:
         raise ValueError(f"{owner}: the branch has {len(branch)} point(s); at least 2 are needed (its direction)")
+    used = branch.meta.get("projection")
+    given = type(projection).__name__ if projection is not None else "ExactProjection"
+    if isinstance(used, str) and used != given:
+        raise ValueError(f"{owner}: the branch was computed with {used} but projection={projection!r} means {given}: "
+                         "its levels would be another discretisation than the branch; pass the projection the branch "
+                         f"was computed with (projection={used}(...))")
     return _Ladder(branch, projection, newton)
 
 
@@ -1361,13 +1369,19 @@ def shooting_unsupported(branch: Branch, projection=None) -> str:
     (:func:`femodes.time.exact.exact_flow_unsupported`), computed with the exact projection."""
     if branch.kind != "forced":
         return "nonlinear modes are compared at the same energy (levels only)"
-    if branch.harmonics.subharmonic != 1:
-        return "sub-harmonic branch"
-    if projection is not None and type(projection).__name__ != "ExactProjection":
-        return "the branch was computed with a sampled projection"
     if branch.model is None:
         return "the branch has no model"
-    return exact_flow_unsupported(branch.model)
+    return shooting_unsupported_for(branch.model, branch.harmonics, projection)
+
+
+def shooting_unsupported_for(model, harmonics, projection=None) -> str:
+    """:func:`shooting_unsupported` of the forced branch that ``model`` would give on ``harmonics``
+    (checked by :func:`femodes.frequency_response` before it runs, for ``error_method="shooting"``)."""
+    if harmonics.subharmonic != 1:
+        return "sub-harmonic branch"
+    if projection is not None and type(projection).__name__ != "ExactProjection":
+        return "the branch is computed with a sampled projection"
+    return exact_flow_unsupported(model)
 
 
 class _Shooter:

@@ -27,7 +27,7 @@ from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.threads import limit_blas_threads
-from .accuracy import check_estimate_method, meet_tolerance, refinement_options
+from .accuracy import check_estimate_method, meet_tolerance, refinement_options, shooting_unsupported_for
 from .floquet import METHODS, annotate_branch
 from .nonsmooth_modes import PeriodDriven, captured_past_grazing, compose, period_driven_sweep
 
@@ -54,7 +54,8 @@ def _span(value: Any, name: str, owner: str, *, positive: bool) -> tuple[float, 
         raise TypeError(f"{owner}: {name} must be a pair (start, end) of numbers, got {value!r}") from None
     if not (math.isfinite(a) and math.isfinite(b)) or a == b or (positive and (a <= 0 or b <= 0)):
         raise ValueError(f"{owner}: {name} must be two distinct finite{' positive' if positive else ''} numbers, got {value!r}")
-    if not math.isfinite((b - a) ** 2) or (b - a) ** 2 == 0.0 or (positive and not 1e-150 < min(a, b) <= max(a, b) < 1e150):
+    # (b - a) * (b - a): a Python float's ** raises OverflowError where * gives inf
+    if not math.isfinite((b - a) * (b - a)) or (b - a) * (b - a) == 0.0 or (positive and not 1e-150 < min(a, b) <= max(a, b) < 1e150):
         raise ValueError(f"{owner}: {name} = {value!r} is out of the representable range (its width squared under- or "
                          "overflows); rescale the units")
     return a, b
@@ -99,7 +100,8 @@ def branch_from_continuation(problem, result, *, kind: str, model: StructuralMod
     return Branch(
         kind=kind, harmonics=s.h, contacts=ContactInfo.from_system(s), omega=omega, Q=Q, P=P, energy=energy, xi=xi,
         residual_norm=result.residual_norm, nit=result.nit, parameter=result.p, folds=result.folds,
-        success=result.success, status=result.status, message=result.message, model=model, meta=meta,
+        success=result.success, status=result.status, message=result.message, model=model,
+        meta={"projection": type(s.projection).__name__, **(meta or {})},  # what estimate_error must use again
     )
 
 
@@ -174,7 +176,10 @@ def frequency_response(
         How ``rtol`` is met with complementarity contacts (:func:`femodes.estimate_error`):
         ``"auto"`` computes the converged orbits themselves by shooting on the exact flow with
         rigid stops where the model is linear with unilateral contacts only (mass at the contact
-        DOFs), and uses the levels of harmonics elsewhere.
+        DOFs), and uses the levels of harmonics elsewhere. ``"shooting"`` and ``"levels"`` use
+        that method only: one that cannot apply (shooting on a penalty model, say) is a
+        ValueError before anything runs, as in :func:`femodes.estimate_error`; only ``"auto"``
+        picks. Without ``rtol`` only ``"auto"`` is accepted.
 
     Returns
     -------
@@ -191,8 +196,19 @@ def frequency_response(
     refinement_options(rtol, max_harmonics, h.n_harmonics, "frequency_response")
     check_estimate_method(error_method, "frequency_response", "error_method")
     span = _span(omega, "omega", "frequency_response", positive=True)
+    if error_method != "auto" and rtol is None:
+        raise ValueError(f"frequency_response: error_method={error_method!r} chooses how rtol= is met, but rtol is not "
+                         "given; pass rtol=..., or leave error_method at 'auto'")
+    why = shooting_unsupported_for(model, h, projection) if error_method == "shooting" else ""
+    if why:  # an explicit method that does not apply is refused, as estimate_error(method="shooting") does
+        raise ValueError(f"frequency_response: error_method='shooting' cannot take this model: {why}; use "
+                         "error_method='levels' (or 'auto', which picks)")
     problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
+    if x0 is not None:
+        x0 = _start_vector(x0, problem.size, f"{model.n_dofs} DOFs x {h.n_coef} coefficients"
+                           + (f" + {problem.size - model.n_dofs * h.n_coef} contact-force coefficients"
+                              if problem.size > model.n_dofs * h.n_coef else ""), "frequency_response")
 
     def start(run_options: ContinuationOptions) -> tuple[np.ndarray, ContinuationOptions]:
         if x0 is not None:
@@ -200,10 +216,7 @@ def frequency_response(
         else:
             with np.errstate(all="ignore"):
                 xs = _starting_point(problem, span[0], run_options.newton)
-            if not np.all(np.isfinite(xs)):
-                raise ValueError(f"frequency_response: the response at omega = {span[0]:g} is not finite in floating "
-                                 "point: the forcing amplitude (HarmonicForce amplitude) is too large for these units; "
-                                 "rescale them")
+            _check_response_scale(problem, xs, span[0])
         if run_options.x_scale is None:
             run_options = dataclasses.replace(run_options, x_scale=_response_scale(problem, span, xs))
         return xs, run_options
@@ -228,6 +241,25 @@ def frequency_response(
                                   projection=projection, progress=progress, stability=stability)
 
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method)
+
+
+def _start_vector(x0, size: int, layout: str, label: str) -> np.ndarray:
+    """``x0`` as a finite float vector of ``size`` unknowns, else a ValueError naming ``x0`` (not a
+    derived quantity such as the scales computed from it)."""
+    try:
+        x = np.asarray(x0, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{label}: x0 must be a real vector of {size} unknowns ({layout}), got {x0!r}") from None
+    if x.shape != (size,):
+        raise ValueError(f"{label}: x0 has shape {x.shape}, this problem has {size} unknowns ({layout}); pass an x0 "
+                         "of that size (e.g. a point's unknowns from a branch on the same model and harmonics)")
+    if not np.all(np.isfinite(x)):
+        raise ValueError(f"{label}: x0 contains non-finite values (nan or inf)")
+    if np.max(np.abs(x), initial=0.0) > _largest_unknown(size):
+        raise ValueError(f"{label}: x0 has entries up to {np.max(np.abs(x)):.3g}, whose squares overflow floating point "
+                         f"(above {_largest_unknown(size):.3g} for {size} unknowns); pass an x0 of the solution's size, "
+                         "or rescale the units")
+    return x
 
 
 def frequency_response_options(**changes) -> ContinuationOptions:
@@ -264,7 +296,42 @@ def _response_scale(problem: ForcedResponseProblem, span: tuple[float, float], x
     sq = max(good) if good else 1.0
     s = problem.system
     cmax = max([ct.c for ct in s.unilateral] or [1.0])
+    _check_law_scales(problem, sq, "frequency_response")
     return s.join(np.full((s.h.n_coef, s.n), sq), np.full((s.h.n_coef, s.n_uc), cmax * sq))
+
+
+def _check_law_scales(problem, sq: float, label: str) -> None:
+    """ValueError naming the law parameter (complementarity ``c``, penalty ``stiffness``) whose
+    product with the response scale ``sq`` makes forces whose squares overflow floating point:
+    every step would otherwise fail as a "non-finite residual" that names nothing."""
+    s, big = problem.system, _largest_unknown(problem.size)
+    for ct in s.unilateral:
+        if ct.c * sq > big:
+            raise ValueError(f"{label}: the contact parameter c = {ct.c:.3g} (UnilateralContact c, DOF {ct.dof}) times "
+                             f"the response scale {sq:.3g} gives contact forces whose squares overflow floating point; "
+                             "leave c=None (chosen from the model's stiffness) or rescale the units")
+    for law, dof in s.penalty:
+        if law.stiffness * sq > big:
+            raise ValueError(f"{label}: the penalty stiffness {law.stiffness:.3g} (PenaltyContact stiffness, DOF {dof}) "
+                             f"times the response scale {sq:.3g} gives contact forces whose squares overflow floating "
+                             "point; use a stiffness of the order of the structure's, or rescale the units")
+
+
+def _check_response_scale(problem, x: np.ndarray, omega: float) -> None:
+    """ValueError naming the forcing amplitude when the (linear or converged) response at ``omega``
+    is not finite, or so large that its square overflows (:func:`_largest_unknown`)."""
+    big = float(np.max(np.abs(x), initial=0.0)) if np.all(np.isfinite(x)) else math.inf
+    if big > _largest_unknown(problem.size):
+        raise ValueError(f"frequency_response: the response at omega = {omega:g} is {big:.3g}, too large for floating "
+                         "point (its square overflows the norms of Newton and the arclength): the forcing amplitude "
+                         "(HarmonicForce amplitude) is too large for these units; rescale them")
+
+
+def _largest_unknown(size: int) -> float:
+    """Largest magnitude of an unknown whose square, summed over ``size`` unknowns, stays finite:
+    the Newton merit ``|r|^2 / 2`` and the arclength norm square the unknowns (above it they
+    overflow to inf and every step fails as a "non-finite residual")."""
+    return math.sqrt(np.finfo(float).max / max(int(size), 1)) / 10.0
 
 
 def _harmonics_key(h: Harmonics) -> list:
@@ -290,7 +357,9 @@ def _starting_point(problem: ForcedResponseProblem, omega: float, newton: Newton
     at w = 0.5, H = 5); growing the forcing from 1 % by continuation from the linear solution
     (nonlinear terms negligible at small amplitude) reaches the solution.
     """
-    x0 = problem.linear_guess(omega)
+    with np.errstate(all="ignore"):
+        x0 = problem.linear_guess(omega)
+    _check_response_scale(problem, x0, omega)  # before Newton and the homotopy square it
     res = semismooth_newton(lambda x: problem.residual(x, omega)[:2], x0, options=newton)
     if res.success:
         return res.x
@@ -320,6 +389,7 @@ def nonlinear_mode_options(problem: NonlinearModeProblem, x0: np.ndarray,
     ``x_scale`` themselves.
     """
     scale = problem.arclength_scale(x0)
+    _check_law_scales(problem, float(np.max(np.abs(x0), initial=0.0)) or 1.0, "nonlinear_mode")
     if options is None:
         # the step control of issue 16 is not used by default here yet: with it the end orbits of
         # examples/validation_cantilever.py move by ~1e-7 and its time-stepping energy drift
@@ -539,7 +609,8 @@ def static_contact(model: StructuralModel, force: np.ndarray | None = None, *, x
         J = sp.block_diag([K, sp.csr_matrix((m, m))], format="csr") + sp.csr_matrix((vals, (rows, cols)), shape=(n + m, n + m))
         return r, J
 
-    x_init = np.zeros(n + m) if x0 is None else np.asarray(x0, dtype=float)
+    x_init = np.zeros(n + m) if x0 is None else _start_vector(x0, n + m, f"{n} DOFs + {m} contact forces",
+                                                             "static_contact")
     res = semismooth_newton(fun, x_init, options=options or NewtonOptions(atol=1e-10, max_iter=50))
     q = res.x[:n]
     forces = np.zeros(len(model.contacts))

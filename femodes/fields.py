@@ -25,7 +25,8 @@ from skfem.helpers import dot
 
 from .linear import LinearModes
 from .model import StructuralModel
-from .results import PeriodicSolution
+from .results import PeriodicSolution, contact_differences
+from .store import model_signature, signature_differences
 from .solvers.checks import check_int
 
 __all__ = ["MeshFields", "mesh_fields", "periodic_source", "resolve_model", "check_scale", "tributary_measure",
@@ -64,6 +65,15 @@ def resolve_model(source: Any, model: Any, owner: str) -> StructuralModel:
             f"{owner}: model has {model.n_dofs} DOFs but the result has {n}; pass the model the result was computed on "
             "(for a Craig-Bampton result, the ReducedModel, not its parent)"
         )
+    own = getattr(source, "model", None)
+    if isinstance(source, PeriodicSolution) and model is not own:
+        diff = contact_differences(source.contacts, model)
+        if own is not None:
+            diff += [d for d in signature_differences(model_signature(own), model_signature(model))
+                     if not (d == "contact laws" and diff)]
+        if diff:
+            raise ValueError(f"{owner}: model differs from the one the solution was solved on ({'; '.join(diff)}); "
+                             "pass the model the solution was computed on (or leave model=None)")
     return model
 
 

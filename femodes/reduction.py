@@ -23,7 +23,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .eigen import IllConditionedWarning, check_conditioning, normal_modes
 from .model import Attached, StructuralModel
-from .solvers.checks import check_int
+from .solvers.checks import check_int, check_memory
 
 __all__ = ["ReducedModel", "craig_bampton"]
 
@@ -149,6 +149,12 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
     n = model.n_dofs
     interior = np.setdiff1d(np.arange(n), kept)
     n_modes = _check_n_modes(n_modes, interior.size)
+    # the basis T (parent DOFs x kept + modes), the interior coupling K_IB and the constraint modes
+    # are dense: three arrays of n_dofs x (kept + modes) floats, refused before they are allocated
+    width = kept.size + n_modes
+    check_memory(24.0 * model.n_dofs * width, f"the dense reduction basis of {model.n_dofs} DOFs x {kept.size} kept "
+                 f"DOFs + {n_modes} modes", "keep fewer DOFs (contacts and forces on fewer nodes) or fewer modes",
+                 owner="craig_bampton")
     T, omega_i = _reduction_basis(model.K.tocsr(), model.M.tocsr(), kept, interior, n_modes)
     reduced = _reduced_model(model, kept, T, omega_i, n_modes)
     log.info("craig_bampton: %d DOFs -> %d kept + %d modes", n, kept.size, n_modes)

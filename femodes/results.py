@@ -10,6 +10,7 @@ Files are written by :mod:`femodes.store` (atomic writes; the checkpoint journal
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -19,9 +20,9 @@ import numpy as np
 
 from .hbm.harmonics import Harmonics
 from .laws import PenaltyContact, UnilateralContact
-from .store import RECORD_SUFFIXES, read_record, write_record
+from .store import RECORD_SUFFIXES, model_signature, read_record, signature_differences, write_record
 
-__all__ = ["PeriodicSolution", "Branch", "Bifurcation", "ErrorEstimate", "load_branch", "FORMAT_VERSION", "BIFURCATION_KINDS"]
+__all__ = ["PeriodicSolution", "Branch", "Bifurcation", "ErrorEstimate", "load_branch", "contact_differences", "FORMAT_VERSION", "BIFURCATION_KINDS"]
 
 FORMAT_VERSION = 1
 
@@ -226,6 +227,27 @@ class ContactInfo:
         return cls(*(tuple(d[k]) for k in ("kinds", "dofs", "gaps", "stiffness", "slots", "c")))
 
 
+def contact_differences(contacts: ContactInfo, model) -> list[str]:
+    """How the contacts of ``model`` differ from those a result stores (DOF, law, gap, penalty
+    stiffness), in words; empty if they agree."""
+    ci = contacts
+    if len(model.contacts) != len(ci.kinds):
+        return [f"{len(ci.kinds)} contacts in the result, {len(model.contacts)} in this model"]
+    out = []
+    for j, (a, kind, dof, gap, k) in enumerate(zip(model.contacts, ci.kinds, ci.dofs, ci.gaps, ci.stiffness)):
+        mkind = "penalty" if isinstance(a.item, PenaltyContact) else "complementarity"
+        where = f"contact {j} (DOF {dof})"
+        if int(a.dof) != int(dof):
+            out.append(f"contact {j}: DOF {dof} in the result, {int(a.dof)} in this model")
+        elif mkind != kind:
+            out.append(f"{where}: {kind} in the result, {mkind} in this model")
+        elif float(a.item.gap) != float(gap):
+            out.append(f"{where}: gap {gap:g} in the result, {float(a.item.gap):g} in this model")
+        elif kind == "penalty" and float(a.item.stiffness) != float(k):
+            out.append(f"{where}: stiffness {k:g} in the result, {float(a.item.stiffness):g} in this model")
+    return out
+
+
 def _fine_points(harmonics: Harmonics) -> int:
     """Samples per period of the fine grid on which contact quality is measured."""
     return max(2048, 64 * harmonics.n_coef)
@@ -424,6 +446,9 @@ class Branch:
         self.stability_method: np.ndarray | None = None
         self.bifurcations: tuple = ()
         self.accuracy: ErrorEstimate | None = None
+        #: :func:`~femodes.store.model_signature` of the model the branch was solved on, as read
+        #: from its file (None: not stored, a file of an older femodes; or computed from ``model``)
+        self.model_signature: dict | None = None
 
     def set_accuracy(self, accuracy: ErrorEstimate) -> "Branch":
         """Attach the error estimate of every point (used by :mod:`femodes.accuracy`)."""
@@ -532,13 +557,35 @@ class Branch:
         return pen / np.where(amp > 0, amp, 1.0), np.where(touching, ten / np.where(touching, fmax, 1.0), 0.0)
 
     def attach(self, model) -> "Branch":
-        """Attach the model (after :func:`load_branch`) so solutions can expand to the full field."""
+        """Attach the model (after :func:`load_branch`) so solutions can expand to the full field.
+
+        The model must be the one the branch was solved on: its contacts (DOF, law, gap,
+        stiffness) are compared with those the branch stores, and its matrices, damping, forcing
+        and laws with the hashes the branch file stores (:func:`~femodes.store.model_signature`);
+        a difference is a ValueError naming it. A file of an older femodes stores no hashes:
+        only its contacts are checked, with a warning.
+        """
         from .model import StructuralModel
 
         if not isinstance(model, StructuralModel):
             raise TypeError(f"attach: model must be the StructuralModel the branch was solved on, got {type(model).__name__}")
         if model.n_dofs != self.Q.shape[2]:
             raise ValueError(f"attach: model has {model.n_dofs} DOFs but the branch was solved on {self.Q.shape[2]}")
+        if model is not self.model:
+            diff = contact_differences(self.contacts, model)
+            saved = self.model_signature if self.model_signature is not None else (
+                model_signature(self.model) if self.model is not None else None)
+            if saved is not None:
+                diff += [d for d in signature_differences(saved, model_signature(model))
+                         if not (d == "contact laws" and diff)]
+            if diff:
+                raise ValueError(f"attach: this model differs from the one the branch was solved on "
+                                 f"({'; '.join(diff)}); attach the model the branch was solved on, or compute the "
+                                 "branch again on this model")
+            if saved is None:
+                warnings.warn("attach: the branch file stores no fingerprint of its model (saved by an older "
+                              "femodes), so the model's matrices, damping and forcing cannot be checked; only its "
+                              "contacts were compared; save the branch again to store one", UserWarning, stacklevel=3)
         self.model = model
         return self
 
@@ -574,6 +621,7 @@ class Branch:
             "harmonics": [self.harmonics.n_harmonics, self.harmonics.n_time, self.harmonics.subharmonic],
             "contacts": self.contacts.to_json(), "success": self.success, "status": self.status,
             "message": self.message, "meta": self.meta,
+            "model": model_signature(self.model) if self.model is not None else self.model_signature,
             "accuracy": None if self.accuracy is None else {
                 "method": [str(m) for m in self.accuracy.method], "rtol": self.accuracy.rtol},
             "stability": None if self.stable is None else {
@@ -591,6 +639,78 @@ class Branch:
         return path
 
 
+#: What a branch file holds (:meth:`Branch._header`, :meth:`Branch._arrays`): header fields and
+#: their types, and the arrays over the points with their number of dimensions.
+_HEADER_FIELDS = {"kind": str, "harmonics": list, "contacts": dict, "success": bool, "status": int, "message": str}
+_CONTACT_FIELDS = ("kinds", "dofs", "gaps", "stiffness", "slots", "c")
+_POINT_ARRAYS = {"omega": 1, "Q": 3, "P": 3, "energy": 1, "xi": 1, "residual_norm": 1, "nit": 1, "parameter": 1}
+_ACCURACY_ARRAYS = ("omega", "amplitude", "penetration", "tension", "harmonics", "rate")
+_STABILITY_ARRAYS = ("stable", "multipliers_re", "multipliers_im", "bif_index", "bif_real", "bif_Q", "bif_P")
+
+
+def _check_schema(header: dict, arrays: dict, path: Path) -> None:
+    """One ValueError naming the first missing or malformed field of a branch file (a file that
+    reads but lacks a field would otherwise fail later as a KeyError or AttributeError)."""
+    def bad(what: str):
+        raise ValueError(f"load_branch: {str(path)!r} is incomplete or damaged: {what}; it cannot be read as a "
+                         "branch (save it again with Branch.save)")
+
+    for key, typ in _HEADER_FIELDS.items():
+        if key not in header:
+            bad(f"its header has no {key!r}")
+        if not isinstance(header[key], typ) or (typ is int and isinstance(header[key], bool)):
+            bad(f"header field {key!r} is {header[key]!r}, not a {typ.__name__}")
+    h = header["harmonics"]
+    if len(h) != 3 or not all(isinstance(v, int) and not isinstance(v, bool) for v in h):
+        bad(f"header field 'harmonics' is {h!r}, not [n_harmonics, n_time, subharmonic]")
+    ct = header["contacts"]
+    for key in _CONTACT_FIELDS:
+        if not isinstance(ct.get(key), list):
+            bad(f"header field 'contacts' has no list {key!r}")
+    if len({len(ct[k]) for k in _CONTACT_FIELDS}) != 1:
+        bad("the lists of header field 'contacts' differ in length")
+    for key in ("meta", "accuracy", "stability", "model"):
+        if header.get(key) is not None and not isinstance(header[key], dict):
+            bad(f"header field {key!r} is {header[key]!r}, not a dict")
+    for key, ndim in {**_POINT_ARRAYS, "folds": 1}.items():
+        if key not in arrays:
+            bad(f"it has no array {key!r}")
+        if np.ndim(arrays[key]) != ndim:
+            bad(f"array {key!r} has {np.ndim(arrays[key])} dimensions, not {ndim}")
+    n = arrays["omega"].shape[0]
+    for key in _POINT_ARRAYS:
+        if arrays[key].shape[0] != n:
+            bad(f"array {key!r} has {arrays[key].shape[0]} points, 'omega' {n}")
+    try:
+        nc = Harmonics(*h).n_coef
+    except (TypeError, ValueError) as exc:
+        bad(f"header field 'harmonics' is {h!r} ({exc})")
+    n_uc = sum(k == "complementarity" for k in ct["kinds"])
+    if arrays["Q"].shape[1] != nc or arrays["P"].shape[1] != nc or arrays["P"].shape[2] != n_uc:
+        bad(f"arrays 'Q' {arrays['Q'].shape} and 'P' {arrays['P'].shape} do not fit {h[0]} harmonics "
+            f"({nc} coefficients) and {n_uc} complementarity contacts")
+    if any(not 0 <= d < arrays["Q"].shape[2] for d in ct["dofs"]):
+        bad(f"a contact DOF of {ct['dofs']} is outside the {arrays['Q'].shape[2]} DOFs of 'Q'")
+    acc = header.get("accuracy")
+    if acc is not None:
+        for key in ("method", "rtol"):
+            if key not in acc:
+                bad(f"header field 'accuracy' has no {key!r}")
+        for key in _ACCURACY_ARRAYS:
+            if f"accuracy_{key}" not in arrays:
+                bad(f"it has an error estimate but no array 'accuracy_{key}'")
+    stab = header.get("stability")
+    if stab is not None:
+        for key in ("methods", "kinds"):
+            if not isinstance(stab.get(key), list):
+                bad(f"header field 'stability' has no list {key!r}")
+        for key in _STABILITY_ARRAYS:
+            if key not in arrays:
+                bad(f"it has stability but no array {key!r}")
+        if len(stab["kinds"]) != len(arrays["bif_index"]) or arrays["bif_real"].shape[1:] != (6,):
+            bad(f"its {len(stab['kinds'])} bifurcation kinds do not match arrays 'bif_index' and 'bif_real'")
+
+
 def load_branch(path, model=None) -> Branch:
     """Read a branch written by :meth:`Branch.save`; ``model`` optionally re-attached."""
     path = Path(path)
@@ -600,12 +720,13 @@ def load_branch(path, model=None) -> Branch:
         header, arrays = read_record(path)
     except ValueError as exc:
         raise ValueError(f"load_branch: {str(path)!r} is not a readable femodes branch file ({exc})") from exc
-    if header.get("format") != "femodes.Branch":
+    if not isinstance(header, dict) or header.get("format") != "femodes.Branch":
         raise ValueError(f"load_branch: {str(path)!r} is not a femodes branch file")
     if header.get("version") != FORMAT_VERSION:
         raise ValueError(
             f"load_branch: {str(path)!r} has format version {header.get('version')}, this femodes reads version {FORMAT_VERSION}"
         )
+    _check_schema(header, arrays, path)
     H, N, nu = header["harmonics"]
     br = Branch(
         kind=header["kind"], harmonics=Harmonics(H, N, nu), contacts=ContactInfo.from_json(header["contacts"]),
@@ -614,6 +735,11 @@ def load_branch(path, model=None) -> Branch:
         folds=arrays["folds"].tolist(), success=header["success"], status=header["status"], message=header["message"],
         meta=header.get("meta"),
     )
+    sig = header.get("model")
+    if not isinstance(sig, dict):  # older files: the finished branch of a checkpointed run has a fingerprint
+        ck = (header.get("meta") or {}).get("checkpoint")
+        sig = ck.get("model") if isinstance(ck, dict) and isinstance(ck.get("model"), dict) else None
+    br.model_signature = sig
     acc = header.get("accuracy")
     if acc is not None:
         br.set_accuracy(ErrorEstimate(**{k: arrays[f"accuracy_{k}"] for k in ("omega", "amplitude", "penetration",

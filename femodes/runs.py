@@ -7,13 +7,14 @@ front of the user's callback. With ``checkpoint=path`` (or ``checkpoint=femodes.
 found (one small file per point, written atomically, see :class:`~femodes.store.CheckpointStore`)
 and the finished branch to ``path``; ``checkpoint=femodes.Checkpoint(path, resume=True)``
 continues a killed run from its last saved point (``continuation(start=...)``), so that the final
-branch holds every point exactly once and equals the branch of an uninterrupted run.
+branch holds every point exactly once and equals the branch of an uninterrupted run. A checkpoint
+is locked while a run uses it, and a run stops (keeping its points) before the points it holds
+would outgrow the memory available at its start (:class:`_MemoryGuard`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import logging
 import os
@@ -21,12 +22,12 @@ import time
 from typing import Any, Callable
 
 import numpy as np
-import scipy.sparse as sp
 
 from .model import StructuralModel
 from .results import Branch, load_branch
-from .store import Checkpoint, CheckpointStore
+from .store import Checkpoint, CheckpointStore, model_fingerprint
 from .solvers import ContinuationOptions, continuation
+from .solvers.checks import available_memory
 from .solvers.continuation import ContinuationResult, ContinuationState
 
 __all__ = ["run_continuation", "checkpoint_spec", "model_fingerprint"]
@@ -34,16 +35,50 @@ __all__ = ["run_continuation", "checkpoint_spec", "model_fingerprint"]
 log = logging.getLogger(__name__)
 
 
+class _MemoryGuard:
+    """Stops a continuation before the points it keeps (unknowns, tangents, and the branch's copy
+    of them: :data:`POINT_COPIES` arrays of ``problem.size`` floats per point) outgrow
+    :data:`POINT_MEMORY_FRACTION` of the memory available when it started, so that a long run of
+    a large model ends with its points and a message instead of a ``MemoryError``."""
+
+    def __init__(self, size: int, label: str, n_saved: int = 0):
+        avail = available_memory()
+        self.per_point = POINT_COPIES * 8.0 * max(int(size), 1)
+        self.limit = None if avail is None else int(POINT_MEMORY_FRACTION * avail // self.per_point)
+        self.label, self.n_saved, self.message = label, n_saved, ""
+
+    def __call__(self, point) -> bool:
+        """False (stop) when one more point would pass the limit."""
+        if self.limit is None or self.n_saved + point.index + 2 <= self.limit:
+            return True
+        self.message = (f"stopped at p = {point.p:.8g} after {point.index + 1} points: the branch's points "
+                        f"({self.per_point / 2**20:.3g} MiB each) would outgrow the memory available "
+                        f"({self.limit} points); the points so far are kept: use fewer harmonics, a Craig-Bampton "
+                        "model, or a shorter span")
+        log.warning("%s: %s", self.label, self.message)
+        return False
+
+
+#: Copies of the unknowns per continuation point held in memory (the point, its tangent, the
+#: branch's Q and P), and the share of the memory available at the start they may take (the
+#: factorisations and the analysis' other arrays need the rest).
+POINT_COPIES = 3
+POINT_MEMORY_FRACTION = 0.5
+
+
 def _run(problem, span, x0, options: ContinuationOptions, label: str, progress, *,
-         start: ContinuationState | None = None, journal: Callable | None = None):
-    """Continuation with the journal writer and the progress callback chained in front of the
-    user's callback."""
+         start: ContinuationState | None = None, journal: Callable | None = None, guard: _MemoryGuard | None = None):
+    """Continuation with the journal writer, the memory guard and the progress callback chained in
+    front of the user's callback."""
     cb = _progress_callback(options.callback, span, label, progress)
-    if journal is not None:
+    if journal is not None or guard is not None:
         after = cb
 
         def cb(point):
-            journal(point)  # saved before the user's callback can stop the run
+            if journal is not None:
+                journal(point)  # saved before the user's callback can stop the run
+            if guard is not None and not guard(point):
+                return False
             return after(point) if after is not None else None
 
     if cb is not None:
@@ -54,52 +89,6 @@ def _run(problem, span, x0, options: ContinuationOptions, label: str, progress, 
 # ------------------------------------------------------------------------------------------------
 # checkpoints: what a run is (to refuse resuming a different one) and what a point stores
 # ------------------------------------------------------------------------------------------------
-def _digest(*parts: bytes) -> str:
-    h = hashlib.sha256()
-    for part in parts:
-        h.update(len(part).to_bytes(8, "little"))
-        h.update(part)
-    return h.hexdigest()[:20]
-
-
-def _matrix_bytes(A) -> list[bytes]:
-    A = sp.csr_matrix(A, dtype=float, copy=True)
-    A.sum_duplicates()
-    A.sort_indices()
-    return [np.asarray(A.shape, dtype=np.int64).tobytes(), A.indptr.astype(np.int64).tobytes(),
-            A.indices.astype(np.int64).tobytes(), A.data.tobytes()]
-
-
-def _declarations(items) -> bytes:
-    """Canonical bytes of attached laws (type, DOF and parameters; ``at`` is the DOF)."""
-    out = []
-    for a in items:
-        law = a.item
-        params = {f.name: repr(getattr(law, f.name)) for f in dataclasses.fields(law) if f.name != "at"} \
-            if dataclasses.is_dataclass(law) else {"repr": repr(law)}
-        out.append([type(law).__name__, int(a.dof), params])
-    return json.dumps(out, sort_keys=True).encode()
-
-
-def model_fingerprint(model: StructuralModel) -> dict:
-    """Short hashes of what defines a model's equations: matrices, forcing, contacts, nonlinearities.
-
-    Stored in checkpoints (and their final branch files) so that resuming with another model is
-    refused with a message saying which part differs.
-    """
-    forces = model.force_vectors()
-    lr = model.C_lowrank  # modal damping's low-rank part (hashed only when present: older digests hold)
-    lr_bytes = [] if lr is None else [np.asarray(lr.U.shape, dtype=np.int64).tobytes(), lr.U.tobytes(), lr.d.tobytes()]
-    force_bytes = [np.int64(k).tobytes() + np.asarray(forces[k], dtype=complex).tobytes() for k in sorted(forces)]
-    return {
-        "n_dofs": int(model.n_dofs),
-        "matrices": _digest(*_matrix_bytes(model.M), *_matrix_bytes(model.K), *_matrix_bytes(model.C), *lr_bytes),
-        "forcing": _digest(*force_bytes),
-        "contacts": _digest(_declarations(model.contacts)),
-        "nonlinearities": _digest(_declarations(model.nonlinearities)),
-    }
-
-
 def _differences(saved: Any, current: Any, prefix: str = "") -> list[str]:
     if isinstance(saved, dict) and isinstance(current, dict):
         out = []
@@ -214,16 +203,28 @@ def run_continuation(problem, span, options: ContinuationOptions, label: str, pr
     if checkpoint is not None and not isinstance(checkpoint, Checkpoint):
         raise TypeError(f"{label}: checkpoint must be a femodes.Checkpoint or None, got {checkpoint!r}")
 
+    guard = _MemoryGuard(problem.size, label)
+
     def finish(res, meta) -> Branch:
         branch = wrap(res, meta)
+        if guard.message:
+            branch.message = guard.message
         if not branch.success:
             log.warning("%s: %s", label, branch.message)
         return branch
 
     if checkpoint is None:
         start_x, start_options = x0(options)
-        return finish(_run(problem, span, start_x, start_options, label, progress), {})
+        return finish(_run(problem, span, start_x, start_options, label, progress, guard=guard), {})
     ck = CheckpointStore(checkpoint.path)
+    with ck.lock(label):  # a second run on the same checkpoint is refused, not raced
+        return _run_checkpointed(problem, span, options, label, progress, x0, finish, model, checkpoint, ck,
+                                 description, guard)
+
+
+def _run_checkpointed(problem, span, options, label, progress, x0, finish, model, checkpoint, ck, description,
+                      guard):
+    """:func:`run_continuation` with a checkpoint, under its lock."""
     desc = json.loads(json.dumps(description))  # as it reads back from the JSON header
     if not checkpoint.resume and (ck.path.exists() or ck.journal.exists()):
         raise FileExistsError(f"{label}: checkpoint {str(ck.path)!r} (or its journal {ck.journal.name}/) exists; "
@@ -239,10 +240,11 @@ def run_continuation(problem, span, options: ContinuationOptions, label: str, pr
     if records:
         start = _state_from_records(records, ck)
         log.info("%s: resuming %s from point %d at p = %.8g", label, ck.journal, start.index, start.p)
-        res = _merge(records, _run(problem, span, None, options, label, progress, start=start, journal=journal))
+        res = _merge(records, _run(problem, span, None, options, label, progress, start=start, journal=journal,
+                                   guard=guard))
     else:
         start_x, start_options = x0(options)
-        res = _run(problem, span, start_x, start_options, label, progress, journal=journal)
+        res = _run(problem, span, start_x, start_options, label, progress, journal=journal, guard=guard)
     branch = finish(res, {"checkpoint": desc})
     ck.finish(branch)
     return branch

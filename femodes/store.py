@@ -6,12 +6,17 @@ and renamed over the target, so a crash or a full disk never leaves a half-writt
 target's name, and readers see either the old or the new file. :func:`write_record` and
 :func:`read_record` store a JSON header with named arrays (``.npz`` or ``.h5``). :class:`Checkpoint`
 is what a user passes to ``checkpoint=`` of the long analyses (a file name, and whether to resume);
-:class:`CheckpointStore` is the journal of a running continuation next to that file.
+:class:`CheckpointStore` is the journal of a running continuation next to that file, locked while
+a run uses it (:func:`file_lock`: a second run is refused, not raced). :func:`model_fingerprint`
+and :func:`model_signature` hash what defines a model's equations, so that a checkpoint or a saved
+branch is only ever resumed or reattached with the model that produced it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import hashlib
 import json
 import os
 import tempfile
@@ -21,9 +26,11 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import scipy.sparse as sp
 
-__all__ = ["atomic_write", "write_record", "read_record", "Checkpoint", "CheckpointStore", "CHECKPOINT_VERSION",
-           "RECORD_SUFFIXES"]
+__all__ = ["atomic_write", "write_record", "read_record", "Checkpoint", "CheckpointStore", "CheckpointInUse",
+           "FileInUse", "file_lock", "CHECKPOINT_VERSION", "RECORD_SUFFIXES", "model_fingerprint", "model_signature",
+           "signature_differences"]
 
 #: Version of the checkpoint journal layout (header.json + one .npz per point).
 CHECKPOINT_VERSION = 1
@@ -115,6 +122,83 @@ def read_record(path) -> tuple[dict, dict]:
         raise ValueError(str(exc)) from exc
 
 
+# ------------------------------------------------------------------------------------------------
+# what a saved result is tied to: hashes of the model it was solved on
+# ------------------------------------------------------------------------------------------------
+def _digest(*parts: bytes) -> str:
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(len(part).to_bytes(8, "little"))
+        h.update(part)
+    return h.hexdigest()[:20]
+
+
+def _matrix_bytes(A) -> list[bytes]:
+    A = sp.csr_matrix(A, dtype=float, copy=True)
+    A.sum_duplicates()
+    A.sort_indices()
+    return [np.asarray(A.shape, dtype=np.int64).tobytes(), A.indptr.astype(np.int64).tobytes(),
+            A.indices.astype(np.int64).tobytes(), A.data.tobytes()]
+
+
+def _declarations(items) -> bytes:
+    """Canonical bytes of attached laws (type, DOF and parameters; ``at`` is the DOF)."""
+    out = []
+    for a in items:
+        law = a.item
+        params = {f.name: repr(getattr(law, f.name)) for f in dataclasses.fields(law) if f.name != "at"} \
+            if dataclasses.is_dataclass(law) else {"repr": repr(law)}
+        out.append([type(law).__name__, int(a.dof), params])
+    return json.dumps(out, sort_keys=True).encode()
+
+
+def model_fingerprint(model) -> dict:
+    """Short hashes of what defines a model's equations: matrices, forcing, contacts, nonlinearities.
+
+    Stored in checkpoints (and their final branch files) so that resuming with another model is
+    refused with a message saying which part differs. ``model`` is a
+    :class:`~femodes.StructuralModel` (or a reduced model): only its matrices, force vectors and
+    attached laws are read.
+    """
+    forces = model.force_vectors()
+    lr = model.C_lowrank  # modal damping's low-rank part (hashed only when present: older digests hold)
+    lr_bytes = [] if lr is None else [np.asarray(lr.U.shape, dtype=np.int64).tobytes(), lr.U.tobytes(), lr.d.tobytes()]
+    force_bytes = [np.int64(k).tobytes() + np.asarray(forces[k], dtype=complex).tobytes() for k in sorted(forces)]
+    return {
+        "n_dofs": int(model.n_dofs),
+        "matrices": _digest(*_matrix_bytes(model.M), *_matrix_bytes(model.K), *_matrix_bytes(model.C), *lr_bytes),
+        "forcing": _digest(*force_bytes),
+        "contacts": _digest(_declarations(model.contacts)),
+        "nonlinearities": _digest(_declarations(model.nonlinearities)),
+    }
+
+#: The parts of :func:`model_signature` in the words of the messages that name a difference.
+_SIGNATURE_PARTS = {"n_dofs": "number of DOFs", "mass": "mass matrix M", "stiffness": "stiffness matrix K",
+                    "damping": "damping (C, Rayleigh or modal)", "forcing": "forcing",
+                    "contacts": "contact laws", "nonlinearities": "nonlinear laws (springs)"}
+
+
+def model_signature(model) -> dict:
+    """:func:`model_fingerprint` plus one hash per matrix (``mass``, ``stiffness``, ``damping``):
+    what a saved branch stores of the model it was solved on, so that attaching another model
+    is refused naming the part that differs (:meth:`femodes.Branch.attach`)."""
+    lr = model.C_lowrank
+    lr_bytes = [] if lr is None else [np.asarray(lr.U.shape, dtype=np.int64).tobytes(), lr.U.tobytes(), lr.d.tobytes()]
+    return dict(model_fingerprint(model), mass=_digest(*_matrix_bytes(model.M)),
+                stiffness=_digest(*_matrix_bytes(model.K)), damping=_digest(*_matrix_bytes(model.C), *lr_bytes))
+
+
+def signature_differences(saved: dict, current: dict) -> list[str]:
+    """The parts (in words) in which two :func:`model_signature` dicts differ; parts that one of
+    them lacks are not compared (``matrices`` only when neither names its matrices)."""
+    keys = [k for k in _SIGNATURE_PARTS if k in saved and k in current]
+    out = [_SIGNATURE_PARTS[k] for k in keys if saved[k] != current[k]]
+    if not any(k in keys for k in ("mass", "stiffness", "damping")) and "matrices" in saved and "matrices" in current \
+            and saved["matrices"] != current["matrices"]:
+        out.append("matrices (M, K or C)")
+    return out
+
+
 @dataclasses.dataclass(frozen=True)
 class Checkpoint:
     """Where a long continuation saves its points, and whether to continue an earlier run.
@@ -154,6 +238,55 @@ class Checkpoint:
         object.__setattr__(self, "path", path)
 
 
+class FileInUse(RuntimeError):
+    """Another process holds the lock (:func:`file_lock`) of what this one was to write."""
+
+
+class CheckpointInUse(FileInUse):
+    """Another process runs the checkpoint (it holds the lock :meth:`CheckpointStore.lock`)."""
+
+
+@contextlib.contextmanager
+def file_lock(path, refuse: Callable[[str], Exception]):
+    """Hold an exclusive lock (``fcntl.flock``, POSIX; a no-op elsewhere) on the file ``path``,
+    which holds the holder's process id and is removed on release; if another process holds it,
+    raise ``refuse(holder_pid)`` at once (never wait: a second run on the same files is a mistake
+    to report, not to queue)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock (atomic writes still hold)
+        yield
+        return
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        f = open(path, "a+")
+        try:
+            fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.seek(0)
+            holder = f.read().strip() or "?"
+            f.close()
+            raise refuse(holder) from None
+        try:  # the holder before us may have removed the file after we opened it: lock the current one
+            same = os.stat(path).st_ino == os.fstat(f.fileno()).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        f.close()
+    try:
+        f.seek(0)
+        f.truncate()
+        f.write(str(os.getpid()))
+        f.flush()
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.remove(path)  # while still locked: an opener of the old file sees another inode and retries
+        f.close()
+
+
 class CheckpointStore:
     """Journal of a running continuation next to its final branch file ``path``.
 
@@ -185,6 +318,18 @@ class CheckpointStore:
 
     def __repr__(self) -> str:
         return f"CheckpointStore({str(self.path)!r})"
+
+    @property
+    def lock_path(self) -> Path:
+        return self.path.with_name(self.path.name + ".lock")
+
+    def lock(self, label: str = "checkpoint"):
+        """Hold an exclusive lock on the checkpoint for a run (:func:`file_lock` on ``<path>.lock``):
+        a second run on the same checkpoint raises :class:`CheckpointInUse` at once instead of
+        reading a journal the first one removes."""
+        return file_lock(self.lock_path, lambda holder: CheckpointInUse(
+            f"{label}: checkpoint {str(self.path)!r} is in use by another run (process {holder}); wait for that run "
+            "to finish, or use another checkpoint file"))
 
     @property
     def header_path(self) -> Path:

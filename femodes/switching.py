@@ -172,6 +172,14 @@ def _locate_hbm_doubling(branch: Branch, bif: Bifurcation, dbl: _Doubled, newton
 
 
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
+def _same_bifurcation(a: Bifurcation, b: Bifurcation) -> bool:
+    """``b`` is ``a``, or a copy of it (the same bifurcation of a branch loaded again from its file)."""
+    if a is b:
+        return True
+    return (a.kind == b.kind and a.index == b.index and a.omega == b.omega and np.shape(a.Q) == np.shape(b.Q)
+            and np.array_equal(a.Q, b.Q) and np.shape(a.P) == np.shape(b.P) and np.array_equal(a.P, b.P))
+
+
 def switch_branch(branch: Branch, bifurcation: Bifurcation, omega: tuple[float, float], *,
                   amplitude: float | None = None, options: ContinuationOptions | None = None,
                   stability: bool | str = False, window: int = 10) -> Branch:
@@ -255,6 +263,11 @@ def switch_branch(branch: Branch, bifurcation: Bifurcation, omega: tuple[float, 
                                   "mode's period-doubled family is not traced); got a nonlinear-mode branch")
     if branch.model is None:
         raise ValueError("switch_branch: the branch has no model (loaded from a file?); attach it with branch.attach(model)")
+    if not any(_same_bifurcation(b, bifurcation) for b in branch.bifurcations):
+        found = ", ".join(f"{b.kind} at w = {b.omega:.6g}" for b in branch.bifurcations) or "none"
+        raise ValueError(f"switch_branch: the {kind} at w = {bifurcation.omega:.6g} (index {bifurcation.index}) is not "
+                         f"one of branch.bifurcations ({found}): it was found on another branch; pass a bifurcation "
+                         "of the branch you switch from (computed with stability=True)")
     if not 0 <= bifurcation.index < len(branch):
         raise ValueError(f"switch_branch: bifurcation.index = {bifurcation.index} is not a point of the branch "
                          f"({len(branch)} points): pass one of branch.bifurcations")

@@ -261,8 +261,12 @@ def test_errors_say_what_is_wrong(forced, backbone, monkeypatch):
     i = int(inside[np.argmax([np.min(np.abs(special - j)) for j in inside])])
     assert np.min(np.abs(special - i)) >= 3
     fake = dataclasses.replace(bp, index=i, omega=float(b.omega[i]), parameter=float(b.parameter[i]), Q=b.Q[i], P=b.P[i])
-    with pytest.raises(RuntimeError, match="not a crossing of two branches"):
+    with pytest.raises(ValueError, match="not one of branch.bifurcations"):  # issue 37: only the branch's own
         fm.switch_branch(b, fake, omega=(0.9, 1.7), window=2)
+    listed = copy.copy(b)
+    listed.bifurcations = b.bifurcations + (fake,)
+    with pytest.raises(RuntimeError, match="not a crossing of two branches"):
+        fm.switch_branch(listed, fake, omega=(0.9, 1.7), window=2)
     _, bb = backbone
     with pytest.raises(NotImplementedError, match="period doubling is supported on forced responses only"):
         fm.switch_branch(bb, dataclasses.replace(_tongue_point(bb), kind="period_doubling"), omega=(0.9, 1.5))

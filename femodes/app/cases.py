@@ -95,7 +95,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-__all__ = ["CaseError", "Case", "SCHEMA", "load_case", "parse_case", "build_model", "run_case", "key_line"]
+__all__ = ["CaseError", "Case", "SCHEMA", "load_case", "parse_case", "build_model", "run_case", "key_line",
+           "schema_type_error"]
 
 # table -> {key: description of the expected type}; ARRAY_TABLES are [[...]] tables.
 SCHEMA: dict[str, dict[str, str]] = {
@@ -249,6 +250,17 @@ def _check_type(v: Any, kind: str) -> bool:
     return True
 
 
+def schema_type_error(table: str, key: str, value: Any) -> str:
+    """Why ``value`` cannot be ``[table] key`` by its type (``"gap must be a number, got 'abc'"``),
+    ``""`` if it can; the type checks of :func:`parse_case` (values are checked there too)."""
+    kind = SCHEMA[table][key]
+    if not _check_type(value, kind):
+        return f"{key} must be {_TYPE_TEXT[kind]}, got {_fmt(value)}"
+    if not _all_finite(value):
+        return f"{key} must be finite (no nan or inf), got {_fmt(value)}"
+    return ""
+
+
 def _all_finite(v: Any) -> bool:
     """False if ``v`` is (or contains, in lists and inline tables) a nan or inf float."""
     if isinstance(v, float):
@@ -281,6 +293,7 @@ def parse_case(text: str, path: str | Path = "case.toml") -> Case:
     """Parse and check the text of a case file (syntax, tables, keys, types, simple values)."""
     path = Path(path)
     name = str(path)
+    text = text.removeprefix("\ufeff")  # a byte-order mark (Windows editors) is not a TOML statement
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -556,7 +569,7 @@ def load_case(path: str | Path) -> Case:
     """Read and check a case file; raises CaseError (file missing, syntax, schema)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a UTF-8 byte-order mark is dropped
     except FileNotFoundError:
         raise CaseError("case file not found", str(path)) from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -793,14 +806,17 @@ def analysis_span(case: Case) -> tuple[float, float]:
     return float(a), float(b)
 
 
-def run_case(case: Case, out: Path, *, progress: bool | Callable = False) -> CaseResult:
+def run_case(case: Case, out: Path, *, progress: bool | Callable = False, checkpoint=None) -> CaseResult:
     """Build the model, run the analysis, write the outputs to ``out``.
 
     ``progress`` goes to the analysis: ``True`` logs points at INFO, a callable receives every
     accepted continuation point (the command line's :class:`~femodes.app.progress.BranchProgress`).
+    ``checkpoint`` (a :class:`femodes.Checkpoint`, optional) journals the points as they are found,
+    so that an interrupted run keeps them and the same case run again continues from them
+    (``femodes run`` uses ``out/checkpoint.npz``, removed once the outputs are written).
     """
     model, _full = build_model(case)
-    branch = _run_analysis(case, model, progress)
+    branch = _run_analysis(case, model, progress, checkpoint)
     outs = {"plot": True, "branch": "branch.npz", "animation": True, "gif": False}
     outs.update(case.data.get("outputs", {}))
     out.mkdir(parents=True, exist_ok=True)
@@ -813,10 +829,12 @@ def run_case(case: Case, out: Path, *, progress: bool | Callable = False) -> Cas
     summary = out / "summary.txt"
     files.append(summary)
     summary.write_text("\n".join(lines) + "\n")
+    if checkpoint is not None:  # the outputs hold the branch now: the run's journal is not needed
+        Path(checkpoint.path).unlink(missing_ok=True)
     return CaseResult(branch=branch, model=model, files=files, lines=lines)
 
 
-def _run_analysis(case: Case, model, progress):
+def _run_analysis(case: Case, model, progress, checkpoint=None):
     """The [analysis] of the case on ``model``: its branch."""
     import femodes as fm
     from ..analyses import frequency_response_options
@@ -833,10 +851,10 @@ def _run_analysis(case: Case, model, progress):
         if an["type"] == "nonlinear_mode":
             return api("analysis", ["mode", "energy", "harmonics", "stability"], fm.nonlinear_mode, model,
                        an.get("mode", 1), energy=tuple(an["energy"]), harmonics=H, progress=progress,
-                       stability=stability)
+                       stability=stability, checkpoint=checkpoint)
         options = frequency_response_options(**opts) if opts else None
         return api("analysis", ["omega", "harmonics", "stability"], fm.frequency_response, model, tuple(an["omega"]),
-                   H, options=options, progress=progress, stability=stability)
+                   H, options=options, progress=progress, stability=stability, checkpoint=checkpoint)
     except ShootingError as exc:  # stability = "shooting" that does not converge (the message says: use "hill")
         raise case.error("analysis", "stability", str(exc)) from None
 

@@ -17,6 +17,10 @@ from .progress import BranchProgress
 
 log = logging.getLogger(__name__)
 
+#: The checkpoint of `femodes run` in its output folder (journal CHECKPOINT_NAME.points/ while it
+#: runs; removed when the outputs are written): an interrupted run is resumed by the same command.
+CHECKPOINT_NAME = "checkpoint.npz"
+
 DESCRIPTION = """\
 femodes: nonlinear vibration modes of finite-element structures with unilateral contact.
 
@@ -29,7 +33,8 @@ femodes: nonlinear vibration modes of finite-element structures with unilateral 
                              [damping], [[contact]], [[force]], [[cubic]], [reduction], [analysis],
                              [outputs]), run the nonlinear-mode or frequency-response analysis and
                              write plot, branch (.npz), animation and summary.txt to DIR
-                             (default ./out/<case name>). Commented examples:
+                             (default ./out/<case name>). Ctrl-C (exit 130) keeps the points found
+                             in DIR/checkpoint.npz.points/; the same command resumes from them. Commented examples:
                              examples/cases/cantilever_nnm.toml, examples/cases/oscillator_frc.toml;
                              full schema: python -c "import femodes.app.cases as c; help(c)"
                              or `femodes run --help`.
@@ -78,11 +83,42 @@ def run_case_cli(path: Path, out: Path | None, progress: bool | None) -> int:
     if show:
         label = "log10(energy)" if case.data["analysis"]["type"] == "nonlinear_mode" else "w"
         bar = BranchProgress(analysis_span(case), label)
+    from ..store import Checkpoint, CheckpointInUse, CheckpointStore
+
+    # the points are journalled as they are found: Ctrl-C keeps them, the same command resumes
+    checkpoint = Checkpoint(out / CHECKPOINT_NAME, resume=True)
+    store = CheckpointStore(checkpoint.path)
+    ours = not (store.path.exists() or store.journal.exists())
     try:
-        res = run_case(case, out, progress=bar.update if bar else False)
-    except CaseError as exc:
-        print(f"femodes run: {exc}", file=sys.stderr)
+        try:
+            res = run_case(case, out, progress=bar.update if bar else False, checkpoint=checkpoint)
+        except (KeyboardInterrupt, CheckpointInUse):
+            raise
+        except BaseException:
+            if ours:  # a run that failed (not interrupted) leaves no journal to block the corrected case
+                store.remove_journal()
+                store.path.unlink(missing_ok=True)
+            raise
+    except CaseError as exc:  # an interrupted run of another case left its journal: say how to start over
+        print(f"femodes run: {exc}".replace("or use another checkpoint file", f"or delete {str(store.journal)!r} to "
+                                            "start this case over"), file=sys.stderr)
         return 2
+    except CheckpointInUse as exc:  # another `femodes run` writes to this --out
+        print(f"femodes run: {exc}".replace("or use another checkpoint file", "or choose another --out"),
+              file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        if bar:
+            bar.close()
+            bar = None
+        n = len(store.indices()) if store.journal.is_dir() else 0
+        print(f"femodes run: interrupted; {n} point{'s' * (n != 1)} kept in {str(checkpoint.path)!r} (journal "
+              f"{checkpoint.path.name}.points/); run the same command again to resume", file=sys.stderr)
+        return 130
+    except MemoryError:
+        print("femodes run: out of memory; use fewer harmonics ([analysis] harmonics), a coarser mesh or a "
+              "Craig-Bampton reduction ([reduction] craig_bampton)", file=sys.stderr)
+        return 1
     except OSError as exc:  # the folder became unwritable during the run, the disk is full...
         print(f"femodes run: cannot write the outputs to {str(out)!r}: {exc.strerror or exc}", file=sys.stderr)
         return 2
@@ -110,12 +146,15 @@ running cluster at --scheduler ADDRESS (the output folder must then be shared wi
 Each case writes DIR/cases/<id>/ (case.toml, branch.npz, summary.txt); the study (parameters,
 status, errors and summary numbers of every case) is DIR/study.npz (femodes.app.sweep.load_study).
 A failed case is reported with its error and the others complete; exit code 1 if any case did not
-finish, 2 for mistakes in the case file or in --set.
+finish, 2 for mistakes in the case file or in --set. The same sweep run again into the same --out
+resumes it (finished cases are kept); a folder holding another sweep is refused (exit 2), never
+overwritten.
 """
 
 
 def run_sweep_cli(args) -> int:
     """``femodes sweep``: returns the exit code (2 for mistakes in the case file or in ``--set``)."""
+    from ..store import FileInUse
     from .cases import CaseError, command_out_folder, load_case
     from .sweep import parse_set, run_sweep
 
@@ -153,6 +192,23 @@ def run_sweep_cli(args) -> int:
     try:
         res = run_sweep(case, params, out=out, executor=args.scheduler, n_workers=args.workers,
                         progress=report if show else False)
+    except KeyboardInterrupt:
+        from .sweep import load_study
+
+        study = out / "study.npz"
+        try:
+            kept = sum(r.status in ("ok", "incomplete") for r in load_study(study))
+        except (OSError, ValueError):
+            kept = 0
+        print(f"femodes sweep: interrupted; {kept} finished case{'s' * (kept != 1)} kept in {str(study)!r}; run "
+              "the same command again to resume", file=sys.stderr)
+        return 130
+    except MemoryError:
+        print("femodes sweep: out of memory in this process; use fewer --workers or smaller cases", file=sys.stderr)
+        return 1
+    except FileInUse as exc:  # another sweep runs in this --out
+        print(f"femodes sweep: {exc}", file=sys.stderr)
+        return 2
     except (ValueError, TypeError) as exc:
         print(f"femodes sweep: {exc}", file=sys.stderr)
         return 2
@@ -194,6 +250,14 @@ def main(argv: list[str] | None = None) -> int:
                        help="one line per finished case on stderr (default: when stderr is a terminal)")
     sweep.add_argument("--no-progress", dest="progress", action="store_false", help="no progress lines")
     args = parser.parse_args(argv)
+    try:
+        return _command(parser, args)
+    except KeyboardInterrupt:  # the commands that keep their work say so themselves; this is the rest
+        print(f"femodes {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _command(parser, args) -> int:
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     if args.command is None:
         parser.print_help()

@@ -11,6 +11,7 @@ from skfem.helpers import dot, grad
 from ..model import StructuralModel
 from .assembly import check_mesh, support_names, build_fe_model, element_property, mass_basis, quad_field, stiffness_basis
 from .material import Material, Section
+from .checks import check_assembly
 
 __all__ = ["bar"]
 
@@ -73,6 +74,7 @@ def bar(
     if lumped and order != 1:
         raise ValueError("bar: lumped=True is only available for order=1 (P2 row-sum lumping gives zero masses)")
     mats = element_property(mesh, material, Material, "bar", "material")
+    check_assembly(mesh, skfem.ElementLineP1() if order == 1 else skfem.ElementLineP2(), "bar")
     secs = element_property(mesh, section, Section, "bar", "section")
     element = skfem.ElementLineP1() if order == 1 else skfem.ElementLineP2()
     kbasis = stiffness_basis(mesh, element, "bar")  # quadrature exact on each element (femodes.fe.quadrature)

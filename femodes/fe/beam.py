@@ -11,6 +11,7 @@ from skfem.helpers import dd, ddot, dot, grad
 from ..model import StructuralModel
 from .assembly import check_mesh, support_names, build_fe_model, element_property, mass_basis, quad_field, stiffness_basis
 from .material import Material, Section
+from .checks import check_assembly
 
 __all__ = ["beam"]
 
@@ -64,6 +65,7 @@ def beam(
     mass (``w v``: degree 6), 2-point for the stiffness (``w'' v''``: degree 2).
     """
     check_mesh(mesh, "beam")
+    check_assembly(mesh, skfem.ElementLineHermite(), "beam")
     mats = element_property(mesh, material, Material, "beam", "material")
     secs = element_property(mesh, section, Section, "beam", "section")
     for s in set(secs):

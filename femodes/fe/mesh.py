@@ -71,7 +71,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 __all__ = ["line_mesh", "load_mesh", "rectangle_mesh", "box_mesh", "named_points", "POINT_RTOL", "COLLINEAR_RTOL",
-           "MAX_ELEMENTS"]
+           "MAX_ELEMENTS", "MAX_GRID_CELLS"]
 
 #: Relative tolerance (times the mesh length) for a named point of
 #: :func:`line_mesh` to coincide with a vertex.
@@ -85,6 +85,11 @@ COLLINEAR_RTOL = 1e-6
 #: Largest number of elements :func:`line_mesh` builds (1e8 elements: 0.8 GB of
 #: coordinates alone, several GB once assembled).
 MAX_ELEMENTS = 10**8
+#: Most cells of the structured grid of :func:`rectangle_mesh` and :func:`box_mesh` (``nx ny`` or
+#: ``nx ny nz``): checked before numpy allocates the vertices and cells, which would fail as
+#: "Unable to allocate 74.5 GiB" at 1e5 x 1e5. A grid of 1e7 cells is already about 1.5 GiB of
+#: mesh arrays as triangles (6 tetrahedra per cell in 3-D: about 10 GiB), before any FE matrix.
+MAX_GRID_CELLS = 10**7
 
 # relative length below which an element read from a file counts as zero
 _ZERO_LENGTH_RTOL = 1e-12
@@ -786,6 +791,16 @@ def _faces(mesh, spec: dict[str, tuple[int, float]]):
     return mesh.with_boundaries(sel)
 
 
+def _check_grid(func: str, **counts: int) -> None:
+    """ValueError naming the divisions when their product exceeds :data:`MAX_GRID_CELLS`."""
+    cells = math.prod(counts.values())
+    if cells > MAX_GRID_CELLS:
+        names = " * ".join(counts)
+        raise ValueError(f"{func}: {names} = {' * '.join(map(str, counts.values()))} = {cells:.3g} grid cells, more "
+                         f"than {MAX_GRID_CELLS:.0e} (the mesh alone would not fit in memory, nor its FE matrices); "
+                         f"use fewer divisions")
+
+
 def rectangle_mesh(length: float = 1.0, height: float = 0.1, nx: int = 20, ny: int = 2, *,
                    quad: bool = False) -> skfem.Mesh:
     """Structured mesh of the rectangle ``[0, length] x [0, height]`` (x: length, y: height).
@@ -810,6 +825,7 @@ def rectangle_mesh(length: float = 1.0, height: float = 0.1, nx: int = 20, ny: i
     length = _real(f, "argument 'length'", length, positive=True)
     height = _real(f, "argument 'height'", height, positive=True)
     nx, ny = _count(f, "nx", nx), _count(f, "ny", ny)
+    _check_grid(f, nx=nx, ny=ny)
     if not isinstance(quad, (bool, np.bool_)):
         raise TypeError(f"{f}: argument 'quad' must be True or False, got {quad!r}")
     x, y = np.linspace(0.0, length, nx + 1), np.linspace(0.0, height, ny + 1)
@@ -844,6 +860,7 @@ def box_mesh(length: float = 1.0, width: float = 0.1, height: float = 0.1, nx: i
     width = _real(f, "argument 'width'", width, positive=True)
     height = _real(f, "argument 'height'", height, positive=True)
     nx, ny, nz = _count(f, "nx", nx), _count(f, "ny", ny), _count(f, "nz", nz)
+    _check_grid(f, nx=nx, ny=ny, nz=nz)
     if not isinstance(hexahedra, (bool, np.bool_)):
         raise TypeError(f"{f}: argument 'hexahedra' must be True or False, got {hexahedra!r}")
     axes = (np.linspace(0.0, length, nx + 1), np.linspace(0.0, width, ny + 1), np.linspace(0.0, height, nz + 1))

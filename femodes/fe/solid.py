@@ -17,6 +17,7 @@ from skfem.helpers import ddot, div, dot, grad, transpose
 from ..model import StructuralModel
 from .assembly import build_fe_model, element_property, mass_basis, quad_field, stiffness_basis, support_names
 from .material import Material
+from .checks import check_assembly, check_element_measures
 from .mesh import named_points
 from .quadrature import facet_order
 
@@ -245,6 +246,8 @@ def solid(
     dim, scalar = _elements(mesh, int(order))
     plane, t = _plane_options(dim, plane, thickness)
     components = _COMPONENTS[dim]
+    check_assembly(mesh, skfem.ElementVector(scalar), "solid")  # refused before anything large is built
+    check_element_measures(mesh, "solid")  # a flat element is named, not left to look like an overflow
     mats = element_property(mesh, material, Material, "solid", "material")
     lam, mu = np.array([m.lame for m in mats]).T
     if plane == "stress":  # sigma_zz = 0 eliminates eps_zz: lambda* = 2 lambda mu / (lambda + 2 mu) = E nu / (1 - nu^2)

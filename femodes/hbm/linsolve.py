@@ -108,7 +108,8 @@ import scipy.sparse.linalg as spla
 from scipy.linalg import lapack
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-__all__ = ["HarmonicBlockJacobian", "StructureFailure", "BlockSolver", "AssembledSolver", "BlockStructure"]
+__all__ = ["HarmonicBlockJacobian", "StructureFailure", "BlockSolver", "AssembledSolver", "BlockStructure",
+           "solver_memory"]
 
 log = logging.getLogger(__name__)
 
@@ -228,6 +229,24 @@ SUPERLU_OPTIONS = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, option
 #: Interior size below which the harmonic blocks are factorised in one thread: starting a pool
 #: costs ~0.1-1 ms, more than a band LU of a few thousand DOFs.
 THREAD_MIN_SIZE = 20000
+
+
+def solver_memory(n_coef: int, n_time: int, n_boundary: int, n_p: int, rank: int = 0, n_border: int = 2,
+                  n_aft: int = 0, block: bool = True) -> float:
+    """Bytes of the dense arrays of a Newton step that grow with H and the contacts, estimated
+    before the first solve (the system refuses a problem that cannot fit, :func:`check_memory`).
+
+    The dense Schur complement ``T`` of :class:`_Factorization`, of size
+    ``nB = n_coef (n_boundary + rank) + n_p + n_border`` (layout: nonlinear DOFs' coefficients,
+    contact forces, modal coordinates, border), and its LU (``lu_factor`` copies it): ``2 nB^2``
+    floats with the block solver; the dense Fourier operators (synthesis and analysis, ``2 N
+    n_coef``) and ``d/dw`` (``n_coef^2``); the AFT Jacobians of the nonlinear DOFs (``n_aft``
+    dense ``n_coef x n_coef`` blocks in CSR, 12 bytes per entry). The interior (banded or sparse)
+    factorisations are not counted: they grow with the mesh, not with H or the contacts.
+    """
+    nB = n_coef * (n_boundary + rank) + n_p + n_border
+    schur = 2.0 * nB * nB if block else 0.0
+    return 8.0 * (schur + 2.0 * n_time * n_coef + n_coef * n_coef) + 12.0 * n_aft * n_coef * n_coef
 
 
 def _threads(n_tasks: int, threads: int | None, size: int) -> int:

@@ -33,7 +33,9 @@ import scipy.sparse.linalg as spla
 from ..laws import CubicSpring, PenaltyContact, UnilateralContact
 from ..model import StructuralModel, low_rank_solver
 from .harmonics import Harmonics
-from .linsolve import DENSE_MAX_SIZE, BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure, build_pattern
+from ..solvers.checks import check_memory
+from .linsolve import (DENSE_MAX_SIZE, BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure,
+                       build_pattern, solver_memory)
 from .positive_part import ExactProjection
 
 __all__ = ["HBMSystem", "default_contact_parameter", "default_contact_parameters"]
@@ -181,6 +183,7 @@ class HBMSystem:
         self.nq = nc * n
         self.np = nc * self.n_uc
         self.size = self.nq + self.np
+        self._check_memory(model, harmonics)
         self.D1 = sp.csr_matrix(np.asarray(harmonics.derivative_domega()))
         self.M, self.K, self.C = model.M.tocsr(), model.K.tocsr(), model.C.tocsr()
         # modal damping: the low-rank part U diag(d) U^T of the damping, never assembled on the
@@ -198,6 +201,24 @@ class HBMSystem:
         self.nonlinear_dofs = np.unique(np.array(
             [ct.dof for ct in self.unilateral] + [d for _, d in self.penalty] + [d for _, d in self.cubic], dtype=int))
         self._cache: dict = {}
+
+    def _check_memory(self, model: StructuralModel, harmonics: Harmonics) -> None:
+        """Refuse, before anything large is allocated, a problem whose dense Schur complement and
+        Fourier operators (:func:`~femodes.hbm.linsolve.solver_memory`) exceed the memory available."""
+        nonlinear = {ct.dof for ct in self.unilateral} | {d for _, d in self.penalty} | {d for _, d in self.cubic}
+        lr = model.C_lowrank
+        rank = int(lr.rank) if lr is not None and lr.rank else 0
+        nc = harmonics.n_coef
+        need = solver_memory(nc, harmonics.n_time, len(nonlinear), self.np, rank,
+                             n_aft=3 * self.n_uc + len(self.penalty) + len(self.cubic),
+                             block=isinstance(self.solver, BlockSolver))
+        n_nl = len(nonlinear)
+        check_memory(need, f"harmonics: H = {harmonics.n_harmonics} with {n_nl} nonlinear DOF{'s' * (n_nl != 1)} "
+                           f"({self.n_uc} complementarity contact{'s' * (self.n_uc != 1)}) gives a dense Schur "
+                           f"complement of size {nc * (n_nl + rank) + self.np + 2} whose factorisation",
+                     "use fewer harmonics (it grows as H^2) or fewer contact nodes (a coarser mesh along the contact "
+                     "boundary)" + (", and Rayleigh instead of modal damping (its modes join the complement)" if rank
+                                    else ""))
 
     # Kronecker-product operators (n_coef n x n_coef n): built only on demand (assembled Jacobian,
     # comparisons); the residual and the structured solver work on (n_coef, n) arrays instead.

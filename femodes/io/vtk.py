@@ -21,8 +21,10 @@ and :mod:`femodes.viz`).
 
 from __future__ import annotations
 
+import glob
 import logging
 import os
+import re
 from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import quoteattr
@@ -144,6 +146,13 @@ def _write_series(fields: MeshFields, stem: Path, scale: float | None, owner: st
     lines += [f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(name)}/>' for t, name in entries]
     lines += ["  </Collection>", "</VTKFile>", ""]
     atomic_write(pvd, lambda tmp: Path(tmp).write_text("\n".join(lines), encoding="utf-8"))
+    # frames of an earlier series under this stem that this one does not have (it had more frames):
+    # removed, so the folder never mixes two animations
+    written = {name for _, name in entries}
+    pattern = re.compile(rf"{re.escape(stem.name)}_\d+\.vtu")
+    for old in stem.parent.glob(f"{glob.escape(stem.name)}_*.vtu"):
+        if pattern.fullmatch(old.name) and old.name not in written:
+            old.unlink(missing_ok=True)
     log.info("%s: wrote %d frames and %s", owner, n, pvd)
     return pvd
 

@@ -9,19 +9,24 @@ caller passed.  Validators return the value converted to the checked kind (``flo
 one line.
 
 Besides the validators: :func:`is_operator` (the duck-typed test for structured Jacobians that
-factorise themselves) and :data:`LINSOLVE_ERRORS` (what a failed linear solve raises).
+factorise themselves), :data:`LINSOLVE_ERRORS` (what a failed linear solve raises) and
+:func:`available_memory` / :func:`check_memory` (an allocation that grows with the problem is
+estimated and refused before it is made, naming its size and what to change).
 """
 
 from __future__ import annotations
 
 import math
 import numbers
+import os
 from typing import Any, Callable
 
 import numpy as np
 
 __all__ = [
     "LINSOLVE_ERRORS",
+    "available_memory",
+    "check_memory",
     "check_bool",
     "check_callable",
     "check_int",
@@ -156,3 +161,46 @@ def is_operator(J: Any) -> bool:
 def inf_norm(v: np.ndarray) -> float:
     """``max |v_i|`` (0 for an empty vector)."""
     return float(np.max(np.abs(v))) if v.size else 0.0
+
+
+#: Fraction of the physical memory assumed available where the system does not say how much is
+#: free (no psutil, no /proc/meminfo): other processes and the page cache hold the rest.
+MEMORY_FALLBACK_FRACTION = 0.5
+
+
+def available_memory() -> float | None:
+    """Bytes this process can still allocate: the system's available memory (psutil, else Linux
+    ``MemAvailable``, else :data:`MEMORY_FALLBACK_FRACTION` of the physical memory), capped by the
+    address-space limit (``ulimit -v``); ``None`` if nothing can be read."""
+    avail = None
+    try:
+        import psutil
+
+        avail = float(psutil.virtual_memory().available)
+    except Exception:  # noqa: BLE001 - psutil missing or failing: the next source
+        try:
+            with open("/proc/meminfo", encoding="ascii") as f:
+                avail = next(float(line.split()[1]) * 1024 for line in f if line.startswith("MemAvailable:"))
+        except (OSError, StopIteration, ValueError, IndexError):
+            try:
+                avail = MEMORY_FALLBACK_FRACTION * os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+            except (ValueError, OSError, AttributeError):
+                avail = None
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY and soft > 0:
+            avail = float(soft) if avail is None else min(avail, float(soft))
+    except (ImportError, ValueError, OSError):
+        pass
+    return avail
+
+
+def check_memory(need: float, what: str, fix: str, *, owner: str | None = None) -> None:
+    """ValueError when ``need`` bytes (the estimate of ``what``) exceed :func:`available_memory`:
+    ``"<owner>: <what> needs about 41.5 GiB, more than the 7.2 GiB available; <fix>"``."""
+    avail = available_memory()
+    if avail is not None and need > avail:
+        raise ValueError(f"{_prefix(owner)}{what} needs about {need / 2**30:.3g} GiB, more than the "
+                         f"{avail / 2**30:.3g} GiB available; {fix}")

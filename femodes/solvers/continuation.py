@@ -177,7 +177,8 @@ def _validate_span(p_span: Any) -> tuple[float, float]:
         raise ValueError(
             f"p_span must be a pair of distinct finite numbers (p_start, p_end), got {show(p_span)}"
         )
-    if not math.isfinite((p1 - p0) ** 2) or (p1 - p0) ** 2 == 0.0:
+    # (p1 - p0) * (p1 - p0): a Python float's ** raises OverflowError where * gives inf
+    if not math.isfinite((p1 - p0) * (p1 - p0)) or (p1 - p0) * (p1 - p0) == 0.0:
         raise ValueError(f"p_span {show(p_span)}: its width squared under- or overflows; rescale the parameter")
     return p0, p1
 
@@ -312,6 +313,10 @@ def _first_guess(problem: Any, x0: Any, p_start: float, options: ContinuationOpt
         x0 = guess(p_start)
     x_init = start_vector(x0)
     n = x_init.size
+    size = getattr(problem, "size", None)
+    if isinstance(size, (int, np.integer)) and not isinstance(size, bool) and n != size:
+        raise ValueError(f"continuation: x0 has {n} values, the problem has {int(size)} unknowns (problem.size); pass "
+                         "an x0 of the problem's size")
     if options.x_scale is not None and not is_real_number(options.x_scale):
         if np.shape(options.x_scale) != (n,):
             raise ValueError(f"x_scale has shape {np.shape(options.x_scale)}, expected ({n},) matching x0")

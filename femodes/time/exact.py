@@ -67,7 +67,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "SAMPLES", "CHUNK", "REFINE",
            "MAX_MASSLESS_CONTACTS", "ExactBranch", "exact_frequency_response", "EXACT_BRANCH_RTOL",
-           "EXACT_FOLD_RTOL", "FOLD_WINDOW"]
+           "EXACT_FOLD_RTOL", "FOLD_WINDOW", "undamped"]
 
 #: Grid points per shortest period of the flow (fastest eigenvalue or forcing harmonic) on which
 #: the events are bracketed, and of the coarse grid per period of the highest forcing harmonic.
@@ -1002,6 +1002,17 @@ class _ShootingResidual:
         return r[S], drdx[np.ix_(S, S)], drdw[S]
 
 
+def undamped(model: StructuralModel, restitution: float = 1.0) -> bool:
+    """True when nothing in ``model`` dissipates energy: no damping matrix entry, no modal damping,
+    and elastic impacts (``restitution >= 1``); :func:`exact_frequency_response` refuses such a
+    model (its forced orbits are unbounded at the resonances)."""
+    C = model.C
+    lr = model.C_lowrank
+    no_c = not np.any(np.asarray(C.data if hasattr(C, "data") else C) != 0.0)
+    no_lr = lr is None or not lr.rank or not np.any(np.asarray(lr.d) != 0.0)
+    return bool(no_c and no_lr and restitution >= 1.0)
+
+
 def exact_frequency_response(model: StructuralModel, span, *, x0=None, restitution: float = 1.0,
                              options=None) -> ExactBranch:
     """The forced response of a linear model with rigid stops, orbit by exact orbit.
@@ -1056,6 +1067,12 @@ def exact_frequency_response(model: StructuralModel, span, *, x0=None, restituti
         raise ValueError(f"{owner}: span must be two different finite positive frequencies, got {span!r}")
     if not model.forces:
         raise ValueError(f"{owner}: the model has no harmonic forcing (add one with with_forcing)")
+    if undamped(model, restitution):
+        raise ValueError(f"{owner}: the model has no damping (C = 0) and restitution = {restitution:g}: nothing "
+                         "dissipates, so near a resonance of the impacting structure the forced orbits grow without "
+                         "bound and the continuation cannot pass it (an undamped oscillator against a stop ran 3000 "
+                         "points to a step-size failure); add damping (model.with_damping(alpha=..., beta=...) or "
+                         "modal=...) or use restitution < 1")
     flow = LinearImpactFlow(model, w0, restitution=restitution)
     n2 = 2 * model.n_dofs
     particular = flow.particular(0.0)

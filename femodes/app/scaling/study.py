@@ -105,6 +105,7 @@ def scaling_study(
     out = Path(out)
     path = case.path.resolve() if case.path else Path("case.toml")
     settings = _settings(case, path, sizes, refine is not None, harmonics_list, repeat, points)
+    _check_earlier_study(out, case.name, settings)
     specs = [(size, H, _spec(case, path, size, H, repeat, points)) for size in sizes for H in harmonics_list]
     records, interrupted = _measure_cases(specs, timeout, progress, out, case.name, settings)
     fits = fit_exponents(records)
@@ -114,6 +115,27 @@ def scaling_study(
         files.append(plot_scaling(records, fits, out / "scaling.png", title=title))
     return ScalingResult(case=case.name, records=tuple(records), fits=tuple(fits), files=tuple(files),
                          interrupted=interrupted, settings=settings)
+
+
+def _check_earlier_study(out: Path, case_name: str, settings: dict) -> None:
+    """ValueError if ``out`` holds the scaling study of other settings (another case, sizes,
+    harmonics, repeat or points): its tables would be replaced by this one's. The same study
+    again (on any machine) measures anew."""
+    path = out / "scaling.json"
+    if not path.is_file():
+        return
+    try:
+        doc = json.loads(path.read_text())
+        saved = dict(doc["settings"], case_name=doc["case"])
+    except (OSError, ValueError, KeyError, TypeError):
+        raise ValueError(f"scaling_study: out {str(out)!r} holds a scaling.json that is not readable; choose another "
+                         "output folder (--out), or delete it to start over") from None
+    mine = dict(json.loads(json.dumps(settings)), case_name=case_name)
+    diff = [k for k in mine if k != "machine" and saved.get(k) != mine[k]]
+    if diff:
+        raise ValueError(f"scaling_study: out {str(out)!r} already holds the scaling study of other settings "
+                         f"({', '.join(diff)} differ); choose another output folder (--out), or delete its "
+                         "scaling.json to start over")
 
 
 def _measure_cases(specs: list, timeout: float | None, progress: bool, out: Path, case_name: str,

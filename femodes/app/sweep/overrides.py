@@ -20,7 +20,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..cases import ARRAY_TABLES, SCHEMA, Case
+from ..cases import ARRAY_TABLES, SCHEMA, Case, schema_type_error
 
 __all__ = ["CASE_OUTPUTS", "apply_overrides", "sweep_cases", "parse_set", "case_text", "to_toml"]
 
@@ -197,7 +197,7 @@ def parse_set(text: str) -> tuple[str, list]:
     path = path.strip()
     if not path or not rhs.strip():
         raise ValueError(f"--set {text!r}: expected PATH=VALUE[,VALUE...], e.g. contact.0.gap=0.005,0.01")
-    _parse_path(path)
+    table, _, key = _parse_path(path)
     values = []
     for item in _split_top(rhs):
         if not item:
@@ -209,6 +209,10 @@ def parse_set(text: str) -> tuple[str, list]:
                 raise ValueError(f"--set {text!r}: cannot read value {item!r} (numbers, true/false, \"text\", "
                                  f"[lists] or plain names)") from None
             values.append(item)
+    for v in values:  # a value of the wrong type is a --set mistake (exit 2), found before any case runs
+        why = schema_type_error(table, key, v)
+        if why:
+            raise ValueError(f"--set {text!r}: {why}")
     return path, values
 
 

@@ -9,6 +9,8 @@ finished case in the study file as it arrives.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import dataclasses
+import json
 import logging
 import os
 import time
@@ -16,11 +18,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
+from ...store import FileInUse, file_lock
 from ..cases import Case, CaseError, load_case, parse_case
 from .executors import check_main_guarded, check_where, open_executor
 from .overrides import case_text, sweep_cases
 from .records import CaseRecord, SweepResult, fmt_value, record_from_task
-from .study import save_study
+from .study import load_study_header, save_study
 from .task import run_sweep_case
 
 __all__ = ["run_sweep"]
@@ -112,11 +115,53 @@ class _Ledger:
                      ", ".join(f"{p}={fmt_value(v)}" for p, v in rec.parameters.items()), rec.message)
 
 
+def _earlier_records(plan: _Plan, out: Path, study: Path) -> dict[str, CaseRecord]:
+    """The finished cases of an earlier run of the same sweep in ``out`` (a resumed sweep keeps
+    them); ValueError if ``out`` holds another sweep's study or case folders (two studies are never
+    mixed in one folder)."""
+    def refuse(why: str):
+        raise ValueError(f"run_sweep: out {str(out)!r} already holds another sweep ({why}); choose another "
+                         "output folder (--out), or delete its study file and cases/ to start over")
+
+    planned = dict(zip(plan.ids, zip(plan.overrides, plan.texts)))
+    kept: dict[str, CaseRecord] = {}
+    if study.exists():
+        try:
+            header = load_study_header(study)
+        except ValueError as exc:
+            refuse(f"{study.name} is not readable: {exc}")
+        if header.get("case_text") != plan.base.text:
+            refuse(f"{study.name} was run from another base case file ({header.get('case')!r})")
+        saved = [(r.get("id"), r.get("parameters")) for r in header.get("records", [])]
+        mine = [(cid, json.loads(json.dumps(ov))) for cid, ov in zip(plan.ids, plan.overrides)]
+        if saved != mine:
+            refuse(f"{study.name} has other parameter values: {len(saved)} cases "
+                   f"({', '.join(header.get('parameters', []))}), this sweep has {len(mine)}")
+        for r in header["records"]:
+            rec = CaseRecord(**r)
+            if rec.status in ("ok", "incomplete") and rec.branch and (out / rec.branch).is_file():
+                kept[rec.id] = dataclasses.replace(rec, parameters=dict(planned[rec.id][0]))
+    folders = out / "cases"
+    for d in sorted(folders.iterdir()) if folders.is_dir() else ():
+        if d.name not in planned:
+            refuse(f"cases/{d.name} is not a case of this sweep")
+        toml = d / "case.toml"
+        if toml.is_file() and toml.read_text(encoding="utf-8") != planned[d.name][1]:
+            refuse(f"cases/{d.name}/case.toml is not the case {d.name} of this sweep")
+    if kept:
+        log.info("sweep of %s: resuming the study in %s, %d of %d cases already finished", plan.base.name, out,
+                 len(kept), len(plan.ids))
+    return kept
+
+
 def _checked_jobs(plan: _Plan, out: Path, ledger: _Ledger) -> list[tuple[str, dict, str]]:
     """The ``(id, overrides, text)`` that pass the case-file checks in this process (a rejected
-    value costs no task); the others are recorded as failed with the check's message."""
+    value costs no task); the others are recorded as failed with the check's message. Cases an
+    earlier run of the same sweep finished are not run again."""
     jobs = []
     for cid, ov, text in zip(plan.ids, plan.overrides, plan.texts):
+        if cid in ledger.records:
+            continue
         try:
             parse_case(text, out / "cases" / cid / "case.toml")
         except CaseError as exc:
@@ -182,6 +227,11 @@ def run_sweep(case, parameters, *, out, executor=None, n_workers: int = 2, study
         the calling process (an exception it raises stops the sweep; the study file keeps the
         finished cases).
 
+    An ``out`` that holds the study of the same sweep (same base case text, same cases) is
+    resumed: its finished cases (``"ok"``, ``"incomplete"``, branch file present) are kept and
+    the others run; an ``out`` holding another sweep's study or case folders is a ValueError,
+    never overwritten.
+
     Returns
     -------
     SweepResult
@@ -192,9 +242,15 @@ def run_sweep(case, parameters, *, out, executor=None, n_workers: int = 2, study
     _check_arguments(out=out, study=study, progress=progress, executor=executor, n_workers=n_workers)
     plan = _plan(_base_case(case), parameters)
     out = Path(out).resolve()
-    (out / "cases").mkdir(parents=True, exist_ok=True)
-    ledger = _Ledger(plan, out / study, t_start=t_start, progress=progress)
-    jobs = _checked_jobs(plan, out, ledger)
-    if jobs:
-        _execute(jobs, out, ledger, executor=executor, n_workers=n_workers)
-    return ledger.save()
+    # one sweep at a time in `out`: a second one (even the same) would rewrite the study under the first
+    with file_lock(out / (study + ".lock"), lambda holder: FileInUse(
+            f"run_sweep: out {str(out)!r} is in use by another sweep (process {holder}); wait for it to finish, or "
+            "choose another output folder (--out)")):
+        kept = _earlier_records(plan, out, out / study)  # another sweep in `out`: refused before anything runs
+        (out / "cases").mkdir(parents=True, exist_ok=True)
+        ledger = _Ledger(plan, out / study, t_start=t_start, progress=progress)
+        ledger.records.update(kept)
+        jobs = _checked_jobs(plan, out, ledger)
+        if jobs:
+            _execute(jobs, out, ledger, executor=executor, n_workers=n_workers)
+        return ledger.save()

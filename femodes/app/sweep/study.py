@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict
+from dataclasses import asdict, fields
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +24,7 @@ import numpy as np
 from ...store import atomic_write
 from .records import INTEGER_FIELDS, NUMERIC_FIELDS, TEXT_FIELDS, CaseRecord, SweepResult
 
-__all__ = ["STUDY_VERSION", "save_study", "load_study"]
+__all__ = ["STUDY_VERSION", "save_study", "load_study", "load_study_header"]
 
 STUDY_VERSION = 2
 #: The versions :func:`load_study` reads (see the module docstring).
@@ -90,9 +90,9 @@ def _read_header(path: Path) -> dict:
         raise ValueError(f"load_study: {str(path)!r} is not a readable femodes study file ({exc})") from exc
 
 
-def load_study(path) -> SweepResult:
-    """Read a study file written by :func:`~femodes.app.sweep.run_sweep`; branches via
-    ``result.load_branch(i)``."""
+def load_study_header(path) -> dict:
+    """The JSON header of a study file (format, version, base case name and text, parameter
+    paths, every record), checked like :func:`load_study` checks it."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"load_study: no such file {str(path)!r}")
@@ -102,7 +102,22 @@ def load_study(path) -> SweepResult:
     if header.get("version") not in READABLE_VERSIONS:
         raise ValueError(f"load_study: {str(path)!r} has study version {header.get('version')}, this femodes reads "
                          f"versions {', '.join(map(str, READABLE_VERSIONS))}")
+    for key in ("records", "parameters"):
+        if not isinstance(header.get(key), list):
+            raise ValueError(f"load_study: {str(path)!r} is incomplete or damaged: its header has no list {key!r}")
+    known = {f.name for f in fields(CaseRecord)}
+    for r in header["records"]:
+        if not isinstance(r, dict) or not {"id", "parameters", "status"} <= set(r) or not set(r) <= known:
+            raise ValueError(f"load_study: {str(path)!r} is incomplete or damaged: a record is {r!r}, not the "
+                             f"fields of a CaseRecord")
+    return header
+
+
+def load_study(path) -> SweepResult:
+    """Read a study file written by :func:`~femodes.app.sweep.run_sweep`; branches via
+    ``result.load_branch(i)``."""
+    path = Path(path)
+    header = load_study_header(path)
     recs = tuple(CaseRecord(**r) for r in header["records"])
     return SweepResult(cases=recs, parameters=tuple(header["parameters"]), study=path, case=header.get("case", ""),
                        elapsed=header.get("elapsed", math.nan))
-

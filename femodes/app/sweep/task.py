@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ...store import Checkpoint
 from ..cases import Case, CaseError, parse_case, run_case
 from .overrides import CASE_OUTPUTS
 from .records import BIFURCATION_FIELDS
@@ -82,7 +83,10 @@ def run_sweep_case(case_id: str, text: str, folder: str) -> dict:
         path = folder_p / "case.toml"
         path.write_text(text, encoding="utf-8")
         case = parse_case(text, path)
-        rec.update(_branch_summary(case, run_case(case, folder_p, progress=False), folder_p))
+        # the points are journalled in the case folder: a case interrupted with its sweep continues
+        # from them when the same sweep runs again (the journal goes once the outputs are written)
+        checkpoint = Checkpoint(folder_p / "checkpoint.npz", resume=True)
+        rec.update(_branch_summary(case, run_case(case, folder_p, progress=False, checkpoint=checkpoint), folder_p))
     except CaseError as exc:
         rec.update(status="failed", message=exc.message)
     except Exception as exc:  # noqa: BLE001 - a failed case is reported, the sweep goes on
