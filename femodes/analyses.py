@@ -189,7 +189,6 @@ def frequency_response(
         end of the span (valid points, ``success`` True, a warning in the log).
     """
     model = _check_model(model, "frequency_response")
-    _warn_undamped(model)
     checkpoint = checkpoint_spec(checkpoint, "frequency_response")
     h = _harmonics(harmonics, "frequency_response")
     _options(options, "frequency_response")
@@ -205,6 +204,7 @@ def frequency_response(
                          "error_method='levels' (or 'auto', which picks)")
     problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
+    _warn_undamped(model)  # after the arguments are checked: bad input is an error first
     if x0 is not None:
         x0 = _start_vector(x0, problem.size, f"{model.n_dofs} DOFs x {h.n_coef} coefficients"
                            + (f" + {problem.size - model.n_dofs * h.n_coef} contact-force coefficients"
