@@ -75,7 +75,7 @@ def _warn_undamped(model: StructuralModel) -> None:
     if model.forces and undamped and getattr(model, "C_lowrank", None) is None:
         warnings.warn("frequency_response: the model has no damping, so its forced response has no finite resonance "
                       "peak (the curve runs to infinity at each resonance); add damping, e.g. "
-                      "model.with_damping(modal=0.01) or model.with_damping(beta=...)", UserWarning, stacklevel=4)
+                      "model.with_damping(modal=0.01) or model.with_damping(beta=...)", UserWarning, stacklevel=2)
 
 
 def _check_model(model: Any, owner: str) -> StructuralModel:
@@ -204,7 +204,6 @@ def frequency_response(
                          "error_method='levels' (or 'auto', which picks)")
     problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
-    _warn_undamped(model)  # after the arguments are checked: bad input is an error first
     if x0 is not None:
         x0 = _start_vector(x0, problem.size, f"{model.n_dofs} DOFs x {h.n_coef} coefficients"
                            + (f" + {problem.size - model.n_dofs * h.n_coef} contact-force coefficients"
@@ -217,6 +216,7 @@ def frequency_response(
             with np.errstate(all="ignore"):
                 xs = _starting_point(problem, span[0], run_options.newton)
             _check_response_scale(problem, xs, span[0])
+        _warn_undamped(model)  # once the input is known to be valid: bad input is an error first
         if run_options.x_scale is None:
             run_options = dataclasses.replace(run_options, x_scale=_response_scale(problem, span, xs))
         return xs, run_options
