@@ -109,6 +109,56 @@ branch = false
     assert res.branch.stable is None and not any(line.startswith(("stability", "bifurcations")) for line in res.lines)
 
 
+def test_rtol_and_grazing_energy_unit_in_case_files(tmp_path):
+    """[analysis] rtol reaches the analysis (issue 36: case files refused it) and the summary gives
+    the error estimate and the contact quality; energy_unit = "grazing" gives a backbone's span in
+    multiples of the grazing energy (femodes.grazing_energy), and summary.txt lists the tongues."""
+    frc = _frc(**{"harmonics = 20": "harmonics = 10\nrtol = 1e-2", "plot = true": "plot = false",
+                  'branch = "response.npz"': "branch = false"})
+    res = cases.run_case(cases.parse_case(frc, tmp_path / "frc.toml"), tmp_path / "frc")
+    assert res.branch.accuracy is not None and res.branch.accuracy.rtol == 1e-2
+    assert any(line.startswith("error estimate (harmonic truncation): largest") and "rtol = 0.01 met at" in line
+               for line in res.lines)
+    assert any(line.startswith("contact quality (truncated Fourier series, relative): max penetration")
+               for line in res.lines)
+    bar = """
+[mesh]
+length = 1.0
+n_elements = 20
+boundaries = { clamp = 0.0, tip = 1.0 }
+[model]
+kind = "bar"
+E = 1.0
+rho = 1.0
+area = 1.0
+clamped = ["clamp"]
+[[contact]]
+at = "tip"
+gap = 0.01
+[analysis]
+type = "nonlinear_mode"
+energy = [0.5, 25]
+energy_unit = "grazing"
+harmonics = 10
+[outputs]
+plot = false
+branch = false
+animation = false
+"""
+    res = cases.run_case(cases.parse_case(bar, tmp_path / "bar.toml"), tmp_path / "bar")
+    mesh = fm.line_mesh(1.0, 20, boundaries={"clamp": 0.0, "tip": 1.0})
+    eg = fm.grazing_energy(fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
+                           .with_contact(fm.UnilateralContact(at="tip", gap=0.01)))
+    assert res.branch.energy[0] == pytest.approx(0.5 * eg, rel=1e-2) and res.branch.energy.max() >= 25 * eg * 0.99
+    assert any(line.startswith("internal-resonance tongues stepped over at w = ") for line in res.lines)
+    with pytest.raises(cases.CaseError, match="rtol must be a relative error in"):
+        cases.parse_case(frc.replace("rtol = 1e-2", "rtol = 2.0"), "x.toml")
+    with pytest.raises(cases.CaseError, match="energy_unit is only for nonlinear_mode"):
+        cases.parse_case(frc.replace("rtol = 1e-2", 'energy_unit = "grazing"'), "x.toml")
+    with pytest.raises(cases.CaseError, match='energy_unit must be "grazing"'):
+        cases.parse_case(bar.replace('energy_unit = "grazing"', 'energy_unit = "joule"'), "x.toml")
+
+
 # --------------------------------------------------------------------------------- bad case files
 def _bad(tmp_path, name, text):
     p = tmp_path / name

@@ -75,6 +75,10 @@ Schema (see ``examples/cases/*.toml`` for commented examples)::
     # max_points = 2000         # optional cap on the number of continuation points
     # stability = true          # Floquet multipliers and bifurcations of every point: true ("auto"),
                                 # "hill", "shooting" or false (default); see femodes.floquet
+    # rtol = 1e-3               # error control: points and folds to this relative error (rtol= of
+                                # the analyses; see femodes.estimate_error)
+    # energy_unit = "grazing"   # nonlinear_mode: energy in multiples of the grazing energy of the
+                                # mode (femodes.grazing_energy), e.g. energy = [0.5, 20]
 
     [outputs]                   # optional; defaults shown
     plot = true                 # frequency_energy.png (nonlinear mode) / response.png (forced)
@@ -95,6 +99,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
+import numpy as np
+
 __all__ = ["CaseError", "Case", "SCHEMA", "load_case", "parse_case", "build_model", "run_case", "key_line",
            "schema_type_error"]
 
@@ -114,7 +120,8 @@ SCHEMA: dict[str, dict[str, str]] = {
     "cubic": {"at": "location", "k3": "number"},
     "reduction": {"craig_bampton": "integer"},
     "analysis": {"type": "string", "mode": "integer", "energy": "pair", "omega": "pair", "harmonics": "integer",
-                 "max_points": "integer", "stability": "boolean or method"},
+                 "max_points": "integer", "stability": "boolean or method", "rtol": "number",
+                 "energy_unit": "string"},
     "outputs": {"plot": "boolean", "branch": "string or false", "animation": "boolean", "gif": "boolean",
                 "response_dof": "location"},
 }
@@ -542,6 +549,14 @@ def _check_analysis_settings(case: Case, an: dict, typ: str) -> None:
     for k in ("harmonics", "mode", "max_points"):
         if k in an and an[k] < (2 if k == "max_points" else 1):
             raise case.error("analysis", k, f"{k} must be >= {2 if k == 'max_points' else 1}, got {an[k]}")
+    if "rtol" in an and not (0 < an["rtol"] < 1):
+        raise case.error("analysis", "rtol", f"rtol must be a relative error in (0, 1), e.g. 1e-3, got {an['rtol']}")
+    if "energy_unit" in an:
+        if typ != "nonlinear_mode":
+            raise case.error("analysis", "energy_unit", "energy_unit is only for nonlinear_mode")
+        if an["energy_unit"] != "grazing":
+            raise case.error("analysis", "energy_unit", f"energy_unit must be \"grazing\" (energies in multiples of "
+                             f"the mode's grazing energy), got {an['energy_unit']!r}; leave it out for energies as given")
     if "harmonics" in an:
         from ..hbm.harmonics import Harmonics
 
@@ -847,14 +862,20 @@ def _run_analysis(case: Case, model, progress, checkpoint=None):
     if "max_points" in an:
         opts["max_points"] = an["max_points"]
     stability = an.get("stability", False)
+    rtol = an.get("rtol")
     try:
         if an["type"] == "nonlinear_mode":
-            return api("analysis", ["mode", "energy", "harmonics", "stability"], fm.nonlinear_mode, model,
-                       an.get("mode", 1), energy=tuple(an["energy"]), harmonics=H, progress=progress,
-                       stability=stability, checkpoint=checkpoint)
+            energy = tuple(an["energy"])
+            if an.get("energy_unit") == "grazing":
+                eg = api("analysis", ["energy_unit", "mode"], fm.grazing_energy, model, an.get("mode", 1))
+                energy = tuple(e * eg for e in energy)
+            return api("analysis", ["mode", "energy", "harmonics", "stability", "rtol"], fm.nonlinear_mode, model,
+                       an.get("mode", 1), energy=energy, harmonics=H, progress=progress,
+                       stability=stability, checkpoint=checkpoint, rtol=rtol)
         options = frequency_response_options(**opts) if opts else None
-        return api("analysis", ["omega", "harmonics", "stability"], fm.frequency_response, model, tuple(an["omega"]),
-                   H, options=options, progress=progress, stability=stability, checkpoint=checkpoint)
+        return api("analysis", ["omega", "harmonics", "stability", "rtol"], fm.frequency_response, model,
+                   tuple(an["omega"]), H, options=options, progress=progress, stability=stability,
+                   checkpoint=checkpoint, rtol=rtol)
     except ShootingError as exc:  # stability = "shooting" that does not converge (the message says: use "hill")
         raise case.error("analysis", "stability", str(exc)) from None
 
@@ -869,6 +890,17 @@ def _summary_lines(case: Case, model, branch) -> list[str]:
         lines.append(f"max |xi| (artificial damping) = {abs(branch.xi).max():.2e}")
     if len(branch.folds):
         lines.append(f"folds at w = {', '.join(f'{w:.6g}' for w in branch.omega[list(branch.folds)])}")
+    if len(branch) and len(branch.contacts.dofs):
+        pen, ten = branch.penetration, branch.tension
+        lines.append(f"contact quality (truncated Fourier series, relative): max penetration {np.max(pen):.3g}, "
+                     f"max tension {np.max(ten):.3g}")
+    if branch.error_estimate is not None:
+        acc = branch.accuracy
+        met = f", rtol = {acc.rtol:g} met at {int(np.sum(acc.met))} of {len(branch)} points" if acc.rtol else ""
+        lines.append(f"error estimate (harmonic truncation): largest {np.nanmax(branch.error_estimate):.3g}{met}")
+    if branch.internal_resonances:
+        ws = ", ".join(f"{t['omega'][0]:.5g}" for t in branch.internal_resonances)
+        lines.append(f"internal-resonance tongues stepped over at w = {ws} (branch.internal_resonances)")
     lines.extend(stability_lines(branch))
     return lines
 
