@@ -7,6 +7,7 @@ it nor with femodes (``tests/bar_stop_fd_check.py``).
 """
 
 import contextlib
+import json
 import logging
 import math
 
@@ -145,3 +146,13 @@ def test_period_driven_options_are_checked():
         m = bar(10)
         eg = fm.grazing_energy(m)
         fm.nonlinear_mode(m, 1, (0.5 * eg, 4 * eg), 5, past_grazing="period")
+
+
+def test_saved_backbone_keeps_its_family_and_tongues(backbone, tmp_path):
+    path = tmp_path / "bb.npz"
+    backbone.save(path)
+    back = fm.load_branch(path)
+    assert back.meta["family"] == "contact phase"
+    # (a failed solve in a tongue has energy NaN: compared as text)
+    assert json.dumps(back.internal_resonances) == json.dumps(backbone.internal_resonances)
+    np.testing.assert_array_equal(back.omega, backbone.omega)
