@@ -26,3 +26,22 @@ def test_undamped_forced_response_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         fm.frequency_response(model.with_damping(alpha=0.1), omega=(0.5, 0.8), harmonics=1)
+
+
+def test_unmerged_mesh_warns(tmp_path):
+    """Two tetrahedra meeting on a face whose three nodes are duplicated (an unmerged gmsh mesh):
+    half the mesh floats free; load_mesh says so and how to merge. The shipped meshes do not warn."""
+    import numpy as np
+    import meshio
+
+    a = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    b = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], float)  # the face again, not shared
+    meshio.write(tmp_path / "two.vtu", meshio.Mesh(np.vstack([a, b]), [("tetra", np.array([[0, 1, 2, 3], [4, 5, 6, 7]]))]))
+    with pytest.warns(UserWarning, match=r"3 node\(s\) at the position of another node.*not merged.*RemoveDuplicateNodes"):
+        fm.load_mesh(tmp_path / "two.vtu")
+    from pathlib import Path
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for name in ("blade2d.msh", "blade3d.msh"):
+            fm.load_mesh(Path(__file__).resolve().parents[1] / "meshes" / name)

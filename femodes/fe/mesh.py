@@ -59,6 +59,7 @@ import io
 import math
 import numbers
 import os
+import warnings
 import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -520,8 +521,29 @@ def load_mesh(path) -> skfem.Mesh:
 
     raw = _read_meshio(fname)
     if any(block.type in _SOLID_TYPES for block in raw.cells):
-        return _from_meshio_solid(raw, fname)
+        mesh = _from_meshio_solid(raw, fname)
+        _warn_duplicate_nodes(mesh, fname)
+        return mesh
     return _from_meshio(raw, fname)
+
+
+def _warn_duplicate_nodes(mesh, fname: str) -> None:
+    """Nodes at the same position (to 1e-9 of the mesh size) are not shared by the elements that
+    meet there: an unmerged mesh (gmsh volumes meshed apart without ``Coherence``), whose parts are
+    not connected and float free (``linear_modes`` finds near-zero frequencies)."""
+    p = np.asarray(mesh.p, dtype=float).T
+    if p.shape[0] < 2:
+        return
+    size = float(np.max(np.ptp(p, axis=0))) or 1.0
+    keys = np.round(p / (1e-9 * size)).astype(np.int64)
+    _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
+    n_dup = int(np.sum(counts - 1))
+    if n_dup:
+        i = int(first[np.argmax(counts > 1)])
+        warnings.warn(f"load_mesh: {fname!r} has {n_dup} node(s) at the position of another node (e.g. node {i} at "
+                      f"{tuple(float(v) for v in p[i])}): the mesh is not merged, so its parts are not connected and "
+                      "float free; merge the duplicate nodes (gmsh: Coherence before meshing, or "
+                      "Mesh.RemoveDuplicateNodes) and load it again", UserWarning, stacklevel=3)
 
 
 @dataclass
