@@ -963,6 +963,7 @@ class StructuralModel:
         owner = f"with_contact: {type(law).__name__}(at={law.at!r})"
         at = law.at
         if law.direction is not None:
+            self._warn_direction_into_body(law, owner)
             comp = self._direction_component(law.direction, owner)
             if comp is None:
                 return self._expand_inclined(law, owner)
@@ -1065,6 +1066,28 @@ class StructuralModel:
                 "with an inclined or negative normal has its DOFs rotated into one nodal frame (u_n along the normal), "
                 "so all contacts of that node must share that normal (or act on its tangent DOF, at=(point, 'u_t')); "
                 "give the stops the same direction or put them on different nodes")
+
+    def _warn_direction_into_body(self, law, owner: str) -> None:
+        """A stop along ``direction`` from a boundary whose outward normal points the other way sits
+        inside the material (``direction`` is the way the structure moves towards the stop)."""
+        name = law.at[0] if isinstance(law.at, tuple) else law.at
+        mesh = getattr(self.fe, "mesh", None)
+        if not isinstance(name, str) or mesh is None or self.fe.kind != "solid":
+            return
+        from .fe.checks import outward_normal
+
+        n = outward_normal(mesh, name)
+        d = np.asarray(law.direction, dtype=float)
+        if n is None or d.shape != n.shape or not np.all(np.isfinite(d)) or not np.any(d):
+            return
+        cos = float(d @ n / np.linalg.norm(d))
+        if cos < -0.5:
+            def show(v):
+                return "(" + ", ".join(f"{float(x) + 0.0:.4g}" for x in v) + ")"
+
+            warnings.warn(f"{owner}: direction={show(d)} points into the body at boundary {name!r} (its outward "
+                          f"normal is {show(n)}), so the stop sits inside the material; give the direction in which "
+                          f"{name!r} moves towards the stop, e.g. direction={show(-d)}", UserWarning, stacklevel=4)
 
     def _direction_component(self, direction: tuple, owner: str) -> int | None:
         """Component of a contact ``direction`` along a positive coordinate axis, or None for an

@@ -45,3 +45,16 @@ def test_unmerged_mesh_warns(tmp_path):
         warnings.simplefilter("error")
         for name in ("blade2d.msh", "blade3d.msh"):
             fm.load_mesh(Path(__file__).resolve().parents[1] / "meshes" / name)
+
+
+def test_contact_direction_into_the_body_warns():
+    """A stop above the top face is along +z; -z puts it inside the plate: said, with the fix.
+    Negative normals on faces that face that way (left face, -x) are not warned of."""
+    model = fm.solid(fm.box_mesh(1.0, 0.2, 0.1, 4, 1, 1), fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left")
+    with pytest.warns(UserWarning, match=r"points into the body at boundary 'top' \(its outward normal is \(0, 0, 1\)\).*"
+                                         r"direction=\(0, 0, 1\)"):
+        model.with_contact(fm.UnilateralContact(at="top", gap=0.01, direction=(0.0, 0.0, -1.0)))
+    strip = fm.solid(fm.rectangle_mesh(1.0, 0.1, 8, 2), fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="right")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        strip.with_contact(fm.UnilateralContact(at="left", gap=0.01, direction=(-1.0, 0.0)))

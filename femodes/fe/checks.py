@@ -16,7 +16,7 @@ import skfem
 
 from ..solvers.checks import check_memory
 
-__all__ = ["assembly_memory", "check_assembly", "check_element_measures"]
+__all__ = ["assembly_memory", "check_assembly", "check_element_measures", "outward_normal"]
 
 #: Bytes per element and per pair of its local DOFs that assembling M and K takes: scikit-fem's
 #: COO triplets (an 8-byte value and two 8-byte indices) for each of the two matrices, twice for
@@ -70,3 +70,31 @@ def check_element_measures(mesh: Any, owner: str) -> None:
         raise ValueError(f"{owner}: mesh element {i} has zero {what} (vertices {verts.tolist()} at {coords} are "
                          f"{'collinear' if dim == 2 else 'coplanar'}; {bad.size} such element{'s' * (bad.size != 1)}); "
                          "remove or repair the degenerate elements of the mesh")
+
+
+def outward_normal(mesh: Any, boundary: str) -> np.ndarray | None:
+    """Area-weighted mean outward unit normal of the facets of ``mesh.boundaries[boundary]`` (2-D
+    edges, 3-D triangles or quadrilaterals), oriented away from the element each facet belongs
+    to; ``None`` for line meshes, unknown names or a boundary whose normals cancel (a closed
+    surface)."""
+    boundaries = getattr(mesh, "boundaries", None) or {}
+    facets = boundaries.get(boundary) if isinstance(boundaries, dict) else None
+    dim = int(mesh.p.shape[0])
+    if facets is None or dim < 2 or len(facets) == 0:
+        return None
+    facets = np.asarray(facets, dtype=int)
+    nodes = mesh.facets[:, facets]                       # (nodes per facet, n_facets)
+    p = np.asarray(mesh.p, dtype=float)
+    if dim == 2:
+        t = p[:, nodes[1]] - p[:, nodes[0]]
+        n = np.vstack([t[1], -t[0]])                     # length = edge length
+    else:
+        n = 0.5 * np.cross((p[:, nodes[1]] - p[:, nodes[0]]).T, (p[:, nodes[2]] - p[:, nodes[0]]).T).T
+    inside = p[:, mesh.t[:, mesh.f2t[0, facets]]].mean(axis=1)   # centroid of each facet's element
+    centre = p[:, nodes].mean(axis=1)
+    n = n * np.sign(np.sum(n * (centre - inside), axis=0))
+    total = n.sum(axis=1)
+    norm = float(np.linalg.norm(total))
+    if norm <= 1e-12 * float(np.sum(np.linalg.norm(n, axis=0))):
+        return None
+    return total / norm
