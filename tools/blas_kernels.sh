@@ -6,6 +6,10 @@
 # Usage: sh tools/blas_kernels.sh [python]   (default .venv/bin/python)
 set -eu
 PY=${1:-.venv/bin/python}
+if [ "$(uname -m)" != "x86_64" ]; then
+    echo "blas_kernels: OpenBLAS core types are x86-64 kernels; nothing to rerun on $(uname -m)"
+    exit 0
+fi
 flags=$(grep -m1 '^flags' /proc/cpuinfo 2>/dev/null || true)
 kernels="Prescott"
 case "$flags" in *" avx2"*) kernels="$kernels Haswell" ;; esac
