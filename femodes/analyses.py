@@ -29,7 +29,7 @@ from .solvers import ContinuationOptions, NewtonOptions, continuation, semismoot
 from .solvers.threads import limit_blas_threads
 from .accuracy import check_estimate_method, meet_tolerance, refinement_options, shooting_unsupported_for
 from .floquet import METHODS, annotate_branch
-from .nonsmooth_modes import PeriodDriven, captured_past_grazing, compose, period_driven_sweep
+from .nonsmooth_modes import PeriodDriven, continue_past_grazing
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
            "branch_from_continuation", "model_fingerprint"]
@@ -70,9 +70,7 @@ def _options(options: Any, owner: str) -> ContinuationOptions | None:
 def _warn_undamped(model: StructuralModel) -> None:
     """A forced model without damping has no finite resonance peak: each resonance is a pole the
     curve runs to infinity on, with no folds (a user's blade: 9 points, no fold)."""
-    undamped = model.C is None or (sp.issparse(model.C) and model.C.count_nonzero() == 0) or (
-        not sp.issparse(model.C) and not np.any(np.asarray(model.C)))
-    if model.forces and undamped and getattr(model, "C_lowrank", None) is None:
+    if model.forces and not model.has_damping:
         warnings.warn("frequency_response: the model has no damping, so its forced response has no finite resonance "
                       "peak (the curve runs to infinity at each resonance); add damping, e.g. "
                       "model.with_damping(modal=0.01) or model.with_damping(beta=...)", UserWarning, stacklevel=2)
@@ -483,14 +481,7 @@ def nonlinear_mode(
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
     branch = run_continuation(problem, span, options, "nonlinear_mode", progress, x0=lambda o: (x0, o), wrap=wrap,
                               model=model, checkpoint=checkpoint, description=description)
-    if past_grazing is not None:
-        branch = _past_grazing(branch, problem, model, past_grazing, e1, options)
-    elif any(isinstance(c.item, UnilateralContact) for c in model.contacts) and len(branch):
-        why = captured_past_grazing(branch, problem, model, PeriodDriven(), e1)
-        if why is not None:  # kept as asked, but said: it does not predict the forced resonance
-            branch.meta["energy_continuation"] = why
-            log.warning("nonlinear_mode: %s; this branch grazes past grazing and does not predict the forced "
-                        "resonance (past_grazing=None keeps it; the default traces the contact-phase family)", why)
+    branch = continue_past_grazing(branch, problem, model, past_grazing, e1, options.newton)
     branch = _with_stability(branch, problem, model, method, options)
     if rtol is None:
         return branch
@@ -500,25 +491,6 @@ def nonlinear_mode(
                               projection=projection, progress=progress, stability=stability, past_grazing=past_grazing)
 
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection)
-
-
-def _past_grazing(branch: Branch, problem: NonlinearModeProblem, model: StructuralModel, strategy: PeriodDriven,
-                  energy_max: float, options: ContinuationOptions) -> Branch:
-    """The branch, or its part up to grazing followed by the period-driven sweep when the energy
-    continuation left the contact-phase family (:mod:`femodes.nonsmooth_modes`)."""
-    if not any(isinstance(c.item, UnilateralContact) for c in model.contacts) or not len(branch):
-        return branch
-    why = captured_past_grazing(branch, problem, model, strategy, energy_max)
-    if why is None:
-        return branch
-    log.info("nonlinear_mode: %s; tracing the contact-phase family by frequency instead", why)
-    orbits, tongues, message = period_driven_sweep(model, problem, energy_max, strategy, options.newton)
-    if not orbits:
-        log.warning("nonlinear_mode: %s, and the period-driven continuation found no orbit (%s); returning the "
-                    "energy continuation's branch", why, message)
-        branch.meta["energy_continuation"] = why
-        return branch
-    return compose(branch, problem, model, orbits, tongues, message, why, Branch)
 
 
 def stability_method(stability: Any, owner: str) -> str | None:

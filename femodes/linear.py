@@ -51,14 +51,15 @@ def _check_n(n, n_max: int, owner: str) -> int:
     return int(n)
 
 
-def grazing_energy(model: StructuralModel, mode: int = 1) -> float:
+def grazing_energy(model: StructuralModel, mode: int = 1, *, modes: LinearModes | None = None) -> float:
     """Energy at which linear mode ``mode`` first touches a contact: ``E_g = w^2 a_g^2 / 2``.
 
     With the mass-normalised shape ``phi``, the modal amplitude ``a`` moves contact ``c`` (gap
     ``g_c`` along its DOF) by ``a |phi_c|``; the first contact reached sets
     ``a_g = min_c g_c / |phi_c|``. Backbones of a structure with contacts are naturally given in
     multiples of it: ``nonlinear_mode(model, energy=(0.5 * E_g, 25 * E_g))``. For a clamped bar
-    with a stop at the tip (``E = rho = A = L = 1``) it tends to ``pi^2 g^2 / 16``.
+    with a stop at the tip (``E = rho = A = L = 1``) it tends to ``pi^2 g^2 / 16``. ``modes``: the
+    model's linear modes if already computed (at least ``mode`` of them).
     """
     if not isinstance(model, StructuralModel):
         raise TypeError(f"grazing_energy: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
@@ -68,8 +69,9 @@ def grazing_energy(model: StructuralModel, mode: int = 1) -> float:
     if not gapped:
         raise ValueError("grazing_energy: the model has no contact with a positive gap; declare one with "
                          "model.with_contact(fm.UnilateralContact(at=..., gap=...))")
-    modes = linear_modes(model, n=mode)
-    w, phi = float(modes.omega[-1]), modes.shapes[:, -1]
+    if modes is None or modes.omega.size < mode:
+        modes = linear_modes(model, n=mode)
+    w, phi = float(modes.omega[mode - 1]), modes.shapes[:, mode - 1]
     amp = [g / abs(phi[d]) for d, g in gapped if abs(phi[d]) > 1e-12 * float(np.max(np.abs(phi)))]
     if not amp:
         raise ValueError(f"grazing_energy: linear mode {mode} does not move any contact DOF (a node of the mode "

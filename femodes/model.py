@@ -691,8 +691,8 @@ class StructuralModel:
 
     @property
     def has_damping(self) -> bool:
-        """True if the damping (sparse or low-rank part) is not zero."""
-        return bool(self.C.nnz) or (self.C_lowrank is not None and bool(np.any(self.C_lowrank.d)))
+        """True if the damping (sparse or low-rank part) is not zero (stored zeros do not count)."""
+        return bool(self.C.count_nonzero()) or (self.C_lowrank is not None and bool(np.any(self.C_lowrank.d)))
 
     def apply_damping(self, V: np.ndarray) -> np.ndarray:
         """The damping matrix times ``V`` (shape ``(n,)`` or ``(n, k)``): ``C V + U diag(d) U^T V``."""

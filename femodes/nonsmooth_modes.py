@@ -28,15 +28,19 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from .hbm.problems import NonlinearModeProblem, PeriodDrivenModeProblem
+from .laws import UnilateralContact
 from .linear import grazing_energy, linear_modes
 from .model import StructuralModel
+from .results import Branch
 from .solvers import NewtonOptions, semismooth_newton
 
-__all__ = ["PeriodDriven", "InternalResonance", "modal_energy_fractions", "period_driven_sweep"]
+__all__ = ["PeriodDriven", "InternalResonance", "modal_energy_fractions", "period_driven_sweep", "captured_past_grazing",
+           "continue_past_grazing"]
 
 log = logging.getLogger(__name__)
 
@@ -140,35 +144,54 @@ def modal_energy_fractions(problem: NonlinearModeProblem, x: np.ndarray, omegas:
     return e / total if total > 0 else np.zeros_like(e)
 
 
+class _Orbit(NamedTuple):
+    """An orbit the sweep kept: its unknowns, frequency, energy and Newton iterations."""
+
+    x: np.ndarray
+    omega: float
+    energy: float
+    nit: int
+
+
+def _spectrum(model: StructuralModel, problem: NonlinearModeProblem, strategy: PeriodDriven):
+    """The linear modes that tell which modes take the energy (at least the traced one and the
+    next), computed once for the detection, the sweep and the grazing energy."""
+    return linear_modes(model, n=int(min(max(strategy.n_modes, problem.mode + 1), model.n_dofs)))
+
+
+def _tongue(points: list[tuple[float, float, np.ndarray | None]], lm, mode: int) -> InternalResonance:
+    """The tongue of the sweep's points ``(w, E, energy shares or None)``: the (up to three) other
+    modes with more than 5 % of the energy there on average, and their ``w_k / w``."""
+    shares = np.mean([f for _, _, f in points if f is not None] or [np.zeros(lm.omega.size)], axis=0)
+    order = [k for k in np.argsort(shares)[::-1] if k != mode - 1 and shares[k] > 0.05][:3]
+    wm = float(np.mean([w for w, _, _ in points]))
+    return InternalResonance(omega=tuple(float(w) for w, _, _ in points), energy=tuple(float(e) for _, e, _ in points),
+                             modes=tuple(int(k) + 1 for k in order), shares=tuple(float(shares[k]) for k in order),
+                             ratios=tuple(float(lm.omega[k] / wm) for k in order))
+
+
 def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, energy_max: float,
-                        strategy: PeriodDriven, newton: NewtonOptions | None = None
-                        ) -> tuple[list[np.ndarray], list[InternalResonance], str]:
+                        strategy: PeriodDriven, newton: NewtonOptions | None = None, *, spectrum=None
+                        ) -> tuple[list[_Orbit], list[InternalResonance], str]:
     """Orbits of the contact-phase family of ``problem``'s mode from just above grazing up to
-    ``energy_max``, by increasing frequency; returns ``(orbits, tongues, message)`` (orbits as
-    unknown vectors of ``problem``, frequencies increasing)."""
+    ``energy_max``, by increasing frequency; returns ``(orbits, tongues, message)``. ``spectrum``:
+    the linear modes of :func:`_spectrum`, if already computed."""
     w0 = problem.omega0
     mode = problem.mode
+    n = problem.system.size
     pd = PeriodDrivenModeProblem(model, problem.system.h, mode, reference_energy=problem.reference_energy,
                                  projection=problem.system.projection)
-    n_modes = int(min(max(strategy.n_modes, mode + 1), model.n_dofs))
-    lm = linear_modes(model, n=n_modes)
-    eg = grazing_energy(model, mode)
+    lm = spectrum if spectrum is not None else _spectrum(model, problem, strategy)
+    eg = grazing_energy(model, mode, modes=lm)
     newton = newton or NewtonOptions(atol=1e-9, max_iter=30)
-    orbits: list[np.ndarray] = []
+    orbits: list[_Orbit] = []
     tongues: list[InternalResonance] = []
     pending: list[tuple[float, float, np.ndarray | None]] = []
 
     def close_tongue():
-        if not pending:
-            return
-        shares = np.mean([f for _, _, f in pending if f is not None] or [np.zeros(n_modes)], axis=0)
-        order = [k for k in np.argsort(shares)[::-1] if k != mode - 1 and shares[k] > 0.05][:3]
-        wm = float(np.mean([w for w, _, _ in pending]))
-        tongues.append(InternalResonance(
-            omega=tuple(float(w) for w, _, _ in pending), energy=tuple(float(e) for _, e, _ in pending),
-            modes=tuple(int(k) + 1 for k in order), shares=tuple(float(shares[k]) for k in order),
-            ratios=tuple(float(lm.omega[k] / wm) for k in order)))
-        pending.clear()
+        if pending:
+            tongues.append(_tongue(pending, lm, mode))
+            pending.clear()
 
     w = (1.0 + strategy.start) * w0
     step = strategy.step * w0
@@ -177,30 +200,24 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
     seed = problem.linear_guess(eg * (1.0 + strategy.start))
     for _ in range(strategy.max_points):
         if len(orbits) >= 2:
-            (xa, xb) = orbits[-2], orbits[-1]
-            wa, wb = float(xa[problem.system.size]), float(xb[problem.system.size])
-            guess = xb + (xb - xa) * (w - wb) / (wb - wa)
-        elif orbits:
-            guess = orbits[-1].copy()
+            a, b = orbits[-2], orbits[-1]
+            guess = b.x + (b.x - a.x) * (w - b.omega) / (b.omega - a.omega)
         else:
-            guess = seed.copy()
-        guess[problem.system.size] = w
+            guess = (orbits[-1].x if orbits else seed).copy()
+        guess[n] = w
         res = semismooth_newton(lambda z, w=w: pd.residual(z, w)[:2], guess, options=newton)
-        x = res.x
-        E = float(problem.system.energy(x[: problem.system.size], w)[0]) if res.success else math.nan
-        fractions = modal_energy_fractions(problem, x, lm.omega, lm.shapes) if res.success else None
+        E = _energy(problem, res.x) if res.success else math.nan
+        fractions = modal_energy_fractions(problem, res.x, lm.omega, lm.shapes) if res.success else None
         log.debug("w = %.6g: success %s, E = %.4g, share of mode %d %.3f", w, res.success, E, mode,
                   fractions[mode - 1] if fractions is not None else math.nan)
-        on_family = (res.success and E > eg * (1.0 - strategy.start)
-                     and fractions[mode - 1] >= strategy.min_fraction)
-        if on_family:
+        if res.success and E > eg * (1.0 - strategy.start) and fractions[mode - 1] >= strategy.min_fraction:
             close_tongue()
             skips = 0
-            orbits.append(x)
+            orbits.append(_Orbit(res.x, w, E, int(res.nit)))
             # past the end once the orbits left after removing the tongues' (_drop_off_curve) are
-            if E >= energy_max and len(orbits) >= 2 and _energy(problem, orbits[-2]) >= energy_max:
+            if E >= energy_max and len(orbits) >= 2 and orbits[-2].energy >= energy_max:
                 kept, _ = _drop_off_curve(problem, orbits, [], lm, strategy)
-                if sum(_energy(problem, k) >= energy_max for k in kept) >= 2:
+                if sum(o.energy >= energy_max for o in kept) >= 2:
                     break
             if res.nit <= 4:
                 step = min(1.5 * step, strategy.max_step * w0)
@@ -221,25 +238,25 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
         message = f"stopped after {strategy.max_points} frequencies (PeriodDriven.max_points)"
     close_tongue()
     orbits, tongues = _drop_off_curve(problem, orbits, tongues, lm, strategy)
-    past = [i for i, x in enumerate(orbits) if _energy(problem, x) >= energy_max]
+    past = [i for i, o in enumerate(orbits) if o.energy >= energy_max]
     if past:  # the branch ends at the first orbit past the end of the span...
         orbits = orbits[: past[0] + 1]
         # ...if it continues the two before it (the tail of the sweep has no later orbits to judge
         # it by, and the family's energy is steep there)
         if len(orbits) >= 3:
-            n = problem.system.size
-            (xa, xb, xc) = orbits[-3:]
-            la, lb, lc = (math.log(_energy(problem, x)) for x in (xa, xb, xc))
-            line = lb + (lb - la) * (float(xc[n]) - float(xb[n])) / (float(xb[n]) - float(xa[n]))
+            a, b, c = orbits[-3:]
+            la, lb, lc = (math.log(o.energy) for o in (a, b, c))
+            line = lb + (lb - la) * (c.omega - b.omega) / (b.omega - a.omega)
             if abs(lc - line) > math.log1p(strategy.off_curve):
                 orbits = orbits[:-1]
-                message = f"reached {_energy(problem, orbits[-1]):g} of the energy {energy_max:g} (the next orbit is a tongue's)"
-        tongues = [t for t in tongues if t.omega[0] < float(orbits[-1][problem.system.size])]
+                message = (f"stopped at the energy {orbits[-1].energy:g}, short of {energy_max:g}: the next orbit is "
+                           "a tongue's")
+        tongues = [t for t in tongues if t.omega[0] < orbits[-1].omega]
     log.info("period-driven sweep of mode %d: %d orbits, %d tongues; %s", mode, len(orbits), len(tongues), message)
     return orbits, tongues, message
 
 
-def _drop_off_curve(problem, orbits, tongues, lm, strategy):
+def _drop_off_curve(problem, orbits: list[_Orbit], tongues, lm, strategy):
     """Orbits of a tongue that the sweep solved without noticing: the family's energy is a smooth,
     increasing function of the frequency, while a tongue's orbits lie off it by 10-40 % (an
     internal resonance feeds energy into another mode at nearly the same frequency). An orbit
@@ -248,9 +265,8 @@ def _drop_off_curve(problem, orbits, tongues, lm, strategy):
     ``w``), the worst first, is moved to the tongues."""
     if len(orbits) < 3:
         return orbits, tongues
-    s = problem.system
-    w = np.array([float(x[s.size]) for x in orbits])
-    logE = np.log([_energy(problem, x) for x in orbits])
+    w = np.array([o.omega for o in orbits])
+    logE = np.log([o.energy for o in orbits])
     # first the lower envelope: a tongue's orbits carry the energy another mode took, above the
     # family's at the same frequency, and the family's energy rises with its frequency, so an orbit
     # with more energy than a later one is a tongue's
@@ -263,8 +279,7 @@ def _drop_off_curve(problem, orbits, tongues, lm, strategy):
         dev = np.zeros(idx.size)
         for j in range(idx.size):
             # neighbours: the nearest kept orbits on each side (two on one side at the ends)
-            nb = [idx[j - 1], idx[j + 1]] if 0 < j < idx.size - 1 else (idx[1:3] if j == 0 else idx[-3:-1])
-            a, b = nb
+            a, b = [idx[j - 1], idx[j + 1]] if 0 < j < idx.size - 1 else (idx[1:3] if j == 0 else idx[-3:-1])
             line = logE[a] + (logE[b] - logE[a]) * (w[idx[j]] - w[a]) / (w[b] - w[a])
             dev[j] = abs(logE[idx[j]] - line)
         worst = int(np.argmax(dev))
@@ -273,15 +288,9 @@ def _drop_off_curve(problem, orbits, tongues, lm, strategy):
         keep[idx[worst]] = False
     if keep.all():
         return orbits, tongues
-    extra = []
-    for i in np.flatnonzero(~keep):
-        f = modal_energy_fractions(problem, orbits[i], lm.omega, lm.shapes)
-        order = [k for k in np.argsort(f)[::-1] if k != problem.mode - 1 and f[k] > 0.05][:3]
-        extra.append(InternalResonance(omega=(float(w[i]),), energy=(float(np.exp(logE[i])),),
-                                       modes=tuple(int(k) + 1 for k in order), shares=tuple(float(f[k]) for k in order),
-                                       ratios=tuple(float(lm.omega[k] / w[i]) for k in order)))
-    tongues = sorted(tongues + extra, key=lambda t: t.omega[0])
-    return [x for x, k in zip(orbits, keep) if k], tongues
+    extra = [_tongue([(o.omega, o.energy, modal_energy_fractions(problem, o.x, lm.omega, lm.shapes))], lm, problem.mode)
+             for o, k in zip(orbits, keep) if not k]
+    return [o for o, k in zip(orbits, keep) if k], sorted(tongues + extra, key=lambda t: t.omega[0])
 
 
 def _energy(problem: NonlinearModeProblem, x: np.ndarray) -> float:
@@ -290,15 +299,19 @@ def _energy(problem: NonlinearModeProblem, x: np.ndarray) -> float:
 
 
 def captured_past_grazing(branch, problem: NonlinearModeProblem, model: StructuralModel, strategy: PeriodDriven,
-                          energy_max: float) -> str | None:
+                          energy_max: float, *, spectrum=None) -> str | None:
     """Why an energy continuation's branch is a grazing family past grazing, or None.
 
     Motions with a contact phase stiffen: at twice the grazing energy their frequency is several
     percent above the linear one (10 % for the clamped bar, 5 % for a cantilever, 1-DOF impact
     oscillators more). A branch whose orbits from ``1.5 E_g`` on all stay within
     ``strategy.grazing_shift`` of the linear frequency while their energy at least doubles past
-    grazing only grazes the stop: an internal resonance takes the energy (on the bar, mode 4)."""
-    eg = grazing_energy(model, problem.mode)
+    grazing only grazes the stop: an internal resonance takes the energy (on the bar, mode 4).
+    A continuation that stopped past grazing is not trusted either; ``strategy.always`` traces
+    past grazing by frequency whatever the energy continuation did. ``spectrum``: the linear
+    modes of :func:`_spectrum`, if already computed."""
+    lm = spectrum if spectrum is not None else _spectrum(model, problem, strategy)
+    eg = grazing_energy(model, problem.mode, modes=lm)
     if energy_max <= 1.05 * eg or not len(branch):
         return None
     if strategy.always:
@@ -311,8 +324,6 @@ def captured_past_grazing(branch, problem: NonlinearModeProblem, model: Structur
     shift = np.abs(branch.omega[above] / problem.omega0 - 1.0)
     if np.max(shift) >= strategy.grazing_shift:
         return None
-    n_modes = int(min(max(strategy.n_modes, problem.mode + 1), model.n_dofs))
-    lm = linear_modes(model, n=n_modes)
     i = int(above[-1])
     x = problem.pack(branch.Q[i], branch.P[i], branch.omega[i], branch.xi[i])
     f = modal_energy_fractions(problem, x, lm.omega, lm.shapes)
@@ -322,23 +333,42 @@ def captured_past_grazing(branch, problem: NonlinearModeProblem, model: Structur
             f"{100 * f[k]:.0f} % of the energy (an internal resonance)")
 
 
-def compose(below, problem: NonlinearModeProblem, model: StructuralModel, orbits: list[np.ndarray],
-            tongues: list[InternalResonance], message: str, why: str, branch_cls):
-    """One branch: the energy continuation's orbits up to grazing, then the period sweep's."""
-    s = problem.system
-    eg = grazing_energy(model, problem.mode)
-    keep = np.flatnonzero(below.energy <= eg)
-    omega, Q, P, energy, xi, res, nit, par = ([] for _ in range(8))
-    for i in keep:
-        omega.append(below.omega[i]), Q.append(below.Q[i]), P.append(below.P[i]), energy.append(below.energy[i])
-        xi.append(below.xi[i]), res.append(below.residual_norm[i]), nit.append(below.nit[i])
-        par.append(below.parameter[i])
-    for x in orbits:
-        u = problem.unpack(x, 0.0)
-        E = _energy(problem, x)
-        omega.append(u.omega), Q.append(u.Q), P.append(u.P), energy.append(E), xi.append(u.xi)
-        res.append(float(np.max(np.abs(problem.residual(x, math.log10(E))[0]))))
-        nit.append(0), par.append(math.log10(E))
+def continue_past_grazing(branch: Branch, problem: NonlinearModeProblem, model: StructuralModel,
+                          strategy: PeriodDriven | None, energy_max: float, newton: NewtonOptions | None) -> Branch:
+    """The energy continuation's ``branch`` of a model with unilateral contacts, or, when it left the
+    contact-phase family past grazing (:func:`captured_past_grazing`), its part up to grazing
+    followed by the period-driven sweep. With ``strategy=None`` the branch is kept, but a grazing
+    one says that it does not predict the forced resonance (meta and a logged warning)."""
+    if not any(isinstance(c.item, UnilateralContact) for c in model.contacts) or not len(branch):
+        return branch
+    lm = _spectrum(model, problem, strategy or PeriodDriven())
+    why = captured_past_grazing(branch, problem, model, strategy or PeriodDriven(), energy_max, spectrum=lm)
+    if why is None:
+        return branch
+    if strategy is None:  # kept as asked, but said: it does not predict the forced resonance
+        branch.meta["energy_continuation"] = why
+        log.warning("nonlinear_mode: %s; this branch grazes past grazing and does not predict the forced resonance "
+                    "(past_grazing=None keeps it; the default traces the contact-phase family)", why)
+        return branch
+    log.info("nonlinear_mode: %s; tracing the contact-phase family by frequency instead", why)
+    orbits, tongues, message = period_driven_sweep(model, problem, energy_max, strategy, newton, spectrum=lm)
+    if not orbits:
+        log.warning("nonlinear_mode: %s, and the period-driven continuation found no orbit (%s); returning the "
+                    "energy continuation's branch", why, message)
+        branch.meta["energy_continuation"] = why
+        return branch
+    return _compose(branch, problem, orbits, tongues, message, why, grazing_energy(model, problem.mode, modes=lm),
+                    energy_max)
+
+
+def _compose(below: Branch, problem: NonlinearModeProblem, orbits: list[_Orbit], tongues: list[InternalResonance],
+             message: str, why: str, eg: float, energy_max: float) -> Branch:
+    """One branch: the energy continuation's orbits up to the grazing energy ``eg``, then the
+    period sweep's; successful when they reach ``energy_max``."""
+    keep = below.energy <= eg
+    parts = [problem.unpack(o.x, 0.0) for o in orbits]
+    energy = np.array([o.energy for o in orbits])
+    residual = [float(np.max(np.abs(problem.residual(o.x, math.log10(o.energy))[0]))) for o in orbits]
     meta = dict(below.meta)
     meta.update({
         "family": "contact phase",
@@ -347,8 +377,16 @@ def compose(below, problem: NonlinearModeProblem, model: StructuralModel, orbits
         "energy_continuation": why,
         "internal_resonances": [t.as_dict() for t in tongues],
     })
-    success = bool(orbits) and message.startswith("reached")
-    return branch_cls(
-        kind=below.kind, harmonics=below.harmonics, contacts=below.contacts, omega=omega, Q=Q, P=P, energy=energy,
-        xi=xi, residual_norm=res, nit=nit, parameter=par, folds=(), success=success, status=0 if success else 4,
-        message=f"period-driven past grazing: {message}", model=below.model, meta=meta)
+    success = orbits[-1].energy >= energy_max
+    return Branch(
+        kind=below.kind, harmonics=below.harmonics, contacts=below.contacts,
+        omega=np.concatenate([below.omega[keep], [u.omega for u in parts]]),
+        Q=np.concatenate([below.Q[keep], [u.Q for u in parts]]),
+        P=np.concatenate([below.P[keep], [u.P for u in parts]]),
+        energy=np.concatenate([below.energy[keep], energy]),
+        xi=np.concatenate([below.xi[keep], [u.xi for u in parts]]),
+        residual_norm=np.concatenate([below.residual_norm[keep], residual]),
+        nit=np.concatenate([below.nit[keep], [o.nit for o in orbits]]),
+        parameter=np.concatenate([below.parameter[keep], np.log10(energy)]),
+        folds=(), success=success, status=0 if success else 4, message=f"period-driven past grazing: {message}",
+        model=below.model, meta=meta)

@@ -25,14 +25,14 @@ W1 = math.pi / 2
 
 @contextlib.contextmanager
 def caplog_warning():
-    """The warnings femodes.analyses logs inside the block."""
+    """The warnings femodes logs inside the block."""
     records = []
 
     class Keep(logging.Handler):
         def emit(self, record):
             records.append(record)
 
-    handler, logger = Keep(level=logging.WARNING), logging.getLogger("femodes.analyses")
+    handler, logger = Keep(level=logging.WARNING), logging.getLogger("femodes")
     logger.addHandler(handler)
     try:
         yield records

@@ -1006,11 +1006,7 @@ def undamped(model: StructuralModel, restitution: float = 1.0) -> bool:
     """True when nothing in ``model`` dissipates energy: no damping matrix entry, no modal damping,
     and elastic impacts (``restitution >= 1``); :func:`exact_frequency_response` refuses such a
     model (its forced orbits are unbounded at the resonances)."""
-    C = model.C
-    lr = model.C_lowrank
-    no_c = not np.any(np.asarray(C.data if hasattr(C, "data") else C) != 0.0)
-    no_lr = lr is None or not lr.rank or not np.any(np.asarray(lr.d) != 0.0)
-    return bool(no_c and no_lr and restitution >= 1.0)
+    return not model.has_damping and restitution >= 1.0
 
 
 def exact_frequency_response(model: StructuralModel, span, *, x0=None, restitution: float = 1.0,
