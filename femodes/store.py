@@ -161,8 +161,7 @@ def model_fingerprint(model) -> dict:
     attached laws are read.
     """
     forces = model.force_vectors()
-    lr = model.C_lowrank  # modal damping's low-rank part (hashed only when present: older digests hold)
-    lr_bytes = [] if lr is None else [np.asarray(lr.U.shape, dtype=np.int64).tobytes(), lr.U.tobytes(), lr.d.tobytes()]
+    lr_bytes = _lowrank_bytes(model)
     force_bytes = [np.int64(k).tobytes() + np.asarray(forces[k], dtype=complex).tobytes() for k in sorted(forces)]
     return {
         "n_dofs": int(model.n_dofs),
@@ -182,10 +181,15 @@ def model_signature(model) -> dict:
     """:func:`model_fingerprint` plus one hash per matrix (``mass``, ``stiffness``, ``damping``):
     what a saved branch stores of the model it was solved on, so that attaching another model
     is refused naming the part that differs (:meth:`femodes.Branch.attach`)."""
-    lr = model.C_lowrank
-    lr_bytes = [] if lr is None else [np.asarray(lr.U.shape, dtype=np.int64).tobytes(), lr.U.tobytes(), lr.d.tobytes()]
     return dict(model_fingerprint(model), mass=_digest(*_matrix_bytes(model.M)),
-                stiffness=_digest(*_matrix_bytes(model.K)), damping=_digest(*_matrix_bytes(model.C), *lr_bytes))
+                stiffness=_digest(*_matrix_bytes(model.K)),
+                damping=_digest(*_matrix_bytes(model.C), *_lowrank_bytes(model)))
+
+
+def _lowrank_bytes(model) -> list[bytes]:
+    """The bytes of modal damping's low-rank part (none when absent: older digests hold)."""
+    lr = model.C_lowrank
+    return [] if lr is None else [np.asarray(lr.U.shape, dtype=np.int64).tobytes(), lr.U.tobytes(), lr.d.tobytes()]
 
 
 def signature_differences(saved: dict, current: dict) -> list[str]:
