@@ -19,6 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .eigen import normal_modes
+from .fe.checks import outward_normal
 from .fe.redistribution import ConsistentMass, RedistributeMass, apply_each
 from .laws import CubicSpring, Location, PenaltyContact, UnilateralContact, check_location
 
@@ -1074,8 +1075,6 @@ class StructuralModel:
         mesh = getattr(self.fe, "mesh", None)
         if not isinstance(name, str) or mesh is None or self.fe.kind != "solid":
             return
-        from .fe.checks import outward_normal
-
         n = outward_normal(mesh, name)
         d = np.asarray(law.direction, dtype=float)
         if n is None or d.shape != n.shape or not np.all(np.isfinite(d)) or not np.any(d):
