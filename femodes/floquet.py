@@ -40,6 +40,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import time
 from typing import Any
 
 import numpy as np
@@ -77,8 +78,15 @@ AUTO_MAX_STIFFNESS = 50.0
 MAX_CORRECTION = 0.2
 
 #: A located crossing whose test function ``|mu| - 1`` stays above this on both sides of a
-#: bracket of 1e-7 of the segment is a jump (kind ``"nonsmooth"``), not a smooth crossing.
+#: bracket of :data:`JUMP_XTOL` of the segment is a jump (kind ``"nonsmooth"``), not a smooth
+#: crossing (which is then refined to a bracket of 1e-7).
 JUMP = 1e-3
+
+#: Seconds between progress lines of a stability run along a branch.
+PROGRESS_EVERY = 5.0
+
+#: Bracket width (fraction of the segment between two branch points) at which a jump is declared.
+JUMP_XTOL = 1e-4
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -305,7 +313,19 @@ class _Annotator:
 
     def run(self):
         b = self.branch
-        results = [self.at(self.point(i), b.parameter[i]) for i in range(len(b))]
+        results = []
+        start = time.perf_counter()
+        last = start
+        for i in range(len(b)):
+            results.append(self.at(self.point(i), b.parameter[i]))
+            now = time.perf_counter()
+            if i == 0 and len(b) > 1:
+                # the first point carries the set-up (reduction modes, factorisations): an upper bound
+                log.info("stability: %d points, about %.3g s (first point %.3g s)", len(b), (now - start) * len(b),
+                         now - start)
+            elif now - last > PROGRESS_EVERY or i == len(b) - 1:
+                log.info("stability: %d of %d points, %.3g s", i + 1, len(b), now - start)
+                last = now
         counts = [self.count(r.multipliers) for r in results]
         bifs = [self._fold(f) for f in b.folds]
         near_fold = set()
@@ -320,6 +340,7 @@ class _Annotator:
                 log.info("stability: no bifurcation test between points %d and %d (%s vs %s)", i, i + 1,
                          results[i].method, results[i + 1].method)
                 continue
+            log.info("stability: locating the change between points %d and %d", i, i + 1)
             bif = self._locate(i, max(counts[i], counts[i + 1]), results[i], results[i + 1])
             if bif is not None:
                 bifs.append(bif)
@@ -354,8 +375,14 @@ class _Annotator:
             ends[theta] = (z, r)
             return self.tau(r.multipliers, k)
 
+        # in two passes: a jump (the test function stays above JUMP on both sides) is told apart
+        # once the bracket is JUMP_XTOL of the segment wide; only a smooth crossing is refined to
+        # 1e-7 (a jump took ~27 Hill solves to 1e-7, now ~14)
+        opts = dict(ftol=1e-9, margin=1e-3, bisect_if_slow=True)
         br = illinois(tau, 0.0, 1.0, self.tau(ra.multipliers, k), self.tau(rb.multipliers, k), max_iter=40,
-                      ftol=1e-9, xtol=1e-7, margin=1e-3, bisect_if_slow=True)
+                      xtol=JUMP_XTOL, **opts)
+        if min(abs(br.f_lo), abs(br.f_hi)) <= JUMP and abs(br.f_lo) > 1e-9 and abs(br.f_hi) > 1e-9:
+            br = illinois(tau, br.lo, br.hi, br.f_lo, br.f_hi, max_iter=max(1, 40 - br.nfev), xtol=1e-7, **opts)
         smooth = min(abs(br.f_lo), abs(br.f_hi)) <= JUMP
         th = br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi
         if not smooth:

@@ -1,4 +1,5 @@
-"""Hill's method on a Craig-Bampton reduction (large models; femodes.hbm.hill module docstring).
+"""Hill's method on a free-interface reduction with residual flexibility (large models and
+models with many contacts; femodes.hbm.hill_reduction).
 
 References are independent of the reduction: the shift-invert solve of the whole model's Hill
 matrix (``reduce=False``, itself checked against the dense solve in test_stability.py) and the
@@ -50,7 +51,9 @@ def test_reduced_hill_matches_the_whole_model_within_its_error_estimate(deepest)
     # reduction would have to hold half of these 300 DOFs, and stays far below the stability
     # tolerance 1e-4 (measured: true 5e-7 / estimate 2e-6 with a penalty stop, 2.4e-6 / 2.7e-5
     # with the unilateral one, whose error converges from further away)
-    assert true <= red.reduction_error
+    # (+ 1e-10: the reference itself is an ARPACK solve, tol 1e-8 on the Ritz values of the
+    # shifted-inverted operator; the free-interface reduction agrees with it to 1e-13 here)
+    assert true <= red.reduction_error + 1e-10
     assert red.reduction_error <= REDUCTION_TOL or red.n_modes + 1 > model.n_dofs // 4
     assert red.reduction_error < 5e-5
     # same leading exponent family (up to the conjugate)
@@ -71,28 +74,35 @@ def test_reduced_hill_reuses_its_reduction_along_a_branch(deepest):
     eigen-solve, and the result is the same."""
     model, sol, system, y, _ = deepest
     first = hill_exponents(system, y, sol.omega)
-    full = system._cache["hill_reduction"].full
+    basis = system._cache["hill_reduction"].basis
+    phi = basis.Phi
     again = hill_exponents(system, y, sol.omega)
-    assert system._cache["hill_reduction"].full is full
+    assert system._cache["hill_reduction"].basis is basis and basis.Phi is phi
+    # a new system of the same model (femodes.stability builds one per point) reuses the modes
+    other = HBMSystem(model, sol.harmonics)
+    hill_exponents(other, y, sol.omega)
+    assert other._cache["hill_reduction"].basis is basis
     assert again.n_modes == first.n_modes
-    # ARPACK starts from a random vector: the leading modulus agrees to its tolerance (~1e-8)
-    assert abs(again.multipliers[0]) == pytest.approx(abs(first.multipliers[0]), abs=1e-7)
+    # the dense solve is deterministic: the same numbers to round-off
+    assert abs(again.multipliers[0]) == pytest.approx(abs(first.multipliers[0]), abs=1e-12)
 
 
-def test_truncation_error_falls_at_least_as_fast_as_the_estimate_assumes(deepest, monkeypatch):
-    """The estimate divides the change between cut-offs in the ratio r by r^RATE - 1 (RATE = 2.3):
-    the measured error must fall by at least 2^RATE per doubling of the cut-off (measured ~8)."""
+def test_estimate_is_not_optimistic_at_any_cut_off(deepest, monkeypatch):
+    """From a cut-off of half the orbit's highest harmonic up: the leading multiplier within the
+    estimate of the whole model's (+ 1e-10, the ARPACK reference's own tolerance). With the
+    residual flexibility the leading family is exact to round-off from the first mode on
+    (measured 1e-13 with 1 to 6 modes), where Craig-Bampton needed 4.4e-4 .. 1.2e-7 for cut-offs
+    1.6 .. 25 times (H + 1/2) w."""
     model, sol, system, y, whole = deepest
     whole = abs(whole.multipliers[0])
     monkeypatch.setattr(hill_mod, "REDUCTION_TOL", np.inf)  # take the first cut-off as it is
-    errors = []
-    for alpha in (2.0, 4.0, 8.0):
+    for alpha in (0.5, 1.0, 2.0):
         monkeypatch.setattr(hill_mod, "ALPHA", alpha)
         fresh = HBMSystem(model, sol.harmonics)
-        errors.append(abs(abs(hill_exponents(fresh, y, sol.omega).multipliers[0]) - whole))
-    assert errors[0] > 1e-7  # the coarse one is visibly off (else the rates below mean nothing)
-    for coarse, fine in zip(errors, errors[1:]):
-        assert fine <= coarse / 2.0 ** hill_mod.RATE
+        r = hill_exponents(fresh, y, sol.omega)
+        true = abs(abs(r.multipliers[0]) - whole)
+        assert true <= r.reduction_error + 1e-10
+        assert true < 1e-9
 
 
 def test_small_models_and_free_structures_use_the_whole_model():

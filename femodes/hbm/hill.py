@@ -38,25 +38,25 @@ exponent found is followed to the central member of its family: the exponents ne
 boundary are found (not all ``2 n_m``: ``HillResult.complete`` is False); an exponent far to the
 right of the boundary, farther than the spacing of the spectrum near it, can be missed.
 
-Large models: Hill's problem on a Craig-Bampton reduction. The contact and nonlinear terms act
-on a few DOFs only; the rest of the structure enters Hill's problem through its linear dynamics
-at the frequencies ``Im s + m w / nu``, ``|m| <= H``. Above :data:`REDUCE_MIN_DOFS` DOFs (and
-when the Hill problem exceeds :data:`DENSE_LIMIT` unknowns) the exponents are those of the
-model's Craig-Bampton reduction that keeps the nonlinear and contact DOFs
-(:func:`~femodes.craig_bampton`), with the fixed-interface modes up to a cut-off frequency
-``omega_c = ALPHA (H + 1/2) w / nu``: the nonlinear part of ``J0`` is the same (it reads the
-kept DOFs and the contact forces only), the interior is represented by its static response plus
-the retained modes. The modal truncation error falls like ``omega_c^-3`` (measured on a bar with
-a stop: the leading ``|mu|`` off by 4.4e-4, 5.6e-5, 7.5e-6, 9.6e-7, 1.2e-7 for ``omega_c`` =
-1.6, 3.2, 6.3, 12.7, 25 times ``(H + 1/2) w``; 5 to 13 times smaller per doubling in the other
-cases measured). It is estimated at every point from the exponents of the reduction with the
-cut-off ``omega_c / r`` nearest to the leading ones, as ``|delta| / (r^2 - 1)`` (exact for a
-rate of 2, conservative for the measured ones), and ``omega_c`` is raised until that estimate
-is below :data:`REDUCTION_TOL` (``HillResult.reduction_error``) or the reduction would hold half
-of the model's DOFs. The reduction is built once per system (one sparse factorisation of the
-interior stiffness and one eigen-solve, grown when a larger cut-off needs more modes), and the
-cut-off that sufficed is where the next point starts, so along a branch the
-cost per point is that of a small Hill problem, independent of the model size.
+Large models and many contacts: Hill's problem on a reduction. The contact and nonlinear terms
+act on a few DOFs only; the rest of the structure enters Hill's problem through its linear
+dynamics at the frequencies ``Im s + m w / nu``, ``|m| <= H``. When Hill's problem has more than
+:data:`DENSE_LIMIT` unknowns with mass or damping, the exponents are those of the model reduced
+to its free-interface modes up to a cut-off ``omega_c = ALPHA (H + 1/2) w / nu`` plus the residual
+flexibility of the DOFs the laws act on (:mod:`femodes.hbm.hill_reduction`): those DOFs carry no
+mass there, so their unknowns, like the contact forces', are eliminated exactly (a Schur
+complement, :func:`_dense`) and the dense eigenproblem has ``(2H + 1) m`` unknowns for ``m``
+modes, whatever the number of contacts. The truncation error is estimated at every point from the
+exponents with the cut-off ``omega_c / r`` nearest to the leading ones, as ``|delta| / (r^2 - 1)``,
+and ``omega_c`` is raised until that estimate is below :data:`REDUCTION_TOL`
+(``HillResult.reduction_error``) or the reduction would hold half of the model's DOFs. The modes
+and the static solves are computed once per model, and the cut-off that sufficed is where the
+next point starts, so along a branch the cost per point is that of a small Hill problem and of
+one dense elimination of the algebraic unknowns. Measured: a clamped bar with one stop, the
+leading multiplier equal to the whole model's to 1e-13 from one mode on (a Craig-Bampton
+reduction needed cut-offs of 1.6 to 25 times ``(H + 1/2) w`` for 4.4e-4 to 1.2e-7); a
+Craig-Bampton blade with 27 contacts (37 DOFs, H = 5): 0.08 s a point, where the whole model's
+dense solve took 2 s and its shift-invert solve did not converge.
 """
 
 from __future__ import annotations
@@ -64,7 +64,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,7 +71,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..reduction import craig_bampton, kept_dofs
+from .hill_reduction import FreeInterfaceReduction
 from .system import HBMSystem
 
 __all__ = ["HillResult", "hill_matrices", "hill_exponents", "DENSE_LIMIT", "REDUCE_MIN_DOFS"]
@@ -92,8 +91,8 @@ FOLLOW = 3
 #: 1100, where shift-invert took 0.2-0.7 s; benchmarks/README_stability.md).
 DENSE_LIMIT = 400
 
-#: Models with more DOFs than this (and Hill problems larger than DENSE_LIMIT) are solved on a
-#: Craig-Bampton reduction (module docstring) when it keeps at most half of the DOFs.
+#: Kept for scripts that read it: models are now reduced when their Hill problem has more than
+#: DENSE_LIMIT unknowns with mass or damping, whatever their size (module docstring).
 REDUCE_MIN_DOFS = 200
 
 #: Initial modal cut-off of the reduction, in units of the highest frequency ``(H + 1/2) w / nu``
@@ -128,7 +127,7 @@ class HillResult:
         The same exponents before folding: the eigenvalues of the central members themselves
         (same order).
     n_modes : int or None
-        Fixed-interface modes of the Craig-Bampton reduction Hill's problem was solved on (None:
+        Free-interface modes of the reduction Hill's problem was solved on (None:
         the model itself).
     reduction_error : float
         Estimated error of the multipliers' moduli from that reduction (0 without reduction).
@@ -245,9 +244,9 @@ def hill_exponents(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0
         Sparse path only: number of shifts along ``Re s = 0`` and eigenvalues per shift
         (default ``max(6, 2 n_nl)`` with ``n_nl`` the nonlinear DOFs and contacts).
     reduce : bool, optional
-        Solve on a Craig-Bampton reduction (module docstring): default when the model has more
-        than :data:`REDUCE_MIN_DOFS` DOFs and Hill's problem more than :data:`DENSE_LIMIT`
-        unknowns; False forces the model itself (shift-invert on the whole Hill matrix).
+        Solve on a free-interface reduction (module docstring): default when Hill's problem has
+        more than :data:`DENSE_LIMIT` unknowns with mass or damping; False forces the model
+        itself (dense after eliminating the algebraic unknowns, or shift-invert when larger).
 
     Returns
     -------
@@ -257,7 +256,8 @@ def hill_exponents(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0
     if not (math.isfinite(omega) and omega > 0):
         raise ValueError(f"hill_exponents: omega must be a positive finite number, got {omega!r}")
     if reduce is None:
-        reduce = system.n > REDUCE_MIN_DOFS and system.size > DENSE_LIMIT
+        # the dense solve holds the unknowns with mass or damping (the others are eliminated)
+        reduce = _n_dynamic_unknowns(system) > DENSE_LIMIT
     if reduce:
         res = _reduced(system, np.asarray(x, dtype=float), omega, xi, n_shifts=n_shifts, k_per_shift=k_per_shift)
         if res is not None:
@@ -273,8 +273,9 @@ def _hill(system: HBMSystem, x: np.ndarray, omega: float, xi: float, n_shifts: i
     J0, J1, J2 = hill_matrices(system, x, omega, xi)
     N = system.size
     n_keep = 2 * _n_dynamic(system)
-    if N <= DENSE_LIMIT:
-        s, V = _dense(J0, J1, J2, base)
+    algebraic = _algebraic(J1, J2)
+    if N - np.count_nonzero(algebraic) <= DENSE_LIMIT:
+        s, V = _dense(J0, J1, J2, base, algebraic)
         complete = True
     else:
         k = k_per_shift or max(6, 2 * (system.nonlinear_dofs.size + system.n_uc))
@@ -293,13 +294,61 @@ def _hill(system: HBMSystem, x: np.ndarray, omega: float, xi: float, n_shifts: i
                       vectors=V[:, idx][:, order], complete=complete, period=T, central=s[idx][order])
 
 
-def _dense(J0, J1, J2, base):
-    """All finite eigenvalues of the pencil ``[[0, I], [-J0, -J1]] - s [[I, 0], [0, J2]]``, by a
-    shift-and-invert of the whole spectrum (standard dense eigenproblem instead of QZ; the
-    infinite eigenvalues of the algebraic rows map to 0 and are dropped)."""
-    N = J0.shape[0]
+def _n_dynamic_unknowns(system: HBMSystem) -> int:
+    """Unknowns of Hill's problem that carry mass or damping (the dense solve's size)."""
+    # (IC holds the whole damping, a modal low-rank part included: HBMSystem.C_full)
+    dyn = np.asarray(abs(system.IM).sum(axis=1)).ravel() + np.asarray(abs(system.IC).sum(axis=1)).ravel()
+    return int(np.count_nonzero(dyn))
+
+
+def _algebraic(J1, J2) -> np.ndarray:
+    """Unknowns whose rows and columns of ``J1`` and ``J2`` vanish: their equations hold at every
+    ``s`` without derivatives (contact forces; massless, undamped DOFs)."""
+    nz = np.zeros(J1.shape[0], dtype=bool)
+    for A in (J1, J2):
+        A = A.tocoo()
+        hit = A.data != 0
+        nz[A.row[hit]] = True
+        nz[A.col[hit]] = True
+    return ~nz
+
+
+def _dense(J0, J1, J2, base, algebraic=None, vectors=True):
+    """All finite eigenvalues of Hill's pencil, densely.
+
+    The algebraic unknowns (:func:`_algebraic`) are eliminated first, exactly: their rows read
+    ``J0_aa v_a + J0_ad v_d = 0`` at every ``s``, so the pencil on the others is
+    ``S0 + s J1_dd + s^2 J2_dd`` with ``S0 = J0_dd - J0_da J0_aa^-1 J0_ad``, and
+    ``v_a = -J0_aa^-1 J0_ad v_d``. (When ``J0_aa`` is singular, e.g. a contact closed over the
+    whole period, the whole pencil is solved instead.)"""
+    if algebraic is not None and np.any(algebraic):
+        a, d = np.flatnonzero(algebraic), np.flatnonzero(~algebraic)
+        J0 = J0.tocsr()
+        Aaa = J0[a][:, a].toarray()
+        try:
+            lu = sla.lu_factor(Aaa, check_finite=False)
+            rcond = sla.lapack.dgecon(lu[0], np.abs(Aaa).sum(axis=0).max(), norm="1")[0]
+        except (sla.LinAlgError, ValueError):
+            rcond = 0.0
+        if d.size and rcond > 1e3 * np.finfo(float).eps:
+            X = sla.lu_solve(lu, J0[a][:, d].toarray(), check_finite=False)
+            S0 = J0[d][:, d].toarray() - J0[d][:, a] @ X
+            s, Vd = _dense_pencil(S0, J1[d][:, d].toarray(), J2[d][:, d].toarray(), base, vectors)
+            if not vectors:
+                return s, None
+            V = np.zeros((J0.shape[0], Vd.shape[1]), dtype=complex)
+            V[d] = Vd
+            V[a] = -X @ Vd
+            return s, V
+    return _dense_pencil(J0.toarray(), J1.toarray(), J2.toarray(), base, vectors)
+
+
+def _dense_pencil(A0, A1, A2, base, vectors=True):
+    """All finite eigenvalues of the pencil ``[[0, I], [-A0, -A1]] - s [[I, 0], [0, A2]]`` (dense
+    arrays), by a shift-and-invert of the whole spectrum (standard dense eigenproblem instead of
+    QZ; the infinite eigenvalues of algebraic rows map to 0 and are dropped)."""
+    N = A0.shape[0]
     sigma = 0.37 * base  # a real shift away from the spectrum near Re s = 0 (any non-eigenvalue works)
-    A0, A1, A2 = J0.toarray(), J1.toarray(), J2.toarray()
     Js = A0 + sigma * A1 + sigma * sigma * A2
     try:
         lu = sla.lu_factor(Js, check_finite=False)
@@ -314,12 +363,14 @@ def _dense(J0, J1, J2, base):
     OP[:N] = Z1
     OP[N:] = sigma * Z1
     OP[N:, :N] += np.eye(N)
-    theta, Zv = sla.eig(OP, check_finite=False)
+    if vectors:
+        theta, Zv = sla.eig(OP, check_finite=False)
+    else:
+        theta, Zv = sla.eigvals(OP, check_finite=False), None
     tol = 1e-10 * max(1.0, float(np.max(np.abs(theta))) if theta.size else 1.0)
     finite = np.abs(theta) > tol
     s = sigma + 1.0 / theta[finite]
-    V = Zv[:N, finite]
-    return s, V
+    return s, (Zv[:N, finite] if vectors else None)
 
 
 class _ShiftInvert:
@@ -397,96 +448,10 @@ def _sparse(system, J0, J1, J2, base, n_shifts, k):
 
 
 # ------------------------------------------------------------------------------------------------
-# Craig-Bampton reduction of Hill's problem (module docstring)
+# Hill's problem on a reduction (femodes.hbm.hill_reduction)
 # ------------------------------------------------------------------------------------------------
-class _ModelCache:
-    """The largest Craig-Bampton reduction built for a model, kept while the model lives (calls of
-    :func:`femodes.stability` on points of one branch build a new system each time)."""
-
-    def __init__(self):
-        self._items: dict[int, tuple] = {}
-
-    def get(self, model):
-        item = self._items.get(id(model))
-        return item[1] if item is not None and item[0]() is model else None
-
-    def put(self, model, reduced) -> None:
-        key = id(model)
-        if key not in self._items:
-            weakref.finalize(model, self._items.pop, key, None)
-        self._items[key] = (weakref.ref(model), reduced)
-
-
-_CB_CACHE = _ModelCache()
-
-
-class _Reduction:
-    """The Craig-Bampton reductions of one system's model, by number of modes (cached on it)."""
-
-    def __init__(self, system: HBMSystem):
-        self.system = system
-        self.full = _CB_CACHE.get(system.model)  # the reduction with the most modes computed so far
-        self.systems: dict = {}     # n_modes -> HBMSystem of the truncated reduction
-        self.alpha = ALPHA          # cut-off (in (H + 1/2) w / nu) that sufficed at the last point
-        model = system.model
-        try:  # the DOFs craig_bampton keeps (ValueError: none declared, it cannot reduce either)
-            self.n_kept = kept_dofs(model).size
-        except ValueError:
-            self.n_kept = 0
-        self.n_interior = model.n_dofs - self.n_kept
-
-    def modes_up_to(self, cutoff: float) -> int | None:
-        """Number of fixed-interface modes at or below ``cutoff``; None when the reduction would
-        not be much smaller than the model (or cannot be built)."""
-        model = self.system.model
-        n_kept, n_interior = self.n_kept, self.n_interior
-        while True:
-            if self.full is not None:
-                w_i = np.asarray(self.full.interface_omega)
-                if w_i.size and (w_i[-1] >= cutoff or self.full.n_modes >= n_interior):
-                    return int(np.count_nonzero(w_i <= cutoff))
-            if self.full is None:
-                m = 16
-            else:  # enough for the cut-off if the mode count grew linearly with frequency (1-D), with
-                # a margin; at least twice as many
-                m0 = self.full.n_modes
-                m = max(2 * m0, math.ceil(1.3 * m0 * cutoff / max(float(w_i[-1]), 1e-300)))
-            m = min(m, n_interior)
-            if n_kept + m > model.n_dofs // 2:
-                return None
-            try:
-                self.full = craig_bampton(model, m)
-                _CB_CACHE.put(model, self.full)
-            except ValueError as exc:  # free structure (singular interior stiffness)
-                log.info("hill_exponents: no Craig-Bampton reduction (%s); Hill's problem of the whole model", exc)
-                return None
-
-    def system_with(self, n_modes: int) -> HBMSystem:
-        if n_modes not in self.systems:
-            s = self.system
-            self.systems[n_modes] = HBMSystem(self.full.truncated(n_modes), s.h, projection=s.projection)
-        return self.systems[n_modes]
-
-    def state(self, x: np.ndarray, rs: HBMSystem) -> np.ndarray:
-        """The solution's unknowns on a reduced system: kept DOFs' coefficients and the contact
-        forces (all ``J0`` depends on); modal coordinates zero (they enter linearly)."""
-        Q, P = self.system.split(x)
-        Qr = np.zeros((Q.shape[0], rs.n))
-        Qr[:, : self.full.n_kept] = Q[:, np.asarray(self.full.kept)]
-        return rs.join(Qr, P)
-
-    def expand(self, V: np.ndarray, rs: HBMSystem) -> np.ndarray:
-        """Eigenvectors of a reduced problem in the layout of the model's own."""
-        s = self.system
-        nc, k = s.h.n_coef, V.shape[1]
-        T = np.asarray(rs.model.basis)
-        Qr = V[: rs.nq].reshape(nc, rs.n, k)
-        Q = np.matmul(T[None], Qr).reshape(nc * s.n, k)  # T @ Qr[c] per coefficient row (BLAS)
-        return np.vstack([Q, V[rs.nq:]])
-
-
 def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) -> HillResult | None:
-    """Hill's exponents on a Craig-Bampton reduction whose estimated truncation error is below
+    """Hill's exponents on a free-interface reduction whose estimated truncation error is below
     :data:`REDUCTION_TOL`; None when no useful reduction exists (then the model itself is used).
 
     The cut-off starts at the one that sufficed at the previous point of the same system (at
@@ -496,7 +461,7 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
     """
     red = system._cache.get("hill_reduction")
     if red is None:
-        red = system._cache["hill_reduction"] = _Reduction(system)
+        red = system._cache["hill_reduction"] = FreeInterfaceReduction(system, ALPHA)
     top = (system.h.n_harmonics + 0.5) * omega / system.h.subharmonic
     cutoff = max(ALPHA, red.alpha) * top
     m_coarse, ratio = red.modes_up_to(cutoff / 2.0), 2.0
@@ -510,7 +475,7 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
         m, used = m_next, cutoff
         fine = _solve_reduced(red, m, x, omega, xi, kw)
         err = 0.0 if m_coarse == m else _error_near(red, m_coarse, fine, x, omega, xi, ratio)
-        if err <= REDUCTION_TOL or m == red.full.n_modes and m >= red.n_interior:
+        if err <= REDUCTION_TOL:
             break
         log.debug("hill_exponents: %d modes (cut-off %.3g x (H + 1/2) w), error estimate %.2e", m, cutoff / top, err)
         # the cut-off the omega_c^-3 rate asks for, with a margin; at least doubled
@@ -519,8 +484,7 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
     if err > REDUCTION_TOL:
         log.info("hill_exponents: reduction error estimate %.1e above %.0e with %d modes", err, REDUCTION_TOL, m)
     red.alpha = used / top
-    return dataclasses.replace(fine, vectors=red.expand(fine.vectors, red.system_with(m)),
-                               reduction_error=err, complete=False)
+    return dataclasses.replace(fine, vectors=red.expand(fine.vectors, m), reduction_error=err, complete=False)
 
 
 #: Truncation error estimate: the change ``delta`` of the leading multipliers' moduli from a coarse
@@ -531,19 +495,30 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
 RATE = 2.0
 
 
-def _error_near(red: _Reduction, m_coarse: int, fine: HillResult, x, omega, xi, ratio: float) -> float:
+def _error_near(red: FreeInterfaceReduction, m_coarse: int, fine: HillResult, x, omega, xi, ratio: float) -> float:
     """Error estimate of ``fine`` from the coarse reduction's exponents nearest to its leading
     exponents (one shift-invert each, not a whole Hill solve: the two solves need not return the
     same subset of the spectrum); ``ratio`` is the ratio of the cut-offs."""
     rs = red.system_with(m_coarse)
-    si = _ShiftInvert(*hill_matrices(rs, red.state(x, rs), omega, xi))
+    J0, J1, J2 = hill_matrices(rs, red.state(x, rs), omega, xi)
+    algebraic = _algebraic(J1, J2)
+    if J0.shape[0] - np.count_nonzero(algebraic) <= DENSE_LIMIT:
+        s_all = _dense(J0, J1, J2, omega / rs.h.subharmonic, algebraic, vectors=False)[0]
+
+        def near(s):
+            return s_all
+    else:
+        si = _ShiftInvert(J0, J1, J2)
+
+        def near(s):
+            return si.near(complex(s) + 1e-9j * omega, 2)[0]
     err = 0.0
     done: list[complex] = []
     for s in fine.central[:4]:
         if any(abs(s - d) <= 1e-9 * omega or abs(s - np.conj(d)) <= 1e-9 * omega for d in done):
             continue  # a conjugate partner changes by the same amount
         done.append(s)
-        sc, _ = si.near(complex(s) + 1e-9j * omega, 2)
+        sc = near(s)
         if sc.size == 0:
             return math.inf
         c = sc[np.argmin(np.abs(sc - s))]
@@ -551,7 +526,7 @@ def _error_near(red: _Reduction, m_coarse: int, fine: HillResult, x, omega, xi, 
     return err / (ratio ** RATE - 1.0)
 
 
-def _solve_reduced(red: _Reduction, n_modes: int, x, omega, xi, kw) -> HillResult:
+def _solve_reduced(red: FreeInterfaceReduction, n_modes: int, x, omega, xi, kw) -> HillResult:
     rs = red.system_with(n_modes)
     r = _hill(rs, red.state(x, rs), omega, xi, kw["n_shifts"], kw["k_per_shift"])
     return dataclasses.replace(r, n_modes=n_modes)
