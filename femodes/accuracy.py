@@ -116,6 +116,7 @@ Contact quality (penetration, tension) of every point is part of the estimate re
 from __future__ import annotations
 
 import logging
+import time
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -132,7 +133,7 @@ from .solvers.bordered import bordered_solver
 from .time.exact import (LinearImpactFlow, exact_flow_unsupported, exact_frequency_response, fold_is_upper, undamped,
                          periodicity_residual)
 
-__all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "shooting_unsupported_for", "refinement_options", "check_estimate_method",
+__all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "RTOL_BUDGET", "shooting_unsupported_for", "refinement_options", "check_estimate_method",
            "shooting_unsupported", "ESTIMATE_METHODS", "RATE_MIN", "BRACKET_RATE_MAX"]
 
 log = logging.getLogger(__name__)
@@ -154,6 +155,10 @@ BRACKET_RATE_MAX = 2.0
 #: Relative frequency change between levels below which they are the same point (a point without
 #: contact: every level is the branch's own, up to the Newton tolerance of the level solves).
 SAME_POINT = 1e-8
+
+
+class _OutOfTime(Exception):
+    """The estimate's time limit has passed (``estimate_error(time_limit=...)``)."""
 
 
 @dataclass
@@ -180,6 +185,8 @@ class _Ladder:
         self.branch = branch
         self.model = branch.model
         self.h0 = branch.harmonics
+        self.deadline: float | None = None  # time.perf_counter() after which the estimate stops
+        self.level_times: dict[int, float] = {}  # seconds per level traced (NaN: started, unfinished)
         self.projection = projection
         self.newton = newton or NewtonOptions(atol=1e-9, max_iter=20)
         self.forced = branch.kind == "forced"
@@ -205,6 +212,11 @@ class _Ladder:
             self.sw = 0.1 * float(np.mean(np.abs(w))) or 1.0
 
     # -- levels -------------------------------------------------------------
+    def check_time(self) -> None:
+        """Raise :class:`_OutOfTime` once the deadline has passed."""
+        if self.deadline is not None and time.perf_counter() > self.deadline:
+            raise _OutOfTime
+
     def harmonics(self, H: int) -> Harmonics:
         h0 = self.h0
         default = Harmonics(H, subharmonic=h0.subharmonic)
@@ -426,7 +438,8 @@ class _Levels:
 
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: int | None = None, projection=None,
-                   newton: NewtonOptions | None = None, method: str = "auto") -> Branch:
+                   newton: NewtonOptions | None = None, method: str = "auto",
+                   time_limit: float | None = None) -> Branch:
     """Attach the estimated error of every point of ``branch`` (``branch.error_estimate``).
 
     Each point is solved again with ``H // 2`` and ``2 H`` harmonics on the hyperplane normal to
@@ -463,6 +476,10 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
         models with unilateral contacts only, else ValueError), the levels for the points where
         no orbit is found. ``"auto"``: shooting where it applies, else the levels.
         :attr:`~femodes.results.ErrorEstimate.method` tells per point which one answered.
+    time_limit : float, optional
+        Seconds after which the estimate stops (checked between the points of a level): the
+        points it has not estimated get none (method ``"failed"``) and a warning says so. The
+        analyses' ``rtol=`` gives :data:`RTOL_BUDGET` times the plain branch's own time.
 
     Returns
     -------
@@ -474,6 +491,13 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     H = branch.harmonics.n_harmonics
     rtol, max_harmonics = refinement_options(rtol, max_harmonics, H)
     check_estimate_method(method, "estimate_error")
+    if time_limit is not None:
+        if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float, np.integer, np.floating)) \
+                or not time_limit > 0:
+            raise ValueError(f"estimate_error: time_limit must be a positive number of seconds or None, got "
+                             f"{time_limit!r}")
+        lad.deadline = time.perf_counter() + float(time_limit)
+    started = time.perf_counter()
     n = len(branch)
     impacts = "complementarity" in branch.contacts.kinds
     ew, eq, rates = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
@@ -499,8 +523,22 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
                 todo = np.ones(n, dtype=bool)
             if todo.any():
                 log.info("accuracy: shooting found no exact orbit at %d point(s); levels there", int(todo.sum()))
+    out_of_time = False
     if todo.any():
-        _estimate_by_levels(lad, rtol, max_harmonics, todo, ew, eq, rates, w_lim, w_lim_err, finest)
+        try:
+            _estimate_by_levels(lad, rtol, max_harmonics, todo, ew, eq, rates, w_lim, w_lim_err, finest)
+        except _OutOfTime:
+            out_of_time = True
+    if out_of_time:
+        missing = int(np.count_nonzero(~np.isfinite(ew) & (kind != "truncation")))
+        done = ", ".join(f"H = {k} in {v:.3g} s" if np.isfinite(v) else f"H = {k} unfinished"
+                         for k, v in lad.level_times.items())
+        log.warning("accuracy: the error estimate stopped at its time limit (%.3g s, after %.3g s; levels: %s): "
+                    "%d of %d points have no estimate (method 'failed'). The finer harmonic levels of this branch "
+                    "cost far more than the branch; give estimate_error a larger time_limit, or fewer harmonics "
+                    "or contacts (the rtol= of the analyses allows %g times the branch's own time)",
+                    float(time_limit), time.perf_counter() - started, done or "none finished", missing, n,
+                    RTOL_BUDGET)
     pen, ten = branch.contact_quality()
     kind = np.where(np.isfinite(ew) | (kind == "truncation"), kind, "failed")
     branch.set_accuracy(ErrorEstimate(omega=ew, amplitude=eq, penetration=pen, tension=ten,
@@ -522,12 +560,19 @@ def _estimate_by_levels(lad: _Ladder, rtol, max_harmonics: int, todo: np.ndarray
     n = len(branch)
     if todo.all():
         trace = _trace_level_by_continuation if impacts else _trace_level
-        traced = [trace(lad, H_l) for H_l in levels]
+        traced = []
+        for H_l in levels:
+            t0 = time.perf_counter()
+            lad.level_times[H_l] = math.nan  # started
+            traced.append(trace(lad, H_l))
+            lad.level_times[H_l] = time.perf_counter() - t0
+            lad.check_time()
     else:  # some points only (where shooting failed): continuations over their part of the branch
         free = _without_contact(branch)
         traced = []
         for H_l in levels:
             sts = [_anchor(branch, i) for i in range(n)] if H_l == H else _trace_by_continuation(lad, H_l, todo)
+            lad.check_time()
             for i in np.flatnonzero(free):
                 sts[i] = lad.padded(H_l, i)
             traced.append(sts)
@@ -556,8 +601,10 @@ def _estimate_by_levels(lad: _Ladder, rtol, max_harmonics: int, todo: np.ndarray
             if not need.any():
                 break
             top *= 2
+            lad.check_time()
             log.info("accuracy: %d point(s) above rtol = %g; level H = %d", int(need.sum()), rtol, top)
             states = _trace_by_continuation(lad, top, need)
+            lad.check_time()
             for i in np.flatnonzero(need):
                 if states[i] is None or any(st is None for st in chains[i][-2:]):
                     continue
@@ -837,8 +884,15 @@ def _bounded_by_bracket(ew: float, omega: float, w_lim: float, half: float, omeg
     return max(ew, abs(omega - w_lim) / omega_ref + half)
 
 
+#: ``rtol=`` of the analyses stops its error estimate after this many times the plain branch's
+#: own computing time (``estimate_error(time_limit=...)``): a tolerance that cannot be met in that
+#: time is reported, not waited for (a many-contact blade at H = 10 ran for minutes without output).
+RTOL_BUDGET = 10.0
+
+
 def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun, *, projection=None,
-                   newton: NewtonOptions | None = None, method: str = "auto") -> Branch:
+                   newton: NewtonOptions | None = None, method: str = "auto",
+                   time_limit: float | None = None) -> Branch:
     """``rtol=`` of :func:`femodes.frequency_response` and :func:`femodes.nonlinear_mode`.
 
     With complementarity contacts (algebraic convergence): :func:`estimate_error` with ``rtol``,
@@ -855,15 +909,25 @@ def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun
         log.warning("accuracy: the branch has %d point(s) (%s); no error estimate for rtol", len(branch),
                     branch.message)
         return branch
+    deadline = None if time_limit is None else time.perf_counter() + time_limit
+
+    def left() -> float | None:
+        return None if deadline is None else max(deadline - time.perf_counter(), 1e-3)
+
     if "complementarity" in branch.contacts.kinds:
         estimate_error(branch, rtol=rtol, max_harmonics=max_harmonics, projection=projection, newton=newton,
-                       method=method)
+                       method=method, time_limit=left())
         _warn_unmet(branch, max_harmonics)
         return branch
     while True:
-        estimate_error(branch, rtol=rtol, projection=projection, newton=newton, method=method)
+        estimate_error(branch, rtol=rtol, projection=projection, newton=newton, method=method, time_limit=left())
         H = branch.harmonics.n_harmonics
         if branch.accuracy.met.all() or 4 * H > max_harmonics:  # the estimate of 2 H needs level 4 H
+            _warn_unmet(branch, max_harmonics)
+            return branch
+        if deadline is not None and time.perf_counter() > deadline:
+            log.warning("accuracy: rtol = %g not met with H = %d, and its time limit (%.3g s) has passed: the "
+                        "branch with H = %d is not computed", rtol, H, time_limit, 2 * H)
             _warn_unmet(branch, max_harmonics)
             return branch
         log.info("accuracy: %d point(s) above rtol = %g with H = %d; again with H = %d",
@@ -956,6 +1020,7 @@ def _level_point(lad: _Ladder, H: int, i: int, anchor: _State, prev: tuple | Non
     """Point ``i`` of the branch at level ``H``: walked from the level's point ``prev = (anchor,
     state)`` of point ``i - 1`` if there is one (:func:`_walk`), else (or if that fails) solved on
     its hyperplane from the branch's own point."""
+    lad.check_time()
     tangents = lad.tangents
     st = _walk(lad, H, prev, anchor, tangents[i - 1], tangents[i]) if prev is not None else None
     if st is None:
@@ -1229,6 +1294,8 @@ class _Progress:
         return self.vectors[i]
 
     def __call__(self, point) -> bool:
+        if self.lad.deadline is not None and time.perf_counter() > self.lad.deadline:
+            return False  # the caller's check_time raises once the continuation has returned
         y = np.append(point.x, point.p)
         if self.step > 0:
             ahead = range(self.at, min(self.at + 4, len(self.lad.branch)))

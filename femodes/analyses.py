@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import time
 import math
 import os
 import warnings
@@ -27,7 +28,7 @@ from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.threads import limit_blas_threads
-from .accuracy import check_estimate_method, meet_tolerance, refinement_options, shooting_unsupported_for
+from .accuracy import RTOL_BUDGET, check_estimate_method, meet_tolerance, refinement_options, shooting_unsupported_for
 from .floquet import METHODS, annotate_branch
 from .nonsmooth_modes import PeriodDriven, continue_past_grazing
 
@@ -228,6 +229,7 @@ def frequency_response(
     description = {"analysis": "frequency_response", "omega": list(span), "harmonics": _harmonics_key(h),
                    "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
+    started = time.perf_counter()
     branch = run_continuation(problem, span, opts, "frequency_response", progress, x0=start, wrap=wrap, model=model,
                               checkpoint=checkpoint, description=description)
     branch = _with_stability(branch, problem, model, method, opts)  # a finished checkpoint saved without it
@@ -238,7 +240,8 @@ def frequency_response(
         return frequency_response(model, omega, Harmonics(H, subharmonic=h.subharmonic), options=options,
                                   projection=projection, progress=progress, stability=stability)
 
-    return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method)
+    return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method,
+                          time_limit=RTOL_BUDGET * (time.perf_counter() - started))
 
 
 def _start_vector(x0, size: int, layout: str, label: str) -> np.ndarray:
@@ -479,6 +482,7 @@ def nonlinear_mode(
     description = {"analysis": "nonlinear_mode", "mode": int(mode), "energy": [e0, e1], "harmonics": _harmonics_key(h),
                    "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
+    started = time.perf_counter()
     branch = run_continuation(problem, span, options, "nonlinear_mode", progress, x0=lambda o: (x0, o), wrap=wrap,
                               model=model, checkpoint=checkpoint, description=description)
     branch = continue_past_grazing(branch, problem, model, past_grazing, e1, options.newton)
@@ -490,7 +494,8 @@ def nonlinear_mode(
         return nonlinear_mode(model, mode, energy, Harmonics(H, subharmonic=h.subharmonic), options=user_options,
                               projection=projection, progress=progress, stability=stability, past_grazing=past_grazing)
 
-    return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection)
+    return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection,
+                          time_limit=RTOL_BUDGET * (time.perf_counter() - started))
 
 
 def stability_method(stability: Any, owner: str) -> str | None:
