@@ -21,7 +21,9 @@ import scipy.sparse as sp
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .hbm.system import default_contact_parameters
+from .eigen import normal_modes
 from .laws import PenaltyContact, UnilateralContact
+from .linear import rigid_body_message, rigid_body_modes
 from .model import StructuralModel
 from .results import Branch, ContactInfo
 from .runs import checkpoint_spec, model_fingerprint, run_continuation
@@ -66,6 +68,20 @@ def _options(options: Any, owner: str) -> ContinuationOptions | None:
     if options is not None and not isinstance(options, ContinuationOptions):
         raise TypeError(f"{owner}: options must be a femodes.ContinuationOptions or None, got {type(options).__name__}")
     return options
+
+
+def _warn_rigid_body(model: StructuralModel) -> None:
+    """A forced model free to move as a whole (no supports, or a floating mesh part): its static
+    harmonic has no stiffness, so the mean position is whatever the contacts and the start make it.
+    One eigen-solve of the lowest mode (about one Newton iteration of the branch)."""
+    try:
+        omega, _ = normal_modes(model.K, model.M, 1, "frequency_response", check=False)
+    except (RuntimeError, ValueError, np.linalg.LinAlgError):
+        return
+    rigid = rigid_body_modes(model, omega)
+    if rigid.any():
+        warnings.warn(rigid_body_message(1, "frequency_response") + " (the mean position of the response is then "
+                      "not determined by the structure)", UserWarning, stacklevel=3)
 
 
 def _warn_undamped(model: StructuralModel) -> None:
@@ -216,6 +232,7 @@ def frequency_response(
                 xs = _starting_point(problem, span[0], run_options.newton)
             _check_response_scale(problem, xs, span[0])
         _warn_undamped(model)  # once the input is known to be valid: bad input is an error first
+        _warn_rigid_body(model)
         if run_options.x_scale is None:
             run_options = dataclasses.replace(run_options, x_scale=_response_scale(problem, span, xs))
         return xs, run_options

@@ -79,6 +79,24 @@ def grazing_energy(model: StructuralModel, mode: int = 1, *, modes: LinearModes 
     return 0.5 * w * w * min(amp) ** 2
 
 
+def rigid_body_modes(model: StructuralModel, omega: np.ndarray) -> np.ndarray:
+    """Which of the frequencies ``omega`` (rad/s) of ``model`` are rigid-body modes: ``w^2`` at the
+    round-off floor of ``K``'s eigenvalues, ``1e3 eps max(K_ii / M_ii)`` (the largest diagonal
+    ratio bounds the largest eigenvalue from below; the floor of :mod:`femodes.eigen`). A model
+    without supports, or with a mesh part that is not connected to them (unmerged duplicate
+    nodes), has such modes."""
+    Kd, Md = model.K.diagonal(), model.M.diagonal()
+    heavy = Md > 0
+    scale = float(np.max(Kd[heavy] / Md[heavy])) if heavy.any() else float(np.max(np.abs(Kd), initial=0.0))
+    return np.asarray(omega, dtype=float) ** 2 <= 1e3 * np.finfo(float).eps * scale
+
+
+def rigid_body_message(count: int, owner: str) -> str:
+    return (f"{owner}: the model has {count} rigid-body mode(s) (zero frequency): it is not supported, or a part "
+            "of its mesh is not connected to the supports; give supports (clamped=... in fm.solid, fm.bar, "
+            "fm.beam) or merge the mesh's duplicate nodes")
+
+
 def linear_modes(model: StructuralModel, n: int = 6, *, sigma: float | None = None) -> LinearModes:
     """Lowest ``n`` linear modes of ``model``: ``(K - w^2 M) phi = 0``.
 

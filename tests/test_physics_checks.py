@@ -58,3 +58,25 @@ def test_contact_direction_into_the_body_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         strip.with_contact(fm.UnilateralContact(at="left", gap=0.01, direction=(-1.0, 0.0)))
+
+
+def _free_bar(clamped=None):
+    mesh = fm.line_mesh(1.0, 20, boundaries={"a": 0.0, "tip": 1.0})
+    return (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped=clamped)
+            .with_contact(fm.UnilateralContact(at="tip", gap=0.01))
+            .with_forcing(fm.HarmonicForce(at="tip", amplitude=0.01)).with_damping(beta=0.01))
+
+
+def test_rigid_body_modes_are_caught_before_an_analysis_that_needs_supports():
+    """A bar without supports: its first mode is rigid (w^2 at the round-off floor of K, here
+    w = 3e-7 against w2 = 3.14): nonlinear_mode of it is refused, naming the fix; a forced response
+    warns (the mean position is then not the structure's); a supported bar is silent."""
+    free = _free_bar()
+    assert fm.linear.rigid_body_modes(free, fm.linear_modes(free, 2).omega).tolist() == [True, False]
+    with pytest.raises(ValueError, match="rigid-body mode.*clamped="):
+        fm.nonlinear_mode(free, 1, energy=(1e-5, 1e-3), harmonics=3)
+    with pytest.warns(UserWarning, match="rigid-body mode.*clamped="):
+        fm.frequency_response(free, (1.0, 1.2), 3, options=fm.ContinuationOptions(max_points=5))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fm.frequency_response(_free_bar("a"), (1.0, 1.2), 3, options=fm.ContinuationOptions(max_points=5))

@@ -13,11 +13,12 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..linear import linear_modes
+from ..linear import linear_modes, rigid_body_message, rigid_body_modes
 from ..model import StructuralModel
 from .harmonics import Harmonics
 from .system import HBMSystem
@@ -150,8 +151,14 @@ class NonlinearModeProblem:
         modes = linear_modes(model, n=int(mode))
         self.mode = int(mode)
         self.omega0 = float(modes.omega[-1])
-        if self.omega0 <= 0:
-            raise ValueError(f"NonlinearModeProblem: mode {mode} is a rigid-body mode (zero frequency)")
+        rigid = rigid_body_modes(model, modes.omega)
+        if self.omega0 <= 0 or rigid[-1]:
+            raise ValueError(rigid_body_message(int(rigid.sum()), "NonlinearModeProblem")
+                             + f"; mode {mode} is one of them (w = {self.omega0:.3g} rad/s): its backbone is not a "
+                             "vibration")
+        if rigid.any():
+            warnings.warn(rigid_body_message(int(rigid.sum()), "nonlinear_mode") + f"; mode {mode} is counted "
+                          "after them", UserWarning, stacklevel=3)
         self.shape = modes.shapes[:, -1]
         s = self.system
         self._phase_idx = s.h.global_index(s.h.sin_index(1), np.arange(s.n), s.n)
