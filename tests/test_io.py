@@ -206,3 +206,25 @@ def test_animation_carries_the_floquet_multipliers(tmp_path):
     plain = fm.frequency_response(model, (1.4, 1.6), 3)[1]
     m2 = meshio.read(write_animation(plain, model, tmp_path / "p", n_frames=2).parent / "p_0000.vtu")
     assert "stable" not in m2.field_data
+
+
+def test_series_state_units_and_contact_quality(cantilever_nnm, tmp_path):
+    """Units in the field data (as array names: meshio reads no VTK strings), the contact quality
+    of the solution, and a note when the truncated law penetrates or pulls."""
+    _, _, model, branch = cantilever_nnm
+    sol = branch[len(branch) - 1]
+    pvd = write_animation(sol, model, tmp_path / "si", n_frames=4, units="SI")
+    m = meshio.read(tmp_path / read_pvd(pvd)[0][1])
+    assert m.field_data["unit displacement: m"][0] == 1 and m.field_data["unit contact_pressure: Pa"][0] == 1
+    assert m.field_data["max_penetration"][0] == pytest.approx(sol.penetration, rel=1e-12)
+    assert m.field_data["max_tension"][0] == pytest.approx(sol.tension, rel=1e-12)
+    assert m.field_data["harmonics"][0] == sol.harmonics.n_harmonics
+    notes = [k for k in m.field_data if k.startswith("note:")]
+    assert (len(notes) == 1) == (sol.penetration > 0 or sol.tension > 0)
+    pvd = write_animation(sol, model, tmp_path / "plain", n_frames=4)
+    m = meshio.read(tmp_path / read_pvd(pvd)[0][1])
+    assert any(k.startswith("units: those of the model") for k in m.field_data)
+    pvd = write_animation(sol, model, tmp_path / "own", n_frames=4, units={"displacement": "mm"})
+    assert "unit displacement: mm" in meshio.read(tmp_path / read_pvd(pvd)[0][1]).field_data
+    with pytest.raises(ValueError, match="units must be"):
+        write_animation(sol, model, tmp_path / "bad", n_frames=4, units="imperial")

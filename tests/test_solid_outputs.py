@@ -364,3 +364,15 @@ def test_contact_pressure_errors(solved):
     with pytest.raises(ValueError, match="unknown boundary 'casing'; the mesh has 'bottom', 'left', 'right', 'top'"):
         f.boundary_coordinate("casing")
     plt.close("all")
+
+
+def test_contact_pressure_map_says_what_truncation_costs(solved):
+    """Negative pressures (drawn as 0) and penetration are said on the picture, with their size."""
+    model, sol = solved["tri-P2"]
+    fig = fm.plot.contact_pressure(sol, model, n_frames=16)
+    notes = [t.get_text() for t in fig.axes[0].texts if "Fourier truncation" in t.get_text()]
+    f = fm.fields.mesh_fields(sol, model, n_frames=16)
+    leaks = bool((f.contact_force < 0).any()) or sol.penetration > 0
+    assert len(notes) == int(leaks)
+    if leaks:
+        assert f"H = {sol.harmonics.n_harmonics}" in notes[0] and "raise the harmonics" in notes[0]

@@ -157,8 +157,42 @@ def _write_series(fields: MeshFields, stem: Path, scale: float | None, owner: st
     return pvd
 
 
+#: Units of the written quantities for ``units="SI"`` (field data ``"unit <quantity>: <unit>"``).
+SI_UNITS = {"displacement": "m", "velocity": "m/s", "rotation": "rad", "contact_force": "N",
+            "contact_pressure": "Pa", "contact_gap": "m", "contact_measure": "m^2 (3-D), m^2 per m of thickness "
+            "(2-D) or 1 (bars, beams)", "omega": "rad/s", "period": "s", "TimeValue": "s"}
+
+
+def _units_and_quality(solution: PeriodicSolution, units: Any, owner: str) -> dict:
+    """Field data that say the units and how far the truncated contact law is from exact.
+
+    meshio cannot read VTK string arrays, so text is carried by array *names* (value 1): ParaView
+    lists them in the Information panel's field data, meshio in ``mesh.field_data``."""
+    if units is None:
+        marks = {"units: those of the model's inputs (femodes does not convert; SI inputs give m, m/s, N, Pa, "
+                 "rad/s, s)": 1}
+    elif units == "SI":
+        marks = {f"unit {q}: {u}": 1 for q, u in SI_UNITS.items()}
+    elif isinstance(units, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in units.items()):
+        marks = {f"unit {q}: {u}": 1 for q, u in units.items()}
+    else:
+        raise ValueError(f"{owner}: units must be None, 'SI' or a dict {{quantity: unit}} of strings, got {units!r}")
+    out = {k: np.array([v], dtype=np.int64) for k, v in marks.items()}
+    if solution.P.size:
+        pen, ten = float(solution.penetration), float(solution.tension)
+        out["max_penetration"] = np.array([pen])
+        out["max_tension"] = np.array([ten])
+        out["harmonics"] = np.array([solution.harmonics.n_harmonics], dtype=np.int64)
+        if pen > 0 or ten > 0:
+            note = (f"note: with H = {solution.harmonics.n_harmonics} the truncated Fourier series penetrates the "
+                    f"obstacle (max {pen:.3g}) and pulls (max tension {ten:.3g}): negative contact_pressure and "
+                    "contact_force off contact are truncation artefacts; raise the harmonics to reduce them")
+            out[note] = np.array([1], dtype=np.int64)
+    return out
+
+
 def write_animation(solution: PeriodicSolution, model: StructuralModel | None, path: Any, n_frames: int = 36,
-                    scale: float | None = None) -> Path:
+                    scale: float | None = None, *, units: Any = None) -> Path:
     """Write one period of a periodic solution as a ParaView time series.
 
     Parameters
@@ -176,6 +210,11 @@ def write_animation(solution: PeriodicSolution, model: StructuralModel | None, p
     scale : float, optional
         If given, an extra point array ``"displacement_scaled"`` = ``scale * displacement`` is
         written (for *Warp By Vector* without a scale factor) and ``scale`` stored as field data.
+    units : None, "SI" or dict, optional
+        Units stated in the field data: ``"SI"`` (:data:`SI_UNITS`), a dict ``{quantity: unit}``,
+        or None (default: a note that they are those of the model's inputs; femodes converts
+        nothing). Text is carried by the names of field data arrays of value 1 (``"unit
+        displacement: m"``): meshio cannot read VTK string arrays.
 
     Returns
     -------
@@ -196,7 +235,10 @@ def write_animation(solution: PeriodicSolution, model: StructuralModel | None, p
     ``"omega"``, and with contacts ``"contact_node"`` and ``"contact_gap"`` (the obstacle is at
     ``displacement = gap`` in the motion direction), for solids also ``"contact_direction"``
     (one 3-vector per contact: the obstacle point is ``x_node + gap * direction``) and
-    ``"contact_measure"`` (``a`` per contact); for a solution of a branch computed with
+    ``"contact_measure"`` (``a`` per contact), ``"max_penetration"``, ``"max_tension"`` and
+    ``"harmonics"`` (the contact quality of the solution, and when it is not zero a field
+    data array whose name says that negative pressures and penetration are truncation
+    artefacts); the units (``units``); for a solution of a branch computed with
     ``stability=True`` also ``"floquet_multipliers_real"``, ``"floquet_multipliers_imag"``
     (largest modulus first) and ``"stable"`` (1 or 0).
 
@@ -223,12 +265,12 @@ def write_animation(solution: PeriodicSolution, model: StructuralModel | None, p
     n_frames = check_int("n_frames", n_frames, 2, owner=owner)
     scale = check_scale(scale, owner)
     stem = _stem(path, owner)
+    extra = _units_and_quality(solution, units, owner)
     fields = mesh_fields(solution, model, n_frames=n_frames, owner=owner)
-    extra = {}
     if solution.multipliers is not None:  # computed with stability=True
-        extra = {"floquet_multipliers_real": solution.multipliers.real,
-                 "floquet_multipliers_imag": solution.multipliers.imag,
-                 "stable": np.array([int(bool(solution.stable))], dtype=np.int64)}
+        extra.update({"floquet_multipliers_real": solution.multipliers.real,
+                      "floquet_multipliers_imag": solution.multipliers.imag,
+                      "stable": np.array([int(bool(solution.stable))], dtype=np.int64)})
     return _write_series(fields, stem, scale, owner, extra)
 
 
