@@ -722,6 +722,41 @@ class StructuralModel:
         """Model DOF index of a location (see :class:`DofMap`); ``owner`` starts error messages."""
         return self.dofmap.index(at, owner)
 
+    def probe(self, at: Location, how: str = "mean", owner: str = "probe") -> np.ndarray:
+        """Weights ``w`` that read a response at ``at`` from the model's DOFs: ``w @ q``.
+
+        A DOF location gives its unit vector (shape ``(n_dofs,)``). A named boundary of a meshed
+        solid (``"tip"`` or ``("tip", "u_z")``; first component by default) gives, with
+        ``how="mean"``, its average displacement in that component (the consistent weights of
+        :attr:`DofMap.group_weights`, supported nodes counting as zero; shape ``(n_dofs,)``),
+        and with ``how="max"`` one row per free node (shape ``(k, n_dofs)``: take the largest).
+        A Craig-Bampton model reads boundaries of its parent, kept or not (``w_parent @ T``), so
+        responses anywhere need no new model.
+        """
+        if how not in ("mean", "max"):
+            raise ValueError(f"{owner}: how must be 'mean' or 'max' (over the boundary's nodes), got {how!r}")
+        group = self._group_of(at)
+        if group is None:
+            w = np.zeros(self.n_dofs)
+            w[self.dof(at, owner)] = 1.0
+            return w
+        name, c = group
+        dm = self.dofmap
+        dofs = dm.node_dof[np.asarray(dm.groups[name]), c]
+        weights = np.asarray(dm.group_weights[name], dtype=float)
+        if np.any(dofs == -2):
+            raise ValueError(f"{owner}: boundary {name!r} is not kept in this model; read it on the full model")
+        free = dofs >= 0
+        if not free.any():
+            raise ValueError(f"{owner}: every node of boundary {name!r} is supported in that component")
+        if how == "max":
+            W = np.zeros((int(free.sum()), self.n_dofs))
+            W[np.arange(W.shape[0]), dofs[free]] = 1.0
+            return W
+        w = np.zeros(self.n_dofs)
+        np.add.at(w, dofs[free], weights[free] / weights.sum())
+        return w
+
     def force_vectors(self) -> dict:
         """Complex force amplitude per harmonic: ``{k: F_k}`` with ``f(t) = Re sum F_k e^{i k w t}``."""
         out: dict = {}

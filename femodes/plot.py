@@ -74,6 +74,24 @@ def _dof(obj: Any, dof: Any, owner: str, n_dofs: int) -> tuple[int, str]:
     return idx, label
 
 
+def _reader(obj: Any, dof: Any, owner: str, n_dofs: int, how: str) -> tuple[np.ndarray, str]:
+    """Weights ``W`` (rows: responses, the largest amplitude taken) and a label: a DOF, or a
+    named boundary read through :meth:`femodes.StructuralModel.probe` (mean or max over its
+    nodes; for a reduced model also boundaries it does not keep)."""
+    model = getattr(obj, "model", None)
+    if isinstance(dof, (str, tuple)) and model is not None:
+        try:
+            W = np.atleast_2d(model.probe(dof, how, owner))
+        except ValueError:
+            W = None
+        if W is not None and not (W.shape[0] == 1 and np.count_nonzero(W) == 1):
+            return W, f"{dof}, {how} over its nodes" if not isinstance(dof, tuple) else f"{dof[0]} {dof[1]}, {how}"
+    idx, label = _dof(obj, dof, owner, n_dofs)
+    W = np.zeros((1, n_dofs))
+    W[0, idx] = 1.0
+    return W, label
+
+
 def _check_solution(solution: Any, owner: str) -> PeriodicSolution:
     if not isinstance(solution, PeriodicSolution):
         raise TypeError(f"{owner}: solution must be a PeriodicSolution (e.g. branch[i]), got {type(solution).__name__}")
@@ -149,7 +167,7 @@ def frequency_energy(branches: Any, ax: Any = None, *, labels: Any = None, hz: b
 
 
 def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str | None = None, hz: bool = False,
-                       mark_folds: bool = True):
+                       mark_folds: bool = True, how: str = "mean"):
     """Amplitude ``max_t |q_dof(t)|`` against frequency, folds marked.
 
     Parameters
@@ -157,7 +175,9 @@ def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str |
     branch : Branch
     dof : int or location
         Model DOF index, or a location name (``"tip"``, ``("tip", "theta")``) when the branch
-        carries its model.
+        carries its model; a named boundary of a solid (``("pad", "u_z")``) reads its mean or
+        max (``how``), also on a Craig-Bampton model that does not keep it
+        (:meth:`femodes.StructuralModel.probe`).
     ax : matplotlib Axes, optional
     label : str, optional
         Legend label of the curve.
@@ -165,6 +185,8 @@ def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str |
         Frequency in Hz instead of rad/s.
     mark_folds : bool
         Add a second line with ``x`` markers at ``branch.folds`` (only if there are folds).
+    how : {"mean", "max"}
+        On a boundary: the amplitude of its mean displacement, or the largest of its nodes'.
 
     Returns
     -------
@@ -178,9 +200,14 @@ def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str |
     owner = "frequency_response"
     if not isinstance(branch, Branch):
         raise TypeError(f"{owner}: branch must be a Branch, got {type(branch).__name__}")
-    idx, dof_label = _dof(branch, dof, owner, branch.Q.shape[2])
+    W, dof_label = _reader(branch, dof, owner, branch.Q.shape[2], how)
     ax = _axes(ax, owner)
-    amp = branch.amplitude(idx)
+
+    def amplitude(Q):  # max over the rows of W of max_t |W q(t)|
+        QW = np.asarray(Q) @ W.T
+        return np.max([branch.amplitude(j, QW) for j in range(W.shape[0])], axis=0)
+
+    amp = amplitude(branch.Q)
     w = _freq(branch.omega, hz)
     if branch.stable is None:
         ax.plot(w, amp, "-", label=label or branch.kind)
@@ -191,7 +218,7 @@ def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str |
     if mark_folds and branch.folds:
         f = list(branch.folds)
         ax.plot(w[f], amp[f], "x", color="k", ms=8, mew=2, label="fold")
-    _mark_bifurcations(ax, branch, lambda b: float(branch.amplitude(idx, b.Q[None])[0]), hz)
+    _mark_bifurcations(ax, branch, lambda b: float(amplitude(b.Q[None])[0]), hz)
     ax.set_xlabel(_freq_label(hz))
     ax.set_ylabel(f"amplitude ({dof_label})")
     ax.grid(True, alpha=0.3)
@@ -231,14 +258,16 @@ def _default_dof(solution: PeriodicSolution) -> int:
 
 
 def time_history(solution: PeriodicSolution, dof: Any = None, ax: Any = None, n_periods: float = 1,
-                 *, n_points: int = 400, contact: bool = True):
+                 *, n_points: int = 400, contact: bool = True, how: str = "mean"):
     """Displacement of one DOF over time, contact forces on a twin axis.
 
     Parameters
     ----------
     solution : PeriodicSolution
     dof : int or location, optional
-        Default: the first contact DOF, or DOF 0 without contacts.
+        Default: the first contact DOF, or DOF 0 without contacts. A named boundary of a solid
+        reads its mean displacement (``how="mean"``) or its node of largest amplitude
+        (``how="max"``), also on a Craig-Bampton model that does not keep it.
     ax : matplotlib Axes, optional
     n_periods : float
         Number of periods shown (> 0).
@@ -256,7 +285,8 @@ def time_history(solution: PeriodicSolution, dof: Any = None, ax: Any = None, n_
     """
     owner = "time_history"
     solution = _check_solution(solution, owner)
-    idx, dof_label = _dof(solution, _default_dof(solution) if dof is None else dof, owner, solution.n_dofs)
+    W, dof_label = _reader(solution, _default_dof(solution) if dof is None else dof, owner, solution.n_dofs, how)
+    idx = int(np.flatnonzero(W[0])[0]) if W.shape[0] == 1 and np.count_nonzero(W[0]) == 1 else None
     if isinstance(n_periods, bool) or not isinstance(n_periods, (int, float, np.integer, np.floating)) or not (
         0 < n_periods < 1e6
     ):
@@ -267,7 +297,8 @@ def time_history(solution: PeriodicSolution, dof: Any = None, ax: Any = None, n_
     ax = _axes(ax, owner)
     T = solution.period
     t = np.linspace(0.0, n_periods * T, max(2, int(round(n_points * n_periods))) + 1)
-    q = solution.displacement(t)[:, idx]
+    q = solution.displacement(t) @ W.T
+    q = q[:, int(np.argmax(np.abs(q).max(axis=0)))]  # the row of largest amplitude (one unless how="max")
     ax.plot(t, q, "-", color="C0", label=f"q ({dof_label})")
     ci = solution.contacts
     if contact and ci.kinds:
@@ -313,7 +344,8 @@ def phase_portrait(solution: PeriodicSolution, dof: Any, ax: Any = None, *, n_po
     n_points = check_int("n_points", n_points, 3, owner=owner)
     ax = _axes(ax, owner)
     t = np.linspace(0.0, solution.period, n_points + 1)
-    q = solution.displacement(t)[:, idx]
+    q = solution.displacement(t) @ W.T
+    q = q[:, int(np.argmax(np.abs(q).max(axis=0)))]  # the row of largest amplitude (one unless how="max")
     v = solution.velocity(t)[:, idx]
     ax.plot(q, v, "-", label=label or f"$\\omega$ = {solution.omega:.4g} rad/s")
     for j, d in enumerate(solution.contacts.dofs):

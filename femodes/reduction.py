@@ -87,6 +87,11 @@ class ReducedModel(StructuralModel):
             raise ValueError(f"expand: expected last axis of length {self.n_dofs} (reduced DOFs), got shape {q.shape}")
         return q @ self.basis.T
 
+    def probe(self, at, how: str = "mean", owner: str = "probe") -> np.ndarray:
+        """:meth:`StructuralModel.probe` of the parent, through the basis: any boundary or DOF
+        of the full model, kept or not."""
+        return self.parent.probe(at, how, owner) @ self.basis
+
     def full_field(self, q: np.ndarray) -> np.ndarray:
         """Reduced coordinates -> the parent's full FE field (constrained DOFs zero)."""
         return self.parent.full_field(self.expand(q))
