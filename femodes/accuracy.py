@@ -133,7 +133,7 @@ from .solvers.bordered import bordered_solver
 from .time.exact import (LinearImpactFlow, exact_flow_unsupported, exact_frequency_response, fold_is_upper, undamped,
                          periodicity_residual)
 
-__all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "RTOL_BUDGET", "shooting_unsupported_for", "refinement_options", "check_estimate_method",
+__all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "RTOL_BUDGET", "RTOL_MIN_SECONDS", "rtol_time_limit", "shooting_unsupported_for", "refinement_options", "check_estimate_method",
            "shooting_unsupported", "ESTIMATE_METHODS", "RATE_MIN", "BRACKET_RATE_MAX"]
 
 log = logging.getLogger(__name__)
@@ -536,9 +536,9 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
         log.warning("accuracy: the error estimate stopped at its time limit (%.3g s, after %.3g s; levels: %s): "
                     "%d of %d points have no estimate (method 'failed'). The finer harmonic levels of this branch "
                     "cost far more than the branch; give estimate_error a larger time_limit, or fewer harmonics "
-                    "or contacts (the rtol= of the analyses allows %g times the branch's own time)",
+                    "or contacts (the rtol= of the analyses allows %g times the branch's own time, at least %g s)",
                     float(time_limit), time.perf_counter() - started, done or "none finished", missing, n,
-                    RTOL_BUDGET)
+                    RTOL_BUDGET, RTOL_MIN_SECONDS)
     pen, ten = branch.contact_quality()
     kind = np.where(np.isfinite(ew) | (kind == "truncation"), kind, "failed")
     branch.set_accuracy(ErrorEstimate(omega=ew, amplitude=eq, penetration=pen, tension=ten,
@@ -885,9 +885,22 @@ def _bounded_by_bracket(ew: float, omega: float, w_lim: float, half: float, omeg
 
 
 #: ``rtol=`` of the analyses stops its error estimate after this many times the plain branch's
-#: own computing time (``estimate_error(time_limit=...)``): a tolerance that cannot be met in that
-#: time is reported, not waited for (a many-contact blade at H = 10 ran for minutes without output).
+#: own computing time, and not before :data:`RTOL_MIN_SECONDS` (``estimate_error(time_limit=...)``):
+#: a tolerance that cannot be met in that time is reported, not waited for (a many-contact blade
+#: at H = 10 ran for minutes without output).
 RTOL_BUDGET = 10.0
+
+#: The least time ``rtol=`` allows its estimate: small models' branches take a fraction of a
+#: second while their finest levels (8 H) take seconds (the free impact oscillator from H = 10:
+#: 0.1 s, then 1.4 s for levels up to 80), and a limit in seconds must not make a machine's load
+#: decide whether such a tolerance is met.
+RTOL_MIN_SECONDS = 60.0
+
+
+def rtol_time_limit(plain_seconds: float) -> float:
+    """Seconds the analyses' ``rtol=`` gives its error estimate after a plain branch that took
+    ``plain_seconds``: ``max(RTOL_BUDGET * plain_seconds, RTOL_MIN_SECONDS)``."""
+    return max(RTOL_BUDGET * float(plain_seconds), RTOL_MIN_SECONDS)
 
 
 def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun, *, projection=None,

@@ -30,7 +30,7 @@ from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.threads import limit_blas_threads
-from .accuracy import RTOL_BUDGET, check_estimate_method, meet_tolerance, refinement_options, shooting_unsupported_for
+from .accuracy import check_estimate_method, rtol_time_limit, meet_tolerance, refinement_options, shooting_unsupported_for
 from .floquet import METHODS, annotate_branch
 from .nonsmooth_modes import PeriodDriven, continue_past_grazing
 
@@ -258,7 +258,7 @@ def frequency_response(
                                   projection=projection, progress=progress, stability=stability)
 
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method,
-                          time_limit=RTOL_BUDGET * (time.perf_counter() - started))
+                          time_limit=rtol_time_limit(time.perf_counter() - started))
 
 
 def _start_vector(x0, size: int, layout: str, label: str) -> np.ndarray:
@@ -512,7 +512,7 @@ def nonlinear_mode(
                               projection=projection, progress=progress, stability=stability, past_grazing=past_grazing)
 
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection,
-                          time_limit=RTOL_BUDGET * (time.perf_counter() - started))
+                          time_limit=rtol_time_limit(time.perf_counter() - started))
 
 
 def stability_method(stability: Any, owner: str) -> str | None:

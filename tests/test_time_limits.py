@@ -40,9 +40,13 @@ def test_time_limit_is_checked(branch):
 
 
 def test_rtol_of_an_analysis_is_bounded_by_the_branch_time(monkeypatch, caplog):
-    """``rtol=`` gives the estimate RTOL_BUDGET times the plain branch's time: with a budget of
-    almost nothing it returns the branch with its warning instead of refining."""
-    monkeypatch.setattr("femodes.analyses.RTOL_BUDGET", 1e-9)
+    """``rtol=`` gives the estimate RTOL_BUDGET times the plain branch's time, at least
+    RTOL_MIN_SECONDS: with a budget of almost nothing it returns the branch with its warning
+    instead of refining."""
+    assert accuracy.rtol_time_limit(0.1) == accuracy.RTOL_MIN_SECONDS
+    assert accuracy.rtol_time_limit(100.0) == 100.0 * accuracy.RTOL_BUDGET
+    monkeypatch.setattr(accuracy, "RTOL_BUDGET", 1e-9)
+    monkeypatch.setattr(accuracy, "RTOL_MIN_SECONDS", 1e-9)
     with caplog.at_level(logging.WARNING, logger="femodes.accuracy"):
         b = fm.frequency_response(_oscillator(), (0.8, 1.3), fm.Harmonics(10), rtol=1e-4, error_method="levels",
                                   options=fm.ContinuationOptions(max_points=40))
