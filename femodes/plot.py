@@ -344,8 +344,7 @@ def phase_portrait(solution: PeriodicSolution, dof: Any, ax: Any = None, *, n_po
     n_points = check_int("n_points", n_points, 3, owner=owner)
     ax = _axes(ax, owner)
     t = np.linspace(0.0, solution.period, n_points + 1)
-    q = solution.displacement(t) @ W.T
-    q = q[:, int(np.argmax(np.abs(q).max(axis=0)))]  # the row of largest amplitude (one unless how="max")
+    q = solution.displacement(t)[:, idx]
     v = solution.velocity(t)[:, idx]
     ax.plot(q, v, "-", label=label or f"$\\omega$ = {solution.omega:.4g} rad/s")
     for j, d in enumerate(solution.contacts.dofs):
