@@ -124,6 +124,7 @@ import numpy as np
 
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
+from .nonsmooth_modes import family_caveat
 from .results import ERROR_METHODS, Branch, ErrorEstimate
 from .solvers import ContinuationOptions, NewtonOptions, continuation
 from .solvers.threads import limit_blas_threads
@@ -503,9 +504,13 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
         _estimate_by_levels(lad, rtol, max_harmonics, todo, ew, eq, rates, w_lim, w_lim_err, finest)
     pen, ten = branch.contact_quality()
     kind = np.where(np.isfinite(ew) | (kind == "truncation"), kind, "failed")
+    # a mesh estimate already attached (femodes.estimate_mesh_error) does not depend on H: kept
+    old = branch.accuracy
+    mesh = {} if old is None or old.mesh is None else {"mesh": old.mesh, "mesh_method": old.mesh_method}
     branch.set_accuracy(ErrorEstimate(omega=ew, amplitude=eq, penetration=pen, tension=ten,
                                       harmonics=np.full(n, H), rate=rates, method=kind.astype(str), rtol=rtol,
-                                      omega_limit=w_lim, omega_limit_error=w_lim_err, finest=finest))
+                                      omega_limit=w_lim, omega_limit_error=w_lim_err, finest=finest,
+                                      caveat=family_caveat(branch), **mesh))
     return branch
 
 
@@ -863,7 +868,8 @@ def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun
     while True:
         estimate_error(branch, rtol=rtol, projection=projection, newton=newton, method=method)
         H = branch.harmonics.n_harmonics
-        if branch.accuracy.met.all() or 4 * H > max_harmonics:  # the estimate of 2 H needs level 4 H
+        # the estimate of 2 H needs level 4 H; a branch with a caveat (not the family asked for) meets rtol at no H
+        if branch.accuracy.met.all() or branch.accuracy.caveat or 4 * H > max_harmonics:
             _warn_unmet(branch, max_harmonics)
             return branch
         log.info("accuracy: %d point(s) above rtol = %g with H = %d; again with H = %d",
@@ -877,12 +883,16 @@ def _warn_unmet(branch: Branch, max_harmonics: int) -> None:
     miss = ~acc.met
     if not miss.any():
         return
+    if acc.caveat:  # not the family asked for: no point is converged, whatever its error
+        log.warning("accuracy: rtol = %g is met at no point: %s", acc.rtol, acc.caveat)
+        return
     # per method: its name in the fold list, and why its points miss rtol
     words = {"doubling": ("levels", f"by the levels (bracket or estimate wider than rtol up to H = {max_harmonics}, "
                                     "or levels that do not contract)"),
              "shooting": ("exact orbit", "by the exact orbit (the point's error above rtol)"),
              "failed": ("no estimate", "without an estimate"),
-             "truncation": ("truncation", "folds of the truncation (none in the limit)")}
+             "truncation": ("truncation", "folds of the truncation (none in the limit)"),
+             "none": ("not estimated", "whose harmonic truncation was not estimated")}
     counts = {k: int(np.sum(miss & (acc.method == k))) for k in ERROR_METHODS}
     folds = [f"w = {float(branch.omega[i]):.6g} ({words[str(acc.method[i])][0]})" for i in branch.folds if miss[i]]
     log.warning("accuracy: rtol = %g not met at %d of %d points%s: %s; branch.accuracy.met tells which",
