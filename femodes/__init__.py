@@ -20,6 +20,7 @@ from .nonsmooth_modes import InternalResonance, PeriodDriven
 from .resonance import ResonancePeak, compare_resonance
 from .floquet import StabilityResult, stability
 from .accuracy import estimate_error
+from .mesh_error import estimate_mesh_error
 from .switching import switch_branch
 from .store import Checkpoint
 from .time import SteadyState, TimeHistory, TimeSteppingOptions, simulate, steady_state
@@ -74,6 +75,7 @@ __all__ = [
     "Branch",
     "ErrorEstimate",
     "estimate_error",
+    "estimate_mesh_error",
     "PeriodicSolution",
     "load_branch",
     "Checkpoint",

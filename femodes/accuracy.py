@@ -125,6 +125,7 @@ import numpy as np
 
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
+from .nonsmooth_modes import family_caveat
 from .results import ERROR_METHODS, Branch, ErrorEstimate
 from .solvers import ContinuationOptions, NewtonOptions, continuation
 from .solvers.threads import limit_blas_threads
@@ -486,6 +487,18 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     Branch
         The same branch, with :attr:`~femodes.Branch.accuracy` (an
         :class:`~femodes.results.ErrorEstimate`) set.
+
+    Notes
+    -----
+    The estimate covers the harmonic truncation only (``accuracy.covers``); the mesh's share is
+    :func:`femodes.estimate_mesh_error`'s, which an estimate computed here keeps if the branch
+    had it. A backbone that is the energy continuation's grazing family past grazing
+    (:func:`femodes.nonsmooth_modes.family_caveat`) gets ``accuracy.caveat`` and meets ``rtol`` at
+    no point. Past grazing, the levels of a period-driven backbone are traced by continuation in
+    the energy, which can follow the grazing family: their estimate is then the distance between
+    the two families (clamped bar, 20 elements, H = 10: 0.06 just past grazing to 0.47 at 6 E_g,
+    where the frequency's error against the continuum's mode is a few 1e-3), an overestimate, not
+    the truncation's.
     """
     lad = _ladder(branch, projection, newton, "estimate_error")
     H = branch.harmonics.n_harmonics
@@ -541,9 +554,13 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
                     RTOL_BUDGET, RTOL_MIN_SECONDS)
     pen, ten = branch.contact_quality()
     kind = np.where(np.isfinite(ew) | (kind == "truncation"), kind, "failed")
+    # a mesh estimate already attached (femodes.estimate_mesh_error) does not depend on H: kept
+    old = branch.accuracy
+    mesh = {} if old is None or old.mesh is None else {"mesh": old.mesh, "mesh_method": old.mesh_method}
     branch.set_accuracy(ErrorEstimate(omega=ew, amplitude=eq, penetration=pen, tension=ten,
                                       harmonics=np.full(n, H), rate=rates, method=kind.astype(str), rtol=rtol,
-                                      omega_limit=w_lim, omega_limit_error=w_lim_err, finest=finest))
+                                      omega_limit=w_lim, omega_limit_error=w_lim_err, finest=finest,
+                                      caveat=family_caveat(branch), **mesh))
     return branch
 
 
@@ -935,7 +952,8 @@ def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun
     while True:
         estimate_error(branch, rtol=rtol, projection=projection, newton=newton, method=method, time_limit=left())
         H = branch.harmonics.n_harmonics
-        if branch.accuracy.met.all() or 4 * H > max_harmonics:  # the estimate of 2 H needs level 4 H
+        # the estimate of 2 H needs level 4 H; a branch with a caveat (not the family asked for) meets rtol at no H
+        if branch.accuracy.met.all() or branch.accuracy.caveat or 4 * H > max_harmonics:
             _warn_unmet(branch, max_harmonics)
             return branch
         if deadline is not None and time.perf_counter() > deadline:
@@ -954,12 +972,16 @@ def _warn_unmet(branch: Branch, max_harmonics: int) -> None:
     miss = ~acc.met
     if not miss.any():
         return
+    if acc.caveat:  # not the family asked for: no point is converged, whatever its error
+        log.warning("accuracy: rtol = %g is met at no point: %s", acc.rtol, acc.caveat)
+        return
     # per method: its name in the fold list, and why its points miss rtol
     words = {"doubling": ("levels", f"by the levels (bracket or estimate wider than rtol up to H = {max_harmonics}, "
                                     "or levels that do not contract)"),
              "shooting": ("exact orbit", "by the exact orbit (the point's error above rtol)"),
              "failed": ("no estimate", "without an estimate"),
-             "truncation": ("truncation", "folds of the truncation (none in the limit)")}
+             "truncation": ("truncation", "folds of the truncation (none in the limit)"),
+             "none": ("not estimated", "whose harmonic truncation was not estimated")}
     counts = {k: int(np.sum(miss & (acc.method == k))) for k in ERROR_METHODS}
     folds = [f"w = {float(branch.omega[i]):.6g} ({words[str(acc.method[i])][0]})" for i in branch.folds if miss[i]]
     log.warning("accuracy: rtol = %g not met at %d of %d points%s: %s; branch.accuracy.met tells which",

@@ -40,7 +40,7 @@ from .results import Branch
 from .solvers import NewtonOptions, semismooth_newton
 
 __all__ = ["PeriodDriven", "InternalResonance", "modal_energy_fractions", "period_driven_sweep", "captured_past_grazing",
-           "continue_past_grazing"]
+           "continue_past_grazing", "family_caveat"]
 
 log = logging.getLogger(__name__)
 
@@ -331,6 +331,25 @@ def captured_past_grazing(branch, problem: NonlinearModeProblem, model: Structur
     return (f"the energy continuation grazed past grazing: from 1.5 to {branch.energy[i] / eg:.3g} E_g its frequency "
             f"stayed within {np.max(shift):.1e} of linear mode {problem.mode}'s, and at the end mode {k + 1} held "
             f"{100 * f[k]:.0f} % of the energy (an internal resonance)")
+
+
+def family_caveat(branch: Branch) -> str | None:
+    """Why a nonlinear mode is not the family that predicts the forced resonance, or None.
+
+    :func:`continue_past_grazing` records in ``branch.meta["energy_continuation"]`` why the
+    energy continuation is not trusted past grazing (:func:`captured_past_grazing`), and sets
+    ``branch.meta["family"] = "contact phase"`` only when it replaced that part by the
+    period-driven sweep. A branch with the first and not the second is the energy continuation's
+    own past grazing (``past_grazing=None``, or a sweep that found no orbit): a grazing family,
+    or a continuation that stopped there. Its error estimate may be small (it is honest about
+    the truncation of the family traced), but the family is not the answer: it is never reported
+    as converged (:attr:`femodes.results.ErrorEstimate.caveat`)."""
+    meta = branch.meta
+    why = meta.get("energy_continuation")
+    if branch.kind != "nonlinear mode" or not why or meta.get("family") == "contact phase":
+        return None
+    return (f"grazing family: does not predict the forced resonance ({why}; nonlinear_mode's default "
+            "past_grazing=PeriodDriven() traces the contact-phase family)")
 
 
 def continue_past_grazing(branch: Branch, problem: NonlinearModeProblem, model: StructuralModel,

@@ -9,6 +9,7 @@ Files are written by :mod:`femodes.store` (atomic writes; the checkpoint journal
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass
@@ -22,7 +23,7 @@ from .hbm.harmonics import Harmonics
 from .laws import PenaltyContact, UnilateralContact
 from .store import RECORD_SUFFIXES, model_signature, read_record, signature_differences, write_record
 
-__all__ = ["PeriodicSolution", "Branch", "Bifurcation", "ErrorEstimate", "load_branch", "contact_differences", "FORMAT_VERSION", "BIFURCATION_KINDS"]
+__all__ = ["PeriodicSolution", "Branch", "Bifurcation", "ErrorEstimate", "ERROR_SOURCES", "load_branch", "contact_differences", "FORMAT_VERSION", "BIFURCATION_KINDS"]
 
 FORMAT_VERSION = 1
 
@@ -81,22 +82,30 @@ class Bifurcation:
 #: (``"failed"``: a level had no solution near the point, e.g. next to a fold that moves by more
 #: than the branch's curvature allows); ``"truncation"``: a fold of the branch that the converged
 #: answer does not have (no fold of the exact branch turns the same way near it: a loop of the
-#: truncation), so no error can be stated for it as a fold (NaN, never met).
-ERROR_METHODS = ("doubling", "shooting", "failed", "truncation")
+#: truncation), so no error can be stated for it as a fold (NaN, never met); ``"none"``: the
+#: harmonic truncation was not estimated (an estimate that holds another source only, e.g. the
+#: mesh's of :func:`femodes.estimate_mesh_error`).
+ERROR_METHODS = ("doubling", "shooting", "failed", "truncation", "none")
+
+#: The sources of error an :class:`ErrorEstimate` can cover, with the words its summary uses.
+ERROR_SOURCES = {"harmonics": "harmonic truncation", "mesh": "mesh"}
 
 
 @dataclass(frozen=True, eq=False)
 class ErrorEstimate:
-    """Estimated error of every point of a branch with respect to the converged (``H -> inf``)
-    answer (:mod:`femodes.accuracy`).
+    """Estimated error of every point of a branch with respect to the converged answer, by source:
+    the harmonic truncation (``H -> inf``, :mod:`femodes.accuracy`) and, when it was estimated,
+    the mesh (``h -> 0``, :func:`femodes.estimate_mesh_error`). :attr:`sources` gives each
+    source's frequency error per point, :attr:`covers` says in words which sources the numbers
+    cover (``"harmonic truncation only; mesh not estimated"``), :meth:`summary` in one line.
 
     Attributes (arrays over the points)
     -----------------------------------
     omega : ndarray
-        Relative error of the frequency.
+        Relative error of the frequency from the harmonic truncation.
     amplitude : ndarray
-        Relative error of the displacement: ``|Q - Q_inf| / |Q|`` over all Fourier coefficients
-        (the RMS over the period and the DOFs).
+        Relative error of the displacement from the harmonic truncation: ``|Q - Q_inf| / |Q|``
+        over all Fourier coefficients (the RMS over the period and the DOFs).
     penetration, tension : ndarray
         Contact quality of the point as stored: max penetration over the largest contact-DOF
         displacement, max tension over the largest contact force (0 without contacts).
@@ -105,7 +114,8 @@ class ErrorEstimate:
     rate : ndarray
         Observed contraction of the error per doubling of H (``inf``: unchanged to round-off).
     method : ndarray of str
-        One of :data:`ERROR_METHODS` per point.
+        One of :data:`ERROR_METHODS` per point (``"none"`` everywhere: the harmonic truncation
+        was not estimated).
     rtol : float or None
         The requested tolerance (``None``: estimate only).
     omega_limit, omega_limit_error : ndarray or None
@@ -116,6 +126,16 @@ class ErrorEstimate:
     finest : ndarray of int or None
         The largest number of harmonics whose solution entered the point's estimate (``2 H``, or
         more where ``rtol`` added levels; 0 where the exact orbit by shooting answered).
+    mesh : ndarray or None
+        Relative frequency error from the spatial discretisation (Richardson extrapolation over
+        meshes, :func:`femodes.estimate_mesh_error`); NaN where the meshes do not give one;
+        ``None``: the mesh was not estimated.
+    mesh_method : str or None
+        How :attr:`mesh` was estimated (meshes, matching, convergence order stated or measured).
+    caveat : str or None
+        Why the branch is not the converged answer of the problem whatever its error numbers say
+        (e.g. ``"grazing family: ... does not predict the forced resonance"``): with a caveat no
+        point is :attr:`met`.
     """
 
     omega: np.ndarray
@@ -129,10 +149,13 @@ class ErrorEstimate:
     omega_limit: np.ndarray | None = None
     omega_limit_error: np.ndarray | None = None
     finest: np.ndarray | None = None
+    mesh: np.ndarray | None = None
+    mesh_method: str | None = None
+    caveat: str | None = None
 
     def __post_init__(self):
         n = np.asarray(self.omega).shape
-        for name in ("omega_limit", "omega_limit_error", "finest"):
+        for name in ("omega_limit", "omega_limit_error", "finest", "mesh"):
             v = getattr(self, name)
             if v is not None and np.asarray(v).shape != n:
                 raise ValueError(f"ErrorEstimate: {name} must have one value per point ({n}), "
@@ -144,17 +167,20 @@ class ErrorEstimate:
         bad = set(np.asarray(self.method, dtype=str).tolist()) - set(ERROR_METHODS)
         if bad:
             raise ValueError(f"ErrorEstimate: method must be one of {ERROR_METHODS}, got {sorted(bad)}")
+        if self.mesh is None and self.mesh_method is not None:
+            raise ValueError("ErrorEstimate: mesh_method describes a mesh estimate, but mesh is None")
+        if not self.harmonics_estimated and self.mesh is None:
+            raise ValueError("ErrorEstimate: no source is estimated (method 'none' everywhere and no mesh)")
 
     @property
-    def value(self) -> np.ndarray:
-        """The estimated relative error per point: the larger of frequency and amplitude (NaN
-        where it could not be estimated)."""
-        return np.fmax(np.asarray(self.omega, float), np.asarray(self.amplitude, float))
+    def harmonics_estimated(self) -> bool:
+        """Whether the harmonic truncation was estimated (a method other than ``"none"``)."""
+        return bool(np.any(np.asarray(self.method, dtype=str) != "none")) or not np.asarray(self.method).size
 
     @property
-    def frequency_error(self) -> np.ndarray:
-        """The relative error of the best frequency the estimate gives per point: the half-width
-        of the extrapolation bracket where there is one (branches with complementarity
+    def harmonic_frequency_error(self) -> np.ndarray:
+        """The relative error of the best frequency the harmonic estimate gives per point: the
+        half-width of the extrapolation bracket where there is one (branches with complementarity
         contacts), else the estimated error of the branch's own frequency (NaN: unknown)."""
         plain = np.asarray(self.omega, float)
         if self.omega_limit_error is None:
@@ -163,18 +189,91 @@ class ErrorEstimate:
         return np.where(np.isfinite(lim), lim, plain)
 
     @property
+    def sources(self) -> dict[str, np.ndarray]:
+        """The relative frequency error per point of each source estimated, by name (the keys of
+        :data:`ERROR_SOURCES`): ``"harmonics"`` (:attr:`harmonic_frequency_error`) when the
+        harmonic truncation was estimated, ``"mesh"`` when a mesh estimate is attached."""
+        out = {}
+        if self.harmonics_estimated:
+            out["harmonics"] = self.harmonic_frequency_error
+        if self.mesh is not None:
+            out["mesh"] = np.asarray(self.mesh, float)
+        return out
+
+    @property
+    def covers(self) -> str:
+        """In words, which sources of error the numbers cover and which not: ``"harmonic
+        truncation only; mesh not estimated"``, ``"harmonic truncation and mesh (...)"`` or
+        ``"mesh only (...); harmonic truncation not estimated"``."""
+        src = self.sources
+        how = f" ({self.mesh_method})" if self.mesh_method else ""
+        if "mesh" not in src:
+            return "harmonic truncation only; mesh not estimated"
+        if "harmonics" not in src:
+            return f"mesh only{how}; harmonic truncation not estimated"
+        return f"harmonic truncation and mesh{how}"
+
+    @property
+    def frequency_error(self) -> np.ndarray:
+        """The relative error of the best frequency per point, all sources estimated together
+        (their sum, a bound when the errors add up with the same sign; NaN where a source has no
+        number): with the harmonic truncation alone, :attr:`harmonic_frequency_error`."""
+        vals = list(self.sources.values())
+        return vals[0] if len(vals) == 1 else np.sum(vals, axis=0)
+
+    @property
+    def value(self) -> np.ndarray:
+        """The estimated relative error per point: the larger of frequency and amplitude from the
+        harmonic truncation, the mesh's frequency error added to the frequency's when it was
+        estimated (NaN where it could not be estimated). :attr:`covers` says which sources."""
+        mesh = None if self.mesh is None else np.asarray(self.mesh, float)
+        if not self.harmonics_estimated:
+            return mesh
+        freq = np.asarray(self.omega, float) + (0.0 if mesh is None else mesh)
+        return np.fmax(freq, np.asarray(self.amplitude, float))
+
+    @property
     def met(self) -> np.ndarray:
-        """Per point: does :attr:`frequency_error` meet ``rtol``? (all False without ``rtol``)."""
-        if self.rtol is None:
+        """Per point: does :attr:`frequency_error` (every source estimated) meet ``rtol``? All
+        False without ``rtol``, and all False with a :attr:`caveat` (a branch that is not the
+        family the problem asks for is not converged, whatever its error)."""
+        if self.rtol is None or self.caveat:
             return np.zeros(np.asarray(self.omega).shape, dtype=bool)
         err = self.frequency_error
         return np.isfinite(err) & (err <= self.rtol)
+
+    def with_mesh(self, mesh, method: str) -> "ErrorEstimate":
+        """The same estimate with the mesh source ``mesh`` (relative frequency error per point)
+        described by ``method`` (replacing an earlier mesh estimate)."""
+        return dataclasses.replace(self, mesh=np.asarray(mesh, float), mesh_method=str(method))
+
+    def summary(self) -> str:
+        """One line: the largest error, per source, the points that meet ``rtol``, what the numbers
+        cover, and the caveat if there is one."""
+        n = np.asarray(self.omega).size
+
+        def largest(v):
+            v = np.asarray(v, float)
+            return f"{np.nanmax(v):.3g}" if np.any(np.isfinite(v)) else "unknown"
+
+        parts = [f"largest {largest(self.value) if n else 'unknown'}"]
+        if len(self.sources) > 1:
+            parts[0] += " (" + ", ".join(f"{ERROR_SOURCES[k]} {largest(v)}" for k, v in self.sources.items()) + ")"
+        if self.rtol:
+            parts.append(f"rtol = {self.rtol:g} met at {int(np.sum(self.met))} of {n} points")
+        parts.append(f"covers {self.covers}")
+        if self.caveat:
+            parts.append(self.caveat)
+        return "error estimate: " + "; ".join(parts)
+
+    def __repr__(self) -> str:
+        return f"ErrorEstimate({np.asarray(self.omega).size} points; {self.summary()[len('error estimate: '):]})"
 
     def arrays(self) -> dict:
         return {"omega": np.asarray(self.omega, float), "amplitude": np.asarray(self.amplitude, float),
                 "penetration": np.asarray(self.penetration, float), "tension": np.asarray(self.tension, float),
                 "harmonics": np.asarray(self.harmonics, int), "rate": np.asarray(self.rate, float),
-                **{k: np.asarray(getattr(self, k), float) for k in ("omega_limit", "omega_limit_error")
+                **{k: np.asarray(getattr(self, k), float) for k in ("omega_limit", "omega_limit_error", "mesh")
                    if getattr(self, k) is not None},
                 **({"finest": np.asarray(self.finest, int)} if self.finest is not None else {})}
 
@@ -309,8 +408,10 @@ class PeriodicSolution:
         (``stability=True``); ``None`` otherwise.
     error_estimate : float or None
         Estimated relative error of frequency and amplitude with respect to the converged
-        (``H -> inf``) answer, when the branch has one (``rtol=`` of the analyses, or
-        :func:`femodes.estimate_error`); ``None`` otherwise. ``harmonics`` is the point's own
+        answer of the sources the branch's estimate covers (``H -> inf``; and ``h -> 0`` if the
+        mesh was estimated: :attr:`ErrorEstimate.covers`), when the branch has one (``rtol=`` of
+        the analyses, :func:`femodes.estimate_error`, :func:`femodes.estimate_mesh_error`);
+        ``None`` otherwise. ``harmonics`` is the point's own
         (error control may use more harmonics at some points than at others).
     """
 
@@ -464,8 +565,10 @@ class Branch:
     @property
     def error_estimate(self) -> np.ndarray | None:
         """Estimated relative error (frequency and amplitude, the larger) of every point with
-        respect to the converged (``H -> inf``) answer; ``None`` unless computed (``rtol=`` of
-        the analyses, or :func:`femodes.estimate_error`). Details: :attr:`accuracy`."""
+        respect to the converged answer of the sources estimated: the harmonic truncation
+        (``H -> inf``; ``rtol=`` of the analyses, or :func:`femodes.estimate_error`) and the mesh
+        if :func:`femodes.estimate_mesh_error` was run; ``None`` unless computed. Which sources
+        the numbers cover: ``branch.accuracy.covers``; details: :attr:`accuracy`."""
         return None if self.accuracy is None else self.accuracy.value
 
     def point_harmonics(self, i: int) -> Harmonics:
@@ -623,7 +726,8 @@ class Branch:
             "message": self.message, "meta": self.meta,
             "model": model_signature(self.model) if self.model is not None else self.model_signature,
             "accuracy": None if self.accuracy is None else {
-                "method": [str(m) for m in self.accuracy.method], "rtol": self.accuracy.rtol},
+                "method": [str(m) for m in self.accuracy.method], "rtol": self.accuracy.rtol,
+                "mesh_method": self.accuracy.mesh_method, "caveat": self.accuracy.caveat},
             "stability": None if self.stable is None else {
                 "methods": [str(m) for m in self.stability_method], "kinds": [b.kind for b in self.bifurcations]},
         }
@@ -745,8 +849,9 @@ def load_branch(path, model=None) -> Branch:
         br.set_accuracy(ErrorEstimate(**{k: arrays[f"accuracy_{k}"] for k in ("omega", "amplitude", "penetration",
                                                                                 "tension", "harmonics", "rate")},
                                       method=np.asarray(acc["method"], dtype=str), rtol=acc["rtol"],
+                                      mesh_method=acc.get("mesh_method"), caveat=acc.get("caveat"),
                                       **{k: arrays[f"accuracy_{k}"] for k in ("omega_limit", "omega_limit_error",
-                                                                              "finest") if f"accuracy_{k}" in arrays}))
+                                                                              "finest", "mesh") if f"accuracy_{k}" in arrays}))
     stab = header.get("stability")
     if stab is not None:
         bifs = [Bifurcation(kind=k, index=int(i), omega=float(r[0]), energy=float(r[1]), parameter=float(r[2]),

@@ -35,6 +35,7 @@ LAYERS = {
     "femodes.runs": 5,
     "femodes.floquet": 5,
     "femodes.accuracy": 5,
+    "femodes.mesh_error": 5,
     "femodes.switching": 5,
     "femodes.fields": 6,
     "femodes.plot": 6,

@@ -881,7 +881,11 @@ def _run_analysis(case: Case, model, progress, checkpoint=None):
 
 
 def _summary_lines(case: Case, model, branch) -> list[str]:
-    """The first lines of summary.txt: case, model and what the branch found."""
+    """The first lines of summary.txt: case, model and what the branch found (with the error
+    estimate: which sources it covers; a grazing family: that it does not predict the resonance)."""
+    from ..nonsmooth_modes import family_caveat
+    from ..results import ERROR_SOURCES
+
     lines = [f"case: {case.name}", f"model: {model!r}"]
     lines.append(f"{branch.kind}: {len(branch)} points, success={branch.success} ({branch.message}), "
                  f"w from {branch.omega[0]:.6g} to {branch.omega[-1]:.6g} rad/s (min {branch.omega.min():.6g}, "
@@ -897,7 +901,12 @@ def _summary_lines(case: Case, model, branch) -> list[str]:
     if branch.error_estimate is not None:
         acc = branch.accuracy
         met = f", rtol = {acc.rtol:g} met at {int(np.sum(acc.met))} of {len(branch)} points" if acc.rtol else ""
-        lines.append(f"error estimate (harmonic truncation): largest {np.nanmax(branch.error_estimate):.3g}{met}")
+        names = " and ".join(ERROR_SOURCES[k] for k in acc.sources)
+        lines.append(f"error estimate ({names}): largest {np.nanmax(branch.error_estimate):.3g}{met}; "
+                     f"covers {acc.covers}")
+    caveat = family_caveat(branch)
+    if caveat:
+        lines.append(caveat)
     if branch.internal_resonances:
         ws = ", ".join(f"{t['omega'][0]:.5g}" for t in branch.internal_resonances)
         lines.append(f"internal-resonance tongues stepped over at w = {ws} (branch.internal_resonances)")
