@@ -10,7 +10,7 @@ STAMP   = $(VENV)/.installed
 JOBS   ?= 2
 DIST    = $(if $(filter 0,$(JOBS)),,--dist loadscope)
 
-.PHONY: demo test test-slow test-kernels bench clean venv
+.PHONY: demo test test-slow test-kernels bench clean venv lint docs
 
 $(STAMP): pyproject.toml
 	@sh tools/sysdeps.sh
@@ -33,6 +33,10 @@ test-slow: $(STAMP)
 # the round-off-sensitive tests (marker `numerics`) again under other OpenBLAS kernels, 1 and 2 threads
 test-kernels: $(STAMP)
 	sh tools/blas_kernels.sh $(BIN)/python
+
+# ruff with the rules of pyproject.toml ([tool.ruff]); `$(BIN)/ruff check --fix .` applies the safe fixes
+lint: $(STAMP)
+	$(BIN)/python -m ruff check --no-cache .
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_models.py
