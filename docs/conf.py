@@ -39,6 +39,8 @@ napoleon_numpy_docstring = True
 napoleon_use_rtype = False
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
+# types of documented parameters only (the docstrings already state the return types)
+autodoc_typehints_description_target = "documented_params"
 autodoc_typehints_format = "short"
 autodoc_default_options = {"members": True, "show-inheritance": False}
 autosummary_generate = False  # the tables link to the autodoc entries on the same page
