@@ -42,7 +42,7 @@ autodoc_typehints = "description"
 # types of documented parameters only (the docstrings already state the return types)
 autodoc_typehints_description_target = "documented_params"
 autodoc_typehints_format = "short"
-autodoc_default_options = {"members": True, "show-inheritance": False}
+autodoc_default_options = {"members": True}
 autosummary_generate = False  # the tables link to the autodoc entries on the same page
 
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence", "deflist"]
