@@ -10,7 +10,7 @@ STAMP   = $(VENV)/.installed
 JOBS   ?= 2
 DIST    = $(if $(filter 0,$(JOBS)),,--dist loadscope)
 
-.PHONY: demo test test-slow test-kernels bench clean venv
+.PHONY: demo test test-slow test-kernels bench clean venv lint docs
 
 $(STAMP): pyproject.toml
 	@sh tools/sysdeps.sh
@@ -34,8 +34,23 @@ test-slow: $(STAMP)
 test-kernels: $(STAMP)
 	sh tools/blas_kernels.sh $(BIN)/python
 
+# the documentation site (docs/, Sphinx) into docs/_build/html, warnings as errors; installs the
+# docs extra into .venv when it is missing
+DOCS_STAMP = $(VENV)/.docs-installed
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	$(BIN)/python -m sphinx -b html -W --keep-going -q docs docs/_build/html
+	@echo "documentation: docs/_build/html/index.html"
+
+# ruff with the rules of pyproject.toml ([tool.ruff]); `$(BIN)/ruff check --fix .` applies the safe fixes
+lint: $(STAMP)
+	$(BIN)/python -m ruff check --no-cache .
+
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_models.py
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out .pytest_cache docs/_build

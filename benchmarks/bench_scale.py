@@ -148,7 +148,7 @@ def _med(v):
     return statistics.median(v) if v else float("nan")
 
 
-def _guess_from_ref(system, ref) -> "np.ndarray":
+def _guess_from_ref(system, ref) -> np.ndarray:  # noqa: F821 (numpy is imported inside)
     """Interpolate the reference state (N_REF, H_REF) to this system's N and H."""
     import numpy as np
 

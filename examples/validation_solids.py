@@ -351,8 +351,8 @@ if __name__ == "__main__":
     for label in ("consistent", "redistributed"):
         print(f"  {label}: folds (upper, lower) strip {np.array(axial[label]['folds']['strip'])} "
               f"bar {np.array(axial[label]['folds']['bar'])}")
-    print("  consistent: bar residual at the strip's points: nnm %.2e, forced %.2e"
-          % (axial["consistent"]["nnm_residual"], axial["consistent"]["frc_residual"]))
+    print(f"  consistent: bar residual at the strip's points: nnm {axial['consistent']['nnm_residual']:.2e}, "
+          f"forced {axial['consistent']['frc_residual']:.2e}")
     print("  default c: strip folds", np.array(axial["default_c_folds"]))
     print("  vertical family of the bar (40 elements):", vertical_family)
     print("2. bending: blade/beam - 1 at E/E_g =", ENERGY_FACTORS)

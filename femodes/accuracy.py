@@ -1526,7 +1526,7 @@ class _Shooter:
         J[n2, n2] = plane.omega_derivative(run)
         return F, h, J, run
 
-    def plane(self, i: int, offset: float = 0.0) -> "_Plane":
+    def plane(self, i: int, offset: float = 0.0) -> _Plane:
         """The hyperplane of point ``i`` (shifted by ``offset``) as a function of a run."""
         return _Plane(self, i, offset)
 
@@ -1916,7 +1916,7 @@ class _ShootingFailed(RuntimeError):
     pass
 
 
-def _shoot_branch(lad: _Ladder, flow=None) -> tuple[dict, _Shooter, "_ExactBranchStarts"]:
+def _shoot_branch(lad: _Ladder, flow=None) -> tuple[dict, _Shooter, _ExactBranchStarts]:
     """Exact orbits on the hyperplanes of the branch's points with contact, each from its
     predecessor's (moved by the branch's step), else (after :data:`SHOOTING_EXACT_AFTER`
     failures) from the exact branch's crossing, else from the point itself, else the linear

@@ -13,7 +13,8 @@ import time
 import math
 import os
 import warnings
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp

@@ -57,7 +57,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 
@@ -70,7 +70,7 @@ __all__ = [
 ]
 
 #: What ``at=`` accepts: a name ("tip"), a (name, component) pair, or a DOF index.
-Location = Union[str, int, tuple]
+Location = str | int | tuple
 
 
 def check_location(at: Any, owner: str) -> Any:

@@ -13,7 +13,8 @@ import logging
 import math
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -191,7 +192,7 @@ class DofMap:
     frames: Mapping[int, NodalFrame] = field(default_factory=dict)
 
     @classmethod
-    def discrete(cls, n_dofs: int, dof_names: Sequence[str] | None = None) -> "DofMap":
+    def discrete(cls, n_dofs: int, dof_names: Sequence[str] | None = None) -> DofMap:
         """DOF map of a discrete system: DOFs addressed by index or by ``dof_names``."""
         names: tuple = ()
         if dof_names is not None:
@@ -311,7 +312,7 @@ class DofMap:
         e[c] = 1.0
         return e
 
-    def restrict(self, kept: np.ndarray) -> "DofMap":
+    def restrict(self, kept: np.ndarray) -> DofMap:
         """DofMap of the DOFs ``kept`` (old indices in new order), followed by unnamed DOFs.
 
         Old DOFs not in ``kept`` are marked "not kept" (-2); constrained ones stay constrained.
@@ -326,7 +327,7 @@ class DofMap:
         labels = tuple(self.label(i) for i in kept)
         return dataclasses.replace(self, n_dofs=kept.size, node_dof=node_dof, dof_names=names, labels=labels)
 
-    def extended(self, extra_labels: Sequence[str]) -> "DofMap":
+    def extended(self, extra_labels: Sequence[str]) -> DofMap:
         """The same map with unnamed extra DOFs appended (e.g. modal coordinates)."""
         names = self.dof_names + tuple(extra_labels) if self.dof_names else ()
         return dataclasses.replace(
@@ -521,11 +522,11 @@ class LowRankDamping:
         C = (self.U * self.d) @ self.U.T
         return 0.5 * (C + C.T)
 
-    def restrict(self, rows) -> "LowRankDamping":
+    def restrict(self, rows) -> LowRankDamping:
         """The part on a subset (or slice) of the DOFs: ``U[rows] diag(d) U[rows]^T``."""
         return LowRankDamping(self.U[rows], self.d)
 
-    def project(self, T: np.ndarray) -> "LowRankDamping":
+    def project(self, T: np.ndarray) -> LowRankDamping:
         """``T^T (U diag(d) U^T) T`` as a low-rank part: ``(T^T U, d)``."""
         return LowRankDamping(np.asarray(T).T @ self.U, self.d)
 
@@ -767,10 +768,10 @@ class StructuralModel:
         return out
 
     # -- frozen updates -------------------------------------------------------------------------
-    def _replace(self, **changes) -> "StructuralModel":
+    def _replace(self, **changes) -> StructuralModel:
         return dataclasses.replace(self, **changes)
 
-    def with_damping(self, alpha: float = 0.0, beta: float = 0.0, *, modal: Any = None, n_modes: int | None = None) -> "StructuralModel":
+    def with_damping(self, alpha: float = 0.0, beta: float = 0.0, *, modal: Any = None, n_modes: int | None = None) -> StructuralModel:
         """Return a copy with damping (replacing any previous one).
 
         Rayleigh: ``C = alpha M + beta K`` (sparse). Modal: ``modal`` is a damping ratio (scalar)
@@ -849,7 +850,7 @@ class StructuralModel:
         replaced since :meth:`with_damping`)."""
         return dict(self.damping_spec).get("fingerprint") == self._damping_fingerprint()
 
-    def _fingerprinted(self) -> "StructuralModel":
+    def _fingerprinted(self) -> StructuralModel:
         """This new model (just built by :meth:`with_damping`, or rotated into nodal frames) with
         its damping matrices' fingerprint in ``damping_spec``: a later change of ``C`` by
         ``dataclasses.replace`` makes the spec stale, and :meth:`with_contact` then keeps the
@@ -858,7 +859,7 @@ class StructuralModel:
         object.__setattr__(self, "damping_spec", spec + (("fingerprint", self._damping_fingerprint()),))
         return self
 
-    def with_forcing(self, *forces: HarmonicForce) -> "StructuralModel":
+    def with_forcing(self, *forces: HarmonicForce) -> StructuralModel:
         """Return a copy with these harmonic point forces added.
 
         On a named boundary of a meshed solid (``at=("tip", "u_y")``, or ``at="tip"`` for the
@@ -986,7 +987,7 @@ class StructuralModel:
                 raise ValueError(f"at={at!r}: {exc}") from None
         return None
 
-    def without_forcing(self) -> "StructuralModel":
+    def without_forcing(self) -> StructuralModel:
         """Return a copy with no forcing (the autonomous system, for nonlinear modes)."""
         return self._replace(forces=())
 
@@ -1176,7 +1177,7 @@ class StructuralModel:
                              "gaps must be finite and >= 0")
         return g
 
-    def with_contact(self, *laws, contact_mass=None) -> "StructuralModel":
+    def with_contact(self, *laws, contact_mass=None) -> StructuralModel:
         """Return a copy with these contact laws (UnilateralContact or PenaltyContact) added.
 
         A law on a named boundary of a meshed solid (``at="right"`` with ``direction=(1.0, 0.0)``,
@@ -1321,7 +1322,7 @@ class StructuralModel:
             comp_of[nd[k, c]] = c
         return node_of, comp_of
 
-    def _rotated(self, pending: Mapping[int, NodalFrame], node_of: np.ndarray, comp_of: np.ndarray) -> "StructuralModel":
+    def _rotated(self, pending: Mapping[int, NodalFrame], node_of: np.ndarray, comp_of: np.ndarray) -> StructuralModel:
         """This model with the DOFs of the nodes ``pending`` rotated into their nodal frames:
         ``q = T^T q_old``, matrices ``T^T A T``, forces ``T^T f``, ``frame`` composed, labels."""
         dm = self.dofmap
@@ -1394,7 +1395,7 @@ class StructuralModel:
         out = (P @ Mw @ P.T).tocsr()
         return (0.5 * (out + out.T)).tocsr(), reps
 
-    def with_nonlinearity(self, *laws) -> "StructuralModel":
+    def with_nonlinearity(self, *laws) -> StructuralModel:
         """Return a copy with these smooth nonlinear laws (e.g. CubicSpring) added."""
         if not laws:
             raise ValueError("with_nonlinearity: give at least one law, e.g. CubicSpring(at=0, k3=1.0)")
@@ -1419,7 +1420,7 @@ class StructuralModel:
         return np.asarray(q)
 
     @property
-    def mesh_owner(self) -> "StructuralModel | None":
+    def mesh_owner(self) -> StructuralModel | None:
         """The model that owns the FE mesh: this one for FE models, None for discrete ones
         (a reduced model answers with its parent's owner)."""
         return self if self.fe is not None else None

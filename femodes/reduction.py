@@ -13,7 +13,8 @@ import logging
 import warnings
 import dataclasses
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.linalg
@@ -66,7 +67,7 @@ class ReducedModel(StructuralModel):
     def n_modes(self) -> int:
         return self.n_dofs - self.n_kept
 
-    def truncated(self, n_modes: int) -> "ReducedModel":
+    def truncated(self, n_modes: int) -> ReducedModel:
         """The same reduction with only its first ``n_modes`` fixed-interface modes: exactly
         ``craig_bampton(parent, n_modes)`` with the same kept DOFs (the modes are nested), without
         a new eigen-solve."""

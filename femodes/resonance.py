@@ -11,7 +11,7 @@ measures how far a backbone can be trusted for a structure: it shrinks with the 
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

@@ -290,7 +290,7 @@ class ContactInfo:
     c: tuple  # complementarity parameter used (nan for penalty)
 
     @classmethod
-    def from_system(cls, system) -> "ContactInfo":
+    def from_system(cls, system) -> ContactInfo:
         kinds, dofs, gaps, stiff, slots, cs = [], [], [], [], [], []
         uc = {ct.dof: ct for ct in system.unilateral}
         for a in system.model.contacts:
@@ -322,7 +322,7 @@ class ContactInfo:
         )
 
     @classmethod
-    def from_json(cls, d: dict) -> "ContactInfo":
+    def from_json(cls, d: dict) -> ContactInfo:
         return cls(*(tuple(d[k]) for k in ("kinds", "dofs", "gaps", "stiffness", "slots", "c")))
 
 
@@ -551,7 +551,7 @@ class Branch:
         #: from its file (None: not stored, a file of an older femodes; or computed from ``model``)
         self.model_signature: dict | None = None
 
-    def set_accuracy(self, accuracy: ErrorEstimate) -> "Branch":
+    def set_accuracy(self, accuracy: ErrorEstimate) -> Branch:
         """Attach the error estimate of every point (used by :mod:`femodes.accuracy`)."""
         if not isinstance(accuracy, ErrorEstimate):
             raise TypeError(f"set_accuracy: expected an ErrorEstimate, got {type(accuracy).__name__}")
@@ -581,7 +581,7 @@ class Branch:
             return self.harmonics
         return Harmonics(H, subharmonic=self.harmonics.subharmonic)
 
-    def set_stability(self, *, stable, multipliers, bifurcations, methods, tol: float) -> "Branch":
+    def set_stability(self, *, stable, multipliers, bifurcations, methods, tol: float) -> Branch:
         """Attach the stability of every point (used by :mod:`femodes.floquet`)."""
         n = len(self)
         stable = np.asarray(stable, dtype=bool)
@@ -659,7 +659,7 @@ class Branch:
         touching = (fmax > 0) & (fmax > 1e-12 * float(np.max(fmax, initial=0.0)))
         return pen / np.where(amp > 0, amp, 1.0), np.where(touching, ten / np.where(touching, fmax, 1.0), 0.0)
 
-    def attach(self, model) -> "Branch":
+    def attach(self, model) -> Branch:
         """Attach the model (after :func:`load_branch`) so solutions can expand to the full field.
 
         The model must be the one the branch was solved on: its contacts (DOF, law, gap,

@@ -19,7 +19,8 @@ import json
 import logging
 import os
 import time
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 import numpy as np
 

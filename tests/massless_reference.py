@@ -60,7 +60,7 @@ class FlowResult:
     t0: float
     t1: float
     _segments: list = field(repr=False, default_factory=list)   # (ta, tb, mode, dense, y(tb))
-    _ref: "MasslessContactReference" = field(repr=False, default=None)
+    _ref: MasslessContactReference = field(repr=False, default=None)
 
     def _eval(self, t, what):
         t = np.asarray(t, dtype=float)

@@ -351,7 +351,7 @@ def test_level_traced_backward_for_the_far_side(caplog):
     assert [forward for _, forward in plan] == [True, False]
     with caplog.at_level(logging.INFO, logger="femodes.accuracy"):
         some = _trace_by_continuation(lad, 20, need)
-    assert "backward from point %d" % (n - 1) in caplog.text
+    assert f"backward from point {n - 1}" in caplog.text
     every = _trace_by_continuation(lad, 20, np.ones(n, dtype=bool))
     for i in np.flatnonzero(need):
         assert some[i] is not None and every[i] is not None

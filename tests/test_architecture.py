@@ -1,7 +1,8 @@
-"""The layers of femodes (README "How the code is organised"; the design's layer picture), read
-from the source: every import, including imports inside functions, points down or stays inside
-its layer; no import loops; no module takes another module's private names; the generic solvers
-import nothing of femodes; harmonic balance and time integration do not know each other.
+"""The layers of femodes (docs/guide/architecture.md, "How the code is organised"; the design's
+layer picture), read from the source: every import, including imports inside functions, points
+down or stays inside its layer; no import loops; no module takes another module's private names;
+the generic solvers import nothing of femodes; harmonic balance and time integration do not know
+each other.
 """
 
 from __future__ import annotations

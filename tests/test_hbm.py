@@ -119,7 +119,7 @@ def crossings(omega, w0):
 
 
 # ===================================================================== cached runs
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def contact_branch(n, n_time=None, exact=True):
     h = fm.Harmonics(20) if n_time is None else fm.Harmonics(20, n_time=n_time)
     return fm.frequency_response(contact_case(n), (0.5, 2.0), h,
@@ -134,13 +134,13 @@ MODE_ATOL = 1e-9
 EPS = np.finfo(float).eps
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def duffing_backbone(H):
     # energy 200 reaches A = 5 for every H >= 1 (A^2/2 + A^4/4 = 168.75 at A = 5)
     return fm.nonlinear_mode(duffing(), 1, energy=(1e-3, 200.0), harmonics=fm.Harmonics(H))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def forced_branch(c, eps, H, max_step=None, span=(0.5, 4.0)):
     opts = None
     if max_step is not None:
@@ -148,7 +148,7 @@ def forced_branch(c, eps, H, max_step=None, span=(0.5, 4.0)):
     return fm.frequency_response(forced_duffing(c, eps), span, fm.Harmonics(H), options=opts)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def case1_at_105(law, param):
     """Case 1 at w = 1.05 (below the lower fold 1.081, so the solution there is unique on the
     branch) for complementarity parameter c or penalty stiffness; traced from w = 0.9 (linear
@@ -717,7 +717,7 @@ def test_stiff_penalty_stalls_at_grazing_without_the_norm_target():
 
 
 # ========================================== 6. free impacting oscillator
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def impact_mode(H, e0, e1):
     model = fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_contact(fm.UnilateralContact(at=0, gap=1.0))
     return fm.nonlinear_mode(model, 1, energy=(e0, e1), harmonics=fm.Harmonics(H))

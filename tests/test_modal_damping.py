@@ -179,7 +179,7 @@ def test_structured_solver_is_used_and_handles_a_singular_interior(monkeypatch):
     assert rel(J1.factorize().solve(b), J2.factorize().solve(b)) < 1e-7
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _frc(kind: str):
     model = chain_case(penalty=False)
     m = {"modal": model, "dense": assembled(model)}[kind]

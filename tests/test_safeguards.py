@@ -4,7 +4,6 @@ H, contacts or DOFs are estimated first; every failure is one sentence naming it
 
 from __future__ import annotations
 
-import warnings
 
 import numpy as np
 import pytest

@@ -37,7 +37,7 @@ def duffing() -> fm.StructuralModel:
             .with_forcing(fm.HarmonicForce(at=0, amplitude=0.1)))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def seed_branch(H: int, law: str = "signorini"):
     return fm.frequency_response(seed_case1(law), (0.5, 2.0), fm.Harmonics(H))
 

@@ -97,7 +97,8 @@ import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 import numpy as np
 
@@ -142,7 +143,7 @@ class CaseError(Exception):
         super().__init__(message)
         self.message, self.file, self.line = message, file, line
 
-    def _at(self, line: int | None) -> "CaseError":
+    def _at(self, line: int | None) -> CaseError:
         self.line = line
         return self
 

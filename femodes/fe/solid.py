@@ -8,7 +8,8 @@ and hexahedra) and a consistent mass matrix.
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 import numpy as np
 import skfem

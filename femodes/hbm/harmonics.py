@@ -289,7 +289,7 @@ class Harmonics:
         self.check_coef(Q, "Q")
         return np.ascontiguousarray(Q).reshape(-1)
 
-    def convert(self, Q, to: "Harmonics") -> np.ndarray:
+    def convert(self, Q, to: Harmonics) -> np.ndarray:
         """Coefficients ``Q`` (shape ``(n_coef, ...)``) of this basis on the basis ``to`` (same
         subharmonic index): harmonics up to ``min(H, H_to)`` copied, missing ones zero, the
         ones beyond ``H_to`` dropped (the L2-best truncation)."""

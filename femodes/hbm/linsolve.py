@@ -626,7 +626,7 @@ class HarmonicBlockJacobian:
     def n_border(self) -> int:
         return self.U.shape[1]
 
-    def _replace(self, **kw) -> "HarmonicBlockJacobian":
+    def _replace(self, **kw) -> HarmonicBlockJacobian:
         d = dict(scale=self.scale, U=self.U, V=self.V, D=self.D)
         d.update(kw)
         return HarmonicBlockJacobian(self.system, self.omega, self.xi, self.N, **d)
@@ -639,7 +639,7 @@ class HarmonicBlockJacobian:
 
     __rmul__ = __mul__
 
-    def bordered(self, cols, rows, corner) -> "HarmonicBlockJacobian":
+    def bordered(self, cols, rows, corner) -> HarmonicBlockJacobian:
         """``[[J, cols], [rows, corner]]`` with ``cols`` of shape ``(n, k)``, ``rows`` ``(k, n)``."""
         n0, m0 = self.system.size, self.n_border
         cols = np.asarray(cols, dtype=float).reshape(self.shape[0], -1)
@@ -880,7 +880,7 @@ class BlockSolver:
         except TypeError:  # not weak-referenceable / hashable: no reuse
             return None
 
-    def _fresh(self, J: HarmonicBlockJacobian, threads: int | None, state: _ReuseState | None) -> "_Factorization":
+    def _fresh(self, J: HarmonicBlockJacobian, threads: int | None, state: _ReuseState | None) -> _Factorization:
         """The exact factorisation at ``(J.omega, J.xi)`` (the system's cached factors if they are
         at that frequency); they become the base of later reuse."""
         F = J.system.linear_factors(J.omega, J.xi, threads)
@@ -911,14 +911,14 @@ class BlockSolver:
                 return None
         return F0
 
-    def passes_budget(self, fac: "_Factorization") -> int:
+    def passes_budget(self, fac: _Factorization) -> int:
         """Passes a reused solve may take before it refactorises: ``max_passes``, or the cost
         model of :func:`_budget_from_factors`."""
         if self.max_passes is not None:
             return self.max_passes
         return _budget_from_factors(fac.F, fac.J)
 
-    def _record(self, state: _ReuseState, fac: "_Factorization", passes: int, worst: float, ok: bool) -> None:
+    def _record(self, state: _ReuseState, fac: _Factorization, passes: int, worst: float, ok: bool) -> None:
         self.stats["solves_reused"] += 1
         self.stats["passes"] += passes
         dw = abs(fac.J.omega - fac.F.omega) / abs(fac.F.omega)
@@ -938,7 +938,7 @@ class BlockSolver:
         return f"BlockSolver({', '.join(args)})"
 
 
-def _budget_from_factors(F: "LinearFactors", J: HarmonicBlockJacobian) -> int:
+def _budget_from_factors(F: LinearFactors, J: HarmonicBlockJacobian) -> int:
     """Passes of a reused solve that cost what refactorising and one exact pass cost.
 
     Cost per harmonic block in single-column band solves (measured on tridiagonal blocks of 1e4
@@ -1048,7 +1048,7 @@ class _ForceSchur:
         return self._norm
 
     @classmethod
-    def build(cls, J: HarmonicBlockJacobian, A: np.ndarray) -> "_ForceSchur | None":
+    def build(cls, J: HarmonicBlockJacobian, A: np.ndarray) -> _ForceSchur | None:
         s = J.system
         nq, n, n_uc = getattr(s, "nq", 0), getattr(s, "n", 0), getattr(s, "n_uc", 0)
         h = getattr(s, "h", None)
@@ -1149,7 +1149,7 @@ class _Factorization:
     contraction and refactorises when it is too slow.
     """
 
-    def __init__(self, J: HarmonicBlockJacobian, threads: int | None, F: "LinearFactors | None" = None,
+    def __init__(self, J: HarmonicBlockJacobian, threads: int | None, F: LinearFactors | None = None,
                  reuse: tuple | None = None):
         self.J = J
         s = J.system

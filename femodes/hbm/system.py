@@ -542,7 +542,7 @@ class HBMSystem:
             r[:nq] -= self.force()
         return r, dr_domega, dr_dxi
 
-    def _cubic_springs(self, Q: np.ndarray, r: np.ndarray, jac: "_Triplets") -> None:
+    def _cubic_springs(self, Q: np.ndarray, r: np.ndarray, jac: _Triplets) -> None:
         """Cubic springs by alias-free sampling: add their forces to ``r`` and Jacobians to ``jac``."""
         for law, dof in self.cubic:
             U = Q[:, dof]
@@ -552,7 +552,7 @@ class HBMSystem:
             r[idx] += self.Pa @ f
             jac.block(idx, idx, self.Pa @ (df[:, None] * self.E))
 
-    def _penalty_contacts(self, Q: np.ndarray, r: np.ndarray, jac: "_Triplets") -> None:
+    def _penalty_contacts(self, Q: np.ndarray, r: np.ndarray, jac: _Triplets) -> None:
         """Penalty contacts by the projected positive part: forces into ``r``, Jacobians into ``jac``."""
         for law, dof in self.penalty:
             # the law is slope * max(0, u - offset): project the positive part of u - offset
@@ -564,7 +564,7 @@ class HBMSystem:
             r[idx] += slope * proj
             jac.block(idx, idx, slope * G)
 
-    def _complementarity_contacts(self, x: np.ndarray, Q: np.ndarray, r: np.ndarray, jac: "_Triplets") -> None:
+    def _complementarity_contacts(self, x: np.ndarray, Q: np.ndarray, r: np.ndarray, jac: _Triplets) -> None:
         """Signorini contacts by complementarity: contact forces on the structure rows and the
         equations ``P - proj[max(0, P + c U_c - c g0)] = 0`` on the contact-force rows (all
         contacts at once)."""

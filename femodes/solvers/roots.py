@@ -11,7 +11,7 @@ evaluation may fail (``None``), which ends the search with the bracket reached s
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -38,7 +38,7 @@ import numbers
 import os
 import sys
 import threading
-from typing import Iterator
+from collections.abc import Iterator
 
 __all__ = ["ENV_VAR", "blas_threads", "current_blas_threads", "limit_blas_threads"]
 

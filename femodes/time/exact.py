@@ -122,7 +122,7 @@ def exact_flow_unsupported(model: StructuralModel) -> str:
 class _Mode:
     """The linear system of the inertial DOFs with the massless contacts ``closed`` closed."""
 
-    def __init__(self, flow: "LinearImpactFlow", closed: frozenset):
+    def __init__(self, flow: LinearImpactFlow, closed: frozenset):
         n, I, Z = flow.n, flow.I, flow.Z
         K = flow.K
         S = [flow.dofs[j] for j in sorted(closed)]
@@ -162,7 +162,7 @@ class _Mode:
         self.fastest = float(np.max(np.abs(lam)))
         self._loads = None
 
-    def loads(self, flow: "LinearImpactFlow"):
+    def loads(self, flow: LinearImpactFlow):
         """The frequency-independent parts of the particular solutions (cached): harmonics ``ks``
         (0 included), the forcing and gap part ``G`` of the displacements, the right-hand sides
         in modal coordinates ``W = (V^-1 b_k)`` and the constant part of the event functions."""
@@ -180,7 +180,7 @@ class _Mode:
             self._loads = (ks, np.array(G), np.array(B) @ self.Vinv.T, np.array(E, dtype=complex).reshape(len(ks), -1))
         return self._loads
 
-    def gq(self, flow: "LinearImpactFlow", k: int, F: np.ndarray) -> np.ndarray:
+    def gq(self, flow: LinearImpactFlow, k: int, F: np.ndarray) -> np.ndarray:
         """Forcing and gap part of the displacements for harmonic ``k`` with load ``F``."""
         g = np.zeros(flow.n, dtype=complex)
         if k == 0 and self.S.size:
@@ -199,7 +199,7 @@ class _ModeAt:
     ``(i k w I - A) X_k = b_k`` is solved in the mode's eigenbasis (the frequency-independent
     parts are the mode's: :meth:`_Mode.loads`)."""
 
-    def __init__(self, flow: "LinearImpactFlow", m: _Mode, omega: float):
+    def __init__(self, flow: LinearImpactFlow, m: _Mode, omega: float):
         ks, G, W, Ye0 = m.loads(flow)
         iw = 1j * omega * ks
         den = iw[:, None] - m.lam[None, :]
@@ -303,7 +303,7 @@ class LinearImpactFlow:
             d = self._at[closed] = _ModeAt(self, m, self.omega)
         return m, d
 
-    def at(self, omega: float) -> "LinearImpactFlow":
+    def at(self, omega: float) -> LinearImpactFlow:
         """The same model at another forcing frequency (the eigenproblems are not solved again)."""
         omega = float(omega)
         if not (math.isfinite(omega) and omega > 0.0):
@@ -332,7 +332,7 @@ class LinearImpactFlow:
         inertial = ~self.massless
         return bool(np.all(self.gaps[inertial] - x[self.dofs[inertial]] >= 0.0))
 
-    def run(self, x0, t0: float, period: float | None = None, variational: bool = False) -> "FlowRun":
+    def run(self, x0, t0: float, period: float | None = None, variational: bool = False) -> FlowRun:
         """The orbit from ``x(t0) = x0`` over ``period`` (default one forcing period)."""
         T = 2.0 * math.pi / self.omega if period is None else float(period)
         return FlowRun(self, np.asarray(x0, dtype=float), float(t0), float(t0) + T, variational)
@@ -447,7 +447,7 @@ class FlowRun:
             # the forcing part of the massless DOFs at the fixed end phase: only the velocity's i k w
             self.x_end_omega = np.concatenate([m.Lq @ dx, m.Lv @ dx + np.real((tail * (1j * d.ks)) @ d.G)])
 
-    def plain(self) -> "FlowRun":
+    def plain(self) -> FlowRun:
         """This run without its variational part (monodromy, segment sensitivities): what
         :meth:`displacement` and :meth:`coefficients` need, kept small."""
         out = copy.copy(self)

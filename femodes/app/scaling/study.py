@@ -20,7 +20,8 @@ import numbers
 import os
 import platform
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -179,7 +180,7 @@ def _log_record(label: str, rec: ScalingRecord) -> None:
         log.warning("scaling %s failed: %s", label, rec.error)
 
 
-def _record(size: "_Size", H: int, d: dict) -> ScalingRecord:
+def _record(size: _Size, H: int, d: dict) -> ScalingRecord:
     """The record of one case from the child's measurements (unknown keys and None left out)."""
     names = {f.name for f in dataclasses.fields(ScalingRecord)} - {"n_elements", "refine", "mesh", "H"}
     return ScalingRecord(n_elements=size.n_elements, refine=size.refine, mesh=size.mesh, H=H,

@@ -16,7 +16,8 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
+from collections.abc import Callable, Mapping
 
 from ...store import FileInUse, file_lock
 from ..cases import Case, CaseError, load_case, parse_case
