@@ -242,7 +242,7 @@ class ErrorEstimate:
         err = self.frequency_error
         return np.isfinite(err) & (err <= self.rtol)
 
-    def with_mesh(self, mesh, method: str) -> "ErrorEstimate":
+    def with_mesh(self, mesh, method: str) -> ErrorEstimate:
         """The same estimate with the mesh source ``mesh`` (relative frequency error per point)
         described by ``method`` (replacing an earlier mesh estimate)."""
         return dataclasses.replace(self, mesh=np.asarray(mesh, float), mesh_method=str(method))
