@@ -86,7 +86,7 @@ JUMP = 1e-3
 PROGRESS_EVERY = 5.0
 
 #: Bracket width (fraction of the segment between two branch points) at which a jump is declared.
-JUMP_XTOL = 1e-4
+JUMP_XTOL = 1e-3
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -377,7 +377,7 @@ class _Annotator:
 
         # in two passes: a jump (the test function stays above JUMP on both sides) is told apart
         # once the bracket is JUMP_XTOL of the segment wide; only a smooth crossing is refined to
-        # 1e-7 (a jump took ~27 Hill solves to 1e-7, now ~14)
+        # 1e-7 (a jump took ~27 Hill solves to 1e-7, now ~10)
         opts = dict(ftol=1e-9, margin=1e-3, bisect_if_slow=True)
         br = illinois(tau, 0.0, 1.0, self.tau(ra.multipliers, k), self.tau(rb.multipliers, k), max_iter=40,
                       xtol=JUMP_XTOL, **opts)

@@ -325,13 +325,22 @@ def _dense(J0, J1, J2, base, algebraic=None, vectors=True):
         a, d = np.flatnonzero(algebraic), np.flatnonzero(~algebraic)
         J0 = J0.tocsr()
         Aaa = J0[a][:, a].toarray()
+        # equilibrated (rows, then columns, by their largest entry): the kept DOFs' residual
+        # stiffness and the contact rows differ by many orders of magnitude, which is scaling,
+        # not singularity
+        with np.errstate(divide="ignore"):
+            r = 1.0 / np.abs(Aaa).max(axis=1)
+            r[~np.isfinite(r)] = 1.0
+            c = 1.0 / np.abs(r[:, None] * Aaa).max(axis=0)
+            c[~np.isfinite(c)] = 1.0
+        As = r[:, None] * Aaa * c[None, :]
         try:
-            lu = sla.lu_factor(Aaa, check_finite=False)
-            rcond = sla.lapack.dgecon(lu[0], np.abs(Aaa).sum(axis=0).max(), norm="1")[0]
+            lu = sla.lu_factor(As, check_finite=False)
+            rcond = sla.lapack.dgecon(lu[0], np.abs(As).sum(axis=0).max(), norm="1")[0]
         except (sla.LinAlgError, ValueError):
             rcond = 0.0
         if d.size and rcond > 1e3 * np.finfo(float).eps:
-            X = sla.lu_solve(lu, J0[a][:, d].toarray(), check_finite=False)
+            X = c[:, None] * sla.lu_solve(lu, r[:, None] * J0[a][:, d].toarray(), check_finite=False)
             S0 = J0[d][:, d].toarray() - J0[d][:, a] @ X
             s, Vd = _dense_pencil(S0, J1[d][:, d].toarray(), J2[d][:, d].toarray(), base, vectors)
             if not vectors:
@@ -467,14 +476,26 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
     m_coarse, ratio = red.modes_up_to(cutoff / 2.0), 2.0
     fine, used = None, cutoff
     for _ in range(8):
-        m_next = None if m_coarse is None else red.modes_up_to(cutoff)
+        # the first solve takes the largest reduction when the cut-off asks for more (a reduced
+        # model's few modes); later ones stop growing there
+        m_next = None if m_coarse is None else red.modes_up_to(cutoff, cap=fine is None)
         if m_next is None:
             if fine is None:
                 return None
-            break  # the reduction cannot grow further (half the model): keep the last, with its estimate
+            break  # the reduction cannot grow further: keep the last, with its estimate
         m, used = m_next, cutoff
         fine = _solve_reduced(red, m, x, omega, xi, kw)
+        if m_coarse == m and m >= 2 and m == red.max_modes:
+            # capped at the largest reduction: the estimate from half its modes
+            m_coarse, ratio = m // 2, 2.0
+        last = red.last_estimate
+        if last is not None and last[0] == m and abs(omega / last[2] - 1.0) <= REUSE_SPAN and last[3] < REUSE_POINTS:
+            # a neighbouring point of the branch with the same reduction: its estimate
+            err = last[1]
+            red.last_estimate = (m, err, last[2], last[3] + 1)
+            break
         err = 0.0 if m_coarse == m else _error_near(red, m_coarse, fine, x, omega, xi, ratio)
+        red.last_estimate = (m, err, omega, 0)
         if err <= REDUCTION_TOL:
             break
         log.debug("hill_exponents: %d modes (cut-off %.3g x (H + 1/2) w), error estimate %.2e", m, cutoff / top, err)
@@ -485,6 +506,15 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
         log.info("hill_exponents: reduction error estimate %.1e above %.0e with %d modes", err, REDUCTION_TOL, m)
     red.alpha = used / top
     return dataclasses.replace(fine, vectors=red.expand(fine.vectors, m), reduction_error=err, complete=False)
+
+
+#: Along a branch, a point whose reduction is that of the last estimated point, within this
+#: relative distance in frequency, takes that point's truncation error estimate (up to
+#: :data:`REUSE_POINTS` points in a row) instead of solving the coarse reduction again.
+REUSE_SPAN = 0.01
+
+#: Points in a row that reuse an estimate (:data:`REUSE_SPAN`).
+REUSE_POINTS = 3
 
 
 #: Truncation error estimate: the change ``delta`` of the leading multipliers' moduli from a coarse

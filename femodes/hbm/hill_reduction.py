@@ -166,6 +166,8 @@ class FreeInterfaceReduction:
             _CACHE.put(model, basis)
         self.basis = basis
         self.alpha = alpha
+        # (modes, estimate, omega, reuses) of the last point whose estimate was computed
+        self.last_estimate: tuple | None = None
         self.systems: dict[int, tuple[HBMSystem, np.ndarray]] = {}
         # the reduced problem must be much smaller than the whole (at most half its DOFs), and the
         # modes must leave the kept DOFs a residual flexibility of full rank (n - m >= n_kept)
@@ -175,29 +177,39 @@ class FreeInterfaceReduction:
     def usable(self) -> bool:
         return self.n_kept > 0 and self.basis.static() is not None
 
-    def modes_up_to(self, cutoff: float) -> int | None:
-        """Number of free-interface modes at or below ``cutoff`` (at least 1); None when the
-        reduction would not be much smaller than the model, or cannot be built."""
+    def modes_up_to(self, cutoff: float, cap: bool = False) -> int | None:
+        """Number of free-interface modes at or below ``cutoff`` (at least 1); None when more
+        than the largest reduction that can be built (``max_modes``, and a residual flexibility
+        of full rank) would be needed, or, with ``cap``, that largest one."""
         if not self.usable:
             return None
         b = self.basis
         while True:
             w = b.omega
-            if w.size and (w[-1] >= cutoff or w.size >= self.model_dofs - 1):
-                m = max(1, int(np.count_nonzero(w <= cutoff)))
-                if m > self.max_modes:
-                    return None
+            if not (w.size and (w[-1] >= cutoff or w.size >= min(self.model_dofs - 1, self.max_modes))):
+                want = w.size + 1 if not w.size else math.ceil(1.3 * w.size * cutoff / max(float(w[-1]), 1e-300))
+                if b.modes(min(max(want, 2 * w.size), self.max_modes + 1)):
+                    continue
+                if b.omega.size == w.size:  # no more modes to be had: the largest reduction there is
+                    if not w.size:
+                        return None
+                else:
+                    continue
+            w = b.omega
+            want = max(1, int(np.count_nonzero(w <= cutoff)))
+            if not cap and (want > self.max_modes or (w[-1] < cutoff and w.size >= self.max_modes)):
+                return None
+            m = min(want, self.max_modes, w.size)
+            while m >= 1:
                 try:
                     self.system_with(m)
+                    return m
                 except _NoReduction as exc:
-                    log.info("hill_exponents: no reduction with %d modes (%s)", m, exc)
-                    return None
-                return m
-            if w.size >= self.max_modes:
-                return None
-            want = w.size + 1 if not w.size else math.ceil(1.3 * w.size * cutoff / max(float(w[-1]), 1e-300))
-            if not b.modes(min(max(want, 2 * w.size), self.max_modes + 1)):
-                return None
+                    log.debug("hill_exponents: no reduction with %d modes (%s)", m, exc)
+                    if not cap:
+                        return None
+                    m -= 1
+            return None
 
     @property
     def model_dofs(self) -> int:
