@@ -46,7 +46,9 @@ to its free-interface modes up to a cut-off ``omega_c = ALPHA (H + 1/2) w / nu``
 flexibility of the DOFs the laws act on (:mod:`femodes.hbm.hill_reduction`): those DOFs carry no
 mass there, so their unknowns, like the contact forces', are eliminated exactly (a Schur
 complement, :func:`_dense`) and the dense eigenproblem has ``(2H + 1) m`` unknowns for ``m``
-modes, whatever the number of contacts. The truncation error is estimated at every point from the
+modes, whatever the number of contacts. The families above the cut-off are not computed, nor the
+combination resonances between two of them (:data:`REDUCE_MIN_UNKNOWNS`); for them, a reduction
+that can resolve them needs harmonics up to their frequencies. The truncation error is estimated at every point from the
 exponents with the cut-off ``omega_c / r`` nearest to the leading ones, as ``|delta| / (r^2 - 1)``,
 and ``omega_c`` is raised until that estimate is below :data:`REDUCTION_TOL`
 (``HillResult.reduction_error``) or the reduction would hold half of the model's DOFs. The modes
@@ -90,6 +92,16 @@ FOLLOW = 3
 #: (measured: the dense eigen-solve grows like unknowns^2.7, 0.19 s at 275 unknowns and 6.3 s at
 #: 1100, where shift-invert took 0.2-0.7 s; benchmarks/README_stability.md).
 DENSE_LIMIT = 400
+
+#: Hill problems with more unknowns with mass or damping than this are solved on a free-interface
+#: reduction (module docstring), whose dense eigen-solve has ``(2H + 1) m`` of them for ``m``
+#: modes. Below it the whole model's spectrum is computed: the reduction drops the families above
+#: its cut-off, and with them the combination resonances between two such families whose
+#: frequencies differ by a harmonic of the orbit (the Craig-Bampton blade of
+#: examples/blade_casing.py, 11 DOFs, H = 7: the whole model's |mu| = 1.09 at 10 grazing
+#: energies, the reduction's 1.0, its estimate blind to it). Measured cost of the whole model's
+#: solve there: 40 ms a point at 165 such unknowns, against 11 ms for a branch point.
+REDUCE_MIN_UNKNOWNS = DENSE_LIMIT
 
 #: Kept for scripts that read it: models are now reduced when their Hill problem has more than
 #: DENSE_LIMIT unknowns with mass or damping, whatever their size (module docstring).
@@ -257,7 +269,7 @@ def hill_exponents(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0
         raise ValueError(f"hill_exponents: omega must be a positive finite number, got {omega!r}")
     if reduce is None:
         # the dense solve holds the unknowns with mass or damping (the others are eliminated)
-        reduce = _n_dynamic_unknowns(system) > DENSE_LIMIT
+        reduce = _n_dynamic_unknowns(system) > REDUCE_MIN_UNKNOWNS
     if reduce:
         res = _reduced(system, np.asarray(x, dtype=float), omega, xi, n_shifts=n_shifts, k_per_shift=k_per_shift)
         if res is not None:
