@@ -17,7 +17,7 @@ import numpy as np
 
 from .results import Branch
 
-__all__ = ["ResonancePeak", "compare_resonance"]
+__all__ = ["ResonancePeak", "compare_resonance", "TONGUE_MARGIN", "ON_BACKBONE"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -27,7 +27,11 @@ class ResonancePeak:
     ``omega`` and ``energy``: the peak (the orbit of largest period-averaged energy on the forced
     branch); ``omega_backbone``: the backbone's frequency at that energy (linear interpolation in
     ``log E``), NaN when the energy is outside the backbone's range; ``distance``:
-    ``omega / omega_backbone - 1``; ``index``: the peak's index on its branch.
+    ``omega / omega_backbone - 1``; ``index``: the peak's index on its branch; ``tongue``: the
+    index in ``backbone.internal_resonances`` of the tongue of internal resonance whose
+    frequencies (widened by :data:`TONGUE_MARGIN`) hold the peak, or None, with ``tongue_modes``
+    the modes that take the energy there: a forced response caught by an internal resonance
+    peaks there, not on the family that steps over it.
     """
 
     omega: float
@@ -35,6 +39,29 @@ class ResonancePeak:
     omega_backbone: float
     distance: float
     index: int
+    tongue: int | None = None
+    tongue_modes: tuple[int, ...] = ()
+
+    @property
+    def predicted(self) -> str:
+        """One line: on the backbone (within :data:`ON_BACKBONE`, with the distance), else in a
+        listed tongue, else off it or outside its energy range."""
+        if np.isfinite(self.distance) and abs(self.distance) <= ON_BACKBONE:
+            return f"on the backbone, {self.distance:+.2%}"
+        if self.tongue is not None:
+            modes = ", ".join(str(m) for m in self.tongue_modes) or "?"
+            return (f"in the tongue of internal resonance {self.tongue} (modes {modes}) listed on the backbone, "
+                    f"{self.distance:+.2%} from the family past it")
+        if np.isfinite(self.distance):
+            return f"off the backbone, {self.distance:+.2%}"
+        return "outside the backbone's energy range"
+
+
+#: A forced peak within this relative distance of a tongue's frequencies is held by that tongue.
+TONGUE_MARGIN = 0.01
+
+#: :attr:`ResonancePeak.predicted` calls a peak within this relative distance on the backbone.
+ON_BACKBONE = 0.01
 
 
 def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch]) -> tuple[ResonancePeak, ...]:
@@ -70,6 +97,15 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch]) -> tu
         e = float(b.energy[i])
         inside = logE[0] <= np.log(e) <= logE[-1]
         w_bb = float(np.interp(np.log(e), logE, wb)) if inside else float("nan")
-        out.append(ResonancePeak(omega=float(b.omega[i]), energy=e, omega_backbone=w_bb,
-                                 distance=float(b.omega[i] / w_bb - 1.0) if inside else float("nan"), index=i))
+        w = float(b.omega[i])
+        tongue, modes = None, ()
+        for k, t in enumerate(backbone.internal_resonances):
+            ws = np.asarray(t.get("omega", ()), dtype=float)
+            ws = ws[np.isfinite(ws)]
+            if ws.size and ws.min() * (1 - TONGUE_MARGIN) <= w <= ws.max() * (1 + TONGUE_MARGIN):
+                tongue, modes = k, tuple(int(m) for m in t.get("modes", ()))
+                break
+        out.append(ResonancePeak(omega=w, energy=e, omega_backbone=w_bb,
+                                 distance=float(w / w_bb - 1.0) if inside else float("nan"), index=i,
+                                 tongue=tongue, tongue_modes=modes))
     return tuple(out)
