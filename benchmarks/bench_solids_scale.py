@@ -321,7 +321,7 @@ def _floor(model, variant: str, rec: dict, budget: float, repeat: int) -> None:
         if pat.banded:
             rec["fill"] = (3 * pat.kl + 1) * nI / Z.nnz
         else:
-            rec["fill"] = lu.slu.nnz / Z.nnz
+            rec["fill"] = lu.factor.nnz / Z.nnz
         x = solve1()[perm]
     else:
         if variant == "colamd":

@@ -73,6 +73,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..reduction import craig_bampton, kept_dofs
+from ..sparse_direct import factorize
 from .system import HBMSystem
 
 __all__ = ["HillResult", "hill_matrices", "hill_exponents", "DENSE_LIMIT", "REDUCE_MIN_DOFS"]
@@ -331,7 +332,7 @@ class _ShiftInvert:
 
     def near(self, sigma: complex, k: int):
         N, J1, J2 = self.N, self.J1, self.J2
-        lu = spla.splu((self.J0 + sigma * J1 + sigma * sigma * J2).tocsc())
+        lu = factorize(self.J0 + sigma * J1 + sigma * sigma * J2)
         S1 = J1 + sigma * J2
 
         def op(y):
