@@ -381,10 +381,11 @@ class BlockLU:
             except RuntimeError as exc:
                 raise StructureFailure(f"interior block singular ({exc})") from None
 
-    def _solve_real_or_complex(self, R: np.ndarray, trans: bool) -> np.ndarray:
+    def _solve_real_or_complex(self, R: np.ndarray, trans: bool, own: bool = False) -> np.ndarray:
+        """``own``: ``R`` is a scratch array of the caller's (the band solve may overwrite it)."""
         if self.pat.banded:
             kl = self.pat.kl
-            x, info = self._gbtrs(self.lu, kl, kl, R, self.piv, trans=1 if trans else 0)
+            x, info = self._gbtrs(self.lu, kl, kl, R, self.piv, trans=1 if trans else 0, overwrite_b=own)
             if info != 0:  # pragma: no cover - argument error
                 raise StructureFailure(f"gbtrs info {info}")
             return x
@@ -411,10 +412,18 @@ class BlockLU:
         if self.complex:
             Xp = self._solve_real_or_complex(np.asfortranarray(Rp, dtype=complex), trans)
         elif np.iscomplexobj(Rp):
+            # real factor (modal damping: K - a M), complex right-hand sides: one real solve with
+            # [Re R, Im R], written straight into Fortran order and read back into a complex array
+            # (no concatenate + copy, no complex temporaries: a third of the cost of a kl = 1 band
+            # solve of 1e3 rows)
             k = Rp.shape[1]
-            both = np.concatenate([Rp.real, Rp.imag], axis=1)
-            Y = self._solve_real_or_complex(np.asfortranarray(both), trans)
-            Xp = Y[:, :k] + 1j * Y[:, k:]
+            both = np.empty((Rp.shape[0], 2 * k), order="F")
+            both[:, :k] = Rp.real
+            both[:, k:] = Rp.imag
+            Y = self._solve_real_or_complex(both, trans, own=True)
+            Xp = np.empty((Rp.shape[0], k), dtype=complex)
+            Xp.real = Y[:, :k]
+            Xp.imag = Y[:, k:]
         else:
             Xp = self._solve_real_or_complex(np.asfortranarray(Rp, dtype=float), trans)
         if identity:
