@@ -19,8 +19,9 @@ harmonic balance solver and Hill's method) calls :func:`factorize` and uses the 
 
 The environment variable ``FEMODES_SPARSE_BACKEND`` (``auto`` by default, or ``superlu``,
 ``cholmod``, ``mumps``) chooses. ``auto`` takes, by the measurement of
-``benchmarks/bench_backends.py`` on P2 tetrahedra (2e4-6e4 DOFs: CHOLMOD and MUMPS 5-6x faster
-than SuperLU on ``K_II``, MUMPS 6x on a complex harmonic block), CHOLMOD for positive definite
+``benchmarks/bench_backends.py`` on P2 tetrahedra (CPU time at 1.9e4 / 6.1e4 DOFs: ``K_II`` and
+its constraint-mode solves 2.2x / 6.8x faster with CHOLMOD than with SuperLU, 1.9x / 8.2x with
+MUMPS; a complex harmonic block 7x / 4.5x with MUMPS), CHOLMOD for positive definite
 matrices, MUMPS for the others, each when installed, and SuperLU for matrices below
 :data:`AUTO_MIN_SIZE` rows (where SuperLU is as fast and its results are the ones the tests
 were written against). A named back-end is used at every size, for the matrices it can take
@@ -54,13 +55,15 @@ ENV_VAR = "FEMODES_SPARSE_BACKEND"
 #: The back-ends, SuperLU first (always installed), and the value that picks by measurement.
 BACKENDS = ("superlu", "cholmod", "mumps")
 _CHOICES = ("auto",) + BACKENDS
-#: ``auto`` keeps SuperLU below this many rows: there its cost is within 1.5x of the others'
-#: (3-D P2 box, 8.8e3 DOFs: K_II 0.09 s SuperLU, 0.05 s CHOLMOD, 0.08 s MUMPS;
-#: ``benchmarks/README_backends.md``) and the per-call set-up of MUMPS weighs more.
+#: ``auto`` keeps SuperLU below this many rows: for positive definite matrices it is as fast there
+#: (P2 box, 3e3 DOFs: K 22 ms SuperLU, 23 ms CHOLMOD, 39 ms MUMPS; 8.8e3 DOFs: K_II and its
+#: solves 0.17, 0.17, 0.15 s; ``benchmarks/README_backends.md``), and the small models of the tests
+#: and examples keep SuperLU's results. Complex blocks would gain below it too (3e3 DOFs: 1.4 s
+#: SuperLU, 59 ms MUMPS); a lower limit for them is left open.
 AUTO_MIN_SIZE = 5000
 #: MUMPS ordering (ICNTL(7)): PORD; on the 6.1e4-DOF P2 box, analysis + factorisation of K_II
-#: 1.7 s against 2.1 (AMD), 4.0 (auto = SCOTCH) and 4.2 s (SCOTCH), of the complex block 4.3 s
-#: against 7.5-7.7 s (``benchmarks/README_backends.md``).
+#: 1.7 s against 2.1 s (AMD), 4.0 s (automatic: SCOTCH) and 4.2 s (SCOTCH), of the complex block
+#: 4.3 s against 7.5-7.7 s (exploratory run, ``benchmarks/README_backends.md``).
 MUMPS_ORDERING = "pord"
 
 _logged: set[str] = set()
