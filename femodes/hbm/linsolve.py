@@ -116,7 +116,7 @@ import scipy.sparse.linalg as spla
 from scipy.linalg import lapack
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-from ..sparse_direct import factorize, is_symmetric
+from ..sparse_direct import factorize, is_symmetric, sparse_backend_info
 
 __all__ = ["HarmonicBlockJacobian", "StructureFailure", "BlockSolver", "AssembledSolver", "BlockStructure",
            "solver_memory"]
@@ -543,6 +543,8 @@ class LinearFactors:
                              np.asarray(W, dtype=complex) if keep else None, Xm if keep else None)
 
         nt = _threads(len(jobs), threads, pat.perm.size)
+        if nt > 1 and not pat.banded and sparse_backend_info().indefinite != "superlu":
+            nt = 1  # MUMPS instances are not used from several Python threads (not tested for it)
         if nt > 1:
             with ThreadPoolExecutor(nt) as ex:
                 self.blocks = list(ex.map(one, jobs))
