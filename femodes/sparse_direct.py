@@ -45,6 +45,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .solvers.threads import refresh_blas_limit
+
 __all__ = ["BACKENDS", "ENV_VAR", "AUTO_MIN_SIZE", "Factor", "SingularMatrixError", "SparseBackendInfo",
            "available_backends", "factorize", "is_symmetric", "sparse_backend_info"]
 
@@ -67,6 +69,7 @@ AUTO_MIN_SIZE = 5000
 MUMPS_ORDERING = "pord"
 
 _logged: set[str] = set()
+_imported: set[str] = set()
 
 
 class SingularMatrixError(RuntimeError):
@@ -83,15 +86,20 @@ def _import(name: str):
     """The back-end's module, or None if it is not installed."""
     try:
         if name == "cholmod":
-            from sksparse import cholmod
-            return cholmod
-        if name == "mumps":
-            import mumps
-            return mumps
+            from sksparse import cholmod as module
+        elif name == "mumps":
+            import mumps as module
+        else:
+            return spla
     except Exception as exc:  # ImportError, or a shared library that does not load
         _log_once(f"import:{name}", logging.DEBUG, "sparse back-end %s not importable: %s", name, exc)
         return None
-    return spla
+    if name not in _imported:
+        # the back-end brings the system's BLAS: under femodes' BLAS thread limit (an analysis),
+        # that library gets the limit too (solvers.threads.refresh_blas_limit)
+        _imported.add(name)
+        refresh_blas_limit()
+    return module
 
 
 def available_backends() -> tuple[str, ...]:

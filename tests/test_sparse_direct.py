@@ -176,3 +176,33 @@ def test_auto_keeps_superlu_for_small_matrices(backend):
         assert info.positive_definite == "cholmod"
     if "mumps" in INSTALLED:
         assert info.indefinite == "mumps"
+
+
+@pytest.mark.skipif(not OPTIONAL or not set(OPTIONAL) & set(INSTALLED), reason="no optional back-end installed")
+def test_backend_blas_follows_femodes_thread_limit():
+    """A back-end first imported inside femodes' BLAS limit (an analysis) brings the system's
+    OpenBLAS; the limit is applied to it too, and lifted with the others (fresh process: the
+    libraries must not be loaded yet)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    name = next(b for b in OPTIONAL if b in INSTALLED)
+    code = textwrap.dedent(f"""
+        import os
+        os.environ["FEMODES_SPARSE_BACKEND"] = "{name}"
+        os.environ.pop("OPENBLAS_NUM_THREADS", None)
+        import scipy.sparse as sp
+        from threadpoolctl import threadpool_info
+        from femodes import sparse_direct as sd
+        from femodes.solvers.threads import limit_blas_threads
+        before = {{i["filepath"] for i in threadpool_info()}}
+        with limit_blas_threads(1):
+            sd.factorize(sp.identity(10, format="csc"), positive_definite=True)
+            inside = threadpool_info()
+        assert all(i["num_threads"] == 1 for i in inside), inside
+        print(len({{i["filepath"] for i in inside}} - before))
+    """)
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
