@@ -10,13 +10,14 @@ STAMP   = $(VENV)/.installed
 JOBS   ?= 2
 DIST    = $(if $(filter 0,$(JOBS)),,--dist loadscope)
 
-.PHONY: demo test test-slow test-kernels bench clean venv lint docs
+.PHONY: demo test test-slow test-kernels bench bench-backends fast clean venv lint docs
 
 $(STAMP): pyproject.toml
 	@sh tools/sysdeps.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e ".[test,plot,store,render,sweep]"
+	@sh tools/fast_backends.sh $(BIN)/python
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -51,6 +52,14 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_models.py
+
+# the optional sparse direct back-ends again (CHOLMOD, MUMPS), e.g. after installing their system libraries
+fast: $(STAMP)
+	@sh tools/sysdeps.sh
+	@sh tools/fast_backends.sh $(BIN)/python
+
+bench-backends: $(STAMP)
+	$(BIN)/python benchmarks/bench_backends.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache docs/_build

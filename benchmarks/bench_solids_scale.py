@@ -321,7 +321,9 @@ def _floor(model, variant: str, rec: dict, budget: float, repeat: int) -> None:
         if pat.banded:
             rec["fill"] = (3 * pat.kl + 1) * nI / Z.nnz
         else:
-            rec["fill"] = lu.slu.nnz / Z.nnz
+            # SuperLU says how many entries its factors hold; the other back-ends do not here
+            rec["fill"] = lu.factor.nnz / Z.nnz if lu.factor.nnz is not None else None
+            rec["backend"] = lu.factor.backend
         x = solve1()[perm]
     else:
         if variant == "colamd":

@@ -1,7 +1,7 @@
 """femodes: nonlinear vibration modes of finite-element structures with unilateral contact.
 
 The public face of the package. Layers, from the bottom: solvers, laws, models (fe, model,
-reduction, linear, eigen), discretise (hbm, time), results (results, store), analyses, outputs
+reduction, linear, eigen, sparse_direct), discretise (hbm, time), results (results, store), analyses, outputs
 (fields, plot, io, viz), application (app); README "How the code is organised".
 """
 
@@ -11,6 +11,7 @@ from .laws import CubicSpring, PenaltyContact, UnilateralContact
 from .linear import IllConditionedWarning, LinearModes, LinearResponse, grazing_energy, linear_modes, linear_response
 from .model import DofMap, HarmonicForce, StructuralModel
 from .reduction import ReducedModel, craig_bampton
+from .sparse_direct import SparseBackendInfo, sparse_backend_info
 from .hbm import ForcedResponseProblem, Harmonics, NonlinearModeProblem
 from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState, NewtonOptions, NewtonResult,
                       continuation, semismooth_newton)
@@ -62,6 +63,8 @@ __all__ = [
     "switch_branch",
     "ReducedModel",
     "craig_bampton",
+    "SparseBackendInfo",
+    "sparse_backend_info",
     "Harmonics",
     "ForcedResponseProblem",
     "NonlinearModeProblem",

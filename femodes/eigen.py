@@ -1,7 +1,8 @@
 """Models layer (leaf): the generalized symmetric eigenproblem ``K phi = lam M phi``.
 
 Shared by linear modes (:mod:`femodes.linear`), modal damping (:mod:`femodes.model`) and the
-fixed-interface modes of Craig-Bampton (:mod:`femodes.reduction`); imports nothing of femodes.
+fixed-interface modes of Craig-Bampton (:mod:`femodes.reduction`); imports only the other leaf,
+:mod:`femodes.sparse_direct`, whose back-end factorises the shift-invert operator.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+
+from .sparse_direct import factorize
 
 __all__ = ["DENSE_LIMIT", "IllConditionedWarning", "check_conditioning", "mass_normalize", "generalized_eigh",
            "normal_modes"]
@@ -108,7 +111,7 @@ def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigm
         # largest Ritz values and converge first). Only if K is exactly singular do we shift below 0.
         sigma = 0.0
         try:
-            lu = spla.splu(K.tocsc())
+            lu = factorize(K, positive_definite=True)
         except RuntimeError:
             d = K.diagonal() / np.maximum(M.diagonal(), 1e-300)
             d = d[np.isfinite(d) & (d > 0)]
@@ -117,7 +120,8 @@ def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigm
     if sigma is None:
         sigma = 0.0
     if lu is None:
-        lu = spla.splu((K - sigma * M).tocsc())
+        # K - sigma M is positive definite for sigma <= 0 (CHOLMOD where installed), indefinite above
+        lu = factorize(K - sigma * M, positive_definite=sigma <= 0)
     if check and sigma <= 0:
         check_conditioning(K, lu.solve, N, owner)
     op = spla.LinearOperator(K.shape, matvec=lu.solve, dtype=float)

@@ -14,6 +14,7 @@ import scipy.sparse.linalg as spla
 
 from .eigen import IllConditionedWarning, normal_modes
 from .model import StructuralModel, low_rank_solver
+from .sparse_direct import factorize
 from .solvers.checks import check_int
 
 __all__ = ["LinearModes", "LinearResponse", "linear_modes", "linear_response", "grazing_energy", "IllConditionedWarning"]
@@ -156,7 +157,7 @@ def _solve_lowrank(Z, lr, w: float, F: np.ndarray) -> np.ndarray:
     alone is singular (an undamped resonance of the sparse part that the modal damping damps),
     SuperLU on the sparse augmented system ``[[Z, i w U diag(d)], [U^T, -I]] [q; y] = [F; 0]``."""
     try:
-        lu = spla.splu(Z)
+        lu = factorize(Z)
     except RuntimeError:
         m = lr.rank
         A = sp.bmat([[Z, sp.csr_matrix(lr.U * (1j * w * lr.d))], [sp.csr_matrix(lr.U.T), -sp.identity(m)]],
@@ -199,7 +200,7 @@ def linear_response(model: StructuralModel, omega, *, force=None) -> LinearRespo
         Z = (K - wi**2 * M + 1j * wi * C).tocsc()
         try:
             if lr is None:
-                out[i] = spla.splu(Z).solve(F)
+                out[i] = factorize(Z).solve(F)
             else:
                 out[i] = _solve_lowrank(Z, lr, wi, F)
         except RuntimeError as exc:

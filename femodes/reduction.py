@@ -19,11 +19,11 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
 from .eigen import IllConditionedWarning, check_conditioning, normal_modes
 from .model import Attached, StructuralModel
+from .sparse_direct import factorize
 from .solvers.checks import check_int, check_memory
 
 __all__ = ["ReducedModel", "craig_bampton"]
@@ -208,9 +208,11 @@ def _reduction_basis(K, M, kept: np.ndarray, interior: np.ndarray, n_modes: int)
 
 
 def _factor_interior(KII) -> Any:
-    """Sparse LU of the interior stiffness; ValueError if singular, warning if ill-conditioned."""
+    """Factorisation of the interior stiffness (:func:`~femodes.sparse_direct.factorize`,
+    positive definite: CHOLMOD where installed); ValueError if singular, warning if
+    ill-conditioned."""
     try:
-        lu = spla.splu(KII)
+        lu = factorize(KII, positive_definite=True)
     except RuntimeError as exc:
         raise ValueError(
             "craig_bampton: the interior stiffness K_II is singular: the structure is not restrained when the "

@@ -73,6 +73,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..sparse_direct import factorize
 from .hill_reduction import FreeInterfaceReduction
 from .system import HBMSystem
 
@@ -403,7 +404,7 @@ class _ShiftInvert:
 
     def near(self, sigma: complex, k: int):
         N, J1, J2 = self.N, self.J1, self.J2
-        lu = spla.splu((self.J0 + sigma * J1 + sigma * sigma * J2).tocsc())
+        lu = factorize(self.J0 + sigma * J1 + sigma * sigma * J2)
         S1 = J1 + sigma * J2
 
         def op(y):

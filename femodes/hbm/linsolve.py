@@ -27,8 +27,10 @@ its :meth:`~HarmonicBlockJacobian.factorize` solves Newton steps by
 2. factorising ``Z_k[I, I]`` for each harmonic independently: LAPACK band LU (``?gbtrf``) after a
    reverse Cuthill-McKee ordering when the band is narrow (its storage at most
    :data:`BAND_MAX_FILL` times the block's nonzeros: line meshes, bandwidth 1-3, and the small
-   dense interiors of reduced models), otherwise SuperLU with a minimum-degree ordering of
-   ``Z + Z^T`` and diagonal pivoting preferred (2-D and 3-D meshes; :data:`SUPERLU_OPTIONS`);
+   dense interiors of reduced models), otherwise (2-D and 3-D meshes) the sparse direct back-end
+   in use (:mod:`femodes.sparse_direct`: MUMPS's complex symmetric ``LDL^T`` where installed,
+   6x faster than SuperLU on a 6.1e4-DOF P2 block), or SuperLU with a minimum-degree ordering of
+   ``Z + Z^T`` and diagonal pivoting preferred (:data:`SUPERLU_OPTIONS`);
    the ``H + 1`` factorisations are independent and can run in threads
    (``HBMSystem(threads=...)``; LAPACK and SuperLU release the GIL). Default one thread: on the
    2-core test machine two threads were slower (1e5-DOF bar, H = 20: 1283 ms vs 1118 ms per
@@ -63,10 +65,16 @@ The per-harmonic factorisations and condensed stiffnesses depend only on ``(w, x
 cached on the system: Newton at a fixed frequency (the start of a frequency response, the forcing
 homotopy, sweeps at fixed ``w``) reuses them at every iteration; inside a continuation ``w`` is an
 unknown and changes at every iteration, so there they are rebuilt (but see "Reused factors").
-Without modal damping the columns ``W = Z_II^-1 Z_Ib`` of the condensation are kept
-(:data:`KEEP_W_MAX_BYTES`), and so are the interior solutions of the border columns: a solve then
-costs one band solve per harmonic (the back substitution is ``W x_b`` plus those columns times the
-border unknowns) and the border coupling one, instead of two each. Cost per Newton iteration:
+The columns ``W = Z_II^-1 Z_Ib`` of the condensation are kept (:data:`KEEP_W_MAX_BYTES`), and so
+are the interior solutions of the border columns: a solve then costs one band solve per harmonic
+(the back substitution is ``W x_b`` plus those columns times the border unknowns) and the border
+coupling one, instead of two each. With modal damping through the modes of the structure this
+holds too: ``Z_II^-1 U_I = (Phi_I + W Phi_b + c Z_II^-1 E_I) diag(1/mu)`` (above) is applied by
+products from ``W`` and the few extra columns kept with it (:meth:`LinearFactors.apply_x`), and
+the modal rows of the border coupling use the symmetry of ``Z`` (issue 38 item 5: a point of the
+1e3-1e5-DOF bar with a stop at H = 5 went from 1.5-1.8x to 1.3-1.5x the Rayleigh-damped point,
+``benchmarks/bench_damping_cpu.py``); a sparse damping part besides the modal one keeps the
+general path (two band solves per harmonic). Cost per Newton iteration:
 ``O(N H bw^2)`` for the band LUs, ``O(N H (n_b + m))`` for the condensation solves and
 ``O((n_b (2H+1))^3)`` for the dense LU.
 
@@ -107,6 +115,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.linalg import lapack
 from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+from ..sparse_direct import factorize, is_symmetric, sparse_backend_info
 
 __all__ = ["HarmonicBlockJacobian", "StructureFailure", "BlockSolver", "AssembledSolver", "BlockStructure",
            "solver_memory"]
@@ -288,6 +298,7 @@ class _Pattern:
     lowrank: dict = field(default_factory=dict)  # modal damping's split of U, Phi (LinearFactors)
     band_flat: np.ndarray | None = None            # rows/cols in the band storage (BlockLU)
     abs_row_sums: tuple | None = None              # the system's abs_row_sums() (refinement test)
+    symmetric: bool = False                        # K, M, C symmetric on I: the blocks are (complex) symmetric
 
 
 def build_pattern(M: sp.spmatrix, K: sp.spmatrix, C: sp.spmatrix, bdofs: np.ndarray) -> _Pattern:
@@ -330,6 +341,7 @@ def build_pattern(M: sp.spmatrix, K: sp.spmatrix, C: sp.spmatrix, bdofs: np.ndar
     return _Pattern(
         interior=interior, bdofs=bdofs, perm=perm, rows=r, cols=c, kv=kv, mv=mv, cv=cv, kl=kl, banded=banded,
         identity=bool(np.array_equal(perm, np.arange(nI))), R=R,
+        symmetric=not banded and all(is_symmetric(A) for A in (KII, MII, CII)),
         Kib=ib[0][R].toarray(), Mib=ib[1][R].toarray(), Cib=ib[2][R].toarray(),
         Kbi=bi[0][:, R].toarray(), Mbi=bi[1][:, R].toarray(), Cbi=bi[2][:, R].toarray(),
         Kbb=K[bdofs][:, bdofs].toarray(), Mbb=M[bdofs][:, bdofs].toarray(), Cbb=C[bdofs][:, bdofs].toarray(),
@@ -365,21 +377,26 @@ class BlockLU:
             if info != 0:
                 raise StructureFailure(f"interior block singular (gbtrf info {info})")
             self._gbtrs = lapack.zgbtrs if self.complex else lapack.dgbtrs
+            self._lu_complex = None  # a real band LU cast to complex, for complex right-hand sides
         else:
             A = sp.csc_matrix((vals, (pat.rows, pat.cols)), shape=(n, n))
             try:
-                self.slu = spla.splu(A, **SUPERLU_OPTIONS)
+                # the back-end in use (femodes.sparse_direct): MUMPS on the large complex symmetric
+                # blocks of 2-D/3-D meshes where installed, SuperLU with SUPERLU_OPTIONS otherwise
+                self.factor = factorize(A, symmetric=pat.symmetric, positive_definite=not self.complex and a <= 0.0,
+                                        superlu_options=SUPERLU_OPTIONS)
             except RuntimeError as exc:
                 raise StructureFailure(f"interior block singular ({exc})") from None
 
-    def _solve_real_or_complex(self, R: np.ndarray, trans: bool) -> np.ndarray:
+    def _solve_real_or_complex(self, R: np.ndarray, trans: bool, own: bool = False) -> np.ndarray:
+        """``own``: ``R`` is a scratch array of the caller's (the band solve may overwrite it)."""
         if self.pat.banded:
             kl = self.pat.kl
-            x, info = self._gbtrs(self.lu, kl, kl, R, self.piv, trans=1 if trans else 0)
+            x, info = self._gbtrs(self.lu, kl, kl, R, self.piv, trans=1 if trans else 0, overwrite_b=own)
             if info != 0:  # pragma: no cover - argument error
                 raise StructureFailure(f"gbtrs info {info}")
             return x
-        return self.slu.solve(R, trans="T" if trans else "N")
+        return self.factor.solve(R, trans=trans)
 
     def solve_columns(self, R: np.ndarray) -> np.ndarray:
         """:meth:`solve` for many right-hand sides (the ``n_b + m`` columns of the modal-damping
@@ -401,11 +418,30 @@ class BlockLU:
         Rp = R if identity else R[perm]
         if self.complex:
             Xp = self._solve_real_or_complex(np.asfortranarray(Rp, dtype=complex), trans)
+        elif np.iscomplexobj(Rp) and self.pat.banded:
+            # real band factor (modal damping: K - a M), complex right-hand sides: zgbtrs on a
+            # complex copy of the LU (made once) sweeps the band once, where dgbtrs on [Re R, Im R]
+            # strides across the two columns (1e5 rows, kl = 1: 2.4 vs 3.8 ms; issue 38 item 5)
+            if self._lu_complex is None:
+                self._lu_complex = self.lu.astype(complex)
+            kl = self.pat.kl
+            Xp, info = lapack.zgbtrs(self._lu_complex, kl, kl, np.array(Rp, dtype=complex, order="F"), self.piv,
+                                     trans=1 if trans else 0, overwrite_b=True)
+            if info != 0:  # pragma: no cover - argument error
+                raise StructureFailure(f"zgbtrs info {info}")
         elif np.iscomplexobj(Rp):
+            # real factor (modal damping: K - a M), complex right-hand sides: one real solve with
+            # [Re R, Im R], written straight into Fortran order and read back into a complex array
+            # (no concatenate + copy, no complex temporaries: a third of the cost of a kl = 1 band
+            # solve of 1e3 rows)
             k = Rp.shape[1]
-            both = np.concatenate([Rp.real, Rp.imag], axis=1)
-            Y = self._solve_real_or_complex(np.asfortranarray(both), trans)
-            Xp = Y[:, :k] + 1j * Y[:, k:]
+            both = np.empty((Rp.shape[0], 2 * k), order="F")
+            both[:, :k] = Rp.real
+            both[:, k:] = Rp.imag
+            Y = self._solve_real_or_complex(both, trans, own=True)
+            Xp = np.empty((Rp.shape[0], k), dtype=complex)
+            Xp.real = Y[:, :k]
+            Xp.imag = Y[:, k:]
         else:
             Xp = self._solve_real_or_complex(np.asfortranarray(Rp, dtype=float), trans)
         if identity:
@@ -437,6 +473,8 @@ class _Harmonic:
     Zbi: np.ndarray        # Z[b, I] on the coupled columns R (complex n_b x len(R))
     W: np.ndarray | None = None  # Z[I, I]^-1 Z[I, b], all interior rows (complex n_I x n_b), kept when
                                  # LinearFactors.keep_w (back substitution by a product, no solve)
+    Xm: tuple | None = None      # modal damping through the modes: what Z[I, I]^-1 U_I is made of
+                                 # (LinearFactors.apply_x), kept with W
 
 
 class LinearFactors:
@@ -474,7 +512,10 @@ class LinearFactors:
             jobs.append((int(h.cos_index(k)), int(h.sin_index(k)), f))
         # keep the condensation columns W = Z_II^-1 Z_Ib (computed anyway): the back substitution
         # and the border rows then cost a product instead of a band solve (KEEP_W_MAX_BYTES)
-        self.keep_w = bool(not self.rank and nb and pat.perm.size
+        # With modal damping through the modes of the structure (_condense_modes), W and the few
+        # columns that make up Z_II^-1 U_I are kept too: the solve then takes the lean path
+        # (one band solve per harmonic, issue 38 item 5)
+        self.keep_w = bool((not self.rank or self.modes is not None) and nb and pat.perm.size
                            and 16 * pat.perm.size * nb * len(jobs) <= KEEP_W_MAX_BYTES)
 
         def one(job):
@@ -485,8 +526,11 @@ class LinearFactors:
             Zbb = pat.Kbb - a * pat.Mbb + 1j * b * Cb
             Zib = pat.Kib - a * pat.Mib + 1j * b * (pat.Cib - self.xi * pat.Mib)
             Zbi = pat.Kbi - a * pat.Mbi + 1j * b * (pat.Cbi - self.xi * pat.Mbi)
+            W = Xm = None
             if self.rank:
                 Zc = self._condense_lowrank(lu, Zbb, Zib, Zbi, a, b)
+                if isinstance(Zc, tuple):
+                    Zc, W, Xm = Zc
             elif lu is not None and nb:
                 full = np.zeros((pat.perm.size, nb), dtype=complex, order="F")  # gbtrs takes it as is
                 full[pat.R] = Zib
@@ -494,10 +538,13 @@ class LinearFactors:
                 Zc = Zbb - Zbi @ W[pat.R]
             else:
                 Zc, W = Zbb, None
+            keep = self.keep_w and W is not None
             return _Harmonic(row_c, row_s, a, b, lu, np.asarray(Zc, dtype=complex), Zib, Zbi,
-                             np.asarray(W, dtype=complex) if self.keep_w and W is not None else None)
+                             np.asarray(W, dtype=complex) if keep else None, Xm if keep else None)
 
         nt = _threads(len(jobs), threads, pat.perm.size)
+        if nt > 1 and not pat.banded and sparse_backend_info().indefinite != "superlu":
+            nt = 1  # MUMPS instances are not used from several Python threads (not tested for it)
         if nt > 1:
             with ThreadPoolExecutor(nt) as ex:
                 self.blocks = list(ex.map(one, jobs))
@@ -577,7 +624,43 @@ class LinearFactors:
         Zc[:nb, nb:] = (self.Ub - ZX) * gd
         Zc[nb:, :nb] = self.Ub.T - UWb
         Zc[nb:, nb:] = -np.eye(m) - UX * gd
-        return Zc
+        if not self.keep_w:
+            return Zc
+        inv_mu = 1.0 / mu_ok
+        inv_mu[bad] = 0.0
+        Xbad = np.ascontiguousarray(W[:, nb + ns:], dtype=complex) if bad.size else None
+        WS = np.ascontiguousarray(W[:, nb:nb + ns], dtype=complex) if ns else None
+        return Zc, Wb, (inv_mu, bad, Xbad, WS, c)
+
+    def apply_x(self, blk: "_Harmonic", V: np.ndarray) -> np.ndarray:
+        """``Z_II^-1 U_I V`` (complex ``V``, ``m x k``) of one harmonic from the modes relation
+        of :meth:`_condense_modes`, ``Z_II^-1 U_I = (Phi_I + W_b Phi_b + c Z_II^-1 E_I) diag(1/mu)``
+        (the columns at ``k w`` near a mode's frequency solved directly): products, no solve."""
+        PhiI, Phib, _, _, _, ES = self.modes
+        inv_mu, bad, Xbad, WS, c = blk.Xm
+        Vm = np.ascontiguousarray(V * inv_mu[:, None], dtype=complex)
+        X = _real_times_complex(PhiI, Vm)
+        if blk.W is not None and blk.W.shape[1]:
+            X += blk.W @ (Phib @ Vm)
+        if WS is not None:
+            X += WS @ (c * (ES @ Vm))
+        if Xbad is not None:
+            X += Xbad @ V[bad]
+        return X
+
+    def rows_x(self, blk: "_Harmonic", L: np.ndarray) -> np.ndarray:
+        """``L Z_II^-1 U_I`` (complex ``L``, ``r x n_I``) by the relation of :meth:`apply_x`."""
+        PhiI, Phib, _, _, _, ES = self.modes
+        inv_mu, bad, Xbad, WS, c = blk.Xm
+        out = _real_times_complex(PhiI.T, np.ascontiguousarray(L.T, dtype=complex)).T
+        if blk.W is not None and blk.W.shape[1]:
+            out = out + (L @ blk.W) @ Phib
+        if WS is not None:
+            out = out + c * ((L @ WS) @ ES)
+        out = out * inv_mu
+        if Xbad is not None:
+            out[:, bad] = L @ Xbad
+        return out
 
     def map(self, fun):
         """Apply ``fun(block)`` to all harmonics (threaded like the factorisation)."""
@@ -1174,9 +1257,10 @@ class _Factorization:
         self.nB = nB
         T = self._boundary_block()
         self._add_condensed_stiffness(T)
-        # without modal damping: the leaner solve path (the interior solutions of the border
-        # columns kept, W = Z_II^-1 Z_Ib used where kept)
-        self.lean = not self.mr
+        # the leaner solve path (the interior solutions of the border columns kept, W = Z_II^-1
+        # Z_Ib used where kept): without modal damping, and with it when every harmonic kept W and
+        # the pieces of Z_II^-1 U_I (LinearFactors.apply_x)
+        self.lean = not self.mr or bool(pat.perm.size and all(blk.Xm is not None for blk in F.blocks))
         self._Zu = self._vc = None
         if m and pat.perm.size:
             if self.lean:
@@ -1313,20 +1397,35 @@ class _Factorization:
             else:
                 y = blk.lu.solve(vc.T, trans=True)
                 yZ = (blk.Zib.T @ y[R]).T
-            return z, vc, blk.Zbi @ z[R], yZ, (vc @ z).real
+            if not self.mr:
+                return z, vc, blk.Zbi @ z[R], yZ, (vc @ z).real, None, None
+            # modal rows U_I^T z; modal columns v^T Z_II^-1 (i b U_I d) = (Z_II^-1 U_I)^T v ... by
+            # the symmetry of Z (no sparse damping part, as in _condense_modes): products only
+            F = self.F
+            ym = _real_times_complex(F.UI.T, z)
+            my = F.rows_x(blk, vc) * (1j * blk.b * F.d)
+            return z, vc, blk.Zbi @ z[R], yZ, (vc @ z).real, ym, my
 
         out = self.F.map(one)
         self._Zu = [o[0] for o in out]
         self._vc = [o[1] for o in out]
         off = self.off_m
         bm = off + np.arange(m)
-        for blk, (_, _, Wz, yZ, vu) in zip(self.F.blocks, out):
+        for blk, (_, _, Wz, yZ, vu, ym, my) in zip(self.F.blocks, out):
             T[np.ix_(qpos(blk.k), bm)] -= Wz.real
             T[np.ix_(bm, qpos(blk.k))] -= yZ.real
             if blk.s is not None:
                 T[np.ix_(qpos(blk.s), bm)] += Wz.imag
                 T[np.ix_(bm, qpos(blk.s))] -= yZ.imag
             T[off:, off:] -= vu / J.scale
+            if ym is not None:  # as in _add_border_coupling
+                yk = self._ypos(blk.k)
+                T[np.ix_(yk, bm)] -= ym.real
+                T[np.ix_(bm, yk)] -= my.real
+                if blk.s is not None:
+                    ys = self._ypos(blk.s)
+                    T[np.ix_(ys, bm)] += ym.imag
+                    T[np.ix_(bm, ys)] -= my.imag
 
     def _eliminate_modal(self, T: np.ndarray):
         """Eliminate the modal coordinates from ``T`` harmonic by harmonic: they couple only to the
@@ -1552,7 +1651,9 @@ class _Factorization:
         I, R = pat.interior, pat.R
         nI = I.size
         x = np.zeros_like(B)
-        rhsB = np.concatenate([B[self.gB], B[n0:]], axis=0)  # (nB, k): q_b, p, border
+        mr, F = self.mr, self.F
+        # (nB, k): q_b, p, modal coordinates (modal damping), border
+        rhsB = np.concatenate([B[self.gB], np.zeros((nc * mr, k)), B[n0:]], axis=0)
         blocks = self.F.blocks
         if nI:
             bq = B[: s.nq].reshape(nc, n, k)
@@ -1565,10 +1666,15 @@ class _Factorization:
                 z = blk.lu.solve(rho * inv_sc)
                 w = (blk.Zbi @ z[R]) * sc if nb else None
                 v = (vc[i] @ z).real if m else None
-                return z, w, v
+                ym = _real_times_complex(F.UI.T, np.ascontiguousarray(z, dtype=complex)) * sc if mr else None
+                return z, w, v, ym
 
             fw = self.F.map_index(forward)
-            for blk, (z, w, v) in zip(blocks, fw):
+            for blk, (z, w, v, ym) in zip(blocks, fw):
+                if mr:  # modal rows y = U^T q (real form): rhs_y -= s U_I^T y_I
+                    rhsB[self._ypos(blk.k)] -= ym.real
+                    if blk.s is not None:
+                        rhsB[self._ypos(blk.s)] += ym.imag
                 if nb:
                     rhsB[blk.k * nb + np.arange(nb)] -= w.real
                     if blk.s is not None:
@@ -1581,6 +1687,7 @@ class _Factorization:
         if nI:
             xq = xB[: self.gq.size].reshape(nc, nb, k)
             xm = xB[self.off_m:] * inv_sc if m else None
+            xy = xB[self.off_y:self.off_m].reshape(nc, mr, k) if mr else None
             Zu = self._Zu
 
             def back(i: int):
@@ -1596,6 +1703,10 @@ class _Factorization:
                         z = z - blk.lu.solve(full)
                 if m:
                     z = z - Zu[i] @ xm
+                if mr and blk.s is not None and blk.b != 0.0:
+                    # Z_II^-1 (i b U_I d y) with y = y_c - i y_s, by products (LinearFactors.apply_x)
+                    yc = xy[blk.k] - 1j * xy[blk.s]
+                    z = z - F.apply_x(blk, (1j * blk.b * F.d)[:, None] * yc)
                 return z
 
             bw = self.F.map_index(back)

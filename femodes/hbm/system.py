@@ -32,6 +32,7 @@ import scipy.sparse.linalg as spla
 
 from ..laws import CubicSpring, PenaltyContact, UnilateralContact
 from ..model import StructuralModel, low_rank_solver
+from ..sparse_direct import factorize
 from .harmonics import Harmonics
 from ..solvers.checks import check_memory
 from .linsolve import (DENSE_MAX_SIZE, BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure,
@@ -68,7 +69,7 @@ def default_contact_parameters(model: StructuralModel, dofs) -> np.ndarray:
         return out
     K = model.K.tocsc()
     try:
-        lu = spla.splu(K)
+        lu = factorize(K, positive_definite=True)
     except RuntimeError:  # singular K: a free structure
         lu = None
     if lu is not None:

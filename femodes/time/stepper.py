@@ -29,10 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..laws import CubicSpring, PenaltyContact, UnilateralContact
 from ..model import StructuralModel, low_rank_solver
+from ..sparse_direct import factorize
 from ..solvers import NewtonOptions, semismooth_newton
 from .impact import ImpactLaw, fischer_burmeister, solve_lcp
 
@@ -168,7 +168,7 @@ class Stepper:
         else:
             self.M, self.K, self.C = M, K, C
             try:
-                lu = spla.splu(A)
+                lu = factorize(A, positive_definite=True)
             except RuntimeError as exc:
                 raise ValueError(f"{_SINGULAR} (a massless DOF without stiffness?)") from exc
             self.solve = lu.solve

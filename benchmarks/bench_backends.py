@@ -1,0 +1,130 @@
+#!/usr/bin/env python
+"""Sparse direct back-ends side by side (issue 38, item 1): CPU time of what femodes factorises,
+on 3-D P2 tetrahedra (``fm.box_mesh`` 1 x 0.1 x 0.1, nx = 10 n, ny = nz = n, ``fm.solid(order=2)``,
+clamped "left", a stop on "right": one contact per node, Rayleigh beta = 0.02).
+
+Run from the repository root (the back-ends that are not installed are skipped)::
+
+    python3 benchmarks/bench_backends.py                 # sizes n = 3, 4, 6 (8.8e3, 1.9e4, 6.1e4 DOFs)
+    python3 benchmarks/bench_backends.py --sizes 4 --repeat 3
+
+Operations, each run for every back-end in one process, back-ends interleaved within each repeat
+(the machine is shared: CPU time by ``time.process_time``, BLAS on one thread through
+threadpoolctl, ``OMP_NUM_THREADS=1``; medians of the repeats):
+
+spd       ``factorize(K_II, positive_definite=True)`` (interior = all DOFs but the contact DOFs),
+          then one solve with the ``n_b`` columns of ``K_IB`` (the constraint modes).
+complex   the harmonic block ``Z = K_II - w^2 M_II + i w C_II`` at ``w = 1.5`` (between
+          eigenfrequencies), ``factorize(Z, symmetric=True)`` (SuperLU with the options of the
+          HBM block solver, ``linsolve.SUPERLU_OPTIONS``), then one solve with ``n_b`` columns.
+cb        the whole ``fm.craig_bampton(model, n_modes=20)`` under ``FEMODES_SPARSE_BACKEND``.
+
+Results: ``benchmarks/results_backends.json``; summary: ``benchmarks/README_backends.md``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+from threadpoolctl import threadpool_limits  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+import femodes as fm  # noqa: E402
+from femodes import sparse_direct as sd  # noqa: E402
+from femodes.hbm.linsolve import SUPERLU_OPTIONS  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _machine import cpu_model  # noqa: E402
+
+OUT = Path(__file__).resolve().parent / "results_backends.json"
+
+
+def model_of(n: int):
+    mesh = fm.box_mesh(length=1.0, width=0.1, height=0.1, nx=10 * n, ny=n, nz=n)
+    model = fm.solid(mesh, fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left", order=2)
+    return model.with_damping(beta=0.02).with_contact(
+        fm.UnilateralContact(at="right", gap=0.01, direction=(1.0, 0.0, 0.0)))
+
+
+def cpu(f):
+    t = time.process_time()
+    out = f()
+    return time.process_time() - t, out
+
+
+def run(n: int, repeat: int, backends) -> list[dict]:
+    model = model_of(n)
+    bd = np.array(sorted({c.dof for c in model.contacts}))
+    mask = np.ones(model.n_dofs, bool)
+    mask[bd] = False
+    I = np.flatnonzero(mask)
+    K, M, C = (A.tocsr() for A in (model.K, model.M, model.C))
+    KII = K[I][:, I].tocsc()
+    KIB = K[I][:, bd].toarray()
+    w = 1.5
+    Z = (K - w * w * M + 1j * w * C)[I][:, I].tocsc()
+    ZIB = (K - w * w * M + 1j * w * C)[I][:, bd].toarray()
+    recs = {(op, b): [] for op in ("spd", "complex", "cb") for b in backends}
+    ref = {}
+    for r in range(repeat):
+        for b in backends:
+            os.environ[sd.ENV_VAR] = b
+            for op, A, B, kw in (("spd", KII, KIB, dict(positive_definite=True)),
+                                 ("complex", Z, ZIB, dict(symmetric=True, superlu_options=SUPERLU_OPTIONS))):
+                tf, f = cpu(lambda: sd.factorize(A, **kw))
+                ts, X = cpu(lambda: f.solve(B))
+                res = float(np.abs(A @ X - B).max() / np.abs(B).max())
+                key = (op, "x")
+                ref.setdefault(key, X)
+                diff = float(np.abs(X - ref[key]).max() / np.abs(ref[key]).max())
+                recs[(op, b)].append(dict(factor_s=tf, solve_s=ts, total_s=tf + ts, residual=res,
+                                          rel_diff_vs_first=diff, used=f.backend))
+                del f
+            tc, rom = cpu(lambda: fm.craig_bampton(model, n_modes=20))
+            om = np.sort(fm.linear_modes(rom, n=10).omega) if r == 0 else None
+            if om is not None:
+                ref.setdefault("omega", om)
+            recs[("cb", b)].append(dict(total_s=tc, omega_rel_diff=(float(np.abs(om / ref["omega"] - 1).max())
+                                                                     if om is not None else None)))
+            print(f"n={n} N={model.n_dofs} repeat {r} {b}: spd {recs[('spd', b)][-1]['total_s']:.2f} s, "
+                  f"complex {recs[('complex', b)][-1]['total_s']:.2f} s, cb {tc:.2f} s", flush=True)
+    out = []
+    for (op, b), rs in recs.items():
+        med = {k: statistics.median(x[k] for x in rs) for k in rs[0] if k.endswith("_s")}
+        out.append(dict(size=n, n_dofs=int(model.n_dofs), n_interior=int(I.size), n_b=int(bd.size),
+                        op=op, backend=b, repeats=rs, **{"median_" + k: v for k, v in med.items()}))
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="3,4,6")
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args(argv)
+    backends = sd.available_backends()
+    results = dict(cpu=cpu_model(), note="CPU time, BLAS 1 thread, machine shared with other sessions",
+                   backends=list(backends), runs=[])
+    with threadpool_limits(1):
+        for n in (int(s) for s in args.sizes.split(",")):
+            results["runs"] += run(n, args.repeat, backends)
+            OUT.write_text(json.dumps(results, indent=1))
+    for r in results["runs"]:
+        base = next(x for x in results["runs"] if x["size"] == r["size"] and x["op"] == r["op"]
+                    and x["backend"] == "superlu")
+        print(f"{r['n_dofs']:7d} {r['op']:8s} {r['backend']:8s} {r['median_total_s']:8.2f} s "
+              f"(x{base['median_total_s'] / r['median_total_s']:.1f} vs SuperLU)")
+
+
+if __name__ == "__main__":
+    main()

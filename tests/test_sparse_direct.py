@@ -1,0 +1,208 @@
+"""The sparse direct back-ends (femodes.sparse_direct, issue 38): every installed back-end agrees
+with SuperLU to a tolerance derived from the conditioning, a back-end that is missing falls back
+with one log record, a bad name is a clear error; forced through ``FEMODES_SPARSE_BACKEND``,
+Craig-Bampton, linear modes, linear responses and the HBM block solver give SuperLU's results.
+The fallback path runs everywhere; the CHOLMOD and MUMPS paths where they are installed
+(``make venv`` installs them when it can)."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import femodes as fm
+from femodes import sparse_direct as sd
+from tests.conftest import roundoff_rtol
+
+OPTIONAL = [b for b in sd.BACKENDS if b != "superlu"]
+INSTALLED = sd.available_backends()
+
+
+def _box(nx=4, n=2):
+    """A short P2 box whose harmonic blocks are too wide for the band LU (sparse back-end)."""
+    mesh = fm.box_mesh(length=0.4, width=0.2, height=0.2, nx=nx, ny=n, nz=n)
+    model = fm.solid(mesh, fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left", order=2)
+    return model.with_damping(beta=0.02).with_contact(fm.UnilateralContact(at="right", gap=0.01, direction=(1.0, 0, 0)))
+
+
+@pytest.fixture(scope="module")
+def box():
+    model = _box()
+    K, M, C = (A.tocsc() for A in (model.K, model.M, model.C))
+    w = 1.5
+    Z = (K - w * w * M + 1j * w * C).tocsc()
+    # forward error of a backward-stable solve: cond(A) eps; cond(K) <= lam_max / lam_min of
+    # (K, I) ~ what roundoff_rtol(K) measures, and Z (between eigenfrequencies, damped) is
+    # better conditioned than K's extremes allow: the same scale with a margin of 100
+    tol = roundoff_rtol(K, multiple=100.0)
+    return model, K, Z, tol
+
+
+@pytest.fixture
+def backend(monkeypatch):
+    def use(name):
+        monkeypatch.setenv(sd.ENV_VAR, name)
+    return use
+
+
+@pytest.mark.parametrize("name", OPTIONAL)
+def test_backend_agrees_with_superlu(box, backend, name):
+    if name not in INSTALLED:
+        pytest.skip(f"{name} not installed (make venv installs it when it can)")
+    model, K, Z, tol = box
+    rng = np.random.default_rng(1)
+    B = rng.standard_normal((K.shape[0], 3))
+    backend("superlu")
+    ref_k = sd.factorize(K, positive_definite=True).solve(B)
+    ref_z = sd.factorize(Z).solve(B + 1j * B[::-1])
+    ref_zt = sd.factorize(Z).solve(B[:, 0], trans=True)
+    backend(name)
+    fk = sd.factorize(K, positive_definite=True)
+    assert fk.backend == name
+    x = fk.solve(B)
+    assert np.abs(x - ref_k).max() <= tol * np.abs(ref_k).max()
+    # complex right-hand sides on a real factor, one vector
+    xc = fk.solve(B[:, 0] + 2j * B[:, 1])
+    assert xc.shape == (K.shape[0],)
+    assert np.abs(xc - (ref_k[:, 0] + 2j * ref_k[:, 1])).max() <= tol * np.abs(ref_k).max()
+    fz = sd.factorize(Z)
+    assert fz.backend == ("mumps" if name == "mumps" else "superlu")  # CHOLMOD takes SPD only
+    assert np.abs(fz.solve(B + 1j * B[::-1]) - ref_z).max() <= tol * np.abs(ref_z).max()
+    assert np.abs(fz.solve(B[:, 0], trans=True) - ref_zt).max() <= tol * np.abs(ref_zt).max()
+
+
+@pytest.mark.skipif("mumps" not in INSTALLED, reason="MUMPS not installed")
+def test_mumps_unsymmetric_and_transposed(backend):
+    rng = np.random.default_rng(2)
+    A = (sp.random(300, 300, density=0.02, random_state=3) + 10 * sp.identity(300)).tocsc() * (1 + 0.5j)
+    b = rng.standard_normal(300)
+    backend("mumps")
+    f = sd.factorize(A)
+    assert f.backend == "mumps" and not sd.is_symmetric(A)
+    assert np.abs(A @ f.solve(b) - b).max() < 1e-12 * np.abs(b).max() * 10
+    assert np.abs(A.T @ f.solve(b, trans=True) - b).max() < 1e-12 * np.abs(b).max() * 10
+
+
+@pytest.mark.parametrize("name", ["superlu"] + OPTIONAL)
+def test_singular_raises_runtime_error(backend, name):
+    if name not in INSTALLED:
+        pytest.skip(f"{name} not installed")
+    backend(name)
+    A = sp.csc_matrix(np.diag([1.0, 2.0, 0.0]) + np.diag([0.0, 0.0], 1) + np.diag([0.0, 0.0], -1))
+    with pytest.raises(RuntimeError):
+        sd.factorize(A, positive_definite=True)
+
+
+@pytest.mark.parametrize("name", OPTIONAL)
+def test_forced_backend_reproduces_reduction_modes_and_response(box, backend, name):
+    if name not in INSTALLED:
+        pytest.skip(f"{name} not installed")
+    model, K, Z, tol = box
+    backend("superlu")
+    rom0 = fm.craig_bampton(model, n_modes=8)
+    om0 = fm.linear_modes(model, n=6).omega
+    q0 = fm.linear_response(model.with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=1e-3)), 1.5).amplitude
+    backend(name)
+    rom = fm.craig_bampton(model, n_modes=8)
+    om = fm.linear_modes(model, n=6).omega
+    q = fm.linear_response(model.with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=1e-3)), 1.5).amplitude
+    # the contact model's mass is singular (massless contact nodes): the scale of the pencil
+    # from the same solid without them
+    bare = fm.solid(fm.box_mesh(length=0.4, width=0.2, height=0.2, nx=4, ny=2, nz=2),
+                    fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left", order=2)
+    rtol = roundoff_rtol(bare.K, bare.M, multiple=100.0)
+    assert np.abs(om / om0 - 1).max() <= rtol
+    assert np.abs(rom.K.toarray() - rom0.K.toarray()).max() <= tol * np.abs(rom0.K.toarray()).max()
+    assert np.abs(rom.M.toarray() - rom0.M.toarray()).max() <= tol * np.abs(rom0.M.toarray()).max()
+    assert np.abs(q - q0).max() <= tol * np.abs(q0).max()
+
+
+def test_forced_backend_in_hbm_blocks(box, backend):
+    """The harmonic blocks of a 3-D solid go to the sparse back-end (not the band LU) and solve,
+    plain and transposed, as with SuperLU."""
+    from femodes.hbm.linsolve import BlockLU, build_pattern
+
+    model, K, Z, tol = box
+    bd = np.array(sorted({c.dof for c in model.contacts}))
+    pat = build_pattern(model.M, model.K, model.C, bd)
+    assert not pat.banded and pat.symmetric
+    R = np.random.default_rng(4).standard_normal((pat.perm.size, 2)) + 0j
+    backend("superlu")
+    lu0 = BlockLU(pat, 2.25, 1.5, 0.0)
+    ref = {trans: lu0.solve(R, trans=trans) for trans in (False, True)}
+    for name in INSTALLED:
+        backend(name)
+        lu = BlockLU(pat, 2.25, 1.5, 0.0)
+        assert lu.factor.backend == ("superlu" if name == "cholmod" else name)  # CHOLMOD: SPD only
+        for trans in (False, True):
+            assert np.abs(lu.solve(R, trans=trans) - ref[trans]).max() <= tol * np.abs(ref[trans]).max()
+
+
+def test_bad_backend_name_is_a_clear_error(backend):
+    backend("pardiso")
+    with pytest.raises(ValueError, match=r"FEMODES_SPARSE_BACKEND='pardiso'.*auto, superlu, cholmod, mumps"):
+        sd.factorize(sp.identity(3, format="csc"))
+    with pytest.raises(ValueError, match="FEMODES_SPARSE_BACKEND"):
+        fm.sparse_backend_info()
+
+
+def test_missing_backend_falls_back_with_one_log_record(backend, monkeypatch, caplog):
+    monkeypatch.setattr(sd, "_import", lambda name: sd.spla if name == "superlu" else None)
+    monkeypatch.setattr(sd, "_logged", set())
+    A = sp.diags([4.0, 5.0, 6.0]).tocsc()
+    for name in OPTIONAL:
+        backend(name)
+        with caplog.at_level(logging.INFO, logger="femodes.sparse_direct"):
+            caplog.clear()
+            for _ in range(3):
+                f = sd.factorize(A, positive_definite=True)
+                assert f.backend == "superlu"
+                assert np.allclose(f.solve(np.ones(3)), 1 / np.array([4.0, 5.0, 6.0]))
+        assert len([r for r in caplog.records if name in r.getMessage()]) == 1, caplog.text
+    info = fm.sparse_backend_info()
+    assert info.available == ("superlu",) and info.positive_definite == "superlu" == info.indefinite
+
+
+def test_auto_keeps_superlu_for_small_matrices(backend):
+    backend("auto")
+    A = sp.diags(np.arange(1.0, 11.0)).tocsc()
+    assert sd.factorize(A, positive_definite=True).backend == "superlu"
+    info = fm.sparse_backend_info()
+    assert info.requested == "auto" and info.min_size == sd.AUTO_MIN_SIZE
+    if "cholmod" in INSTALLED:
+        assert info.positive_definite == "cholmod"
+    if "mumps" in INSTALLED:
+        assert info.indefinite == "mumps"
+
+
+@pytest.mark.skipif(not OPTIONAL or not set(OPTIONAL) & set(INSTALLED), reason="no optional back-end installed")
+def test_backend_blas_follows_femodes_thread_limit():
+    """A back-end first imported inside femodes' BLAS limit (an analysis) brings the system's
+    OpenBLAS; the limit is applied to it too, and lifted with the others (fresh process: the
+    libraries must not be loaded yet)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    name = next(b for b in OPTIONAL if b in INSTALLED)
+    code = textwrap.dedent(f"""
+        import os
+        os.environ["FEMODES_SPARSE_BACKEND"] = "{name}"
+        os.environ.pop("OPENBLAS_NUM_THREADS", None)
+        import scipy.sparse as sp
+        from threadpoolctl import threadpool_info
+        from femodes import sparse_direct as sd
+        from femodes.solvers.threads import limit_blas_threads
+        before = {{i["filepath"] for i in threadpool_info()}}
+        with limit_blas_threads(1):
+            sd.factorize(sp.identity(10, format="csc"), positive_definite=True)
+            inside = threadpool_info()
+        assert all(i["num_threads"] == 1 for i in inside), inside
+        print(len({{i["filepath"] for i in inside}} - before))
+    """)
+    env = {k: v for k, v in __import__("os").environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
