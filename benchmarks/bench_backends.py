@@ -83,7 +83,7 @@ def run(n: int, repeat: int, backends) -> list[dict]:
             for op, A, B, kw in (("spd", KII, KIB, dict(positive_definite=True)),
                                  ("complex", Z, ZIB, dict(symmetric=True, superlu_options=SUPERLU_OPTIONS))):
                 tf, f = cpu(lambda: sd.factorize(A, **kw))
-                ts, X = cpu(lambda: f.solve(B))
+                ts, X = cpu(lambda: f.solve(B))  # noqa: F821 (f is bound on the line above)
                 res = float(np.abs(A @ X - B).max() / np.abs(B).max())
                 key = (op, "x")
                 ref.setdefault(key, X)

@@ -632,7 +632,7 @@ class LinearFactors:
         WS = np.ascontiguousarray(W[:, nb:nb + ns], dtype=complex) if ns else None
         return Zc, Wb, (inv_mu, bad, Xbad, WS, c)
 
-    def apply_x(self, blk: "_Harmonic", V: np.ndarray) -> np.ndarray:
+    def apply_x(self, blk: _Harmonic, V: np.ndarray) -> np.ndarray:
         """``Z_II^-1 U_I V`` (complex ``V``, ``m x k``) of one harmonic from the modes relation
         of :meth:`_condense_modes`, ``Z_II^-1 U_I = (Phi_I + W_b Phi_b + c Z_II^-1 E_I) diag(1/mu)``
         (the columns at ``k w`` near a mode's frequency solved directly): products, no solve."""
@@ -648,7 +648,7 @@ class LinearFactors:
             X += Xbad @ V[bad]
         return X
 
-    def rows_x(self, blk: "_Harmonic", L: np.ndarray) -> np.ndarray:
+    def rows_x(self, blk: _Harmonic, L: np.ndarray) -> np.ndarray:
         """``L Z_II^-1 U_I`` (complex ``L``, ``r x n_I``) by the relation of :meth:`apply_x`."""
         PhiI, Phib, _, _, _, ES = self.modes
         inv_mu, bad, Xbad, WS, c = blk.Xm
