@@ -45,10 +45,10 @@ import weakref
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..eigen import normal_modes
 from ..model import Attached, StructuralModel
+from ..sparse_direct import factorize
 from .system import HBMSystem
 
 __all__ = ["FreeInterfaceReduction"]
@@ -100,9 +100,8 @@ class _Basis:
             E = np.zeros((n, self.kept.size))
             E[self.kept, np.arange(self.kept.size)] = 1.0
             try:
-                lu = spla.splu(K)
-                F = lu.solve(E)
-            except RuntimeError:  # exactly singular
+                F = factorize(K, positive_definite=True).solve(E)
+            except RuntimeError:  # singular (SingularMatrixError is one)
                 F = None
             if F is not None:
                 # a numerically singular K (rigid-body motion left once the supports are counted)
