@@ -494,11 +494,13 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     :func:`femodes.estimate_mesh_error`'s, which an estimate computed here keeps if the branch
     had it. A backbone that is the energy continuation's grazing family past grazing
     (:func:`femodes.nonsmooth_modes.family_caveat`) gets ``accuracy.caveat`` and meets ``rtol`` at
-    no point. Past grazing, the levels of a period-driven backbone are traced by continuation in
-    the energy, which can follow the grazing family: their estimate is then the distance between
-    the two families (clamped bar, 20 elements, H = 10: 0.06 just past grazing to 0.47 at 6 E_g,
-    where the frequency's error against the continuum's mode is a few 1e-3), an overestimate, not
-    the truncation's.
+    no point. The levels of a period-driven backbone (``meta["family"] == "contact phase"``) are
+    solved at each point from the branch's own orbit, neither continued in the energy nor walked
+    from the previous point: both followed the grazing family past grazing, and the estimate was
+    the distance between the two families (clamped bar, 20 elements, H = 10: 0.06 just past grazing
+    to 0.6 at 20 E_g, where the error against the continuum's mode is a few 1e-3; solved point by
+    point, 6e-4 to 1.6e-2 against true errors of 3e-4 to 7e-3). A point whose level has no orbit
+    near it (in a tongue of internal resonance) gets no estimate (method ``"failed"``).
     """
     lad = _ladder(branch, projection, newton, "estimate_error")
     H = branch.harmonics.n_harmonics
@@ -576,7 +578,7 @@ def _estimate_by_levels(lad: _Ladder, rtol, max_harmonics: int, todo: np.ndarray
     impacts = "complementarity" in branch.contacts.kinds
     n = len(branch)
     if todo.all():
-        trace = _trace_level_by_continuation if impacts else _trace_level
+        trace = _trace_level_by_continuation if impacts and not _period_driven(branch) else _trace_level
         traced = []
         for H_l in levels:
             t0 = time.perf_counter()
@@ -629,6 +631,11 @@ def _estimate_by_levels(lad: _Ladder, rtol, max_harmonics: int, todo: np.ndarray
                 lv = _Levels(chains[i], lad.Q_norm(i), lad.omega_ref(i))
                 w_lim[i], w_lim_err[i] = lv.frequency_bracket()
                 finest[i] = top
+
+
+def _period_driven(branch: Branch) -> bool:
+    """The branch holds the contact-phase family traced by period past grazing."""
+    return branch.kind == "nonlinear mode" and branch.meta.get("family") == "contact phase"
 
 
 def _contracting(chain: list, Q_norm: float, omega_ref: float) -> bool:
@@ -1084,10 +1091,11 @@ def _trace_level(lad: _Ladder, H: int) -> list:
             out[i] = _anchor(branch, i)
     else:
         prev = None  # (branch anchor, level state) of the last solved point
+        walk = not _period_driven(branch)
         for i in range(n):
             anchor = _anchor(branch, i)
             out[i] = st = _level_point(lad, H, i, anchor, prev)
-            prev = None if st is None else (anchor, st)
+            prev = None if st is None or not walk else (anchor, st)
     for f in branch.folds if H != branch.harmonics.n_harmonics else ():  # the branch's own are located
         out[f] = lad.locate_fold(H, out, f)
     return out

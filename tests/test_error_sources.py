@@ -227,3 +227,24 @@ def test_mesh_error_bad_input(linear_backbones):
     loaded.model = None
     with pytest.raises(ValueError, match="give sizes="):
         fm.estimate_mesh_error(copy(f), loaded, order=2)
+
+
+def test_period_driven_backbone_estimate_is_the_truncation_not_the_other_family():
+    """Past grazing the levels of a period-driven backbone are solved from the branch's own orbits:
+    the estimate is of the size of the truncation error (the bar, 20 elements, H = 10: 6e-4 to
+    1.6e-2, against errors of 3e-4 to 7e-3 from the continuum's mode, which also hold the mesh's
+    share), not the distance to the grazing family (0.06 to 0.6 when the levels were continued in
+    the energy). Bound: a tenth of the distance between the families at 2 E_g (0.1 x 0.1)."""
+    mesh = fm.line_mesh(1.0, 20, boundaries={"clamp": 0.0, "tip": 1.0})
+    model = (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
+             .with_contact(fm.UnilateralContact(at="tip", gap=0.01)))
+    eg = fm.grazing_energy(model)
+    b = fm.nonlinear_mode(model, 1, energy=(0.5 * eg, 10 * eg), harmonics=10)
+    assert b.meta["family"] == "contact phase"
+    fm.estimate_error(b)
+    eg_c = math.pi ** 2 * 0.01 ** 2 / 16
+    past = (b.energy > 1.5 * eg_c) & np.isfinite(b.accuracy.omega)
+    assert past.sum() >= 3
+    assert np.all(b.accuracy.omega[past] < 0.05)  # not the 0.06-0.6 of the grazing family
+    true = np.abs(b.omega[past] / first_nonsmooth_mode(b.energy[past] / eg_c)[0] - 1)
+    assert np.median(b.accuracy.omega[past]) < 0.05 and np.all(true < 1e-2)
