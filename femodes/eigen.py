@@ -17,7 +17,7 @@ import scipy.sparse.linalg as spla
 
 from .sparse_direct import factorize
 
-__all__ = ["DENSE_LIMIT", "IllConditionedWarning", "check_conditioning", "mass_normalize", "generalized_eigh",
+__all__ = ["DENSE_LIMIT", "IllConditionedWarning", "check_conditioning", "eigenvalue_floor", "mass_normalize", "generalized_eigh",
            "normal_modes"]
 
 log = logging.getLogger(__name__)
@@ -28,6 +28,18 @@ DENSE_LIMIT = 600
 
 class IllConditionedWarning(UserWarning):
     """Stiffness matrix so ill-conditioned that low eigenvalues lose most of their digits."""
+
+
+def eigenvalue_floor(K, M) -> float:
+    """Round-off floor of the eigenvalues of ``(K, M)``: ``1e3 eps max(K_ii / M_ii)`` over the DOFs
+    with mass (``max |K_ii|`` if none has any). The largest diagonal ratio bounds the largest
+    eigenvalue from below (Rayleigh quotients of unit vectors), so an eigenvalue under this floor
+    carries no digits: a rigid-body mode, or a singular ``K`` passing a factorisation by round-off.
+    ``K``, ``M``: sparse or dense."""
+    Kd, Md = np.asarray(K.diagonal(), dtype=float), np.asarray(M.diagonal(), dtype=float)
+    heavy = Md > 0
+    scale = float(np.max(Kd[heavy] / Md[heavy])) if heavy.any() else float(np.max(np.abs(Kd), initial=0.0))
+    return 1e3 * np.finfo(float).eps * scale
 
 
 def check_conditioning(K: sp.spmatrix, solve, n: int, owner: str, *, warn: bool = True) -> float:
@@ -98,8 +110,7 @@ def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigm
                 # absolute errors ~eps * mu_max, i.e. no digits. max K_ii / M_ii <= lambda_max
                 # (Rayleigh quotients of unit vectors), so this floor test errs towards the inverse
                 # problem only for cond(K) > 1 / (1e3 eps) = 4.5e12.
-                floor = 1e3 * np.finfo(float).eps * float(np.max(np.diag(Kd) / np.diag(Md)))
-                if np.all(mu > 0) and 1.0 / mu[-1] > floor:
+                if np.all(mu > 0) and 1.0 / mu[-1] > eigenvalue_floor(Kd, Md):
                     return 1.0 / mu[::-1], vec[:, ::-1]
             except (np.linalg.LinAlgError, ValueError):
                 pass  # K singular (free structure): direct problem below

@@ -12,7 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .eigen import IllConditionedWarning, normal_modes
+from .eigen import IllConditionedWarning, eigenvalue_floor, normal_modes
 from .model import StructuralModel, low_rank_solver
 from .sparse_direct import factorize
 from .solvers.checks import check_int
@@ -82,14 +82,10 @@ def grazing_energy(model: StructuralModel, mode: int = 1, *, modes: LinearModes 
 
 def rigid_body_modes(model: StructuralModel, omega: np.ndarray) -> np.ndarray:
     """Which of the frequencies ``omega`` (rad/s) of ``model`` are rigid-body modes: ``w^2`` at the
-    round-off floor of ``K``'s eigenvalues, ``1e3 eps max(K_ii / M_ii)`` (the largest diagonal
-    ratio bounds the largest eigenvalue from below; the floor of :mod:`femodes.eigen`). A model
+    round-off floor of ``K``'s eigenvalues (:func:`femodes.eigen.eigenvalue_floor`). A model
     without supports, or with a mesh part that is not connected to them (unmerged duplicate
     nodes), has such modes."""
-    Kd, Md = model.K.diagonal(), model.M.diagonal()
-    heavy = Md > 0
-    scale = float(np.max(Kd[heavy] / Md[heavy])) if heavy.any() else float(np.max(np.abs(Kd), initial=0.0))
-    return np.asarray(omega, dtype=float) ** 2 <= 1e3 * np.finfo(float).eps * scale
+    return np.asarray(omega, dtype=float) ** 2 <= eigenvalue_floor(model.K, model.M)
 
 
 def rigid_body_message(count: int, owner: str) -> str:
