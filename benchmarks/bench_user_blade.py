@@ -36,8 +36,7 @@ def main() -> None:
         mesh = fm.load_mesh(ex.MESHES[False])
         model, *t = timed(lambda: fm.solid(mesh, ex.STEEL, clamped="root", order=2))
         rows["model (fm.solid, Q2)"] = t
-        model = (model.with_contact(fm.UnilateralContact(at="pad", gap=ex.GAP, direction=(0.0, 0.0, 1.0)))
-                 .with_forcing(fm.HarmonicForce(at=("pad", "u_z"), amplitude=ex.FORCE)).with_damping(modal=ex.ZETA))
+        model = ex.with_stop(model)
         rom, *t = timed(lambda: fm.craig_bampton(model, 10))
         rows["Craig-Bampton (10 modes)"] = t
         w1 = float(fm.linear_modes(rom, 1).omega[0])

@@ -81,12 +81,11 @@ def _blade3d():
     sys.path.insert(0, str(HERE))
     import user_blade_3d as ub
 
-    model = fm.solid(fm.load_mesh(ub.MESHES[False]), ub.STEEL, clamped="root", order=2)
-    model = model.with_contact(fm.UnilateralContact(at="pad", gap=ub.GAP, direction=(0.0, 0.0, 1.0)))
+    solid = fm.solid(fm.load_mesh(ub.MESHES[False]), ub.STEEL, clamped="root", order=2)
+    model = ub.with_stop(solid, zeta=None, force=None)
 
     def forced(d):
-        return fm.craig_bampton(model.with_damping(modal=d).with_forcing(fm.HarmonicForce(at=("pad", "u_z"),
-                                                                                            amplitude=ub.FORCE)), 10)
+        return fm.craig_bampton(ub.with_stop(solid, zeta=d), 10)
 
     w1 = float(fm.linear_modes(model, 1).omega[0])
     return dict(free=fm.craig_bampton(model, 10), forced=forced, damping=0.01, H=5, span=(0.9 * w1, 1.25 * w1),

@@ -111,6 +111,18 @@ def write_mesh(path: Path, n_length: int = 15, n_chord: int = 4) -> Path:
     return path
 
 
+def with_stop(solid: fm.StructuralModel, zeta: float | None = ZETA, force: float | None = FORCE) -> fm.StructuralModel:
+    """The blade's loads on its solid model: the stop ``GAP`` above every pad node, and unless None
+    the resultant ``force`` on the pad and modal damping ``zeta`` (None, None: the free structure of
+    a backbone)."""
+    model = solid.with_contact(fm.UnilateralContact(at="pad", gap=GAP, direction=(0.0, 0.0, 1.0)))
+    if force is not None:
+        model = model.with_forcing(fm.HarmonicForce(at=("pad", "u_z"), amplitude=force))
+    if zeta is not None:
+        model = model.with_damping(modal=zeta)
+    return model
+
+
 class Stages:
     """Wall time of each stage, printed as it ends."""
 
@@ -141,10 +153,7 @@ def run(out: Path | str = "out/user_blade_3d", quick: bool = False, echo: bool =
         mesh_path, made = MESHES[quick], "read (gmsh not installed)"
     mesh = fm.load_mesh(mesh_path)
     st.done("mesh", f"{made}: {mesh_path.name}")
-    model = fm.solid(mesh, STEEL, clamped="root", order=2)
-    model = (model.with_contact(fm.UnilateralContact(at="pad", gap=GAP, direction=(0.0, 0.0, 1.0)))
-                  .with_forcing(fm.HarmonicForce(at=("pad", "u_z"), amplitude=FORCE))
-                  .with_damping(modal=ZETA))
+    model = with_stop(fm.solid(mesh, STEEL, clamped="root", order=2))
     st.done("model", f"{model.n_dofs} DOFs, {len(model.contacts)} contacts")
     linear = fm.linear_modes(model, 3)
     w1 = float(linear.omega[0])

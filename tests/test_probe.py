@@ -2,6 +2,7 @@
 read it (mean or max over the boundary's nodes; a Craig-Bampton model reads its parent's
 boundaries through its basis, kept or not)."""
 
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -12,14 +13,13 @@ import pytest  # noqa: E402
 
 import femodes as fm  # noqa: E402
 
-MESH = Path(__file__).resolve().parents[1] / "meshes" / "user_blade_quick.msh"
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
+import user_blade_3d as ub  # noqa: E402  (the blade of the example: 6 x 2 Q2 mesh, stop, force, damping)
 
 
 @pytest.fixture(scope="module")
 def blade():
-    model = fm.solid(fm.load_mesh(MESH), fm.Material(E=210e9, rho=7800.0, nu=0.3), clamped="root", order=2)
-    model = (model.with_contact(fm.UnilateralContact(at="pad", gap=0.3e-3, direction=(0.0, 0.0, 1.0)))
-                  .with_forcing(fm.HarmonicForce(at=("pad", "u_z"), amplitude=1.0)).with_damping(modal=0.01))
+    model = ub.with_stop(fm.solid(fm.load_mesh(ub.MESHES[True]), ub.STEEL, clamped="root", order=2))
     rom = fm.craig_bampton(model, 6)
     return model, rom
 
