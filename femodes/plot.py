@@ -578,10 +578,10 @@ def contact_pressure(solution: PeriodicSolution, model: Any = None, *, boundary:
     side.tick_params(labelleft=False)
     side.grid(True, alpha=0.3)
     fig.colorbar(mesh, cax=cax, label="contact pressure", extend="min" if values.min() < 0 else "neither")
-    low = float(values.min())
-    if low < 0 or solution.penetration > 0:
+    low, pen = float(values.min()), solution.penetration
+    if low < 0 or pen > 0:
         # what the picture cannot show by colour: the truncated law's artefacts, said on it
         ax.text(0.0, -0.2, f"H = {solution.harmonics.n_harmonics}: Fourier truncation gives pressures down to "
-                f"{low:.3g} (drawn as 0) and penetration up to {solution.penetration:.3g}; raise the harmonics "
+                f"{low:.3g} (drawn as 0) and penetration up to {pen:.3g}; raise the harmonics "
                 "to reduce them", transform=ax.transAxes, fontsize="small", color="0.35", va="top")
     return fig
