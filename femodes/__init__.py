@@ -19,7 +19,7 @@ from .results import Bifurcation, Branch, ErrorEstimate, PeriodicSolution, load_
 from .analyses import StaticContactResult, frequency_response, nonlinear_mode, static_contact
 from .nonsmooth_modes import InternalResonance, PeriodDriven
 from .resonance import ResonancePeak, compare_resonance
-from .floquet import StabilityResult, stability
+from .floquet import StabilityOptions, StabilityResult, stability
 from .accuracy import estimate_error
 from .mesh_error import estimate_mesh_error
 from .switching import switch_branch
@@ -58,6 +58,7 @@ __all__ = [
     "HarmonicForce",
     "StructuralModel",
     "Bifurcation",
+    "StabilityOptions",
     "StabilityResult",
     "stability",
     "switch_branch",

@@ -32,7 +32,7 @@ from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.threads import limit_blas_threads
 from .accuracy import check_estimate_method, rtol_time_limit, meet_tolerance, refinement_options, shooting_unsupported_for
-from .floquet import METHODS, annotate_branch
+from .floquet import StabilityOptions, annotate_branch
 from .nonsmooth_modes import PeriodDriven, continue_past_grazing
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
@@ -132,7 +132,7 @@ def frequency_response(
     projection=None,
     progress: bool | Callable = False,
     checkpoint: str | os.PathLike | Checkpoint | None = None,
-    stability: bool | str = False,
+    stability: bool | str | StabilityOptions = False,
     rtol: float | None = None,
     max_harmonics: int | None = None,
     error_method: str = "auto",
@@ -175,6 +175,12 @@ def frequency_response(
         (step bounds, ``max_points``...), the arclength scaling of the run is kept.  Damaged
         files or another format version give a ``ValueError`` naming the file.
 
+    stability : bool, str or StabilityOptions
+        Floquet stability of every point and the bifurcations between points
+        (:mod:`femodes.floquet`): False (default) none, True the defaults of
+        :class:`~femodes.StabilityOptions`, a method name (``"auto"``, ``"hill"``,
+        ``"shooting"``), or ``StabilityOptions(method, tol, locate)``; ``locate=False`` brackets
+        the bifurcations between points without locating them (no solves beyond the points').
     rtol : float, optional
         Requested relative accuracy of the frequency with respect to the converged (``H -> inf``)
         answer (e.g. ``1e-3``). The branch then carries :attr:`~femodes.Branch.accuracy`: with
@@ -238,7 +244,7 @@ def frequency_response(
             run_options = dataclasses.replace(run_options, x_scale=_response_scale(problem, span, xs))
         return xs, run_options
 
-    method = stability_method(stability, "frequency_response")
+    method = stability_options(stability, "frequency_response")
 
     def wrap(res, meta) -> Branch:
         branch = branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span), **meta})
@@ -432,7 +438,7 @@ def nonlinear_mode(
     projection=None,
     progress: bool | Callable = False,
     checkpoint: str | os.PathLike | Checkpoint | None = None,
-    stability: bool | str = False,
+    stability: bool | str | StabilityOptions = False,
     rtol: float | None = None,
     max_harmonics: int | None = None,
     past_grazing: PeriodDriven | None = PeriodDriven(),
@@ -449,7 +455,7 @@ def nonlinear_mode(
     :func:`frequency_response`: every converged point is written to a journal as it is found; the
     checkpoint must come from the same model, ``mode``, energy span, harmonics and ``projection``.
     ``rtol`` and ``max_harmonics`` are as for :func:`frequency_response` (levels compared at equal
-    energy).
+    energy), and so is ``stability`` (``True`` or a :class:`~femodes.StabilityOptions`).
 
     Past grazing (models with unilateral contacts): the returned family is the one whose motions
     have a contact phase in every period and keep most of their energy in mode ``mode``; it is the
@@ -485,7 +491,7 @@ def nonlinear_mode(
     x0 = problem.linear_guess(e0)
     user_options = options
     options = nonlinear_mode_options(problem, x0, options)
-    method = stability_method(stability, "nonlinear_mode")
+    method = stability_options(stability, "nonlinear_mode")
 
     def wrap(res, meta) -> Branch:
         if res.status == 5:  # the start failed: say it in the user's terms, not as p = log10(E)
@@ -516,24 +522,19 @@ def nonlinear_mode(
                           time_limit=rtol_time_limit(time.perf_counter() - started))
 
 
-def stability_method(stability: Any, owner: str) -> str | None:
-    """``stability=`` of the analyses: False (none), True (``"auto"``) or a method name."""
-    if stability is False or stability is None:
-        return None
-    if stability is True:
-        return "auto"
-    if stability in METHODS:
-        return stability
-    raise ValueError(f"{owner}: stability must be True, False or one of {', '.join(map(repr, METHODS))}, "
-                     f"got {stability!r}")
+def stability_options(stability: Any, owner: str) -> StabilityOptions | None:
+    """``stability=`` of the analyses: False (none), True (the defaults), a method name or a
+    :class:`~femodes.StabilityOptions`."""
+    return StabilityOptions.parse(stability, owner)
 
 
-def _with_stability(branch: Branch, problem, model: StructuralModel, method: str | None,
+def _with_stability(branch: Branch, problem, model: StructuralModel, stability: StabilityOptions | None,
                     options: ContinuationOptions) -> Branch:
     """The branch with its stability and bifurcations (:mod:`femodes.floquet`), once."""
-    if method is None or branch.stable is not None or not len(branch):
+    if stability is None or branch.stable is not None or not len(branch):
         return branch
-    return annotate_branch(branch, problem, model, method=method, newton=options.newton)
+    return annotate_branch(branch, problem, model, method=stability.method, tol=stability.tol, newton=options.newton,
+                           locate=stability.locate)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

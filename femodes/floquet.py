@@ -56,7 +56,8 @@ from .solvers.roots import illinois
 from .solvers.threads import limit_blas_threads
 from .time.shooting import shoot, unsupported
 
-__all__ = ["stability", "StabilityResult", "ShootingError", "annotate_branch", "solve_on_secant", "METHODS"]
+__all__ = ["stability", "StabilityResult", "StabilityOptions", "ShootingError", "annotate_branch", "solve_on_secant",
+           "METHODS"]
 
 log = logging.getLogger(__name__)
 
@@ -78,8 +79,8 @@ AUTO_MAX_STIFFNESS = 50.0
 MAX_CORRECTION = 0.2
 
 #: A located crossing whose test function ``|mu| - 1`` stays above this on both sides of a
-#: bracket of :data:`JUMP_XTOL` of the segment is a jump (kind ``"nonsmooth"``), not a smooth
-#: crossing (which is then refined to a bracket of 1e-7).
+#: narrow bracket (:data:`JUMP_BRACKET`, :data:`JUMP_XTOL`) is a jump (kind ``"nonsmooth"``), not a
+#: smooth crossing (which is then refined to a bracket of 1e-7).
 JUMP = 1e-3
 
 #: Seconds between progress lines of a stability run along a branch.
@@ -87,6 +88,12 @@ PROGRESS_EVERY = 5.0
 
 #: Bracket width (fraction of the segment between two branch points) at which a jump is declared.
 JUMP_XTOL = 1e-3
+
+#: A bracket of this fraction of the segment whose ends still differ by :data:`JUMP_SHARE` of the
+#: test function's change over the whole segment (and both above :data:`JUMP`) is a jump: a
+#: smooth crossing's change shrinks with its bracket.
+JUMP_BRACKET = 1.0 / 32.0
+JUMP_SHARE = 0.5
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -113,6 +120,55 @@ class StabilityResult:
     method: str
     message: str = ""
     orbit_correction: float = math.nan
+
+
+@dataclasses.dataclass(frozen=True)
+class StabilityOptions:
+    """Stability along a branch: ``stability=StabilityOptions(...)`` of the analyses
+    (``stability=True`` is ``StabilityOptions()``, ``stability="hill"`` is
+    ``StabilityOptions(method="hill")``).
+
+    Attributes
+    ----------
+    method : {"auto", "hill", "shooting"}
+        How the multipliers of each point are computed (module docstring).
+    tol : float
+        A point is unstable when ``max |mu| > 1 + tol``.
+    locate : bool
+        True (default): each change of stability between two points is located between them by
+        regula falsi over solutions corrected on the secant, about 6 corrector and Hill solves
+        for a jump of the multipliers and 5-15 for a smooth crossing, and classified there
+        (``"nonsmooth"`` for a jump). False: bracketing only, at no cost beyond the points'
+        multipliers: the bifurcation is reported at the point of the bracket on its unstable
+        side (``Bifurcation.located`` False), classified by that point's crossing multiplier
+        (a jump cannot be told from a crossing there). :func:`~femodes.switch_branch` locates
+        the bifurcation itself in either case.
+    """
+
+    method: str = "auto"
+    tol: float = TOL
+    locate: bool = True
+
+    def __post_init__(self):
+        _check_method(self.method, "StabilityOptions")
+        object.__setattr__(self, "tol", _check_tol(self.tol, "StabilityOptions"))
+        if not isinstance(self.locate, (bool, np.bool_)):
+            raise TypeError(f"StabilityOptions: locate must be True or False, got {self.locate!r}")
+
+    @classmethod
+    def parse(cls, stability: Any, owner: str) -> StabilityOptions | None:
+        """``stability=`` of an analysis: False or None (no stability), True (the defaults), a
+        method name, or a :class:`StabilityOptions`."""
+        if stability is False or stability is None:
+            return None
+        if stability is True:
+            return cls()
+        if isinstance(stability, cls):
+            return stability
+        if isinstance(stability, str) and stability in METHODS:
+            return cls(method=stability)
+        raise ValueError(f"{owner}: stability must be True, False, one of {', '.join(map(repr, METHODS))} or a "
+                         f"femodes.StabilityOptions, got {stability!r}")
 
 
 def _check_method(method: Any, owner: str) -> str:
@@ -281,9 +337,9 @@ class _Annotator:
     """Multipliers at every point of a branch, and its bifurcations located between points."""
 
     def __init__(self, branch: Branch, problem, model: StructuralModel, method: str, tol: float,
-                 newton: NewtonOptions):
+                 newton: NewtonOptions, locate: bool = True):
         self.branch, self.problem, self.model = branch, problem, model
-        self.method, self.tol, self.newton = method, tol, newton
+        self.method, self.tol, self.newton, self.locate = method, tol, newton, locate
         self.forced = isinstance(problem, ForcedResponseProblem)
         self.system = problem.system
 
@@ -340,8 +396,12 @@ class _Annotator:
                 log.info("stability: no bifurcation test between points %d and %d (%s vs %s)", i, i + 1,
                          results[i].method, results[i + 1].method)
                 continue
+            k = max(counts[i], counts[i + 1])
+            if not self.locate:
+                bifs.append(self._bracketed(i, k, results[i], results[i + 1], counts[i + 1] > counts[i]))
+                continue
             log.info("stability: locating the change between points %d and %d", i, i + 1)
-            bif = self._locate(i, max(counts[i], counts[i + 1]), results[i], results[i + 1])
+            bif = self._locate(i, k, results[i], results[i + 1])
             if bif is not None:
                 bifs.append(bif)
         bifs.sort(key=lambda z: (z.index, z.parameter))
@@ -352,13 +412,25 @@ class _Annotator:
         return Bifurcation(kind="fold", index=int(f), omega=float(b.omega[f]), energy=float(b.energy[f]),
                            parameter=float(b.parameter[f]), multiplier=complex(1.0), Q=b.Q[f], P=b.P[f], xi=float(b.xi[f]))
 
+    def _bracketed(self, i: int, k: int, ra: StabilityResult, rb: StabilityResult, rising: bool) -> Bifurcation:
+        """The change between points ``i`` and ``i + 1`` reported at the point on its unstable side
+        (``StabilityOptions(locate=False)``)."""
+        j, r = (i + 1, rb) if rising else (i, ra)
+        b = self.branch
+        crossing = self.crossing(r.multipliers, k)
+        return Bifurcation(kind=_kind(crossing, r.multipliers, not self.forced), index=int(i), omega=float(b.omega[j]),
+                           energy=float(b.energy[j]), parameter=float(b.parameter[j]), multiplier=complex(crossing),
+                           Q=np.array(b.Q[j]), P=np.array(b.P[j]), xi=float(b.xi[j]), located=False)
+
     def _locate(self, i: int, k: int, ra: StabilityResult, rb: StabilityResult) -> Bifurcation | None:
         """Regula falsi (Illinois, bisecting whenever the bracket does not halve) on
         ``tau(theta) = |mu_(k)| - 1`` along the secant from point ``i`` to ``i + 1``.
 
-        A bracket that shrinks below ``1e-7`` of the segment while ``|tau|`` stays above
-        :data:`JUMP` on both sides is a jump of the multipliers across the circle, not a smooth
-        crossing: kind ``"nonsmooth"`` (a change of the contact pattern, e.g. grazing)."""
+        A bracket that shrinks to :data:`JUMP_BRACKET` of the segment with ``|tau|`` above
+        :data:`JUMP` on both sides and its ends still :data:`JUMP_SHARE` of the change over the
+        segment apart, or to :data:`JUMP_XTOL` with ``|tau|`` above :data:`JUMP`, is a jump of the
+        multipliers across the circle, not a smooth crossing: kind ``"nonsmooth"`` (a change of
+        the contact pattern, e.g. grazing)."""
         b = self.branch
         za = np.append(self.point(i), b.parameter[i])
         zb = np.append(self.point(i + 1), b.parameter[i + 1])
@@ -375,15 +447,24 @@ class _Annotator:
             ends[theta] = (z, r)
             return self.tau(r.multipliers, k)
 
-        # in two passes: a jump (the test function stays above JUMP on both sides) is told apart
-        # once the bracket is JUMP_XTOL of the segment wide; only a smooth crossing is refined to
-        # 1e-7 (a jump took ~27 Hill solves to 1e-7, now ~10)
+        # in passes: a jump (the test function stays above JUMP on both sides) is told apart
+        # once the bracket is JUMP_BRACKET of the segment wide and still holds most of the change
+        # of the test function (a smooth crossing's change shrinks with the bracket), or else
+        # once it is JUMP_XTOL wide; only a smooth crossing is refined to 1e-7 (a jump took ~27
+        # Hill solves to 1e-7, then ~13 to 1e-3, now ~6)
         opts = dict(ftol=1e-9, margin=1e-3, bisect_if_slow=True)
-        br = illinois(tau, 0.0, 1.0, self.tau(ra.multipliers, k), self.tau(rb.multipliers, k), max_iter=40,
-                      xtol=JUMP_XTOL, **opts)
-        if min(abs(br.f_lo), abs(br.f_hi)) <= JUMP and abs(br.f_lo) > 1e-9 and abs(br.f_hi) > 1e-9:
+        fa, fb = self.tau(ra.multipliers, k), self.tau(rb.multipliers, k)
+
+        def small(br):
+            return min(abs(br.f_lo), abs(br.f_hi)) <= JUMP
+
+        br = illinois(tau, 0.0, 1.0, fa, fb, max_iter=40, xtol=JUMP_BRACKET, **opts)
+        jump = not small(br) and abs(br.f_hi - br.f_lo) >= JUMP_SHARE * abs(fb - fa)
+        if not jump and not small(br):
+            br = illinois(tau, br.lo, br.hi, br.f_lo, br.f_hi, max_iter=max(1, 40 - br.nfev), xtol=JUMP_XTOL, **opts)
+        if small(br) and abs(br.f_lo) > 1e-9 and abs(br.f_hi) > 1e-9:
             br = illinois(tau, br.lo, br.hi, br.f_lo, br.f_hi, max_iter=max(1, 40 - br.nfev), xtol=1e-7, **opts)
-        smooth = min(abs(br.f_lo), abs(br.f_hi)) <= JUMP
+        smooth = small(br)
         th = br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi
         if not smooth:
             th = br.hi if br.f_hi > 0 else br.lo  # the unstable side: its crossing multiplier is reported
@@ -504,17 +585,19 @@ def _kind(mu: complex, all_mu: np.ndarray, free: bool = False) -> str:
 
 
 def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: str = "auto", tol: float = TOL,
-                    newton: NewtonOptions | None = None) -> Branch:
+                    newton: NewtonOptions | None = None, locate: bool = True) -> Branch:
     """Fill ``branch.stable``, ``branch.multipliers``, ``branch.bifurcations`` (module docstring).
 
     ``problem`` is the :class:`ForcedResponseProblem` or :class:`NonlinearModeProblem` the
-    branch was traced with; ``newton`` the corrector options of the located points.
+    branch was traced with; ``newton`` the corrector options of the located points; ``locate``
+    as in :class:`StabilityOptions`.
     """
-    method = _check_method(method, "stability")
-    tol = _check_tol(tol, "stability")
+    opts = StabilityOptions(method=method, tol=tol, locate=locate)
     if not isinstance(problem, (ForcedResponseProblem, NonlinearModeProblem)):
         raise TypeError(f"annotate_branch: problem must be an HBM problem, got {type(problem).__name__}")
-    ann = _Annotator(branch, problem, model, method, tol, newton or NewtonOptions(atol=1e-9, max_iter=20))
+    method, tol = opts.method, opts.tol
+    ann = _Annotator(branch, problem, model, method, tol, newton or NewtonOptions(atol=1e-9, max_iter=20),
+                     opts.locate)
     results, bifs = ann.run()
     m = max((r.multipliers.size for r in results), default=0)
     mult = np.full((len(branch), m), np.nan + 0j)

@@ -55,6 +55,10 @@ class Bifurcation:
         The periodic solution at the bifurcation (displacement and contact-force coefficients).
     xi : float
         Artificial damping (nonlinear modes).
+    located : bool
+        True when it was located between its two branch points (``omega``, ``Q``, ``P`` are
+        there); False for a bracketed one (``StabilityOptions(locate=False)``), reported at the
+        point of the bracket on its unstable side.
     """
 
     kind: str
@@ -66,6 +70,7 @@ class Bifurcation:
     Q: np.ndarray
     P: np.ndarray
     xi: float = 0.0
+    located: bool = True
 
     def __post_init__(self):
         if self.kind not in BIFURCATION_KINDS:
@@ -73,7 +78,7 @@ class Bifurcation:
 
     def __repr__(self) -> str:
         return (f"Bifurcation({self.kind!r}, index={self.index}, omega={self.omega:.8g}, "
-                f"multiplier={complex(self.multiplier):.4g})")
+                f"multiplier={complex(self.multiplier):.4g}{'' if self.located else ', located=False'})")
 
 
 #: How the error of a point was estimated (:attr:`ErrorEstimate.method`): from the change between
@@ -729,7 +734,8 @@ class Branch:
                 "method": [str(m) for m in self.accuracy.method], "rtol": self.accuracy.rtol,
                 "mesh_method": self.accuracy.mesh_method, "caveat": self.accuracy.caveat},
             "stability": None if self.stable is None else {
-                "methods": [str(m) for m in self.stability_method], "kinds": [b.kind for b in self.bifurcations]},
+                "methods": [str(m) for m in self.stability_method], "kinds": [b.kind for b in self.bifurcations],
+                          "located": [bool(b.located) for b in self.bifurcations]},
         }
 
     def save(self, path) -> Path:
@@ -813,6 +819,9 @@ def _check_schema(header: dict, arrays: dict, path: Path) -> None:
                 bad(f"it has stability but no array {key!r}")
         if len(stab["kinds"]) != len(arrays["bif_index"]) or arrays["bif_real"].shape[1:] != (6,):
             bad(f"its {len(stab['kinds'])} bifurcation kinds do not match arrays 'bif_index' and 'bif_real'")
+        loc = stab.get("located")
+        if loc is not None and (not isinstance(loc, list) or len(loc) != len(stab["kinds"])):
+            bad(f"header field 'stability' has a 'located' that is not a list of {len(stab['kinds'])} flags")
 
 
 def load_branch(path, model=None) -> Branch:
@@ -854,10 +863,11 @@ def load_branch(path, model=None) -> Branch:
                                                                               "finest", "mesh") if f"accuracy_{k}" in arrays}))
     stab = header.get("stability")
     if stab is not None:
+        located = stab.get("located", [True] * len(stab["kinds"]))  # older files: every bifurcation located
         bifs = [Bifurcation(kind=k, index=int(i), omega=float(r[0]), energy=float(r[1]), parameter=float(r[2]),
-                            multiplier=complex(r[3], r[4]), xi=float(r[5]), Q=q, P=p)
-                for k, i, r, q, p in zip(stab["kinds"], arrays["bif_index"], arrays["bif_real"], arrays["bif_Q"],
-                                         arrays["bif_P"])]
+                            multiplier=complex(r[3], r[4]), xi=float(r[5]), Q=q, P=p, located=bool(loc))
+                for k, i, r, q, p, loc in zip(stab["kinds"], arrays["bif_index"], arrays["bif_real"], arrays["bif_Q"],
+                                              arrays["bif_P"], located)]
         br.set_stability(stable=arrays["stable"].astype(bool),
                          multipliers=arrays["multipliers_re"] + 1j * arrays["multipliers_im"], bifurcations=bifs,
                          methods=stab["methods"], tol=float(br.meta.get("stability_tol", 1e-4)))

@@ -72,11 +72,11 @@ import numpy as np
 import scipy.linalg as sla
 
 from .analyses import (branch_from_continuation, frequency_response, frequency_response_options, nonlinear_mode_options,
-                       stability_method)
+                       stability_options)
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .results import Bifurcation, Branch
-from .floquet import (annotate_branch, augmented_jacobian, branch_point_test, refine_branch_point, root_on_secant,
+from .floquet import (StabilityOptions, annotate_branch, augmented_jacobian, branch_point_test, refine_branch_point, root_on_secant,
                       solve_on_secant)
 from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState, NewtonOptions, continuation,
                       semismooth_newton)
@@ -182,7 +182,7 @@ def _same_bifurcation(a: Bifurcation, b: Bifurcation) -> bool:
 
 def switch_branch(branch: Branch, bifurcation: Bifurcation, omega: tuple[float, float], *,
                   amplitude: float | None = None, options: ContinuationOptions | None = None,
-                  stability: bool | str = False, window: int = 10) -> Branch:
+                  stability: bool | str | StabilityOptions = False, window: int = 10) -> Branch:
     """Continue the branch born at ``bifurcation`` of ``branch`` (module docstring).
 
     Parameters
@@ -214,7 +214,7 @@ def switch_branch(branch: Branch, bifurcation: Bifurcation, omega: tuple[float, 
         Continuation of the new branch (default :func:`~femodes.frequency_response_options`,
         resp. :func:`~femodes.analyses.nonlinear_mode_options`); ``options.newton`` also
         corrects the located points and the first point.
-    stability : bool or str
+    stability : bool, str or StabilityOptions
         Stability of the new branch, as in :func:`~femodes.frequency_response` (needed to switch
         again from the new branch, e.g. back off a tongue).
     window : int
@@ -448,7 +448,7 @@ def _null_directions(aug: _Augmented, z_bp: np.ndarray, za: np.ndarray, zb: np.n
 
 def _switch_at_branch_point(branch: Branch, bif: Bifurcation, span: tuple[float, float], amplitude, options,
                             stability, window: int) -> Branch:
-    method = stability_method(stability, "switch_branch")  # a bad value is refused before the work
+    method = stability_options(stability, "switch_branch")  # a bad value is refused before the work
     aug = _Augmented(branch)
     w_lo, w_hi = min(span), max(span)
     if not w_lo < bif.omega < w_hi:
@@ -498,7 +498,8 @@ def _switch_at_branch_point(branch: Branch, bif: Bifurcation, span: tuple[float,
     if not new.success:
         log.warning("switch_branch: %s", new.message)
     if method is not None:
-        annotate_branch(new, aug.problem, branch.model, method=method, newton=newton)
+        annotate_branch(new, aug.problem, branch.model, method=method.method, tol=method.tol, newton=newton,
+                        locate=method.locate)
         _add_branch_points(new, newton)
     new.meta["switched_from"] = {
         "kind": "branch_point", "reported_kind": bif.kind, "omega_hbm": float(u_bp.omega), "omega_reported": float(bif.omega), "index": int(i),

@@ -228,3 +228,17 @@ def test_series_state_units_and_contact_quality(cantilever_nnm, tmp_path):
     assert "unit displacement: mm" in meshio.read(tmp_path / read_pvd(pvd)[0][1]).field_data
     with pytest.raises(ValueError, match="units must be"):
         write_animation(sol, model, tmp_path / "bad", n_frames=4, units="imperial")
+
+
+def test_linear_mode_series_state_units(tmp_path):
+    """write_linear_mode takes ``units`` as write_animation does, and says the shape is
+    mass-normalised."""
+    mesh = fm.line_mesh(1.0, 4, boundaries={"clamp": 0.0, "tip": 1.0})
+    bar = fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
+    modes = fm.linear_modes(bar, 1)
+    pvd = write_linear_mode(modes, bar, tmp_path / "si", n_frames=2, units="SI")
+    fd = meshio.read(tmp_path / read_pvd(pvd)[0][1]).field_data
+    assert fd["unit displacement: m"][0] == 1
+    assert any(k.startswith("note: linear mode shape, mass-normalised") for k in fd)
+    with pytest.raises(ValueError, match="units must be"):
+        write_linear_mode(modes, bar, tmp_path / "bad", n_frames=2, units=3)

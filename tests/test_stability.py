@@ -169,7 +169,7 @@ def test_sparse_hill_finds_the_leading_exponents(monkeypatch, contact, H):
 
 def test_bad_input_names_the_argument(duffing):
     model = oscillator(k3=1.0)
-    with pytest.raises(ValueError, match="stability must be True, False or one of"):
+    with pytest.raises(ValueError, match="stability must be True, False, one of"):
         fm.frequency_response(model, (0.5, 1.0), 3, stability="maybe")
     with pytest.raises(ValueError, match="method must be one of"):
         fm.stability(duffing[0], method="floquet")

@@ -270,3 +270,46 @@ def test_errors_say_what_is_wrong(forced, backbone, monkeypatch):
     _, bb = backbone
     with pytest.raises(NotImplementedError, match="period doubling is supported on forced responses only"):
         fm.switch_branch(bb, dataclasses.replace(_tongue_point(bb), kind="period_doubling"), omega=(0.9, 1.5))
+
+
+def test_bracketed_branch_point_costs_no_solve_and_switches_the_same(forced, monkeypatch, tmp_path):
+    """StabilityOptions(locate=False): the same stability verdicts and the same bifurcations,
+    bracketed between the branch's points (reported at the unstable side, ``located`` False)
+    without a single corrector solve; switch_branch locates the HBM's own branch point from it,
+    the same one as from the located report."""
+    from femodes import floquet
+
+    model, b = forced
+    located = [z for z in b.bifurcations if z.kind != "fold"]
+
+    def no_solve(*args, **kwargs):
+        raise AssertionError("locate=False must not correct any point between the branch's points")
+
+    with monkeypatch.context() as m:
+        m.setattr(floquet, "solve_on_secant", no_solve)
+        bb = fm.frequency_response(model, (0.9, 1.7), 7, stability=fm.StabilityOptions(method="hill", locate=False))
+    np.testing.assert_array_equal(bb.stable, b.stable)
+    bracketed = [z for z in bb.bifurcations if z.kind != "fold"]
+    assert [(z.kind, z.index) for z in bracketed] == [(z.kind, z.index) for z in located]
+    assert all(not z.located for z in bracketed) and all(z.located for z in b.bifurcations)
+    outside = np.sum(np.abs(np.nan_to_num(bb.multipliers)) > 1 + 1e-4, axis=1)
+    for z in bracketed:  # at a point of the branch, on the side with more multipliers outside
+        j = z.index + 1 if outside[z.index + 1] > outside[z.index] else z.index
+        assert z.omega == bb.omega[j] and not bb.stable[j]
+    bb.save(tmp_path / "b.npz")  # the flag survives a save
+    assert [z.located for z in fm.load_branch(tmp_path / "b.npz").bifurcations] == [z.located for z in bb.bifurcations]
+    bp = next(z for z in bracketed if z.kind == "branch_point")
+    bp_located = next(z for z in b.bifurcations if z.kind == "branch_point")
+    new = fm.switch_branch(bb, bp, omega=(0.9, 1.7), options=fm.ContinuationOptions(max_points=3))
+    assert new.meta["switched_from"]["omega_hbm"] == pytest.approx(bp_located.omega, rel=1e-7)
+
+
+def test_stability_options_are_checked():
+    with pytest.raises(ValueError, match="method must be one of"):
+        fm.StabilityOptions(method="floquet")
+    with pytest.raises(ValueError, match="tol must be in"):
+        fm.StabilityOptions(tol=2.0)
+    with pytest.raises(TypeError, match="locate must be True or False"):
+        fm.StabilityOptions(locate="no")
+    with pytest.raises(ValueError, match="StabilityOptions"):
+        fm.frequency_response(pair(KC_F, C, F), (0.9, 1.0), 3, stability="yes")

@@ -47,8 +47,8 @@ flexibility of the DOFs the laws act on (:mod:`femodes.hbm.hill_reduction`): tho
 mass there, so their unknowns, like the contact forces', are eliminated exactly (a Schur
 complement, :func:`_dense`) and the dense eigenproblem has ``(2H + 1) m`` unknowns for ``m``
 modes, whatever the number of contacts. The families above the cut-off are not computed, nor the
-combination resonances between two of them (:data:`REDUCE_MIN_UNKNOWNS`); for them, a reduction
-that can resolve them needs harmonics up to their frequencies. The truncation error is estimated at every point from the
+combination resonances between two of them; for them, a reduction that can resolve them needs
+harmonics up to their frequencies. The truncation error is estimated at every point from the
 exponents with the cut-off ``omega_c / r`` nearest to the leading ones, as ``|delta| / (r^2 - 1)``,
 and ``omega_c`` is raised until that estimate is below :data:`REDUCTION_TOL`
 (``HillResult.reduction_error``) or the reduction would hold half of the model's DOFs. The modes
@@ -96,13 +96,15 @@ DENSE_LIMIT = 400
 
 #: Hill problems with more unknowns with mass or damping than this are solved on a free-interface
 #: reduction (module docstring), whose dense eigen-solve has ``(2H + 1) m`` of them for ``m``
-#: modes. Below it the whole model's spectrum is computed: the reduction drops the families above
-#: its cut-off, and with them the combination resonances between two such families whose
-#: frequencies differ by a harmonic of the orbit (the Craig-Bampton blade of
-#: examples/blade_casing.py, 11 DOFs, H = 7: the whole model's |mu| = 1.09 at 10 grazing
-#: energies, the reduction's 1.0, its estimate blind to it). Measured cost of the whole model's
-#: solve there: 40 ms a point at 165 such unknowns, against 11 ms for a branch point.
-REDUCE_MIN_UNKNOWNS = DENSE_LIMIT
+#: modes; below it the whole model's spectrum is cheap. The whole spectrum is not the better
+#: answer on stiff reduced models: eliminating the force of a contact closed over most of the
+#: period leaves a stiff constraint mode (``|s|`` 1e4-1e9 on the Craig-Bampton blade of
+#: examples/blade_casing.py, 11 DOFs, H = 7), whose round-off real parts read as instabilities
+#: (``|mu|`` up to 6 on its backbone, before they were set to 0 below their round-off bound) and
+#: whose copies crowd the selection (on its forced curve the whole model's leading multipliers
+#: were ~0 at 8 points where the reduction, confirmed by its neighbours, gives 0.96). Measured
+#: there: 10-16 ms a point reduced against 43 ms whole.
+REDUCE_MIN_UNKNOWNS = 100
 
 #: Kept for scripts that read it: models are now reduced when their Hill problem has more than
 #: DENSE_LIMIT unknowns with mass or damping, whatever their size (module docstring).
@@ -336,33 +338,94 @@ def _dense(J0, J1, J2, base, algebraic=None, vectors=True):
     whole period, the whole pencil is solved instead.)"""
     if algebraic is not None and np.any(algebraic):
         a, d = np.flatnonzero(algebraic), np.flatnonzero(~algebraic)
-        J0 = J0.tocsr()
-        Aaa = J0[a][:, a].toarray()
-        # equilibrated (rows, then columns, by their largest entry): the kept DOFs' residual
-        # stiffness and the contact rows differ by many orders of magnitude, which is scaling,
-        # not singularity
-        with np.errstate(divide="ignore"):
-            r = 1.0 / np.abs(Aaa).max(axis=1)
-            r[~np.isfinite(r)] = 1.0
-            c = 1.0 / np.abs(r[:, None] * Aaa).max(axis=0)
-            c[~np.isfinite(c)] = 1.0
-        As = r[:, None] * Aaa * c[None, :]
-        try:
-            lu = sla.lu_factor(As, check_finite=False)
-            rcond = sla.lapack.dgecon(lu[0], np.abs(As).sum(axis=0).max(), norm="1")[0]
-        except (sla.LinAlgError, ValueError):
-            rcond = 0.0
-        if d.size and rcond > 1e3 * np.finfo(float).eps:
-            X = c[:, None] * sla.lu_solve(lu, r[:, None] * J0[a][:, d].toarray(), check_finite=False)
-            S0 = J0[d][:, d].toarray() - J0[d][:, a] @ X
-            s, Vd = _dense_pencil(S0, J1[d][:, d].toarray(), J2[d][:, d].toarray(), base, vectors)
+        if J0.shape[0] <= SMALL:  # dense slicing: scipy.sparse's per-call overhead dominates there
+            J0, J1, J2 = (np.asarray(A.toarray()) for A in (J0, J1, J2))
+
+            def block(A, r, c):
+                return A[np.ix_(r, c)]
+        else:
+            J0, J1, J2 = (A.tocsr() for A in (J0, J1, J2))
+
+            def block(A, r, c):
+                return A[r][:, c]
+        X = _eliminate(block(J0, a, a), block(J0, a, d)) if d.size else None
+        if X is not None:
+            S0 = _dense_array(block(J0, d, d)) - block(J0, d, a) @ X
+            s, Vd = _dense_pencil(S0, _dense_array(block(J1, d, d)), _dense_array(block(J2, d, d)), base, vectors)
             if not vectors:
                 return s, None
             V = np.zeros((J0.shape[0], Vd.shape[1]), dtype=complex)
             V[d] = Vd
             V[a] = -X @ Vd
             return s, V
-    return _dense_pencil(J0.toarray(), J1.toarray(), J2.toarray(), base, vectors)
+    return _dense_pencil(_dense_array(J0), _dense_array(J1), _dense_array(J2), base, vectors)
+
+
+#: Hill problems of at most this many unknowns are eliminated with dense arrays (:func:`_dense`).
+SMALL = 1000
+
+
+def _dense_array(A) -> np.ndarray:
+    return A.toarray() if sp.issparse(A) else np.asarray(A)
+
+
+#: An algebraic block with at most this fraction of nonzeros is factorised sparse (:func:`_eliminate`).
+SPARSE_ELIMINATION_DENSITY = 0.1
+
+
+def _eliminate(Aaa, Aad) -> np.ndarray | None:
+    """``X = Aaa^-1 Aad`` (dense), or None when ``Aaa`` is singular to working precision.
+
+    ``Aaa`` is equilibrated first (rows, then columns, by their largest entry): the kept DOFs'
+    residual stiffness and the contact rows differ by many orders of magnitude, which is scaling,
+    not singularity. Its reciprocal condition number (1-norm, LAPACK's ``dgecon`` on a dense LU,
+    Hager's estimate ``onenormest`` on a sparse one) must exceed ``1e3 eps``. A sparse block (the
+    harmonics of the kept DOFs and contacts couple only through the laws: 3 % nonzeros on a blade
+    with 27 contacts at H = 5) takes SuperLU, 8x faster than the dense LU there."""
+    n = Aaa.shape[0]
+    floor = 1e3 * np.finfo(float).eps
+    if not sp.issparse(Aaa) and n and np.count_nonzero(Aaa) > SPARSE_ELIMINATION_DENSITY * n * n:
+        As = np.asarray(Aaa)  # dense and full enough: no sparse detour
+        with np.errstate(divide="ignore"):
+            r = 1.0 / np.abs(As).max(axis=1)
+            r[~np.isfinite(r)] = 1.0
+            c = 1.0 / np.abs(r[:, None] * As).max(axis=0)
+            c[~np.isfinite(c)] = 1.0
+        As = r[:, None] * As * c[None, :]
+        return _dense_solve(As, r[:, None] * _dense_array(Aad), c, floor)
+    Aaa = sp.csr_matrix(Aaa)
+    absA = abs(Aaa)
+    with np.errstate(divide="ignore"):
+        r = 1.0 / absA.max(axis=1).toarray().ravel()
+        r[~np.isfinite(r)] = 1.0
+        c = 1.0 / (sp.diags(r) @ absA).max(axis=0).toarray().ravel()
+        c[~np.isfinite(c)] = 1.0
+    As = (sp.diags(r) @ Aaa @ sp.diags(c)).tocsc()
+    B = r[:, None] * _dense_array(Aad)
+    norm1 = float(abs(As).sum(axis=0).max()) if n else 0.0
+    if n and As.nnz <= SPARSE_ELIMINATION_DENSITY * n * n:
+        try:
+            lu = spla.splu(As, permc_spec="COLAMD", diag_pivot_thresh=1.0)
+        except RuntimeError:  # exactly singular
+            return None
+        inv = spla.LinearOperator((n, n), matvec=lu.solve, rmatvec=lambda y: lu.solve(y, trans="T"), dtype=float)
+        rcond = 1.0 / (norm1 * spla.onenormest(inv)) if norm1 else 0.0
+        if not rcond > floor:
+            return None
+        return c[:, None] * lu.solve(B)
+    return _dense_solve(As.toarray(), B, c, floor)
+
+
+def _dense_solve(As: np.ndarray, B: np.ndarray, c: np.ndarray, floor: float) -> np.ndarray | None:
+    """``c * As^-1 B`` by LAPACK, None when ``rcond(As) <= floor``."""
+    try:
+        lu = sla.lu_factor(As, check_finite=False)
+        rcond = sla.lapack.dgecon(lu[0], float(np.abs(As).sum(axis=0).max()), norm="1")[0]
+    except (sla.LinAlgError, ValueError):
+        return None
+    if not rcond > floor:
+        return None
+    return c[:, None] * sla.lu_solve(lu, B, check_finite=False)
 
 
 def _dense_pencil(A0, A1, A2, base, vectors=True):
@@ -392,6 +455,15 @@ def _dense_pencil(A0, A1, A2, base, vectors=True):
     tol = 1e-10 * max(1.0, float(np.max(np.abs(theta))) if theta.size else 1.0)
     finite = np.abs(theta) > tol
     s = sigma + 1.0 / theta[finite]
+    # round-off: theta carries an absolute error of about (2N) eps |OP|, which 1/theta magnifies
+    # by |s - sigma|^2; a real part below that bound is not resolved (the stiff constraint modes
+    # that the elimination of a contact closed over most of the period leaves, |s| ~ 1e9 on the
+    # blade of examples/blade_casing.py, came out with Re s = +-1e5..1e6): it is set to 0
+    bound = 2 * N * np.finfo(float).eps * float(np.abs(OP).sum(axis=0).max()) * np.abs(s - sigma) ** 2
+    unresolved = np.abs(s.real) <= bound
+    if np.any(unresolved):
+        log.debug("hill_exponents: %d exponents with real parts below round-off set to 0", np.count_nonzero(unresolved))
+        s = np.where(unresolved, 1j * s.imag, s)
     return s, (Zv[:N, finite] if vectors else None)
 
 
@@ -523,11 +595,13 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
 
 #: Along a branch, a point whose reduction is that of the last estimated point, within this
 #: relative distance in frequency, takes that point's truncation error estimate (up to
-#: :data:`REUSE_POINTS` points in a row) instead of solving the coarse reduction again.
-REUSE_SPAN = 0.01
+#: :data:`REUSE_POINTS` points in a row) instead of solving the coarse reduction again (an
+#: estimate, used to choose the cut-off: it varies by orders of magnitude between neighbouring
+#: points of a contact branch either way).
+REUSE_SPAN = 0.02
 
 #: Points in a row that reuse an estimate (:data:`REUSE_SPAN`).
-REUSE_POINTS = 3
+REUSE_POINTS = 5
 
 
 #: Truncation error estimate: the change ``delta`` of the leading multipliers' moduli from a coarse

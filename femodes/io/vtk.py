@@ -164,7 +164,23 @@ SI_UNITS = {"displacement": "m", "velocity": "m/s", "rotation": "rad", "contact_
 
 
 def _units_and_quality(solution: PeriodicSolution, units: Any, owner: str) -> dict:
-    """Field data that say the units and how far the truncated contact law is from exact.
+    """Field data that say the units and how far the truncated contact law is from exact."""
+    out = _units(units, owner)
+    if solution.P.size:
+        pen, ten = float(solution.penetration), float(solution.tension)
+        out["max_penetration"] = np.array([pen])
+        out["max_tension"] = np.array([ten])
+        out["harmonics"] = np.array([solution.harmonics.n_harmonics], dtype=np.int64)
+        if pen > 0 or ten > 0:
+            note = (f"note: with H = {solution.harmonics.n_harmonics} the truncated Fourier series penetrates the "
+                    f"obstacle (max {pen:.3g}) and pulls (max tension {ten:.3g}): negative contact_pressure and "
+                    "contact_force off contact are truncation artefacts; raise the harmonics to reduce them")
+            out[note] = np.array([1], dtype=np.int64)
+    return out
+
+
+def _units(units: Any, owner: str) -> dict:
+    """Field data that say the units (``units`` of the writers).
 
     meshio cannot read VTK string arrays, so text is carried by array *names* (value 1): ParaView
     lists them in the Information panel's field data, meshio in ``mesh.field_data``."""
@@ -177,18 +193,7 @@ def _units_and_quality(solution: PeriodicSolution, units: Any, owner: str) -> di
         marks = {f"unit {q}: {u}": 1 for q, u in units.items()}
     else:
         raise ValueError(f"{owner}: units must be None, 'SI' or a dict {{quantity: unit}} of strings, got {units!r}")
-    out = {k: np.array([v], dtype=np.int64) for k, v in marks.items()}
-    if solution.P.size:
-        pen, ten = float(solution.penetration), float(solution.tension)
-        out["max_penetration"] = np.array([pen])
-        out["max_tension"] = np.array([ten])
-        out["harmonics"] = np.array([solution.harmonics.n_harmonics], dtype=np.int64)
-        if pen > 0 or ten > 0:
-            note = (f"note: with H = {solution.harmonics.n_harmonics} the truncated Fourier series penetrates the "
-                    f"obstacle (max {pen:.3g}) and pulls (max tension {ten:.3g}): negative contact_pressure and "
-                    "contact_force off contact are truncation artefacts; raise the harmonics to reduce them")
-            out[note] = np.array([1], dtype=np.int64)
-    return out
+    return {k: np.array([v], dtype=np.int64) for k, v in marks.items()}
 
 
 def write_animation(solution: PeriodicSolution, model: StructuralModel | None, path: Any, n_frames: int = 36,
@@ -275,7 +280,7 @@ def write_animation(solution: PeriodicSolution, model: StructuralModel | None, p
 
 
 def write_linear_mode(modes: LinearModes, model: StructuralModel, path: Any, n_frames: int = 36,
-                      scale: float | None = None, *, mode: int = 1) -> Path:
+                      scale: float | None = None, *, mode: int = 1, units: Any = None) -> Path:
     """Write a linear mode as a ParaView time series ``q(t) = phi cos(w t)``.
 
     Parameters
@@ -289,6 +294,9 @@ def write_linear_mode(modes: LinearModes, model: StructuralModel, path: Any, n_f
         ``scale`` to choose a visible amplitude.
     mode : int
         Mode number, 1 = the first mode (``modes.omega[mode - 1]``), as everywhere in femodes.
+    units : None, "SI" or dict, optional
+        As in :func:`write_animation`; the field data also say that the shape is mass-normalised
+        (its amplitude, in units of the displacement per square root of mass, is arbitrary).
 
     Returns
     -------
@@ -311,5 +319,7 @@ def write_linear_mode(modes: LinearModes, model: StructuralModel, path: Any, n_f
     n_frames = check_int("n_frames", n_frames, 2, owner=owner)
     scale = check_scale(scale, owner)
     stem = _stem(path, owner)
+    extra = _units(units, owner)
     fields = mesh_fields(modes, model, n_frames=n_frames, mode=mode, owner=owner)
-    return _write_series(fields, stem, scale, owner)
+    extra["note: linear mode shape, mass-normalised (its amplitude is arbitrary)"] = np.array([1], dtype=np.int64)
+    return _write_series(fields, stem, scale, owner, extra)

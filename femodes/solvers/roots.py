@@ -57,7 +57,7 @@ def illinois(f: Callable[[float], float | None], lo: float, hi: float, f_lo: flo
         n += 1
         if fx is None:
             break
-        stop = abs(fx) <= ftol or width <= xtol
+        stop = abs(fx) <= ftol
         if np.sign(fx) == np.sign(g_lo):
             lo, g_lo, f_lo = x, fx, fx
             if side == -1:
@@ -68,6 +68,6 @@ def illinois(f: Callable[[float], float | None], lo: float, hi: float, f_lo: flo
             if side == 1:
                 g_lo *= 0.5
             side = 1
-        if stop:
+        if stop or hi - lo <= xtol:
             break
     return Bracket(lo=lo, hi=hi, f_lo=f_lo, f_hi=f_hi, nfev=n)
