@@ -20,7 +20,7 @@ from .analyses import StaticContactResult, frequency_response, nonlinear_mode, s
 from .nonsmooth_modes import InternalResonance, PeriodDriven
 from .resonance import ResonancePeak, compare_resonance
 from .floquet import StabilityOptions, StabilityResult, stability
-from .accuracy import estimate_error
+from .accuracy import AccuracyOptions, estimate_error
 from .mesh_error import estimate_mesh_error
 from .switching import switch_branch
 from .store import Checkpoint
@@ -79,6 +79,7 @@ __all__ = [
     "Branch",
     "ErrorEstimate",
     "estimate_error",
+    "AccuracyOptions",
     "estimate_mesh_error",
     "PeriodicSolution",
     "load_branch",

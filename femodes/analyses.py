@@ -31,7 +31,8 @@ from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.threads import limit_blas_threads
-from .accuracy import check_estimate_method, rtol_time_limit, meet_tolerance, refinement_options, shooting_unsupported_for
+from .accuracy import (AccuracyOptions, check_estimate_method, check_options, rtol_time_limit, meet_tolerance,
+                       refinement_options, shooting_unsupported_for)
 from .floquet import StabilityOptions, annotate_branch
 from .nonsmooth_modes import PeriodDriven, continue_past_grazing
 
@@ -136,6 +137,7 @@ def frequency_response(
     rtol: float | None = None,
     max_harmonics: int | None = None,
     error_method: str = "auto",
+    error_options: AccuracyOptions | None = None,
 ) -> Branch:
     """Forced frequency-response curve by HBM and pseudo-arclength continuation.
 
@@ -202,6 +204,10 @@ def frequency_response(
         that method only: one that cannot apply (shooting on a penalty model, say) is a
         ValueError before anything runs, as in :func:`femodes.estimate_error`; only ``"auto"``
         picks. Without ``rtol`` only ``"auto"`` is accepted.
+    error_options : AccuracyOptions, optional
+        Tuning of the error estimate of ``rtol`` (:class:`femodes.AccuracyOptions`; the default is
+        the measured one), including its time limit: ``rtol_budget`` times the plain branch's
+        own time, at least ``rtol_min_seconds``.
 
     Returns
     -------
@@ -216,6 +222,7 @@ def frequency_response(
     _options(options, "frequency_response")
     refinement_options(rtol, max_harmonics, h.n_harmonics, "frequency_response")
     check_estimate_method(error_method, "frequency_response", "error_method")
+    error_options = check_options(error_options, "frequency_response", "error_options")
     span = _span(omega, "omega", "frequency_response", positive=True)
     if error_method != "auto" and rtol is None:
         raise ValueError(f"frequency_response: error_method={error_method!r} chooses how rtol= is met, but rtol is not "
@@ -265,7 +272,8 @@ def frequency_response(
                                   projection=projection, progress=progress, stability=stability)
 
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method,
-                          time_limit=rtol_time_limit(time.perf_counter() - started))
+                          time_limit=rtol_time_limit(time.perf_counter() - started, error_options),
+                          options=error_options)
 
 
 def _start_vector(x0, size: int, layout: str, label: str) -> np.ndarray:
@@ -442,6 +450,7 @@ def nonlinear_mode(
     rtol: float | None = None,
     max_harmonics: int | None = None,
     past_grazing: PeriodDriven | None = PeriodDriven(),
+    error_options: AccuracyOptions | None = None,
 ) -> Branch:
     """Nonlinear mode (frequency-energy backbone) by the extended periodic motion concept.
 
@@ -454,8 +463,8 @@ def nonlinear_mode(
     ``femodes.Checkpoint(path, resume=True)`` to continue a killed run) are as for
     :func:`frequency_response`: every converged point is written to a journal as it is found; the
     checkpoint must come from the same model, ``mode``, energy span, harmonics and ``projection``.
-    ``rtol`` and ``max_harmonics`` are as for :func:`frequency_response` (levels compared at equal
-    energy), and so is ``stability`` (``True`` or a :class:`~femodes.StabilityOptions`).
+    ``rtol``, ``max_harmonics`` and ``error_options`` are as for :func:`frequency_response` (levels
+    compared at equal energy), and so is ``stability`` (``True`` or a :class:`~femodes.StabilityOptions`).
 
     Past grazing (models with unilateral contacts): the returned family is the one whose motions
     have a contact phase in every period and keep most of their energy in mode ``mode``; it is the
@@ -478,6 +487,7 @@ def nonlinear_mode(
     h = _harmonics(harmonics, "nonlinear_mode")
     _options(options, "nonlinear_mode")
     refinement_options(rtol, max_harmonics, h.n_harmonics, "nonlinear_mode")
+    error_options = check_options(error_options, "nonlinear_mode", "error_options")
     if past_grazing is not None and not isinstance(past_grazing, PeriodDriven):
         raise TypeError(f"nonlinear_mode: past_grazing must be a femodes.PeriodDriven or None, got {past_grazing!r}")
     e0, e1 = _span(energy, "energy", "nonlinear_mode", positive=True)
@@ -519,7 +529,8 @@ def nonlinear_mode(
                               projection=projection, progress=progress, stability=stability, past_grazing=past_grazing)
 
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection,
-                          time_limit=rtol_time_limit(time.perf_counter() - started))
+                          time_limit=rtol_time_limit(time.perf_counter() - started, error_options),
+                          options=error_options)
 
 
 def stability_options(stability: Any, owner: str) -> StabilityOptions | None:

@@ -6,7 +6,7 @@ closed form; the Duffing backbone from the elliptic-integral formula of referenc
 An estimate must not be optimistic (>= the true error) and should not overstate it by more than
 a small factor: measured 1.13-1.25x at the fold (the observed ratio per doubling, 1.6-1.7, is
 below the asymptotic 2 there), allowed here up to 3x (the largest factor r / (r - 1) can give
-with the clamped ratio RATE_MIN = 1.5).
+with the clamped ratio ``AccuracyOptions.rate_min`` = 1.5).
 """
 
 import dataclasses
@@ -17,10 +17,14 @@ import pytest
 from scipy.special import ellipk
 
 import femodes as fm
-from femodes.accuracy import RATE_MIN, estimate_error
+from femodes.accuracy import AccuracyOptions, estimate_error
+from femodes.accuracy.ladder import ladder_for
+from femodes.accuracy.points import anchor, contact_force_peak, without_contact
 from femodes.results import ErrorEstimate
 
 from .impact_reference import free_frequency, upper_fold
+
+OPTIONS = AccuracyOptions()  # the defaults, which the estimates below use
 
 
 def _forced(c=0.1, F=0.2, g=1.0):
@@ -41,7 +45,7 @@ def test_fold_estimate_bounds_true_error(forced10):
     est = b.accuracy.omega[f]
     assert 0.03 < true < 0.06  # first order in 1/H: 4.4 % at H = 10
     assert true <= est <= 3.0 * true
-    assert b.accuracy.method[f] == "doubling" and b.accuracy.rate[f] >= RATE_MIN
+    assert b.accuracy.method[f] == "doubling" and b.accuracy.rate[f] >= OPTIONS.rate_min
 
 
 def test_fold_frequency_bracketed_by_first_order_extrapolation(forced10):
@@ -56,10 +60,10 @@ def test_fold_frequency_bracketed_by_first_order_extrapolation(forced10):
     assert abs(mid / ref - 1.0) < 0.1 * b.accuracy.omega[f]  # 20x better than the H = 10 point itself
     # below contact the limit is the point itself (the levels solve the same linear response, to
     # the Newton tolerance of the level solves, atol 1e-9 on a residual of order 1, well-conditioned
-    # away from resonance), with a half-width of that size: accuracy.SAME_POINT (1e-8) bounds it
+    # away from resonance), with a half-width of that size: AccuracyOptions.same_point (1e-8) bounds it
     free = (b.omega < 0.8) & (b.penetration == 0)
-    np.testing.assert_allclose(b.accuracy.omega_limit[free], b.omega[free], rtol=fm.accuracy.SAME_POINT)
-    assert np.all(b.accuracy.omega_limit_error[free] <= fm.accuracy.SAME_POINT)
+    np.testing.assert_allclose(b.accuracy.omega_limit[free], b.omega[free], rtol=OPTIONS.same_point)
+    assert np.all(b.accuracy.omega_limit_error[free] <= OPTIONS.same_point)
 
 
 def test_points_without_contact_are_exact(forced10):
@@ -68,7 +72,7 @@ def test_points_without_contact_are_exact(forced10):
     b = forced10
     free = (b.omega < 0.8) & (b.penetration == 0)
     assert free.sum() >= 3
-    assert np.all(b.error_estimate[free] < fm.accuracy.SAME_POINT)
+    assert np.all(b.error_estimate[free] < OPTIONS.same_point)
     assert np.all(b.accuracy.penetration[free] == 0)
     # no contact force: no relative tension (a ratio of round-off forces was about 1 at one point)
     assert np.all(b.accuracy.tension[free] == 0)
@@ -241,16 +245,17 @@ def test_rtol_forced_fold_within_tolerance():
 def test_contracting_levels():
     """A point gets a further level only if its last three levels are solved and the change to
     the finest is smaller than the one before (frequency and displacement, relative)."""
-    from femodes.accuracy import _contracting, _State
+    from femodes.accuracy.extrapolation import contracting
+    from femodes.accuracy.points import State
 
     def st(w, q):
-        return _State(Q=np.array([[q]]), P=np.zeros((1, 1)), omega=w, xi=0.0, p=w, H=1)
+        return State(Q=np.array([[q]]), P=np.zeros((1, 1)), omega=w, xi=0.0, p=w, H=1)
 
-    assert _contracting([st(1.0, 1.0), st(1.1, 1.0), st(1.15, 1.0)], 1.0, 1.0)
-    assert not _contracting([st(1.0, 1.0), st(1.1, 1.0), st(1.25, 1.0)], 1.0, 1.0)  # the change grows
-    assert not _contracting([st(1.0, 1.0), st(1.1, 1.0), st(1.1, 1.3)], 1.0, 1.0)  # in the displacement
-    assert not _contracting([st(1.0, 1.0), None, st(1.15, 1.0)], 1.0, 1.0)  # a level missing
-    assert not _contracting([st(1.0, 1.0), st(1.1, 1.0)], 1.0, 1.0)  # two levels
+    assert contracting([st(1.0, 1.0), st(1.1, 1.0), st(1.15, 1.0)], 1.0, 1.0)
+    assert not contracting([st(1.0, 1.0), st(1.1, 1.0), st(1.25, 1.0)], 1.0, 1.0)  # the change grows
+    assert not contracting([st(1.0, 1.0), st(1.1, 1.0), st(1.1, 1.3)], 1.0, 1.0)  # in the displacement
+    assert not contracting([st(1.0, 1.0), None, st(1.15, 1.0)], 1.0, 1.0)  # a level missing
+    assert not contracting([st(1.0, 1.0), st(1.1, 1.0)], 1.0, 1.0)  # two levels
 
 
 def test_rtol_levels_not_refined_where_they_do_not_contract(caplog):
@@ -280,49 +285,49 @@ def test_rtol_levels_not_refined_where_they_do_not_contract(caplog):
 
 
 def test_level_trace_stops_when_it_does_not_pass_the_branch():
-    """A level traced for some points stops once it takes more than LEVEL_POINTS_PER_POINT
-    continuation points per branch point passed (plus LEVEL_POINTS_SLACK): a level that stays
+    """A level traced for some points stops once it takes more than ``level_points_per_point``
+    continuation points per branch point passed (plus ``level_points_slack``): a level that stays
     at one branch point is stopped after exactly that many; one that passes a branch point per
     continuation point is not."""
     from types import SimpleNamespace
 
-    from femodes.accuracy import LEVEL_POINTS_SLACK, _anchor, _ladder, _Progress
+    from femodes.accuracy.level_trace import Progress
 
     b = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    lad = _ladder(b, None, None, "test")
+    lad = ladder_for(b, None, None, "test")
     H = 10
     near = lad.weights(H)
 
     def point(i):
-        a = _anchor(b, i)
+        a = anchor(b, i)
         v = lad.vector(H, a.Q, a.P, a.omega, a.xi, a.p)
         return SimpleNamespace(x=v[:-1], p=float(v[-1]))
 
-    stuck = _Progress(lad, H, near, 5, len(b) - 3)
-    answers = [stuck(point(5)) for _ in range(LEVEL_POINTS_SLACK + 1)]
+    stuck = Progress(lad, H, near, 5, len(b) - 3, OPTIONS)
+    answers = [stuck(point(5)) for _ in range(OPTIONS.level_points_slack + 1)]
     assert all(answers[:-1]) and answers[-1] is False
-    moving = _Progress(lad, H, near, 5, len(b) - 3)
+    moving = Progress(lad, H, near, 5, len(b) - 3, OPTIONS)
     assert all(moving(point(i)) for i in range(6, len(b) - 3))
 
 
 def test_level_traced_for_some_points_stops_past_the_last(caplog):
     """A refinement level traced for some points only stops a few points past the last of them
-    (``_Progress``), with the same states for those points as a trace of the whole branch (each
+    (``level_trace.Progress``), with the same states for those points as a trace of the whole branch (each
     the level's solution on the point's hyperplane, polished by Newton to atol 1e-9 from starts
     on two different continuations: equal to 1e-9)."""
     import logging
 
-    from femodes.accuracy import _ladder, _trace_by_continuation
+    from femodes.accuracy.level_trace import trace_by_continuation
 
     branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    lad = _ladder(branch, None, None, "test")
+    lad = ladder_for(branch, None, None, "test")
     n = len(branch)
     need = np.zeros(n, dtype=bool)
     need[n // 4: n // 2] = True
     with caplog.at_level(logging.INFO, logger="femodes.accuracy"):
-        some = _trace_by_continuation(lad, 20, need)
+        some = trace_by_continuation(lad, 20, need, OPTIONS)
     assert "stopped by callback" in caplog.text
-    every = _trace_by_continuation(lad, 20, np.ones(n, dtype=bool))
+    every = trace_by_continuation(lad, 20, np.ones(n, dtype=bool), OPTIONS)
     for i in np.flatnonzero(need):
         assert some[i] is not None and every[i] is not None
         assert abs(some[i].omega - every[i].omega) <= 1e-9
@@ -333,26 +338,26 @@ def test_level_traced_for_some_points_stops_past_the_last(caplog):
 def test_level_traced_backward_for_the_far_side(caplog):
     """Needed points on the rising side and next to the lower fold (as level 160 of an rtol run
     has them): the level is traced forward for the first group and backward from the branch's
-    contact-free end for the second (``_plan_traces``), with the same states as one forward
+    contact-free end for the second (``level_trace.plan_traces``), with the same states as one forward
     trace of the whole branch (polished on the same hyperplanes: equal to 1e-9, as above)."""
     import logging
 
-    from femodes.accuracy import _ladder, _plan_traces, _trace_by_continuation, _without_contact
+    from femodes.accuracy.level_trace import plan_traces, trace_by_continuation
 
     branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    lad = _ladder(branch, None, None, "test")
+    lad = ladder_for(branch, None, None, "test")
     n = len(branch)
-    contact = np.flatnonzero(~_without_contact(branch))
+    contact = np.flatnonzero(~without_contact(branch))
     upper, lower = branch.folds[:2]
     need = np.zeros(n, dtype=bool)
     need[contact[0] + 2: contact[0] + 5] = True
     need[lower - 4: lower - 1] = True
-    plan = _plan_traces(branch, need)
+    plan = plan_traces(branch, need, OPTIONS)
     assert [forward for _, forward in plan] == [True, False]
     with caplog.at_level(logging.INFO, logger="femodes.accuracy"):
-        some = _trace_by_continuation(lad, 20, need)
+        some = trace_by_continuation(lad, 20, need, OPTIONS)
     assert f"backward from point {n - 1}" in caplog.text
-    every = _trace_by_continuation(lad, 20, np.ones(n, dtype=bool))
+    every = trace_by_continuation(lad, 20, np.ones(n, dtype=bool), OPTIONS)
     for i in np.flatnonzero(need):
         assert some[i] is not None and every[i] is not None
         assert abs(some[i].omega - every[i].omega) <= 1e-9
@@ -360,14 +365,14 @@ def test_level_traced_backward_for_the_far_side(caplog):
     # points spread over the whole resonance: one trace
     spread = np.zeros(n, dtype=bool)
     spread[contact[0]: lower] = True
-    assert [forward for _, forward in _plan_traces(branch, spread)] == [True]
+    assert [forward for _, forward in plan_traces(branch, spread, OPTIONS)] == [True]
     # with another nonlinear law no point is linear, even without a complementarity force
     stiff = _forced().with_nonlinearity(fm.CubicSpring(at=0, k3=0.5))
     low = fm.frequency_response(stiff, (0.5, 0.7), 6)
-    assert np.all(low.P == 0) and _without_contact(branch).any() and not _without_contact(low).any()
+    assert np.all(low.P == 0) and without_contact(branch).any() and not without_contact(low).any()
 
 
-def test_level_continuation_restarts_after_a_stop(caplog, monkeypatch):
+def test_level_continuation_restarts_after_a_stop(caplog):
     """A level whose continuation stops short (here: its points after the first few contact
     points dropped, as a corrector that fails at a nonsmooth point leaves them) walks the next
     point and restarts its continuation from there, instead of walking every point left: one
@@ -375,22 +380,17 @@ def test_level_continuation_restarts_after_a_stop(caplog, monkeypatch):
     solution on the point's hyperplane, polished by Newton to atol 1e-9: equal to 1e-9)."""
     import logging
 
-    from femodes import accuracy as am
+    from femodes.accuracy.level_trace import complete_level, trace_by_continuation, trace_level_by_continuation
 
     branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    lad = am._ladder(branch, None, None, "test")
+    lad = ladder_for(branch, None, None, "test")
     n = len(branch)
-    every = am._trace_level_by_continuation(lad, 20)
-    cut = int(np.flatnonzero(~am._without_contact(branch))[0]) + 5
-    whole = am._trace_by_continuation
-
-    def short(lad_, H, need):
-        out = whole(lad_, H, need)
-        return out[: cut + 1] + [None] * (n - cut - 1)
-
-    monkeypatch.setattr(am, "_trace_by_continuation", short)
+    every = trace_level_by_continuation(lad, 20, OPTIONS)
+    free = without_contact(branch)
+    cut = int(np.flatnonzero(~free)[0]) + 5
+    short = trace_by_continuation(lad, 20, ~free, OPTIONS)[: cut + 1] + [None] * (n - cut - 1)
     with caplog.at_level(logging.INFO, logger="femodes.accuracy"):
-        again = am._trace_level_by_continuation(lad, 20)
+        again = complete_level(lad, 20, short, OPTIONS)
     assert f"traced by continuation forward from point {cut + 1} (walked, restart)" in caplog.text
     assert f"1 of {n} points not on its continuation, walked (1 restarts" in caplog.text
     for i in range(n):
@@ -400,31 +400,29 @@ def test_level_continuation_restarts_after_a_stop(caplog, monkeypatch):
 
 
 def test_walk_deadline_abandons_a_stalling_solve(caplog):
-    """Newton from the branch's own point does not reach level 2H near the upper fold (module
-    docstring): with WALK_DEADLINE the hyperplane solve is abandoned (the continuation's rule:
+    """Newton from the branch's own point does not reach level 2H near the upper fold
+    (femodes/accuracy/walk.py): with ``walk_deadline`` the hyperplane solve is abandoned (the continuation's rule:
     the residual not halved after that many iterations) instead of running to max_iter; from a
     guess next to the level's solution it still converges, to the same point (atol 1e-9 of the
     Newton options: equal to 1e-8)."""
     import logging
 
-    from femodes.accuracy import WALK_DEADLINE, _anchor, _contact_force_peak, _ladder
+    from femodes.accuracy.level_trace import trace_level_by_continuation
 
     b = fm.frequency_response(_forced(), (0.5, 2.0), 20)
-    lad = _ladder(b, None, None, "test")
-    peak = _contact_force_peak(b)
+    lad = ladder_for(b, None, None, "test")
+    peak = contact_force_peak(b)
     peak[list(b.folds)] = -np.inf  # a fold's level point is the level's fold, not on the point's hyperplane
     i = int(np.argmax(peak))
-    a, t = _anchor(b, i), lad.tangents[i]
+    a, t = anchor(b, i), lad.tangents[i]
     with caplog.at_level(logging.DEBUG, logger="femodes.accuracy"):
-        assert lad.solve(40, a, t, None, WALK_DEADLINE) is None
+        assert lad.solve(40, a, t, None, OPTIONS.walk_deadline) is None
     assert "abandoned" in caplog.text
     # the level's point, from the level's continuation, then disturbed and solved with the deadline
-    from femodes.accuracy import _trace_level_by_continuation
-
-    exact = _trace_level_by_continuation(lad, 40)[i]
+    exact = trace_level_by_continuation(lad, 40, OPTIONS)[i]
     assert exact is not None
     guess = dataclasses.replace(exact, Q=exact.Q * (1 + 1e-4), P=exact.P * (1 + 1e-4))
-    again = lad.solve(40, a, t, guess, WALK_DEADLINE)
+    again = lad.solve(40, a, t, guess, OPTIONS.walk_deadline)
     assert again is not None
     assert abs(again.omega - exact.omega) <= 1e-8
     np.testing.assert_allclose(again.Q, exact.Q, rtol=0, atol=1e-8)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import femodes as fm
-from femodes.accuracy import estimate_error
+from femodes.accuracy import AccuracyOptions, estimate_error
 from femodes.solvers import ContinuationOptions
 from femodes.time import ExactBranch, exact_frequency_response
 from femodes.time.exact import LinearImpactFlow
@@ -209,12 +209,12 @@ def test_options_passed_through():
     assert np.array_equal(seen, b.omega) and all(o is not None for o in b._orbits)
 
 
-def _missed_folds(monkeypatch):
-    """The fold search of the shooting refinement finds nothing (as on the cantilever below)."""
-    monkeypatch.setattr(fm.accuracy._Shooter, "fold", lambda self, i, r: None)
+#: The fold search of the shooting refinement left out: the folds go to the exact branch's, as the
+#: folds the fold search does not locate do (the cantilever below).
+NO_FOLD_SEARCH = AccuracyOptions(shooting_fold_search=False)
 
 
-def test_missed_folds_taken_from_the_exact_branch(monkeypatch):
+def test_missed_folds_taken_from_the_exact_branch():
     """Seed case 2 at H = 10 with the fold search disabled: both folds are paired with the exact
     branch's (same turn, nearest), so the upper fold's limit is the reference to 1e-6 (the
     stated half-width EXACT_FOLD_RTOL; measured 2.5e-13) and the error estimate covers the
@@ -222,8 +222,7 @@ def test_missed_folds_taken_from_the_exact_branch(monkeypatch):
     model = _oscillator(0.2, 1.0, 2.5)
     b = fm.frequency_response(model, (0.5, 2.0), 10)
     assert len(b.folds) == 2
-    _missed_folds(monkeypatch)
-    acc = estimate_error(b).accuracy
+    acc = estimate_error(b, options=NO_FOLD_SEARCH).accuracy
     ref = upper_fold(0.2, 1.0, 2.5).w
     up = max(b.folds, key=lambda i: b.omega[i])
     assert acc.method[up] == "shooting" and acc.finest[up] == 0
@@ -239,9 +238,9 @@ def test_fold_without_exact_counterpart_gets_no_estimate(monkeypatch):
     """A fold of the truncation that the exact branch does not have (here: the exact branch
     stripped of its lower fold) is left without an estimate and marked "truncation" (never met),
     not sent to the levels; the other is paired."""
-    import femodes.accuracy as accuracy
+    import femodes.accuracy.exact_branch as exact_branch
 
-    real = accuracy.exact_frequency_response
+    real = exact_branch.exact_frequency_response
 
     def upper_only(model, span, **kw):
         eb = real(model, span, **kw)
@@ -250,10 +249,9 @@ def test_fold_without_exact_counterpart_gets_no_estimate(monkeypatch):
         eb.fold_omega, eb.fold_error, eb.fold_upper = eb.fold_omega[keep], eb.fold_error[keep], eb.fold_upper[keep]
         return eb
 
-    monkeypatch.setattr(accuracy, "exact_frequency_response", upper_only)
-    _missed_folds(monkeypatch)
+    monkeypatch.setattr(exact_branch, "exact_frequency_response", upper_only)
     b = fm.frequency_response(_oscillator(0.2, 1.0, 2.5), (0.5, 2.0), 10)
-    acc = estimate_error(b).accuracy
+    acc = estimate_error(b, options=NO_FOLD_SEARCH).accuracy
     up, low = max(b.folds, key=lambda i: b.omega[i]), min(b.folds, key=lambda i: b.omega[i])
     assert acc.method[up] == "shooting"
     assert acc.method[low] == "truncation" and not math.isfinite(acc.omega[low]) and acc.finest[low] == 0
@@ -272,15 +270,17 @@ def test_points_without_an_orbit_start_from_the_exact_branch(monkeypatch):
     P = np.abs(b.P).reshape(len(b), -1).max(axis=1)
     lose = [i for i in np.flatnonzero(P > 0.1 * P.max()) if i not in b.folds and plain.method[i] == "shooting"][::5][:3]
     assert len(lose) == 3
-    real = fm.accuracy._shoot_branch
+    import femodes.accuracy.shooting as shooting
 
-    def losing(lad, flow=None):
-        out, sh, exact = real(lad, flow)
+    real = shooting.shoot_branch
+
+    def losing(sh, exact, options):
+        out = real(sh, exact, options)
         for i in lose:
             out[i] = None
-        return out, sh, exact
+        return out
 
-    monkeypatch.setattr(fm.accuracy, "_shoot_branch", losing)
+    monkeypatch.setattr(shooting, "shoot_branch", losing)
     again = estimate_error(b).accuracy
     for i in lose:
         assert again.method[i] == "shooting"

@@ -12,12 +12,19 @@ import numpy as np
 import pytest
 
 import femodes as fm
-from femodes.accuracy import SHOOTING_FLOOR, estimate_error
+from femodes.accuracy import AccuracyOptions, estimate_error
+from femodes.accuracy.exact_branch import ExactBranchCache
+from femodes.accuracy.ladder import ladder_for
+from femodes.accuracy.points import without_contact
+from femodes.accuracy.shooter import Shooter
+from femodes.accuracy.shooting import shoot_branch
 from femodes.time import shoot
 from femodes.time.exact import LinearImpactFlow, exact_flow_unsupported
 
 from .impact_reference import upper_fold
 from .massless_reference import MasslessContactReference
+
+OPTIONS = AccuracyOptions()  # the defaults
 
 
 def _forced(c=0.1, F=0.2, g=1.0):
@@ -46,7 +53,7 @@ def orbit():
     model = _forced()
     b = fm.frequency_response(model, (0.5, 2.0), 10)
     i = max(b.folds, key=lambda j: b.omega[j]) - 5
-    x, theta0 = fm.accuracy._Shooter(fm.accuracy._ladder(b, None, None, "test")).start(i)
+    x, theta0 = Shooter(ladder_for(b, None, None, "test"), OPTIONS).start(i)
     w = float(b.omega[i])
     flow = LinearImpactFlow(model, w)
     x, run = _periodic(flow, x, theta0 / w)
@@ -173,13 +180,13 @@ def test_shooting_folds_exact(shot10):
     acc = b.accuracy
     up, lo = sorted(b.folds, key=lambda i: -b.omega[i])
     ref = upper_fold(0.1, 0.2, 1.0).w
-    assert abs(acc.omega_limit[up] / ref - 1.0) <= SHOOTING_FLOOR
+    assert abs(acc.omega_limit[up] / ref - 1.0) <= OPTIONS.shooting_floor
     graze = math.sqrt((1.99 + math.sqrt(1.99 ** 2 - 4 * 0.96)) / 2)
-    assert abs(acc.omega_limit[lo] / graze - 1.0) <= SHOOTING_FLOOR
+    assert abs(acc.omega_limit[lo] / graze - 1.0) <= OPTIONS.shooting_floor
     assert acc.met[[up, lo]].all() and acc.omega_limit_error[up] <= 1e-6
     # the estimate of the H = 10 fold's own error (relative to its frequency) is its true error
     # (4.7 %) plus the floor
-    assert abs(acc.omega[up] - abs(b.omega[up] - ref) / b.omega[up]) <= 2 * SHOOTING_FLOOR
+    assert abs(acc.omega[up] - abs(b.omega[up] - ref) / b.omega[up]) <= 2 * OPTIONS.shooting_floor
 
 
 def test_shooting_meets_rtol_where_the_orbit_is_a_counterpart(shot10):
@@ -227,7 +234,7 @@ def test_fe_bar_orbit_matches_event_driven_integration():
     i = max(b.folds, key=lambda j: b.omega[j]) - 3
     # the exact orbit on the point's hyperplane (a plain Newton from the point lands on the
     # coexisting orbit without impacts)
-    x, w, theta0, run = fm.accuracy._Shooter(fm.accuracy._ladder(b, None, None, "test")).solve(i)[:4]
+    x, w, theta0, run = Shooter(ladder_for(b, None, None, "test"), OPTIONS).solve(i)[:4]
     flow = run.flow
     tip = model.dof("tip")
     assert len(run.impacts) >= 1 and np.max(np.abs(run.x_end - x)) <= 1e-10 * np.max(np.abs(x))
@@ -337,7 +344,7 @@ def test_certified_search_same_as_fine_search(monkeypatch):
     w1 = float(fm.linear_modes(model, n=1).omega[0])
     b = fm.frequency_response(model, (0.9 * w1, 1.25 * w1), 6)
     i = max(b.folds, key=lambda j: b.omega[j]) - 2
-    x, w, theta0, run = fm.accuracy._Shooter(fm.accuracy._ladder(b, None, None, "test")).solve(i)[:4]
+    x, w, theta0, run = Shooter(ladder_for(b, None, None, "test"), OPTIONS).solve(i)[:4]
     flow = run.flow
     again = flow.run(x, theta0 / w, variational=True)
     monkeypatch.setattr(exact, "REFINE", 10 ** 9)
@@ -350,17 +357,19 @@ def test_certified_search_same_as_fine_search(monkeypatch):
     np.testing.assert_allclose(again.Phi, fine.Phi, rtol=0, atol=1e-11 * np.max(np.abs(fine.Phi)))
 
 
-def test_crossing_cosine_separates_glancing_points(monkeypatch):
+def test_crossing_cosine_separates_glancing_points():
     """Seed case 1, H = 20: the first point with contact, whose plane the exact curve crosses
-    12 % away at kappa 18, is glancing (cosine 0.27 measured, below GLANCING_COS); a point half
+    12 % away at kappa 18, is glancing (cosine 0.27 measured, below ``glancing_cos``); a point half
     way to the upper fold crosses nearly at right angles (cosine above 0.9)."""
     b = fm.frequency_response(_forced(), (0.5, 2.0), 20)
-    monkeypatch.setattr(fm.accuracy, "GLANCING_MAX", math.inf)  # keep the orbits of glancing points
-    solved, sh, _ = fm.accuracy._shoot_branch(fm.accuracy._ladder(b, None, None, "test"))
-    first = int(np.flatnonzero(~fm.accuracy._without_contact(b))[0])
+    keep = AccuracyOptions(glancing_max=math.inf)  # keep the orbits of glancing points
+    lad = ladder_for(b, None, None, "test")
+    sh = Shooter(lad, keep)
+    solved = shoot_branch(sh, ExactBranchCache(lad), keep)
+    first = int(np.flatnonzero(~without_contact(b))[0])
     mid = (first + max(b.folds, key=lambda j: b.omega[j])) // 2
     assert sh.glancing(first, solved[first]) > 3.0
-    assert sh.crossing_cosine(first, solved[first]) < fm.accuracy.GLANCING_COS
+    assert sh.crossing_cosine(first, solved[first]) < OPTIONS.glancing_cos
     assert sh.crossing_cosine(mid, solved[mid]) > 0.9
 
 
@@ -372,14 +381,14 @@ def test_massless_dof_with_damping_refused():
         LinearImpactFlow(model, 1.0)
 
 
-def test_chattering_orbit_left_to_the_levels(monkeypatch):
+def test_chattering_orbit_left_to_the_levels():
     """``auto`` leaves a model whose probe orbit has more events per period at one contact than
-    SHOOTING_AUTO_MAX_EVENTS to the levels; ``shooting`` asked for explicitly goes on."""
+    ``shooting_auto_max_events`` to the levels; ``shooting`` asked for explicitly goes on."""
     b = fm.frequency_response(_forced(), (0.95, 1.05), 6)  # in contact: one impact per period
     assert np.abs(b.P).max() > 0.1
-    monkeypatch.setattr(fm.accuracy, "SHOOTING_AUTO_MAX_EVENTS", 0)
-    assert set(estimate_error(b).accuracy.method) <= {"doubling", "failed"}
-    assert "shooting" in set(estimate_error(b, method="shooting").accuracy.method)
+    options = AccuracyOptions(shooting_auto_max_events=0)
+    assert set(estimate_error(b, options=options).accuracy.method) <= {"doubling", "failed"}
+    assert "shooting" in set(estimate_error(b, method="shooting", options=options).accuracy.method)
 
 
 def test_shooting_estimate_saved_and_loaded(shot10, tmp_path):
@@ -414,19 +423,19 @@ def test_chunked_impact_search_same_orbit(orbit, monkeypatch):
     np.testing.assert_allclose(again.Phi, run.Phi, rtol=0, atol=1e-12)
 
 
-def test_auto_leaves_stiff_models_to_the_levels(monkeypatch):
-    """``auto`` shoots only if a period's impact search is small enough (SHOOTING_AUTO_MAX_WORK);
+def test_auto_leaves_stiff_models_to_the_levels():
+    """``auto`` shoots only if a period's impact search is small enough (``shooting_auto_max_work``);
     ``shooting`` asked for explicitly goes on."""
     b = fm.frequency_response(_forced(), (0.95, 1.05), 6)
-    monkeypatch.setattr(fm.accuracy, "SHOOTING_AUTO_MAX_WORK", 10.0)
-    assert set(estimate_error(b).accuracy.method) <= {"doubling", "failed"}
-    assert "shooting" in set(estimate_error(b, method="shooting").accuracy.method)
+    options = AccuracyOptions(shooting_auto_max_work=10.0)
+    assert set(estimate_error(b, options=options).accuracy.method) <= {"doubling", "failed"}
+    assert "shooting" in set(estimate_error(b, method="shooting", options=options).accuracy.method)
 
 
-def test_auto_leaves_large_models_to_the_levels(monkeypatch):
-    """``auto`` shoots only models with at most SHOOTING_AUTO_MAX_DOFS DOFs with mass (dense
+def test_auto_leaves_large_models_to_the_levels():
+    """``auto`` shoots only models with at most ``shooting_auto_max_dofs`` DOFs with mass (dense
     modal algebra); ``shooting`` asked for explicitly goes on."""
     b = fm.frequency_response(_forced(), (0.95, 1.05), 6)
-    monkeypatch.setattr(fm.accuracy, "SHOOTING_AUTO_MAX_DOFS", 0)
-    assert set(estimate_error(b).accuracy.method) <= {"doubling", "failed"}
-    assert "shooting" in set(estimate_error(b, method="shooting").accuracy.method)
+    options = AccuracyOptions(shooting_auto_max_dofs=0)
+    assert set(estimate_error(b, options=options).accuracy.method) <= {"doubling", "failed"}
+    assert "shooting" in set(estimate_error(b, method="shooting", options=options).accuracy.method)

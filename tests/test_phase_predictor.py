@@ -123,16 +123,16 @@ def test_bad_predictor_is_named():
 
 
 def test_level_start_between_two_points_follows_the_phase():
-    """accuracy._between: between a motion and the same motion delayed by tau, the point at a
+    """accuracy.level_trace.between: between a motion and the same motion delayed by tau, the point at a
     fraction theta is the motion delayed by theta tau, to round-off (the chord would shrink the
     high harmonics: at H = 20 harmonic 20 turned by 20 tau = 8 rad)."""
-    from femodes.accuracy import _between
+    from femodes.accuracy.level_trace import between
 
     pr = ForcedResponseProblem(_seed(), fm.Harmonics(20))
     x0 = np.random.default_rng(5).standard_normal(pr.size)
     tau, theta = 0.4, 0.3
     y0, y1 = np.append(x0, 1.0), np.append(pr.phase_shift(x0, tau), 1.2)
-    got = _between(pr, y0, y1, theta)
+    got = between(pr, y0, y1, theta)
     assert got[:-1] == pytest.approx(pr.phase_shift(x0, theta * tau), abs=1e-12)
     assert got[-1] == pytest.approx(1.06, rel=1e-15)
     chord = y0 + theta * (y1 - y0)

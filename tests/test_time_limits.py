@@ -1,5 +1,6 @@
 """Long work that returns: the error estimate's time limit (``estimate_error(time_limit=)``, the
-analyses' ``rtol=`` at RTOL_BUDGET times the plain branch) and the progress of stability runs."""
+analyses' ``rtol=`` at ``AccuracyOptions.rtol_budget`` times the plain branch) and the progress of
+stability runs."""
 
 import logging
 
@@ -39,17 +40,18 @@ def test_time_limit_is_checked(branch):
             fm.estimate_error(branch, time_limit=bad)
 
 
-def test_rtol_of_an_analysis_is_bounded_by_the_branch_time(monkeypatch, caplog):
-    """``rtol=`` gives the estimate RTOL_BUDGET times the plain branch's time, at least
-    RTOL_MIN_SECONDS: with a budget of almost nothing it returns the branch with its warning
+def test_rtol_of_an_analysis_is_bounded_by_the_branch_time(caplog):
+    """``rtol=`` gives the estimate ``rtol_budget`` times the plain branch's time, at least
+    ``rtol_min_seconds``: with a budget of almost nothing it returns the branch with its warning
     instead of refining."""
-    assert accuracy.rtol_time_limit(0.1) == accuracy.RTOL_MIN_SECONDS
-    assert accuracy.rtol_time_limit(100.0) == 100.0 * accuracy.RTOL_BUDGET
-    monkeypatch.setattr(accuracy, "RTOL_BUDGET", 1e-9)
-    monkeypatch.setattr(accuracy, "RTOL_MIN_SECONDS", 1e-9)
+    default = fm.AccuracyOptions()
+    assert accuracy.rtol_time_limit(0.1) == default.rtol_min_seconds == 60.0
+    assert accuracy.rtol_time_limit(100.0) == 100.0 * default.rtol_budget == 1000.0
+    hurried = fm.AccuracyOptions(rtol_budget=1e-9, rtol_min_seconds=1e-9)
+    assert accuracy.rtol_time_limit(0.1, hurried) == 1e-9
     with caplog.at_level(logging.WARNING, logger="femodes.accuracy"):
         b = fm.frequency_response(_oscillator(), (0.8, 1.3), fm.Harmonics(10), rtol=1e-4, error_method="levels",
-                                  options=fm.ContinuationOptions(max_points=40))
+                                  options=fm.ContinuationOptions(max_points=40), error_options=hurried)
     assert b.accuracy is not None and not b.accuracy.met.all()
     assert any("time limit" in r.getMessage() for r in caplog.records)
 

@@ -1,0 +1,175 @@
+"""The error estimate of a branch (:func:`estimate_error`): the estimators of :mod:`.protocol` in
+turn, shooting where it applies (:func:`shooting_unsupported`), the levels for the rest, within a
+time limit; the result attached as ``branch.accuracy`` (:class:`~femodes.results.ErrorEstimate`,
+with the contact quality of every point).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from ..nonsmooth_modes import family_caveat
+from ..results import Branch, ErrorEstimate
+from ..solvers import NewtonOptions
+from ..solvers.threads import limit_blas_threads
+from .exact_branch import ExactBranchCache, ExactFolds
+from .extrapolation import estimate_levels
+from .ladder import Ladder, OutOfTime, ladder_for
+from .levels import Levels
+from .options import AccuracyOptions, check_estimate_method, check_options, refinement_options
+from .protocol import PointErrors
+from .shooting import Shooting, shooting_unsupported
+
+__all__ = ["estimate_error"]
+
+log = logging.getLogger(__name__)
+
+
+@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
+def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: int | None = None, projection=None,
+                   newton: NewtonOptions | None = None, method: str = "auto", time_limit: float | None = None,
+                   options: AccuracyOptions | None = None) -> Branch:
+    """Attach the estimated error of every point of ``branch`` (``branch.error_estimate``).
+
+    Each point is solved again with ``H // 2`` and ``2 H`` harmonics on the hyperplane normal to
+    the branch (located folds: the fold of each level), and the error of the branch's level ``H``
+    is ``|X_2H - X_H| r / (r - 1)`` with the observed ratio ``r`` (docs/guide/accuracy.md); with
+    complementarity contacts the frequency error is at least the distance to the far end of the
+    extrapolation bracket (:func:`~femodes.accuracy.extrapolation.bounded_by_bracket`). Odd
+    ``H >= 5`` uses the levels ``H, 2H, 4H``, ``H < 4`` the levels ``H, 2H + 1, 4H + 2``
+    (:func:`~femodes.accuracy.estimate_levels`; even ``H`` is cheaper). Cost: one corrector
+    solve per point and level, the finest dominating.
+
+    With ``rtol`` (branches with complementarity contacts), the frequency bracket of every
+    point whose half-width exceeds ``rtol`` (or that has none) is refined by a further level
+    ``4 H``, ``8 H``... up to ``max_harmonics``: the level is traced only over the part of the
+    branch that needs it, from the last point without contact before it (docs/guide/accuracy.md,
+    "Refinement to a tolerance"). Smooth branches have no extrapolation; their estimate is that
+    of the branch's own ``H`` (:func:`femodes.frequency_response` with ``rtol`` raises ``H``
+    instead).
+
+    Parameters
+    ----------
+    branch : Branch
+        From :func:`femodes.frequency_response` or :func:`femodes.nonlinear_mode`, with its model
+        attached.
+    rtol : float, optional
+        Requested relative accuracy of the frequency (``0 < rtol < 0.5``);
+        :attr:`~femodes.results.ErrorEstimate.met` tells which points meet it.
+    max_harmonics : int, optional
+        Largest level ``rtol`` may add (default ``8 H``; at least ``2 H``).
+    projection : ExactProjection or SampledProjection, optional
+        The projection the branch was computed with (default exact).
+    newton : NewtonOptions, optional
+    method : {"auto", "shooting", "levels"}, default "auto"
+        ``"levels"``: harmonic balance at other H (above). ``"shooting"``: the exact orbits of
+        the flow with rigid stops (docs/guide/accuracy.md, "Shooting"; forced branches of linear
+        models with unilateral contacts only, else ValueError), the levels for the points where
+        no orbit is found. ``"auto"``: shooting where it applies, else the levels.
+        :attr:`~femodes.results.ErrorEstimate.method` tells per point which one answered.
+    time_limit : float, optional
+        Seconds after which the estimate stops (checked between the points of a level): the
+        points it has not estimated get none (method ``"failed"``) and a warning says so. The
+        analyses' ``rtol=`` gives ``options.rtol_budget`` times the plain branch's own time.
+    options : AccuracyOptions, optional
+        Tuning of the estimators (default :class:`~femodes.AccuracyOptions`: the measured choices).
+
+    Returns
+    -------
+    Branch
+        The same branch, with :attr:`~femodes.Branch.accuracy` (an
+        :class:`~femodes.results.ErrorEstimate`) set.
+
+    Notes
+    -----
+    The estimate covers the harmonic truncation only (``accuracy.covers``); the mesh's share is
+    :func:`femodes.estimate_mesh_error`'s, which an estimate computed here keeps if the branch
+    had it. A backbone that is the energy continuation's grazing family past grazing
+    (:func:`femodes.nonsmooth_modes.family_caveat`) gets ``accuracy.caveat`` and meets ``rtol`` at
+    no point. The levels of a period-driven backbone (``meta["family"] == "contact phase"``) are
+    solved at each point from the branch's own orbit, neither continued in the energy nor walked
+    from the previous point: both followed the grazing family past grazing, and the estimate was
+    the distance between the two families (clamped bar, 20 elements, H = 10: 0.06 just past grazing
+    to 0.6 at 20 E_g, where the error against the continuum's mode is a few 1e-3; solved point by
+    point, 6e-4 to 1.6e-2 against true errors of 3e-4 to 7e-3). A point whose level has no orbit
+    near it (in a tongue of internal resonance) gets no estimate (method ``"failed"``).
+    """
+    lad = ladder_for(branch, projection, newton, "estimate_error")
+    H = branch.harmonics.n_harmonics
+    rtol, max_harmonics = refinement_options(rtol, max_harmonics, H)
+    check_estimate_method(method, "estimate_error")
+    options = check_options(options, "estimate_error")
+    if time_limit is not None:
+        if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float, np.integer, np.floating)) \
+                or not time_limit > 0:
+            raise ValueError(f"estimate_error: time_limit must be a positive number of seconds or None, got "
+                             f"{time_limit!r}")
+        lad.deadline = time.perf_counter() + float(time_limit)
+    started = time.perf_counter()
+    n = len(branch)
+    errors = PointErrors.empty(n, "complementarity" in branch.contacts.kinds, estimate_levels(H)[0][-1])
+    todo = np.ones(n, dtype=bool)
+    if method != "levels":
+        todo = _by_shooting(lad, errors, method, projection, options)
+    out_of_time = False
+    if todo.any():
+        try:
+            Levels(options, rtol, max_harmonics).estimate(lad, errors, todo)
+        except OutOfTime:
+            out_of_time = True
+    if out_of_time:
+        _warn_out_of_time(lad, errors, time_limit, time.perf_counter() - started, options)
+    pen, ten = branch.contact_quality()
+    kind = np.where(np.isfinite(errors.omega) | (errors.method == "truncation"), errors.method, "failed")
+    # a mesh estimate already attached (femodes.estimate_mesh_error) does not depend on H: kept
+    old = branch.accuracy
+    mesh = {} if old is None or old.mesh is None else {"mesh": old.mesh, "mesh_method": old.mesh_method}
+    branch.set_accuracy(ErrorEstimate(omega=errors.omega, amplitude=errors.amplitude, penetration=pen, tension=ten,
+                                      harmonics=np.full(n, H), rate=errors.rate, method=kind.astype(str), rtol=rtol,
+                                      omega_limit=errors.omega_limit, omega_limit_error=errors.omega_limit_error,
+                                      finest=errors.finest, caveat=family_caveat(branch), **mesh))
+    return branch
+
+
+def _by_shooting(lad: Ladder, errors: PointErrors, method: str, projection, options: AccuracyOptions) -> np.ndarray:
+    """Shooting, then the exact branch's folds (:class:`~.shooting.Shooting`,
+    :class:`~.exact_branch.ExactFolds`) where they apply; the points left for the levels. With
+    ``method="auto"`` a branch they cannot take goes to the levels whole; with ``"shooting"``
+    that is a ValueError."""
+    n = len(lad.branch)
+    why = shooting_unsupported(lad.branch, projection)
+    if why and method == "shooting":
+        raise ValueError(f"estimate_error: method='shooting' cannot take this branch: {why}; use "
+                         "method='levels' (or 'auto')")
+    if why:
+        return np.ones(n, dtype=bool)
+    exact = ExactBranchCache(lad)
+    todo = np.ones(n, dtype=bool)
+    try:
+        for estimator in (Shooting(exact, options, auto=method == "auto"), ExactFolds(exact, options)):
+            todo = estimator.estimate(lad, errors, todo)
+    except ValueError as exc:  # the flow itself (a nearly defective state matrix), or too stiff for auto
+        if method == "shooting":
+            raise ValueError(f"estimate_error: method='shooting': {exc}") from None
+        log.info("accuracy: no shooting (%s); levels", exc)
+        errors.clear()
+        todo = np.ones(n, dtype=bool)
+    if todo.any():
+        log.info("accuracy: shooting found no exact orbit at %d point(s); levels there", int(todo.sum()))
+    return todo
+
+
+def _warn_out_of_time(lad: Ladder, errors: PointErrors, time_limit: float, elapsed: float,
+                      options: AccuracyOptions) -> None:
+    missing = int(np.count_nonzero(~np.isfinite(errors.omega) & (errors.method != "truncation")))
+    done = ", ".join(f"H = {k} in {v:.3g} s" if np.isfinite(v) else f"H = {k} unfinished"
+                     for k, v in lad.level_times.items())
+    log.warning("accuracy: the error estimate stopped at its time limit (%.3g s, after %.3g s; levels: %s): "
+                "%d of %d points have no estimate (method 'failed'). The finer harmonic levels of this branch "
+                "cost far more than the branch; give estimate_error a larger time_limit, or fewer harmonics "
+                "or contacts (the rtol= of the analyses allows %g times the branch's own time, at least %g s)",
+                float(time_limit), elapsed, done or "none finished", missing, len(lad.branch),
+                options.rtol_budget, options.rtol_min_seconds)
