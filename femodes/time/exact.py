@@ -25,21 +25,15 @@ function of ``x`` and the forcing, hence of the same closed form. Events:
   Both sides of a switch have the same vector field (at ``q_c = gap`` the force is 0), so the
   state and the monodromy matrix pass it unchanged (saltation matrix ``I``).
 
-Events are located by a certified search: the event functions are sampled on a coarse grid
-(:data:`SAMPLES` per period of the highest forcing harmonic); on an interval of length ``h`` each
-modal term ``c_m e^{lambda_m s}`` moves the function by less than ``|c_m| min(|lambda_m|^2
-h^2 / 8, 2)`` away from the chord of its samples, so an interval whose samples exceed that bound
-has no event and is not looked at again; the others are split (:data:`REFINE` parts) down to
-:data:`SAMPLES` points per shortest period of the flow, where sign changes and sampled minima
-bracket the event, which Newton on the closed form locates to round-off. A stiff model pays the
-fine grid only near its events. No step size, no integration error: the orbit is exact to
-round-off and to the root tolerance of the event times (4 eps). Restitution below 1 is
-accepted, but an accumulation of events (chattering) is refused after
-:data:`~femodes.time.shooting.MAX_IMPACTS` of them.
+Events are located by a certified search (:mod:`.exact_events`) on a grid of :data:`SAMPLES`
+points per shortest period of the flow, refined only where a bound on the modal terms cannot
+exclude an event. No step size, no integration error: the orbit is exact to round-off and to the
+root tolerance of the event times (4 eps). Restitution below 1 is accepted, but an accumulation of
+events (chattering) is refused after :data:`~femodes.time.shooting.MAX_IMPACTS` of them.
 
-The Fourier coefficients of the orbit follow in closed form as well (integrals of exponentials
-over each segment; impulses and the piecewise closed-form forces for the contact forces), which
-is what :mod:`femodes.accuracy` compares harmonic balance solutions with.
+A run (:class:`~femodes.time.exact_run.FlowRun`) also gives the Fourier coefficients of the orbit
+in closed form (:mod:`.exact_fourier`), which is what :mod:`femodes.accuracy` compares harmonic
+balance solutions with.
 
 Used by :mod:`femodes.accuracy` (shooting refinement of error-controlled branches); the general
 event-driven integration with smooth laws is :mod:`femodes.time.shooting`.
@@ -56,27 +50,23 @@ import math
 
 import numpy as np
 import scipy.linalg as sla
-from scipy.optimize import minimize_scalar
 
 from ..laws import UnilateralContact
 from ..model import StructuralModel
 from ..solvers import ContinuationOptions, continuation
-from .shooting import MAX_IMPACTS, unsupported
+from .exact_events import CHUNK, REFINE
+from .exact_run import FlowRun
+from .shooting import unsupported
 
 log = logging.getLogger(__name__)
 
-__all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "SAMPLES", "CHUNK", "REFINE",
+__all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "periodicity_residual", "SAMPLES", "CHUNK", "REFINE",
            "MAX_MASSLESS_CONTACTS", "ExactBranch", "exact_frequency_response", "EXACT_BRANCH_RTOL",
            "EXACT_FOLD_RTOL", "FOLD_WINDOW", "undamped"]
 
 #: Grid points per shortest period of the flow (fastest eigenvalue or forcing harmonic) on which
 #: the events are bracketed, and of the coarse grid per period of the highest forcing harmonic.
 SAMPLES = 24
-#: Largest number of grid points of one fine search evaluated at once (memory CHUNK x 2n complex
-#: numbers); longer searches go chunk by chunk and stop at the first event.
-CHUNK = 4096
-#: Parts into which the certified search splits an interval that may hold an event.
-REFINE = 8
 #: Largest condition number of the eigenvector matrix (a nearly defective A, e.g. critical
 #: damping, makes the modal flow inaccurate).
 MAX_CONDITION = 1e8
@@ -337,7 +327,7 @@ class LinearImpactFlow:
         T = 2.0 * math.pi / self.omega if period is None else float(period)
         return FlowRun(self, np.asarray(x0, dtype=float), float(t0), float(t0) + T, variational)
 
-    def _start_mode(self, x: np.ndarray, t: float) -> frozenset:
+    def start_mode(self, x: np.ndarray, t: float) -> frozenset:
         """The massless contacts closed at the start: the set whose condensed displacements keep
         to the gaps and whose forces are compressive (unique: the condensed stiffness is
         positive definite), by enumeration."""
@@ -358,445 +348,6 @@ class LinearImpactFlow:
                     best, best_v = S, v
         return best  # round-off on a switching surface: the least violated
 
-
-class FlowRun:
-    """One run of :class:`LinearImpactFlow`: end state, monodromy, segments, impacts, switches.
-
-    Attributes
-    ----------
-    x_end : ndarray (2n,)
-    Phi : ndarray (2n, 2n) or None
-        ``d x_end / d x0`` (saltation matrices at the impacts) when ``variational``; zero columns
-        for the massless DOFs' entries.
-    x_end_omega : ndarray (2n,) or None
-        ``d x_end / d w`` when ``variational``, with the start and end phases ``w t0`` and
-        ``w t1`` held fixed (a run of one forcing period from a given phase, as shooting and
-        :func:`exact_frequency_response` use it): the particular solution's change carried
-        through the segments, the saltation matrices at the impacts (the impact surfaces depend
-        on the state alone), unchanged through switches (the same vector field on both sides),
-        and the moves ``-t0 / w`` and ``-t1 / w`` of the start and end times.
-    segments : list of (t_a, t_b, z_a, closed)
-        Intervals between events with the modal coordinates ``z_a = V^-1 (x(t_a) - x_p(t_a))`` of
-        the mode ``closed`` (the massless contacts closed there).
-    impacts : list of (t, contact index, impulse)
-        Impulse ``(1 + e) v_c^- / (M^-1)_cc`` (compression positive).
-    switches : list of (t, contact index, "close" | "open")
-    samples : int
-        Event function evaluations of the searches (the cost of a stiff model).
-    """
-
-    def __init__(self, flow: LinearImpactFlow, x0: np.ndarray, t0: float, t1: float, variational: bool):
-        self.flow, self.t0, self.t1 = flow, t0, t1
-        n2 = 2 * flow.n
-        if x0.shape != (n2,) or not np.all(np.isfinite(x0)):
-            raise ValueError(f"LinearImpactFlow.run: x0 must be {n2} finite numbers, got shape {x0.shape}")
-        inertial = ~flow.massless
-        g0 = flow.gaps[inertial] - x0[flow.dofs[inertial]]
-        scale = max(float(np.max(np.abs(flow.gaps))), float(np.max(np.abs(x0[:flow.n]))), 1e-300)
-        if g0.size and np.any(g0 < -1e-9 * scale):
-            raise ValueError(f"LinearImpactFlow.run: the start state penetrates an obstacle (gap {float(g0.min()):.3g})")
-        self.segments: list = []
-        self.impacts: list = []
-        self.switches: list = []
-        self.samples = 0
-        x = x0[flow.state_index].copy()
-        self._Phi = np.eye(n2)[flow.state_index] if variational else None
-        self._sigma = None  # d x(t) / d w at a fixed time t, the start time's move included
-        self.sensitivities: list = []
-        self._sigmas: list = []
-        self._J: dict = {}  # (H, segment) -> its integrals (_segment_integrals)
-        closed = flow._start_mode(x, t0)
-        t = t0
-        while True:
-            m, d = flow.mode(closed)
-            self._m, self._d = m, d
-            if variational and self._sigma is None:  # x(t0) = x0 with t0 = theta0 / w: dt0/dw = -t0 / w
-                self._sigma = self._field(t0, x) * (t0 / flow.omega)
-            z = m.Vinv @ (x - d.particular(t))
-            hit = self._next_event(t, z, t1)
-            tb = t1 if hit is None else hit[0]
-            self.segments.append((t, tb, z, closed))
-            if variational:
-                self.sensitivities.append(self._Phi)  # d x(t_a+) / d x0 of the segment
-                self._sigmas.append(self._sigma)  # and d x(t_a+) / d w at the fixed time t_a
-            e = np.exp(m.lam * (tb - t))
-            x = d.particular(tb) + np.real(m.V @ (e * z))
-            if variational:
-                Pm = np.real((m.V * e) @ m.Vinv)
-                self._Phi = Pm @ self._Phi
-                self._sigma = d.particular_omega(tb) + Pm @ (self._sigma - d.particular_omega(t))
-            if hit is None:
-                break
-            if len(self.impacts) + len(self.switches) >= MAX_IMPACTS:
-                raise ValueError(f"LinearImpactFlow.run: more than {MAX_IMPACTS} contact events in one run (an "
-                                 "accumulation of impacts or switches)")
-            j = hit[1]
-            if flow.massless[j]:
-                closed = closed ^ {j}
-                self.switches.append((tb, j, "close" if j in closed else "open"))
-            else:
-                x = self._impact(tb, x, j, variational)
-            t = tb
-        m, d = flow.mode(closed)
-        tail = d.phases(t1)
-        self.x_end = np.concatenate([m.Lq @ x + np.real(tail @ d.G), m.Lv @ x + np.real((tail * d.iw) @ d.G)])
-        self.Phi = np.vstack([m.Lq, m.Lv]) @ self._Phi if variational else None
-        self.x_end_omega = None
-        if variational:
-            dx = self._sigma - self._field(t1, x) * (t1 / flow.omega)  # dt1/dw = -t1 / w
-            # the forcing part of the massless DOFs at the fixed end phase: only the velocity's i k w
-            self.x_end_omega = np.concatenate([m.Lq @ dx, m.Lv @ dx + np.real((tail * (1j * d.ks)) @ d.G)])
-
-    def plain(self) -> FlowRun:
-        """This run without its variational part (monodromy, segment sensitivities): what
-        :meth:`displacement` and :meth:`coefficients` need, kept small."""
-        out = copy.copy(self)
-        out._Phi, out.Phi, out.x_end_omega, out._sigma = None, None, None, None
-        out.sensitivities, out._sigmas, out._J = [], [], {}
-        return out
-
-    @property
-    def touches(self) -> bool:
-        """Whether the orbit touches an obstacle (an impact or a closed massless contact)."""
-        return bool(self.impacts or self.switches or any(s[3] for s in self.segments))
-
-    # -- event search ---------------------------------------------------------------------------
-    def _event_and_rate(self, t: float, z: np.ndarray, tau: np.ndarray, rates: bool = True):
-        """Event functions and their rates (None without ``rates``) at ``t + tau`` (rows) for
-        every contact (columns)."""
-        m, d = self._m, self._d
-        self.samples += tau.size
-        E = np.exp(np.multiply.outer(tau, m.lam)) * z  # (p, 2nI)
-        ph = d.phases(t + tau)  # (p, nk)
-        g = np.real(E @ m.Re.T + ph @ d.Ye)
-        if not rates:
-            return g, None
-        r = np.real((E * m.lam) @ m.Re.T + (ph * d.iw) @ d.Ye)
-        return g, r
-
-    def _next_event(self, t: float, z: np.ndarray, t1: float):
-        """``(time, contact)`` of the first event in ``(t, t1]``, or None: the certified coarse
-        search (module docstring), then the fine search where it cannot exclude an event."""
-        span = t1 - t
-        if span <= 0.0:
-            return None
-        d = self._d
-        fine = d.dt
-        m0 = max(1, int(math.ceil(span / d.coarse)))
-        h = span / m0
-        if h <= REFINE * fine:  # not stiff: the fine search everywhere
-            return self._fine(t, z, 0.0, span)
-        m = self._m
-        # intervals [j h, (j + 1) h] by their integer index j on the current level's grid: the end
-        # of one is the start of the next to the bit, so each grid point is evaluated once
-        idx = np.arange(m0)
-        amp = np.abs(m.Re * z)  # (nc, 2nI) modal amplitudes of the event functions
-        famp = np.abs(d.Ye[1:]) if d.ks.size > 1 else np.zeros((0, d.Ye.shape[1]))
-        kw = np.abs(d.iw[1:])
-        while h > fine:
-            # the starts, then the ends that are not the next interval's start
-            p = idx.size
-            joined = np.append(np.diff(idx) == 1, False)
-            g, _ = self._event_and_rate(t, z, np.concatenate([idx, idx[~joined] + 1]) * h, rates=False)
-            ga, gb = g[:p], g[np.where(joined, np.arange(1, p + 1), p + np.cumsum(~joined) - 1)]
-            if idx[0] == 0:
-                ga[0] = np.minimum(ga[0], 0.0)  # after an event the function starts at 0: look closer
-            starts = idx * h
-            growth = np.exp(np.multiply.outer(starts, m.lam.real)) * np.maximum(1.0, np.exp(m.lam.real * h))
-            curv = np.minimum(np.abs(m.lam) ** 2 * h * h / 8.0, 2.0)
-            bound = growth @ (amp * curv).T + (np.minimum(kw ** 2 * h * h / 8.0, 2.0) @ famp)
-            unsure = np.any(np.minimum(ga, gb) - bound < 0.0, axis=1)
-            below = np.flatnonzero(np.any(gb < 0.0, axis=1))
-            if below.size:  # an event for sure up to there: nothing after it matters
-                unsure[below[0] + 1:] = False
-            idx = idx[unsure]
-            if not idx.size:
-                return None
-            idx = (idx[:, None] * REFINE + np.arange(REFINE)).ravel()
-            h /= REFINE
-        starts = idx * h
-        # the intervals left, in time order, as runs of adjacent ones: the first event found is the first
-        cut = np.flatnonzero(np.diff(starts) > 1.5 * h) + 1
-        for run in np.split(starts, cut):
-            hit = self._fine(t, z, float(run[0]), float(run[-1]) + h)
-            if hit is not None:
-                return hit
-        return None
-
-    def _fine(self, t: float, z: np.ndarray, a: float, b: float):
-        """The first event in ``(t + a, t + b]`` on the fine grid (chunk by chunk)."""
-        fine = self._d.dt
-        m = max(2, int(math.ceil((b - a) / fine)))
-        if m > CHUNK:
-            edges = np.linspace(a, b, -(-m // CHUNK) + 1)
-            for lo, hi in zip(edges[:-1], edges[1:]):
-                hit = self._fine(t, z, lo, hi)
-                if hit is not None:
-                    return hit
-            return None
-        tau = np.linspace(a, b, m + 1)
-        g, r = self._event_and_rate(t, z, tau)
-        return self._first_crossing(t, z, tau, g, r, m, after_event=(a == 0.0))
-
-    def _first_crossing(self, t, z, tau, g, r, m, after_event: bool):
-        """The earliest crossing on the sampled event functions ``g`` (rates ``r``) at ``t + tau``."""
-        best = None
-        for c in range(g.shape[1]):
-            gc, rc = g[:, c], r[:, c]
-            gc0 = max(gc[0], 0.0) if after_event else gc[0]  # at 0 after an event (or round-off below)
-
-            def value(s, c=c):
-                return self._scalar(t, z, c, s)[0]
-
-            found = None
-            for i in range(1, m + 1):
-                a = gc0 if i == 1 else gc[i - 1]
-                if gc[i] < 0.0:
-                    lo = tau[i - 1]
-                    if i == 1 and gc[0] <= 0.0 and after_event:  # leaving zero: where does it return?
-                        lo = self._leave(value, tau[0], tau[1])
-                        if lo is None:
-                            found = None
-                            break
-                    found = self._root(t, z, c, lo, tau[i])
-                    break
-                if a > 0.0 and rc[i - 1] < 0.0 < rc[i]:  # a minimum between two grid points: grazing?
-                    s_min = self._root(t, z, c, tau[i - 1], tau[i], rate=True)
-                    if self._scalar(t, z, c, s_min)[0] < 0.0:
-                        found = self._root(t, z, c, tau[i - 1], s_min)
-                        break
-            if found is not None and (best is None or found < best[0]):
-                best = (found, c)
-        if best is None:
-            return None
-        return t + best[0], best[1]
-
-    def _scalar(self, t: float, z: np.ndarray, c: int, s: float) -> tuple[float, float, float]:
-        """Event function ``c`` at ``t + s``, its rate and the rate's rate (one point)."""
-        m, d = self._m, self._d
-        e = np.exp(m.lam * s) * z
-        ph = np.exp(d.iw * (t + s))
-        row, y = m.Re[c], d.Ye[:, c]
-        val = (row @ e + y @ ph).real
-        rate = (row @ (m.lam * e) + y @ (d.iw * ph)).real
-        acc = (row @ (m.lam ** 2 * e) + y @ (d.iw ** 2 * ph)).real
-        return val, rate, acc
-
-    def _root(self, t: float, z: np.ndarray, c: int, a: float, b: float, rate: bool = False) -> float:
-        """The zero in ``[a, b]`` of event function ``c`` (positive at ``a``, negative at ``b``),
-        or with ``rate`` of its rate (negative at ``a``, positive at ``b``: the function's
-        minimum): Newton on the closed form with its derivative, kept in the bracket (bisection
-        when a step leaves it), to round-off in time."""
-        tol = 4.0 * np.finfo(float).eps * max(1.0, abs(t) + abs(b))
-        sign = -1.0 if rate else 1.0  # the function is positive at a
-        x = 0.5 * (a + b)
-        for _ in range(100):
-            g, r, dr = self._scalar(t, z, c, x)
-            val, der = (sign * r, sign * dr) if rate else (g, r)
-            if val > 0.0:
-                a = x
-            elif val < 0.0:
-                b = x
-            else:
-                return x
-            x1 = x - val / der if der != 0.0 else 0.5 * (a + b)
-            if not a < x1 < b:
-                x1 = 0.5 * (a + b)
-            if abs(x1 - x) <= tol or b - a <= tol:
-                return x1
-            x = x1
-        return x
-
-    @staticmethod
-    def _leave(value, a: float, b: float):
-        """After an event the function starts at 0 and must grow: the first sampled interval is
-        negative only if it returns within one grid step; the root sought is then the one after
-        the function's maximum."""
-        res = minimize_scalar(lambda s: -value(s), bounds=(a, b), method="bounded")
-        if -res.fun <= 0.0:
-            return None
-        return res.x
-
-    def _field(self, t: float, x: np.ndarray) -> np.ndarray:
-        """``x' = A x + b(t)`` of the current mode (inertial state)."""
-        m, d = self._m, self._d
-        ph = d.phases(t)
-        return m.A @ (x - np.real(ph @ d.X)) + np.real((ph * d.iw) @ d.X)
-
-    def _impact(self, t: float, x: np.ndarray, j: int, variational: bool) -> np.ndarray:
-        f = self.flow
-        nI = f.I.size
-        i = f.pos[f.dofs[j]]
-        vc = x[nI + i]
-        if vc <= 0.0:  # touching without approach: nothing to reverse
-            return x
-        self.impacts.append((t, j, (1.0 + f.e) * vc / f.MinvII[i, i]))
-        xp = x.copy()
-        dirI = f.impact_dir[j, f.I]
-        xp[nI:] -= (1.0 + f.e) * vc * dirI
-        if variational:
-            R = np.eye(2 * nI)
-            R[nI:, nI + i] -= (1.0 + f.e) * dirI
-            f_minus, f_plus = self._field(t, x), self._field(t, xp)
-            nvec = np.zeros(2 * nI)
-            nvec[i] = -1.0
-            salt = R + np.outer(f_plus - R @ f_minus, nvec) / (nvec @ f_minus)
-            self._Phi = salt @ self._Phi
-            self._sigma = salt @ self._sigma
-        return xp
-
-    # -- closed form over the run ---------------------------------------------------------------
-    def displacement(self, t) -> np.ndarray:
-        """Displacements of all DOFs at times ``t`` in ``[t0, t1]``, shape ``(len(t), n)``."""
-        t = np.atleast_1d(np.asarray(t, dtype=float))
-        out = np.empty((t.size, self.flow.n))
-        for k, (ta, tb, z, closed) in enumerate(self.segments):
-            last = k == len(self.segments) - 1
-            sel = (t >= ta) & ((t <= tb) if last else (t < tb))
-            if sel.any():
-                m, d = self.flow.mode(closed)
-                E = np.exp(np.multiply.outer(t[sel] - ta, m.lam)) * z
-                out[sel] = np.real(E @ m.Rq.T + d.phases(t[sel]) @ d.Yq)
-        return out
-
-    def _integrals(self, H: int, ta: float, tb: float, lam: np.ndarray) -> np.ndarray:
-        """``int_ta^tb e^{lam_m (t - ta)} e^{-i k w t} dt``, shape ``(2nI, H + 1)``."""
-        w = self.flow.omega
-        k = np.arange(H + 1)
-        mu = np.subtract.outer(lam, 1j * k * w)
-        dlt = tb - ta
-        x = mu * dlt
-        small = np.abs(x) < 1e-8
-        phi1 = np.where(small, 1.0 + 0.5 * x, np.expm1(np.where(small, 1.0, x)) / np.where(small, 1.0, x))
-        return dlt * phi1 * np.exp(-1j * k * w * ta)
-
-    def _harmonic_integrals(self, H: int, ta: float, tb: float, d: _ModeAt, Y: np.ndarray) -> np.ndarray:
-        """``int_ta^tb Re(sum_k Y_k e^{i k w t}) e^{-i j w t} dt`` for ``j = 0..H``, shape
-        ``(H + 1,) + Y.shape[1:]``."""
-        w = self.flow.omega
-        j = np.arange(H + 1)
-
-        def E(mu):  # int_ta^tb e^{i mu w t} dt
-            mu = np.asarray(mu, dtype=float)
-            safe = np.where(mu == 0.0, 1.0, mu)
-            return np.where(mu == 0.0, tb - ta,
-                            (np.exp(1j * safe * w * tb) - np.exp(1j * safe * w * ta)) / (1j * safe * w))
-
-        k = d.ks[:, None]
-        E1, E2 = E(k - j), E(-(k + j))  # (n_k, H + 1)
-        Yf = Y.reshape(len(d.ks), -1)
-        out = 0.5 * (E1.T @ Yf + E2.T @ np.conj(Yf))
-        return out.reshape((H + 1,) + Y.shape[1:])
-
-    def _t_integrals(self, ta: float, tb: float, mu: np.ndarray) -> np.ndarray:
-        """``int_ta^tb t e^{mu (t - ta)} dt`` for every ``mu``: ``ta D phi1(mu D) + D^2
-        psi(mu D)`` with ``D = tb - ta``, ``phi1(x) = (e^x - 1) / x`` and ``psi(x) = int_0^1 u
-        e^{x u} du = (e^x (x - 1) + 1) / x^2`` (its series below ``|x| = 1/2``, where the closed
-        form cancels)."""
-        D = tb - ta
-        x = np.asarray(mu, dtype=complex) * D
-        small = np.abs(x) < 0.5
-        xs = np.where(small, 1.0, x)
-        tiny = np.abs(x) < 1e-8
-        xt = np.where(tiny, 1.0, x)
-        phi1 = np.where(tiny, 1.0 + 0.5 * x, np.expm1(xt) / xt)
-        psi = (np.exp(xs) * (xs - 1.0) + 1.0) / (xs * xs)
-        if small.any():  # sum_k x^k / (k! (k + 2)): 18 terms reach round-off for |x| < 1/2
-            xx, term, ser = x[small], np.ones(int(small.sum()), dtype=complex), np.zeros(int(small.sum()), dtype=complex)
-            for k in range(18):
-                ser += term / (k + 2)
-                term = term * xx / (k + 1)
-            psi[small] = ser
-        return ta * D * phi1 + D * D * psi
-
-    @staticmethod
-    def _real(C: np.ndarray, H: int) -> np.ndarray:
-        """Real coefficients ``[c0, c1, s1, ...]`` from ``(w / pi) int q e^{-ikwt} dt`` (rows k)."""
-        out = np.zeros((2 * H + 1,) + C.shape[1:])
-        out[0] = 0.5 * np.real(C[0])
-        out[1::2] = np.real(C[1:])
-        out[2::2] = -np.imag(C[1:])
-        return out
-
-    def coefficients(self, H: int) -> tuple[np.ndarray, np.ndarray]:
-        """Real Fourier coefficients ``[c0, c1, s1, ..., cH, sH]`` of the displacements (shape
-        ``(2H + 1, n)``) and of the contact forces (``(2H + 1, n_contacts)``; impulses at the
-        impacts, the closed-form forces of closed massless contacts) over the run, in the phase
-        ``theta = w t`` (the conventions of :mod:`femodes.hbm.harmonics`). Exact when the run is
-        one period of a periodic orbit."""
-        f = self.flow
-        w = f.omega
-        k = np.arange(H + 1)
-        Ic = np.zeros((H + 1, f.n), dtype=complex)  # int q(t) e^{-i k w t} dt
-        Il = np.zeros((H + 1, len(f.dofs)), dtype=complex)  # the same for the massless contacts' forces
-        for s, (ta, tb, z, closed) in enumerate(self.segments):
-            m, d = f.mode(closed)
-            J = self._segment_integrals(H, s)
-            Ic += (J.T * z) @ m.Rq.T + self._harmonic_integrals(H, ta, tb, d, d.Yq)
-            if closed:
-                js = sorted(closed)
-                Il[:, js] += (J.T * z) @ m.Re[js].T + self._harmonic_integrals(H, ta, tb, d, d.Ye[:, js])
-        Q = self._real(Ic * (w / math.pi), H)
-        P = self._real(Il * (w / math.pi), H)
-        for t, c, imp in self.impacts:
-            ph = w * t * k[1:]
-            P[0, c] += imp * w / (2.0 * math.pi)
-            P[1::2, c] += imp * w / math.pi * np.cos(ph)
-            P[2::2, c] += imp * w / math.pi * np.sin(ph)
-        return Q, P
-
-    def coefficient_omega(self, H: int) -> np.ndarray:
-        """``d Q / d w`` of :meth:`coefficients` (shape ``(2H + 1, n)``; a variational run) with
-        the start and end phases held fixed, as :attr:`x_end_omega`. In the phase ``theta = w
-        t``, ``Q = (1/pi) int q(theta / w; w) e^{-i k theta} d theta``, so ``dQ/dw = (w/pi) int
-        (sigma_q(t) - (t/w) q'(t)) e^{-i k w t} dt`` with ``sigma_q`` the displacements' change
-        at a fixed time. On a segment ``sigma = P(t) + V e^{Lambda (t - t_a)} V^-1 (sigma(t_a) -
-        P(t_a))``, ``P = d x_p / d w`` (:meth:`_ModeAt.particular_omega`): the integrals of
-        exponentials and of ``t`` times exponentials (:meth:`_t_integrals`), in closed form."""
-        if self._Phi is None:
-            raise ValueError("coefficient_omega needs a run with variational=True")
-        f = self.flow
-        w = f.omega
-        dI = np.zeros((H + 1, f.n), dtype=complex)
-        kk = np.arange(H + 1)
-        for s, ((ta, tb, z, closed), sig) in enumerate(zip(self.segments, self._sigmas)):
-            m, d = f.mode(closed)
-            J0 = self._segment_integrals(H, s)  # (2nI, H + 1)
-            J1 = np.exp(-1j * kk * w * ta)[None, :] * self._t_integrals(ta, tb, np.subtract.outer(m.lam, 1j * kk * w))
-            zs = m.Vinv @ (sig - d.particular_omega(ta))
-            # sigma_q's part t i k Yq_k e^{i k w t} (the phases' change at a fixed time) and the
-            # forced part of (t/w) q' are the same: they cancel and are left out
-            dI += (J0.T * zs) @ m.Rq.T + self._harmonic_integrals(H, ta, tb, d, d.dX @ m.Lq.T)
-            dI -= ((J1.T * (m.lam * z)) @ m.Rq.T) / w
-        return self._real(dI * (w / math.pi), H)
-
-    def _segment_integrals(self, H: int, s: int) -> np.ndarray:
-        """:meth:`_integrals` of segment ``s`` in its mode, computed once per run and ``H``
-        (:meth:`coefficients`, :meth:`coefficient_sensitivity` and :meth:`coefficient_omega` all
-        need them)."""
-        key = (H, s)
-        J = self._J.get(key)
-        if J is None:
-            ta, tb, _, closed = self.segments[s]
-            J = self._J[key] = self._integrals(H, ta, tb, self.flow.mode(closed)[0].lam)
-        return J
-
-    def coefficient_sensitivity(self, H: int) -> np.ndarray:
-        """``d Q / d x0`` of :meth:`coefficients`, shape ``(2H + 1, n, 2n)`` (a variational run):
-        on each segment ``dq(t)/dx0 = L_q V e^{Lambda (t - t_a)} V^-1 Phi_a`` with ``Phi_a`` the
-        sensitivity at its start (saltation included; q is continuous at the events, so a shift of
-        an event time adds nothing else)."""
-        if self._Phi is None:
-            raise ValueError("coefficient_sensitivity needs a run with variational=True")
-        f = self.flow
-        w = f.omega
-        Ic = np.zeros((H + 1, f.n, 2 * f.n), dtype=complex)
-        for s, ((ta, tb, _, closed), Phi_a) in enumerate(zip(self.segments, self.sensitivities)):
-            m, _ = f.mode(closed)
-            J = self._segment_integrals(H, s)
-            Zm = m.Vinv @ Phi_a  # (modes, 2n columns)
-            Ic += (m.Rq[None, :, :] * J.T[:, None, :]) @ Zm  # sum over m of J[m, k] Rq[d, m] Zm[m, c]
-        return self._real(Ic * (w / math.pi), H)
 
 
 # ------------------------------------------------------------------------------ the exact branch
