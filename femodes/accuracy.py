@@ -131,8 +131,9 @@ from .solvers import ContinuationOptions, NewtonOptions, continuation
 from .solvers.threads import limit_blas_threads
 from .solvers.arclength import ArclengthSystem
 from .solvers.bordered import bordered_solver
-from .time.exact import (LinearImpactFlow, exact_flow_unsupported, exact_frequency_response, fold_is_upper, undamped,
-                         periodicity_residual)
+from .exact_branch import fold_is_upper
+from .exact_response import exact_frequency_response
+from .time.exact import LinearImpactFlow, exact_flow_unsupported, periodicity_residual, undamped
 
 __all__ = ["estimate_error", "estimate_levels", "meet_tolerance", "RTOL_BUDGET", "RTOL_MIN_SECONDS", "rtol_time_limit", "shooting_unsupported_for", "refinement_options", "check_estimate_method",
            "shooting_unsupported", "ESTIMATE_METHODS", "RATE_MIN", "BRACKET_RATE_MAX"]

@@ -35,34 +35,30 @@ A run (:class:`~femodes.time.exact_run.FlowRun`) also gives the Fourier coeffici
 in closed form (:mod:`.exact_fourier`), which is what :mod:`femodes.accuracy` compares harmonic
 balance solutions with.
 
-Used by :mod:`femodes.accuracy` (shooting refinement of error-controlled branches); the general
+Used by :mod:`femodes.accuracy` (shooting refinement of error-controlled branches) and
+:func:`femodes.exact_frequency_response` (the exact branch, an analysis); the general
 event-driven integration with smooth laws is :mod:`femodes.time.shooting`.
 """
 
 from __future__ import annotations
 
-import collections
 import copy
-import dataclasses
+import importlib
 import itertools
-import logging
 import math
+import warnings
 
 import numpy as np
 import scipy.linalg as sla
 
 from ..laws import UnilateralContact
 from ..model import StructuralModel
-from ..solvers import ContinuationOptions, continuation
 from .exact_events import CHUNK, REFINE
 from .exact_run import FlowRun
 from .shooting import unsupported
 
-log = logging.getLogger(__name__)
-
-__all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "periodicity_residual", "SAMPLES", "CHUNK", "REFINE",
-           "MAX_MASSLESS_CONTACTS", "ExactBranch", "exact_frequency_response", "EXACT_BRANCH_RTOL",
-           "EXACT_FOLD_RTOL", "FOLD_WINDOW", "undamped"]
+__all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "periodicity_residual", "undamped", "SAMPLES",
+           "CHUNK", "REFINE", "MAX_MASSLESS_CONTACTS"]
 
 #: Grid points per shortest period of the flow (fastest eigenvalue or forcing harmonic) on which
 #: the events are bracketed, and of the coarse grid per period of the highest forcing harmonic.
@@ -349,153 +345,13 @@ class LinearImpactFlow:
         return best  # round-off on a switching surface: the least violated
 
 
-
-# ------------------------------------------------------------------------------ the exact branch
-#: Relative error stated for a fold of :func:`exact_frequency_response` that is the extreme
-#: frequency of its neighbours: its location by the continuation (secant on ``dw/ds``) measured
-#: 3.2e-8 and 2.5e-13 against the seed cases' references, below 1e-9 against the shooting
-#: refinement on the 2-DOF massless model (tests/test_exact_branch.py).
-EXACT_FOLD_RTOL = 1e-6
-#: Points on either side of a fold that :attr:`ExactBranch.fold_omega` looks at (and
-#: :func:`fold_is_upper`). With a finite-difference ``dr/dw`` the continuation detected the lower
-#: fold of the cantilever of ``benchmarks/bench_cantilever_time.py`` at 3.7193289, a point between
-#: two of larger frequency on one side and smaller on the other (a kink); the extreme of the 3
-#: points on either side was 3.7193164, their range 2.9e-5 relative; local continuations with
-#: short steps give 3.719311942. Detected folds are now refined (:func:`_refine_fold`).
-FOLD_WINDOW = 3
-#: Default Newton tolerance of :func:`exact_frequency_response`, relative to the larger of the
-#: largest gap and the start state of the response without contact at the first frequency. On the
-#: cantilever of ``benchmarks/bench_cantilever_time.py`` (scale 0.02) the continuation's default
-#: 1e-10 was not reached: the corrector stalled at residuals of 4e-9, 2e-7 of the scale (stiff
-#: modes: event times to round-off still leave that much in their velocities).
-EXACT_BRANCH_RTOL = 1e-6
-
-
-def fold_is_upper(omega: np.ndarray, j: int) -> bool:
-    """Whether the fold at point ``j`` of a branch is a largest frequency: ``omega[j]`` at least
-    the mean of the frequencies :data:`FOLD_WINDOW` points before and after it (fewer at the
-    ends)."""
-    lo, hi = max(j - FOLD_WINDOW, 0), min(j + FOLD_WINDOW, omega.size - 1)
-    return bool(omega[j] >= 0.5 * (omega[lo] + omega[hi]))
-
-
-def _fold_window(omega: np.ndarray, j: int) -> tuple[np.ndarray, bool, float]:
-    """The frequencies of fold ``j`` and of the :data:`FOLD_WINDOW` points on either side of it,
-    whether it is an upper fold (:func:`fold_is_upper`), and their extreme frequency that way."""
-    win = omega[max(j - FOLD_WINDOW, 0):min(j + FOLD_WINDOW + 1, omega.size)]
-    upper = fold_is_upper(omega, j)
-    return win, upper, float(win.max() if upper else win.min())
-
-
-class ExactBranch:
-    """Periodic orbits of a linear model with rigid stops traced by continuation in the forcing
-    frequency (:func:`exact_frequency_response`).
-
-    Attributes
-    ----------
-    omega : ndarray (n_points,)
-    states : ndarray (n_points, 2 n_dofs)
-        Start states ``[q; v]`` at ``t = 0``, periodic to the continuation's Newton tolerance
-        (massless DOFs' entries consistent with the others).
-    atol : float
-        That tolerance: ``|x(T) - x(0)|`` of the inertial entries is about that small at every
-        point (Newton also stops on a step below its ``xtol``).
-    folds : tuple of int
-        Indices of the folds (turning points in ``omega``) the continuation located, or only
-        detected (the point nearer to the sign change of ``dw/ds``).
-    fold_omega, fold_error : ndarray (len(folds),)
-        The folds' frequencies and relative errors: a located fold that is the extreme frequency
-        of the :data:`FOLD_WINDOW` points on either side is taken as it is, with the error
-        :data:`EXACT_FOLD_RTOL`; otherwise the extreme frequency of those points, with their
-        range as the error. A fold the continuation detected but did not locate (a grazing at
-        the turn: the corrector fails there) is refined by short-step continuations toward it
-        from both sides (:func:`_refine_fold`): the extreme frequency they and the branch reach,
-        with the larger distance of either side's extreme from it (at least
-        :data:`EXACT_FOLD_RTOL`) as the error.
-    fold_upper : ndarray of bool (len(folds),)
-        Whether a fold is a largest frequency (the branch turns back from increasing ``omega``;
-        :func:`fold_is_upper`).
-    pieces : tuple of int
-        Start indices of the pieces: ``(0,)``, or ``(0, k)`` when the continuation stopped inside
-        the span (a grazing orbit) and points ``k:`` were traced back from the other end.
-    success, status, message
-        Whether the pieces cover the span; the status (:data:`~femodes.solvers.STATUS_MESSAGES`)
-        and message of the first continuation, and of the second if there is one.
-    runs : int
-        Runs of the flow (the cost).
-    flow : LinearImpactFlow
-    """
-
-    def __init__(self, flow: LinearImpactFlow, omega, states, results, folds, runs: int, atol: float,
-                 refined: dict | None = None, orbits: list | None = None):
-        self.flow, self.atol = flow, float(atol)
-        self.omega = np.asarray(omega, dtype=float)
-        self.states = np.asarray(states, dtype=float)
-        self.folds = tuple(sorted(int(i) for i in folds))
-        self.fold_omega, self.fold_error, self.fold_upper = self._fold_frequencies()
-        for k, j in enumerate(self.folds):  # detected folds refined by short-step continuations
-            if refined and j in refined:
-                self.fold_omega[k], self.fold_error[k] = refined[j]
-        first = results[0]
-        self.pieces = (0,) if len(results) == 1 else (0, len(first.p))
-        # covered: the first run reached the end, or the second (backward) reached where it stopped
-        self.success = first.status == 0 or (len(results) == 2 and results[1].status == 0)
-        self.status = int(first.status)
-        self.message = "; ".join(f"{'forward' if k == 0 else 'back'}: {r.message}" for k, r in enumerate(results))
-        self.runs = int(runs)
-        self._orbits = orbits
-
-    def __len__(self) -> int:
-        return self.omega.size
-
-    def _fold_frequencies(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:attr:`fold_omega`, :attr:`fold_error`, :attr:`fold_upper`."""
-        w = self.omega
-        out_w, out_e = np.zeros(len(self.folds)), np.zeros(len(self.folds))
-        out_u = np.zeros(len(self.folds), dtype=bool)
-        for k, j in enumerate(self.folds):
-            win, out_u[k], extreme = _fold_window(w, j)
-            if w[j] == extreme:  # the located fold is the extreme frequency around it
-                out_w[k], out_e[k] = w[j], EXACT_FOLD_RTOL
-            else:  # it is not (a kink of the branch next to it): the sampled extreme, and the window's range
-                out_w[k], out_e[k] = extreme, float(np.ptp(win)) / abs(extreme)
-        return out_w, out_e, out_u
-
-    def orbit(self, i: int) -> FlowRun:
-        """The run of point ``i`` over one forcing period (its impacts, switches, displacements):
-        the continuation's own (kept), else run again."""
-        if self._orbits is not None and self._orbits[i] is not None:
-            return self._orbits[i]
-        return self.flow.at(self.omega[i]).run(self.states[i], 0.0)
-
-    def amplitude(self, dof, samples: int = 400, points=None) -> np.ndarray:
-        """``max_t |q_dof(t)|`` of every orbit (or of ``points``) on ``samples`` points per period
-        (those of :meth:`femodes.Branch.amplitude` are on the truncated Fourier series); ``dof``
-        a DOF or a list of DOFs (the largest over them)."""
-        points = range(len(self)) if points is None else points
-        out = []
-        for i in points:
-            t = np.linspace(0.0, 2.0 * math.pi / self.omega[i], samples)
-            out.append(float(np.max(np.abs(self.orbit(i).displacement(t)[:, dof]))))
-        return np.asarray(out)
-
-    def coefficients(self, i: int, H: int) -> tuple[np.ndarray, np.ndarray]:
-        """Exact Fourier coefficients of point ``i`` to ``H`` harmonics (:meth:`FlowRun.coefficients`)."""
-        return self.orbit(i).coefficients(H)
-
-
-#: Runs of the continuation's residual kept until it accepts a point (the corrector's last
-#: iterate is evaluated last, or nearly: fold location and tangents come between).
-RECENT_RUNS = 32
-
-
 def periodicity_residual(flow: LinearImpactFlow, x: np.ndarray, omega: float, t0: float = 0.0,
                          variational: bool = True):
     """``(r, dr/dx, dr/dw, run)`` of ``r = x(t0 + T) - x``, one forcing period ``T = 2 pi / w`` of
     the exact flow from ``x(t0) = x``: ``dr/dx = Phi - I`` with the monodromy matrix and ``dr/dw``
     the end state's change with ``w`` at the fixed start time (:attr:`FlowRun.x_end_omega`), both
     from the variational run; without ``variational`` the two derivatives are None. The one
-    periodicity residual of the exact branch (:class:`_ShootingResidual`, inertial entries) and
+    periodicity residual of the exact branch (:func:`femodes.exact_frequency_response`, inertial entries) and
     of the shooting refinement of :mod:`femodes.accuracy` (full state, bordered by a hyperplane)."""
     run = flow.at(omega).run(x, t0, variational=variational)
     r = run.x_end - x
@@ -504,216 +360,43 @@ def periodicity_residual(flow: LinearImpactFlow, x: np.ndarray, omega: float, t0
     return r, run.Phi - np.eye(x.size), run.x_end_omega, run
 
 
-class _ShootingResidual:
-    """``r(x, w) = x(T) - x`` over one forcing period ``T = 2 pi / w`` from ``x(0) = x`` (the
-    inertial entries of the state), with ``dr/dx = Phi - I`` and ``dr/dw`` from the variational
-    run (:attr:`FlowRun.x_end_omega`). The last :data:`RECENT_RUNS` runs (:meth:`FlowRun.plain`)
-    are kept by start state and frequency; :meth:`keep` (the continuation's callback) moves an
-    accepted point's into ``orbits``: its orbit and its massless DOFs' entries."""
-
-    def __init__(self, flow: LinearImpactFlow):
-        self.flow, self.S = flow, flow.state_index
-        self.massless = np.setdiff1d(np.arange(2 * flow.n), flow.state_index)
-        self.runs = 0
-        self.recent: collections.OrderedDict = collections.OrderedDict()
-        self.orbits: dict = {}
-
-    def keep(self, y: np.ndarray, w: float) -> None:
-        key = (np.asarray(y, dtype=float).tobytes(), float(w))
-        run = self.recent.get(key)
-        if run is not None:
-            self.orbits[key] = run
-
-    def callback(self, then=None):
-        """A continuation callback that keeps every accepted point's run, then calls ``then``."""
-        def cb(point):
-            self.keep(point.x, point.p)
-            return None if then is None else then(point)
-        return cb
-
-    def full(self, y: np.ndarray) -> np.ndarray:
-        x = np.zeros(2 * self.flow.n)
-        x[self.S] = y
-        return x
-
-    def residual(self, y: np.ndarray, w: float):
-        S = self.S
-        x = self.full(y)
-        self.runs += 1
-        try:
-            r, drdx, drdw, run = periodicity_residual(self.flow, x, w)
-        except ValueError:
-            # an iterate the flow cannot start from (inside an obstacle, w <= 0, an accumulation of
-            # events): a non-finite residual, which makes Newton's line search cut the step
-            nan = np.full(S.size, np.nan)
-            return nan, np.full((S.size, S.size), np.nan), nan
-        self.recent[(y.tobytes(), float(w))] = run.plain()
-        if len(self.recent) > RECENT_RUNS:
-            self.recent.popitem(last=False)
-        return r[S], drdx[np.ix_(S, S)], drdw[S]
-
-
 def undamped(model: StructuralModel, restitution: float = 1.0) -> bool:
     """True when nothing in ``model`` dissipates energy: no damping matrix entry, no modal damping,
-    and elastic impacts (``restitution >= 1``); :func:`exact_frequency_response` refuses such a
+    and elastic impacts (``restitution >= 1``); :func:`femodes.exact_frequency_response` refuses such a
     model (its forced orbits are unbounded at the resonances)."""
     return not model.has_damping and restitution >= 1.0
 
 
-def exact_frequency_response(model: StructuralModel, span, *, x0=None, restitution: float = 1.0,
-                             options=None) -> ExactBranch:
-    """The forced response of a linear model with rigid stops, orbit by exact orbit.
-
-    Pseudo-arclength continuation (:func:`femodes.solvers.continuation`) of the periodic orbits
-    of :class:`LinearImpactFlow` in the forcing frequency: the unknowns are the start state at
-    ``t = 0`` (the forcing fixes the phase), the residual ``x(T) - x(0)`` with the monodromy
-    matrix (saltation at impacts) as its Jacobian. No harmonics and no time step: every point
-    is a periodic orbit of the semi-discrete model to round-off, which is what harmonic balance
-    converges to as H grows; folds are located as turning points. The orbits need not be
-    stable (:func:`femodes.stability` or a time integration says which are).
-
-    Parameters
-    ----------
-    model : StructuralModel
-        Linear, with unilateral contacts (on DOFs with or without mass) and harmonic forcing;
-        no smooth nonlinear laws or penalty contacts (:func:`exact_flow_unsupported` says why
-        a model is refused).
-    span : (float, float)
-        Forcing frequencies ``(w_start, w_end)`` in rad/s, positive; may decrease.
-    x0 : array_like (2 n_dofs,), optional
-        Start state ``[q; v]`` at ``w_start``; default: the response without contact there
-        (right when it keeps off the stops, a first guess otherwise).
-    restitution : float
-        Newton's coefficient of the impacts on DOFs with mass (1: the limit of harmonic balance).
-    options : ContinuationOptions, optional
-        Default: ``max_points=3000`` and Newton's ``atol`` :data:`EXACT_BRANCH_RTOL` times the
-        larger of the largest gap and the size of the start state without contact at
-        ``w_start``.
-
-    Returns
-    -------
-    ExactBranch
-        ``success``/``message`` report how the continuation ended; never raises on numerical
-        failure.
-
-    Raises
-    ------
-    TypeError
-        ``model`` is not a model, ``options`` not a ContinuationOptions.
-    ValueError
-        A model the flow cannot take, a bad span or ``x0``.
-    """
-    owner = "exact_frequency_response"
-    if not isinstance(model, StructuralModel):
-        raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
-    try:
-        w0, w1 = (float(span[0]), float(span[1]))
-    except (TypeError, ValueError, IndexError):
-        raise ValueError(f"{owner}: span must be two forcing frequencies (w_start, w_end), got {span!r}") from None
-    if len(span) != 2 or not (math.isfinite(w0) and math.isfinite(w1) and w0 > 0.0 and w1 > 0.0) or w0 == w1:
-        raise ValueError(f"{owner}: span must be two different finite positive frequencies, got {span!r}")
-    if not model.forces:
-        raise ValueError(f"{owner}: the model has no harmonic forcing (add one with with_forcing)")
-    if undamped(model, restitution):
-        raise ValueError(f"{owner}: the model has no damping (C = 0) and restitution = {restitution:g}: nothing "
-                         "dissipates, so near a resonance of the impacting structure the forced orbits grow without "
-                         "bound and the continuation cannot pass it (an undamped oscillator against a stop ran 3000 "
-                         "points to a step-size failure); add damping (model.with_damping(alpha=..., beta=...) or "
-                         "modal=...) or use restitution < 1")
-    flow = LinearImpactFlow(model, w0, restitution=restitution)
-    n2 = 2 * model.n_dofs
-    particular = flow.particular(0.0)
-    if x0 is None:
-        x0 = particular
-    else:
-        x0 = np.asarray(x0, dtype=float)
-        if x0.shape != (n2,) or not np.all(np.isfinite(x0)):
-            raise ValueError(f"{owner}: x0 must be {n2} finite numbers [q; v], got shape {x0.shape}")
-    if options is None:
-        scale = max(float(np.linalg.norm(particular[flow.state_index])), float(np.max(np.abs(flow.gaps), initial=0.0)))
-        base = ContinuationOptions()
-        options = ContinuationOptions(max_points=3000, newton=dataclasses.replace(
-            base.newton, atol=EXACT_BRANCH_RTOL * max(scale, 1e-300)))
-    elif not isinstance(options, ContinuationOptions):
-        raise TypeError(f"{owner}: options must be a ContinuationOptions or None, got {type(options).__name__}")
-    problem = _ShootingResidual(flow)
-    options = dataclasses.replace(options, callback=problem.callback(options.callback))
-    res = continuation(problem, (w0, w1), x0=x0[flow.state_index], options=options)
-    pieces = [res]
-    if res.status == 4 and len(res.p):
-        # the corrector gave up inside the span (a grazing orbit: the flow's derivative jumps
-        # there): trace the rest back from the other end, from its response without contact
-        w_stop = float(res.p[-1])
-        back = continuation(problem, (w1, w_stop), x0=flow.at(w1).particular(0.0)[flow.state_index], options=options)
-        log.info("%s: stopped at w = %.6g (%s); traced back from w = %.6g to %.6g (%s)", owner, w_stop, res.message,
-                 w1, float(back.p[-1]) if len(back.p) else w1, back.message)
-        if len(back.p):
-            pieces.append(back)
-    def joined(arrays):  # the pieces' arrays in the branch's order: the back piece reversed
-        return np.concatenate([np.asarray(a, dtype=float)[::1 if k == 0 else -1] for k, a in enumerate(arrays)])
-
-    omega = joined([r.p for r in pieces])
-    ys = joined([np.reshape(r.x, (len(r.p), flow.state_index.size)) for r in pieces])
-    steps = joined([r.step for r in pieces])
-    folds, located = list(res.folds), set(res.located)
-    if len(pieces) == 2:  # the back piece's index i is the branch's omega.size - 1 - i
-        folds += [omega.size - 1 - int(i) for i in sorted(pieces[1].folds, reverse=True)]
-        located |= {omega.size - 1 - int(i) for i in pieces[1].located}
-    # the refinement steps in the first run's arclength norm (scales), comparable with its steps
-    scaled = dataclasses.replace(options, x_scale=np.asarray(res.x_scale), p_scale=float(res.p_scale))
-    refined = {j: got for j in folds if j not in located
-               and (got := _refine_fold(problem, omega, ys, steps, j, scaled)) is not None}
-    # the points' orbits: the continuation's runs from them (one more run where its last step was
-    # not evaluated), and from those the massless DOFs' entries (consistent with the inertial
-    # ones, which are the continuation's own: periodic to its Newton tolerance)
-    states = np.zeros((omega.size, n2))
-    orbits = []
-    for i, (y, w) in enumerate(zip(ys, omega)):
-        states[i] = problem.full(y)
-        run = problem.orbits.get((y.tobytes(), float(w)))
-        if run is None:
-            problem.runs += 1
-            run = flow.at(w).run(states[i], 0.0)
-        orbits.append(run)
-        states[i, problem.massless] = run.x_end[problem.massless]
-    problem.orbits.clear()
-    problem.recent.clear()
-    return ExactBranch(flow, omega, states, pieces, folds, problem.runs, options.newton.atol, refined, orbits)
+# ------------------------------------------------------------------ names that moved up (issue 39)
+#: The exact branch is an analysis (layer 5) with its own result type (layer 4): these names live
+#: in :mod:`femodes.exact_response` and :mod:`femodes.exact_branch` now. The old paths
+#: (``femodes.time.exact.X``, ``femodes.time.X``) still work for one release, with a
+#: DeprecationWarning; the discretise layer does not import them (the layers' arrows point down).
+MOVED = {
+    "exact_frequency_response": "femodes.exact_response",
+    "EXACT_BRANCH_RTOL": "femodes.exact_response",
+    "RECENT_RUNS": "femodes.exact_response",
+    "REFINE_FOLD_POINTS": "femodes.exact_response",
+    "ExactBranch": "femodes.exact_branch",
+    "EXACT_FOLD_RTOL": "femodes.exact_branch",
+    "FOLD_WINDOW": "femodes.exact_branch",
+    "fold_is_upper": "femodes.exact_branch",
+}
 
 
-#: Points of :func:`_refine_fold`'s continuations toward a fold, from either side.
-REFINE_FOLD_POINTS = 60
+def moved(old: str, name: str):
+    """The object ``name`` that moved from module ``old`` to its :data:`MOVED` place, with a
+    DeprecationWarning that names the new import."""
+    new = MOVED[name]
+    public = f"femodes.{name}" if name in ("exact_frequency_response", "ExactBranch") else f"{new}.{name}"
+    warnings.warn(f"{old}.{name} moved to {public} (the exact branch is an analysis, no longer part of the time "
+                  f"integration); import it from there: the old path is deprecated and will be removed",
+                  DeprecationWarning, stacklevel=3)
+    return getattr(importlib.import_module(new), name)
 
 
-def _refine_fold(problem: _ShootingResidual, omega: np.ndarray, ys: np.ndarray, steps: np.ndarray, j: int,
-                 options: ContinuationOptions) -> tuple[float, float] | None:
-    """A fold ``j`` the continuation detected but did not locate: where the corrector fails at
-    the turn (a grazing there), the branch jumped across it. Continuations with a quarter of the
-    steps into and out of ``j`` (:data:`REFINE_FOLD_POINTS` points at most) from the points two before and two
-    after ``j`` toward it, beyond it in frequency, in the first run's arclength scales: ``(the
-    extreme frequency of theirs and the branch's points, the larger distance of either side's
-    extreme from it relative to it (at least EXACT_FOLD_RTOL))``, or None if a side gets no
-    point (the sampled window then stands). On the cantilever of ``benchmarks/bench_cantilever_time.py``
-    (3 % modal damping) the lower fold was detected at 3.7193283 before the continuation located
-    sharp folds (``_FOLD_SHARP_ITER``); the two sides reached 3.71931195 and 3.7193120 (233 runs),
-    4.4e-6 lower, where the fold search of :mod:`femodes.accuracy` puts it (3.7193120 +- 2.3e-7).
-    Seed case 2's lower fold, a grazing where the corrector fails, is still refined so."""
-    upper, extreme = _fold_window(omega, j)[1:]
-    lo, hi = max(j - 2, 0), min(j + 2, omega.size - 1)
-    if lo == j or hi == j:
-        return None
-    step = max(0.25 * float(np.max(steps[j - 1:j + 2])), options.min_step)  # the steps into and out of j
-    opt = dataclasses.replace(options, step=step, max_step=step, max_points=REFINE_FOLD_POINTS, callback=None)
-    ext = []
-    for k in (lo, hi):
-        reach = 10.0 * abs(omega[k] - omega[j]) + EXACT_FOLD_RTOL * abs(omega[j])
-        end = omega[k] + reach if upper else omega[k] - reach
-        r = continuation(problem, (float(omega[k]), float(end)), x0=ys[k], options=opt)
-        if len(r.p) < 2:
-            return None
-        p = np.asarray(r.p, dtype=float)
-        ext.append(float(p.max() if upper else p.min()))
-    # the branch's own points bound the fold too: the extreme of all, and how far each side fell short
-    best = max(ext + [extreme]) if upper else min(ext + [extreme])
-    log.info("exact branch: fold %d detected at w = %.8g, refined from both sides to %.8g and %.8g", j, omega[j], *ext)
-    return best, max(max(abs(best - e) for e in ext) / abs(best), EXACT_FOLD_RTOL)
+def __getattr__(name: str):
+    if name in MOVED:
+        return moved(__name__, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
