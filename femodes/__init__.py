@@ -1,8 +1,8 @@
 """femodes: nonlinear vibration modes of finite-element structures with unilateral contact.
 
 The public face of the package. Layers, from the bottom: solvers, laws, models (fe, model,
-reduction, linear, eigen, sparse_direct), discretise (hbm, time), results (results, store), analyses, outputs
-(fields, plot, io, viz), application (app); README "How the code is organised".
+reduction, linear, eigen, sparse_direct), discretise (hbm, time), results (results, store, exact_branch),
+analyses, outputs (fields, plot, io, viz), application (app); README "How the code is organised".
 """
 
 from .fe import Material, Section, bar, beam, box_mesh, line_mesh, load_mesh, rectangle_mesh, solid
@@ -16,7 +16,9 @@ from .hbm import ForcedResponseProblem, Harmonics, NonlinearModeProblem
 from .solvers import (ContinuationOptions, ContinuationResult, ContinuationState, NewtonOptions, NewtonResult,
                       continuation, semismooth_newton)
 from .results import Bifurcation, Branch, ErrorEstimate, PeriodicSolution, load_branch
+from .exact_branch import ExactBranch
 from .analyses import StaticContactResult, frequency_response, nonlinear_mode, static_contact
+from .exact_response import exact_frequency_response
 from .nonsmooth_modes import InternalResonance, PeriodDriven
 from .resonance import ResonancePeak, compare_resonance
 from .floquet import StabilityOptions, StabilityResult, stability
@@ -77,6 +79,7 @@ __all__ = [
     "continuation",
     "semismooth_newton",
     "Branch",
+    "ExactBranch",
     "ErrorEstimate",
     "estimate_error",
     "AccuracyOptions",
@@ -85,6 +88,7 @@ __all__ = [
     "load_branch",
     "Checkpoint",
     "frequency_response",
+    "exact_frequency_response",
     "nonlinear_mode",
     "static_contact",
     "StaticContactResult",

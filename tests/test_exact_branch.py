@@ -1,4 +1,4 @@
-"""The exact forced response by continuation of exact orbits (femodes.time.exact_frequency_response).
+"""The exact forced response by continuation of exact orbits (femodes.exact_frequency_response).
 
 References: the semi-analytic upper folds of tests/impact_reference.py (seed cases), the folds
 that the shooting refinement of femodes.accuracy locates on the 2-DOF massless-contact model
@@ -15,7 +15,7 @@ import pytest
 import femodes as fm
 from femodes.accuracy import AccuracyOptions, estimate_error
 from femodes.solvers import ContinuationOptions
-from femodes.time import ExactBranch, exact_frequency_response
+from femodes import ExactBranch, exact_frequency_response
 from femodes.time.exact import LinearImpactFlow
 
 from .impact_reference import upper_fold
@@ -391,3 +391,29 @@ def test_points_just_above_grazing_get_the_exact_orbit_at_their_frequency(case, 
         dQ = fm.Harmonics(20).convert(b.Q[i], hk) - run.coefficients(160)[0]
         ref = np.linalg.norm(dQ) / np.linalg.norm(b.Q[i])
         assert abs(acc.amplitude[i] - ref) <= 1e-6 and low <= ref <= 0.05
+
+
+@pytest.mark.parametrize("old", ["femodes.time", "femodes.time.exact"])
+def test_old_import_paths_warn_and_give_the_moved_names(old):
+    """The exact branch moved from the time integration to the analyses (exact_frequency_response)
+    and results (ExactBranch) layers: the old paths give the same objects, with a
+    DeprecationWarning naming the new import."""
+    import importlib
+
+    import femodes.exact_branch as exact_branch
+    import femodes.exact_response as exact_response
+
+    module = importlib.import_module(old)
+    for name, new in (("exact_frequency_response", exact_response), ("ExactBranch", exact_branch)):
+        with pytest.warns(DeprecationWarning, match=rf"{old}\.{name} moved to femodes\.{name}"):
+            assert getattr(module, name) is getattr(new, name)
+    if old == "femodes.time.exact":
+        for name, new in (("EXACT_BRANCH_RTOL", exact_response), ("EXACT_FOLD_RTOL", exact_branch),
+                          ("FOLD_WINDOW", exact_branch), ("fold_is_upper", exact_branch)):
+            with pytest.warns(DeprecationWarning, match=rf"moved to {new.__name__}\.{name}"):
+                assert getattr(module, name) is getattr(new, name)
+    with pytest.warns(DeprecationWarning):
+        exec(f"from {old} import exact_frequency_response as f", {})
+    with pytest.raises(AttributeError):
+        getattr(module, "no_such_name")
+

@@ -114,7 +114,7 @@ def test_frequency_derivatives_match_central_differences(massless):
     else:
         model = _forced(c=0.2, F=1.0, g=2.5)
         span = (0.5, 2.0)
-    b = fm.time.exact_frequency_response(model, span)
+    b = fm.exact_frequency_response(model, span)
     pick = np.linspace(0, len(b) - 1, 9).astype(int)
     errs = _omega_derivatives_against_central_differences(model, b.states[pick], b.omega[pick])
     assert len(errs) >= 12 and np.sum(errs[:, 2] > 0) >= 4  # orbits with events among them
@@ -131,11 +131,11 @@ def test_t_integrals_series_and_closed_form_agree():
     against adaptive quadrature (relative 1e-12), on both sides of the switch."""
     from scipy.integrate import quad
 
-    flow = LinearImpactFlow(_forced(), 1.0)
-    run = flow.run(np.zeros(2), 0.0)
+    from femodes.time.exact_fourier import t_integrals
+
     ta, tb = 0.7, 1.1
     for mu in (0.0, 1e-9, 0.3 - 0.2j, -1.24 + 0.1j, 1.26j, -3.0 + 8.0j, -40.0):
-        got = run._t_integrals(ta, tb, np.array([mu]))[0]
+        got = t_integrals(ta, tb, np.array([mu]))[0]
         re = quad(lambda t: t * (np.exp(mu * (t - ta))).real, ta, tb, epsabs=0, epsrel=1e-13)[0]
         im = quad(lambda t: t * (np.exp(mu * (t - ta))).imag, ta, tb, epsabs=0, epsrel=1e-13)[0]
         assert abs(got - (re + 1j * im)) <= 1e-12 * abs(re + 1j * im) + 1e-15
@@ -338,7 +338,7 @@ def test_certified_search_same_as_fine_search(monkeypatch):
     eigenvalue 65 times the forcing frequency) has the same impacts and end state, to round-off
     (measured: identical), as with the fine grid everywhere (REFINE huge), from 10 times fewer
     samples (223 against 2355; 5 required)."""
-    import femodes.time.exact as exact
+    import femodes.time.exact_events as exact_events
 
     model = _bar(20)
     w1 = float(fm.linear_modes(model, n=1).omega[0])
@@ -347,7 +347,7 @@ def test_certified_search_same_as_fine_search(monkeypatch):
     x, w, theta0, run = Shooter(ladder_for(b, None, None, "test"), OPTIONS).solve(i)[:4]
     flow = run.flow
     again = flow.run(x, theta0 / w, variational=True)
-    monkeypatch.setattr(exact, "REFINE", 10 ** 9)
+    monkeypatch.setattr(exact_events, "REFINE", 10 ** 9)
     fine = flow.run(x, theta0 / w, variational=True)
     assert len(again.impacts) == len(fine.impacts) >= 1
     assert again.samples * 5 < fine.samples
@@ -413,10 +413,10 @@ def test_defective_state_matrix_falls_back_to_the_levels():
 def test_chunked_impact_search_same_orbit(orbit, monkeypatch):
     """A stiff model's impact search goes chunk by chunk (memory): with chunks of 5 grid points
     the run is the same to round-off."""
-    import femodes.time.exact as exact
+    import femodes.time.exact_events as exact_events
 
     _, flow, _, t0, x, run = orbit
-    monkeypatch.setattr(exact, "CHUNK", 5)
+    monkeypatch.setattr(exact_events, "CHUNK", 5)
     again = flow.run(x, t0, variational=True)
     assert len(again.impacts) == len(run.impacts)
     np.testing.assert_allclose(again.x_end, run.x_end, rtol=0, atol=1e-14 * np.max(np.abs(x)))

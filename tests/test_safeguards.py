@@ -466,10 +466,10 @@ def test_undamped_exact_frequency_response_names_the_missing_damping():
     t0 = time.perf_counter()
     with pytest.raises(ValueError, match=r"exact_frequency_response: the model has no damping \(C = 0\) and "
                                          r"restitution = 1: nothing dissipates.*add damping"):
-        fm.time.exact_frequency_response(model, (0.5, 2.0))
+        fm.exact_frequency_response(model, (0.5, 2.0))
     assert time.perf_counter() - t0 < 1.0
     damped = model.with_damping(alpha=0.1)
-    assert fm.time.exact_frequency_response(damped, (0.5, 0.6)).success
+    assert fm.exact_frequency_response(damped, (0.5, 0.6)).success
 
 
 # -- same class: outputs take the model a solution was solved on -----------------------------------

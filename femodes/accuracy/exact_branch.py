@@ -1,4 +1,4 @@
-"""The exact branch over the branch's span (:func:`femodes.time.exact_frequency_response`,
+"""The exact branch over the branch's span (:func:`femodes.exact_frequency_response`,
 continuation of exact orbits in the frequency), traced once when first needed
 (:class:`ExactBranchCache`): its crossings of a point's hyperplane are starts for the points where
 Newton from the branch found no orbit, and its folds are the folds the fold search did not locate
@@ -16,7 +16,9 @@ import logging
 import numpy as np
 
 from ..hbm.harmonics import Harmonics
-from ..time.exact import exact_frequency_response, fold_is_upper, undamped
+from ..exact_branch import fold_is_upper
+from ..exact_response import exact_frequency_response
+from ..time.exact import undamped
 from .ladder import Ladder
 from .options import AccuracyOptions
 from .protocol import PointErrors

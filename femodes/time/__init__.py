@@ -15,26 +15,34 @@
 * ``exact.LinearImpactFlow`` -- the closed-form flow of a linear model with rigid stops (modal
   exponentials between contact events; impacts at contacts on DOFs with mass, switches of
   condensed massless contact DOFs; events located to round-off by a certified search; exact
-  Fourier coefficients):
-  the shooting refinement of :func:`femodes.estimate_error` (``method="shooting"``).
-* :func:`exact_frequency_response` -- the forced response of such a model orbit by exact orbit:
-  continuation in the forcing frequency of the flow's periodic orbits (:class:`ExactBranch`),
-  the limit harmonic balance converges to, with its folds.
+  Fourier coefficients): the shooting refinement of :func:`femodes.estimate_error`
+  (``method="shooting"``) and the exact branch :func:`femodes.exact_frequency_response` (an
+  analysis: ``femodes.time.exact_frequency_response`` and ``femodes.time.ExactBranch`` still work,
+  deprecated).
 
 Modules: ``moreau`` (the scheme, described once, and the public names), ``results`` (the two
 result classes), ``stepper`` (operators of a step, its local problem, the stepping loop),
 ``impact`` (the impact law and its complementarity problem), ``drivers`` (``simulate``,
-``steady_state``). The local problems are solved by :func:`femodes.solvers.semismooth_newton`.
+``steady_state``), ``exact`` (the closed-form flow), ``exact_run`` (one run of it),
+``exact_events`` (its certified event search), ``exact_fourier`` (its Fourier coefficients). The
+local problems are solved by :func:`femodes.solvers.semismooth_newton`.
 
 This layer imports the models, laws and solvers, never :mod:`femodes.hbm`: both are independent
 discretisations of the same model and can be compared.
 """
 
 from .drivers import TimeSteppingOptions
-from .exact import ExactBranch, exact_frequency_response
 from .moreau import SteadyState, TimeHistory, simulate, steady_state
 from .shooting import Monodromy, ShootingResult, monodromy, shoot, trajectory
 
 __all__ = ["TimeHistory", "SteadyState", "simulate", "steady_state", "TimeSteppingOptions",
-           "Monodromy", "ShootingResult", "monodromy", "shoot", "trajectory", "ExactBranch",
-           "exact_frequency_response"]
+           "Monodromy", "ShootingResult", "monodromy", "shoot", "trajectory"]
+
+
+def __getattr__(name: str):
+    # the exact branch moved to the analyses and results layers (issue 39): deprecated here
+    if name in ("ExactBranch", "exact_frequency_response"):
+        from .exact import moved
+
+        return moved(__name__, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -25,58 +25,44 @@ function of ``x`` and the forcing, hence of the same closed form. Events:
   Both sides of a switch have the same vector field (at ``q_c = gap`` the force is 0), so the
   state and the monodromy matrix pass it unchanged (saltation matrix ``I``).
 
-Events are located by a certified search: the event functions are sampled on a coarse grid
-(:data:`SAMPLES` per period of the highest forcing harmonic); on an interval of length ``h`` each
-modal term ``c_m e^{lambda_m s}`` moves the function by less than ``|c_m| min(|lambda_m|^2
-h^2 / 8, 2)`` away from the chord of its samples, so an interval whose samples exceed that bound
-has no event and is not looked at again; the others are split (:data:`REFINE` parts) down to
-:data:`SAMPLES` points per shortest period of the flow, where sign changes and sampled minima
-bracket the event, which Newton on the closed form locates to round-off. A stiff model pays the
-fine grid only near its events. No step size, no integration error: the orbit is exact to
-round-off and to the root tolerance of the event times (4 eps). Restitution below 1 is
-accepted, but an accumulation of events (chattering) is refused after
-:data:`~femodes.time.shooting.MAX_IMPACTS` of them.
+Events are located by a certified search (:mod:`.exact_events`) on a grid of :data:`SAMPLES`
+points per shortest period of the flow, refined only where a bound on the modal terms cannot
+exclude an event. No step size, no integration error: the orbit is exact to round-off and to the
+root tolerance of the event times (4 eps). Restitution below 1 is accepted, but an accumulation of
+events (chattering) is refused after :data:`~femodes.time.shooting.MAX_IMPACTS` of them.
 
-The Fourier coefficients of the orbit follow in closed form as well (integrals of exponentials
-over each segment; impulses and the piecewise closed-form forces for the contact forces), which
-is what :mod:`femodes.accuracy` compares harmonic balance solutions with.
+A run (:class:`~femodes.time.exact_run.FlowRun`) also gives the Fourier coefficients of the orbit
+in closed form (:mod:`.exact_fourier`), which is what :mod:`femodes.accuracy` compares harmonic
+balance solutions with.
 
-Used by :mod:`femodes.accuracy` (shooting refinement of error-controlled branches); the general
+Used by :mod:`femodes.accuracy` (shooting refinement of error-controlled branches) and
+:func:`femodes.exact_frequency_response` (the exact branch, an analysis); the general
 event-driven integration with smooth laws is :mod:`femodes.time.shooting`.
 """
 
 from __future__ import annotations
 
-import collections
 import copy
-import dataclasses
+import importlib
 import itertools
-import logging
 import math
+import warnings
 
 import numpy as np
 import scipy.linalg as sla
-from scipy.optimize import minimize_scalar
 
 from ..laws import UnilateralContact
 from ..model import StructuralModel
-from ..solvers import ContinuationOptions, continuation
-from .shooting import MAX_IMPACTS, unsupported
+from .exact_events import CHUNK, REFINE
+from .exact_run import FlowRun
+from .shooting import unsupported
 
-log = logging.getLogger(__name__)
-
-__all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "SAMPLES", "CHUNK", "REFINE",
-           "MAX_MASSLESS_CONTACTS", "ExactBranch", "exact_frequency_response", "EXACT_BRANCH_RTOL",
-           "EXACT_FOLD_RTOL", "FOLD_WINDOW", "undamped"]
+__all__ = ["LinearImpactFlow", "FlowRun", "exact_flow_unsupported", "periodicity_residual", "undamped", "SAMPLES",
+           "CHUNK", "REFINE", "MAX_MASSLESS_CONTACTS"]
 
 #: Grid points per shortest period of the flow (fastest eigenvalue or forcing harmonic) on which
 #: the events are bracketed, and of the coarse grid per period of the highest forcing harmonic.
 SAMPLES = 24
-#: Largest number of grid points of one fine search evaluated at once (memory CHUNK x 2n complex
-#: numbers); longer searches go chunk by chunk and stop at the first event.
-CHUNK = 4096
-#: Parts into which the certified search splits an interval that may hold an event.
-REFINE = 8
 #: Largest condition number of the eigenvector matrix (a nearly defective A, e.g. critical
 #: damping, makes the modal flow inaccurate).
 MAX_CONDITION = 1e8
@@ -337,7 +323,7 @@ class LinearImpactFlow:
         T = 2.0 * math.pi / self.omega if period is None else float(period)
         return FlowRun(self, np.asarray(x0, dtype=float), float(t0), float(t0) + T, variational)
 
-    def _start_mode(self, x: np.ndarray, t: float) -> frozenset:
+    def start_mode(self, x: np.ndarray, t: float) -> frozenset:
         """The massless contacts closed at the start: the set whose condensed displacements keep
         to the gaps and whose forces are compressive (unique: the condensed stiffness is
         positive definite), by enumeration."""
@@ -359,592 +345,13 @@ class LinearImpactFlow:
         return best  # round-off on a switching surface: the least violated
 
 
-class FlowRun:
-    """One run of :class:`LinearImpactFlow`: end state, monodromy, segments, impacts, switches.
-
-    Attributes
-    ----------
-    x_end : ndarray (2n,)
-    Phi : ndarray (2n, 2n) or None
-        ``d x_end / d x0`` (saltation matrices at the impacts) when ``variational``; zero columns
-        for the massless DOFs' entries.
-    x_end_omega : ndarray (2n,) or None
-        ``d x_end / d w`` when ``variational``, with the start and end phases ``w t0`` and
-        ``w t1`` held fixed (a run of one forcing period from a given phase, as shooting and
-        :func:`exact_frequency_response` use it): the particular solution's change carried
-        through the segments, the saltation matrices at the impacts (the impact surfaces depend
-        on the state alone), unchanged through switches (the same vector field on both sides),
-        and the moves ``-t0 / w`` and ``-t1 / w`` of the start and end times.
-    segments : list of (t_a, t_b, z_a, closed)
-        Intervals between events with the modal coordinates ``z_a = V^-1 (x(t_a) - x_p(t_a))`` of
-        the mode ``closed`` (the massless contacts closed there).
-    impacts : list of (t, contact index, impulse)
-        Impulse ``(1 + e) v_c^- / (M^-1)_cc`` (compression positive).
-    switches : list of (t, contact index, "close" | "open")
-    samples : int
-        Event function evaluations of the searches (the cost of a stiff model).
-    """
-
-    def __init__(self, flow: LinearImpactFlow, x0: np.ndarray, t0: float, t1: float, variational: bool):
-        self.flow, self.t0, self.t1 = flow, t0, t1
-        n2 = 2 * flow.n
-        if x0.shape != (n2,) or not np.all(np.isfinite(x0)):
-            raise ValueError(f"LinearImpactFlow.run: x0 must be {n2} finite numbers, got shape {x0.shape}")
-        inertial = ~flow.massless
-        g0 = flow.gaps[inertial] - x0[flow.dofs[inertial]]
-        scale = max(float(np.max(np.abs(flow.gaps))), float(np.max(np.abs(x0[:flow.n]))), 1e-300)
-        if g0.size and np.any(g0 < -1e-9 * scale):
-            raise ValueError(f"LinearImpactFlow.run: the start state penetrates an obstacle (gap {float(g0.min()):.3g})")
-        self.segments: list = []
-        self.impacts: list = []
-        self.switches: list = []
-        self.samples = 0
-        x = x0[flow.state_index].copy()
-        self._Phi = np.eye(n2)[flow.state_index] if variational else None
-        self._sigma = None  # d x(t) / d w at a fixed time t, the start time's move included
-        self.sensitivities: list = []
-        self._sigmas: list = []
-        self._J: dict = {}  # (H, segment) -> its integrals (_segment_integrals)
-        closed = flow._start_mode(x, t0)
-        t = t0
-        while True:
-            m, d = flow.mode(closed)
-            self._m, self._d = m, d
-            if variational and self._sigma is None:  # x(t0) = x0 with t0 = theta0 / w: dt0/dw = -t0 / w
-                self._sigma = self._field(t0, x) * (t0 / flow.omega)
-            z = m.Vinv @ (x - d.particular(t))
-            hit = self._next_event(t, z, t1)
-            tb = t1 if hit is None else hit[0]
-            self.segments.append((t, tb, z, closed))
-            if variational:
-                self.sensitivities.append(self._Phi)  # d x(t_a+) / d x0 of the segment
-                self._sigmas.append(self._sigma)  # and d x(t_a+) / d w at the fixed time t_a
-            e = np.exp(m.lam * (tb - t))
-            x = d.particular(tb) + np.real(m.V @ (e * z))
-            if variational:
-                Pm = np.real((m.V * e) @ m.Vinv)
-                self._Phi = Pm @ self._Phi
-                self._sigma = d.particular_omega(tb) + Pm @ (self._sigma - d.particular_omega(t))
-            if hit is None:
-                break
-            if len(self.impacts) + len(self.switches) >= MAX_IMPACTS:
-                raise ValueError(f"LinearImpactFlow.run: more than {MAX_IMPACTS} contact events in one run (an "
-                                 "accumulation of impacts or switches)")
-            j = hit[1]
-            if flow.massless[j]:
-                closed = closed ^ {j}
-                self.switches.append((tb, j, "close" if j in closed else "open"))
-            else:
-                x = self._impact(tb, x, j, variational)
-            t = tb
-        m, d = flow.mode(closed)
-        tail = d.phases(t1)
-        self.x_end = np.concatenate([m.Lq @ x + np.real(tail @ d.G), m.Lv @ x + np.real((tail * d.iw) @ d.G)])
-        self.Phi = np.vstack([m.Lq, m.Lv]) @ self._Phi if variational else None
-        self.x_end_omega = None
-        if variational:
-            dx = self._sigma - self._field(t1, x) * (t1 / flow.omega)  # dt1/dw = -t1 / w
-            # the forcing part of the massless DOFs at the fixed end phase: only the velocity's i k w
-            self.x_end_omega = np.concatenate([m.Lq @ dx, m.Lv @ dx + np.real((tail * (1j * d.ks)) @ d.G)])
-
-    def plain(self) -> FlowRun:
-        """This run without its variational part (monodromy, segment sensitivities): what
-        :meth:`displacement` and :meth:`coefficients` need, kept small."""
-        out = copy.copy(self)
-        out._Phi, out.Phi, out.x_end_omega, out._sigma = None, None, None, None
-        out.sensitivities, out._sigmas, out._J = [], [], {}
-        return out
-
-    @property
-    def touches(self) -> bool:
-        """Whether the orbit touches an obstacle (an impact or a closed massless contact)."""
-        return bool(self.impacts or self.switches or any(s[3] for s in self.segments))
-
-    # -- event search ---------------------------------------------------------------------------
-    def _event_and_rate(self, t: float, z: np.ndarray, tau: np.ndarray, rates: bool = True):
-        """Event functions and their rates (None without ``rates``) at ``t + tau`` (rows) for
-        every contact (columns)."""
-        m, d = self._m, self._d
-        self.samples += tau.size
-        E = np.exp(np.multiply.outer(tau, m.lam)) * z  # (p, 2nI)
-        ph = d.phases(t + tau)  # (p, nk)
-        g = np.real(E @ m.Re.T + ph @ d.Ye)
-        if not rates:
-            return g, None
-        r = np.real((E * m.lam) @ m.Re.T + (ph * d.iw) @ d.Ye)
-        return g, r
-
-    def _next_event(self, t: float, z: np.ndarray, t1: float):
-        """``(time, contact)`` of the first event in ``(t, t1]``, or None: the certified coarse
-        search (module docstring), then the fine search where it cannot exclude an event."""
-        span = t1 - t
-        if span <= 0.0:
-            return None
-        d = self._d
-        fine = d.dt
-        m0 = max(1, int(math.ceil(span / d.coarse)))
-        h = span / m0
-        if h <= REFINE * fine:  # not stiff: the fine search everywhere
-            return self._fine(t, z, 0.0, span)
-        m = self._m
-        # intervals [j h, (j + 1) h] by their integer index j on the current level's grid: the end
-        # of one is the start of the next to the bit, so each grid point is evaluated once
-        idx = np.arange(m0)
-        amp = np.abs(m.Re * z)  # (nc, 2nI) modal amplitudes of the event functions
-        famp = np.abs(d.Ye[1:]) if d.ks.size > 1 else np.zeros((0, d.Ye.shape[1]))
-        kw = np.abs(d.iw[1:])
-        while h > fine:
-            # the starts, then the ends that are not the next interval's start
-            p = idx.size
-            joined = np.append(np.diff(idx) == 1, False)
-            g, _ = self._event_and_rate(t, z, np.concatenate([idx, idx[~joined] + 1]) * h, rates=False)
-            ga, gb = g[:p], g[np.where(joined, np.arange(1, p + 1), p + np.cumsum(~joined) - 1)]
-            if idx[0] == 0:
-                ga[0] = np.minimum(ga[0], 0.0)  # after an event the function starts at 0: look closer
-            starts = idx * h
-            growth = np.exp(np.multiply.outer(starts, m.lam.real)) * np.maximum(1.0, np.exp(m.lam.real * h))
-            curv = np.minimum(np.abs(m.lam) ** 2 * h * h / 8.0, 2.0)
-            bound = growth @ (amp * curv).T + (np.minimum(kw ** 2 * h * h / 8.0, 2.0) @ famp)
-            unsure = np.any(np.minimum(ga, gb) - bound < 0.0, axis=1)
-            below = np.flatnonzero(np.any(gb < 0.0, axis=1))
-            if below.size:  # an event for sure up to there: nothing after it matters
-                unsure[below[0] + 1:] = False
-            idx = idx[unsure]
-            if not idx.size:
-                return None
-            idx = (idx[:, None] * REFINE + np.arange(REFINE)).ravel()
-            h /= REFINE
-        starts = idx * h
-        # the intervals left, in time order, as runs of adjacent ones: the first event found is the first
-        cut = np.flatnonzero(np.diff(starts) > 1.5 * h) + 1
-        for run in np.split(starts, cut):
-            hit = self._fine(t, z, float(run[0]), float(run[-1]) + h)
-            if hit is not None:
-                return hit
-        return None
-
-    def _fine(self, t: float, z: np.ndarray, a: float, b: float):
-        """The first event in ``(t + a, t + b]`` on the fine grid (chunk by chunk)."""
-        fine = self._d.dt
-        m = max(2, int(math.ceil((b - a) / fine)))
-        if m > CHUNK:
-            edges = np.linspace(a, b, -(-m // CHUNK) + 1)
-            for lo, hi in zip(edges[:-1], edges[1:]):
-                hit = self._fine(t, z, lo, hi)
-                if hit is not None:
-                    return hit
-            return None
-        tau = np.linspace(a, b, m + 1)
-        g, r = self._event_and_rate(t, z, tau)
-        return self._first_crossing(t, z, tau, g, r, m, after_event=(a == 0.0))
-
-    def _first_crossing(self, t, z, tau, g, r, m, after_event: bool):
-        """The earliest crossing on the sampled event functions ``g`` (rates ``r``) at ``t + tau``."""
-        best = None
-        for c in range(g.shape[1]):
-            gc, rc = g[:, c], r[:, c]
-            gc0 = max(gc[0], 0.0) if after_event else gc[0]  # at 0 after an event (or round-off below)
-
-            def value(s, c=c):
-                return self._scalar(t, z, c, s)[0]
-
-            found = None
-            for i in range(1, m + 1):
-                a = gc0 if i == 1 else gc[i - 1]
-                if gc[i] < 0.0:
-                    lo = tau[i - 1]
-                    if i == 1 and gc[0] <= 0.0 and after_event:  # leaving zero: where does it return?
-                        lo = self._leave(value, tau[0], tau[1])
-                        if lo is None:
-                            found = None
-                            break
-                    found = self._root(t, z, c, lo, tau[i])
-                    break
-                if a > 0.0 and rc[i - 1] < 0.0 < rc[i]:  # a minimum between two grid points: grazing?
-                    s_min = self._root(t, z, c, tau[i - 1], tau[i], rate=True)
-                    if self._scalar(t, z, c, s_min)[0] < 0.0:
-                        found = self._root(t, z, c, tau[i - 1], s_min)
-                        break
-            if found is not None and (best is None or found < best[0]):
-                best = (found, c)
-        if best is None:
-            return None
-        return t + best[0], best[1]
-
-    def _scalar(self, t: float, z: np.ndarray, c: int, s: float) -> tuple[float, float, float]:
-        """Event function ``c`` at ``t + s``, its rate and the rate's rate (one point)."""
-        m, d = self._m, self._d
-        e = np.exp(m.lam * s) * z
-        ph = np.exp(d.iw * (t + s))
-        row, y = m.Re[c], d.Ye[:, c]
-        val = (row @ e + y @ ph).real
-        rate = (row @ (m.lam * e) + y @ (d.iw * ph)).real
-        acc = (row @ (m.lam ** 2 * e) + y @ (d.iw ** 2 * ph)).real
-        return val, rate, acc
-
-    def _root(self, t: float, z: np.ndarray, c: int, a: float, b: float, rate: bool = False) -> float:
-        """The zero in ``[a, b]`` of event function ``c`` (positive at ``a``, negative at ``b``),
-        or with ``rate`` of its rate (negative at ``a``, positive at ``b``: the function's
-        minimum): Newton on the closed form with its derivative, kept in the bracket (bisection
-        when a step leaves it), to round-off in time."""
-        tol = 4.0 * np.finfo(float).eps * max(1.0, abs(t) + abs(b))
-        sign = -1.0 if rate else 1.0  # the function is positive at a
-        x = 0.5 * (a + b)
-        for _ in range(100):
-            g, r, dr = self._scalar(t, z, c, x)
-            val, der = (sign * r, sign * dr) if rate else (g, r)
-            if val > 0.0:
-                a = x
-            elif val < 0.0:
-                b = x
-            else:
-                return x
-            x1 = x - val / der if der != 0.0 else 0.5 * (a + b)
-            if not a < x1 < b:
-                x1 = 0.5 * (a + b)
-            if abs(x1 - x) <= tol or b - a <= tol:
-                return x1
-            x = x1
-        return x
-
-    @staticmethod
-    def _leave(value, a: float, b: float):
-        """After an event the function starts at 0 and must grow: the first sampled interval is
-        negative only if it returns within one grid step; the root sought is then the one after
-        the function's maximum."""
-        res = minimize_scalar(lambda s: -value(s), bounds=(a, b), method="bounded")
-        if -res.fun <= 0.0:
-            return None
-        return res.x
-
-    def _field(self, t: float, x: np.ndarray) -> np.ndarray:
-        """``x' = A x + b(t)`` of the current mode (inertial state)."""
-        m, d = self._m, self._d
-        ph = d.phases(t)
-        return m.A @ (x - np.real(ph @ d.X)) + np.real((ph * d.iw) @ d.X)
-
-    def _impact(self, t: float, x: np.ndarray, j: int, variational: bool) -> np.ndarray:
-        f = self.flow
-        nI = f.I.size
-        i = f.pos[f.dofs[j]]
-        vc = x[nI + i]
-        if vc <= 0.0:  # touching without approach: nothing to reverse
-            return x
-        self.impacts.append((t, j, (1.0 + f.e) * vc / f.MinvII[i, i]))
-        xp = x.copy()
-        dirI = f.impact_dir[j, f.I]
-        xp[nI:] -= (1.0 + f.e) * vc * dirI
-        if variational:
-            R = np.eye(2 * nI)
-            R[nI:, nI + i] -= (1.0 + f.e) * dirI
-            f_minus, f_plus = self._field(t, x), self._field(t, xp)
-            nvec = np.zeros(2 * nI)
-            nvec[i] = -1.0
-            salt = R + np.outer(f_plus - R @ f_minus, nvec) / (nvec @ f_minus)
-            self._Phi = salt @ self._Phi
-            self._sigma = salt @ self._sigma
-        return xp
-
-    # -- closed form over the run ---------------------------------------------------------------
-    def displacement(self, t) -> np.ndarray:
-        """Displacements of all DOFs at times ``t`` in ``[t0, t1]``, shape ``(len(t), n)``."""
-        t = np.atleast_1d(np.asarray(t, dtype=float))
-        out = np.empty((t.size, self.flow.n))
-        for k, (ta, tb, z, closed) in enumerate(self.segments):
-            last = k == len(self.segments) - 1
-            sel = (t >= ta) & ((t <= tb) if last else (t < tb))
-            if sel.any():
-                m, d = self.flow.mode(closed)
-                E = np.exp(np.multiply.outer(t[sel] - ta, m.lam)) * z
-                out[sel] = np.real(E @ m.Rq.T + d.phases(t[sel]) @ d.Yq)
-        return out
-
-    def _integrals(self, H: int, ta: float, tb: float, lam: np.ndarray) -> np.ndarray:
-        """``int_ta^tb e^{lam_m (t - ta)} e^{-i k w t} dt``, shape ``(2nI, H + 1)``."""
-        w = self.flow.omega
-        k = np.arange(H + 1)
-        mu = np.subtract.outer(lam, 1j * k * w)
-        dlt = tb - ta
-        x = mu * dlt
-        small = np.abs(x) < 1e-8
-        phi1 = np.where(small, 1.0 + 0.5 * x, np.expm1(np.where(small, 1.0, x)) / np.where(small, 1.0, x))
-        return dlt * phi1 * np.exp(-1j * k * w * ta)
-
-    def _harmonic_integrals(self, H: int, ta: float, tb: float, d: _ModeAt, Y: np.ndarray) -> np.ndarray:
-        """``int_ta^tb Re(sum_k Y_k e^{i k w t}) e^{-i j w t} dt`` for ``j = 0..H``, shape
-        ``(H + 1,) + Y.shape[1:]``."""
-        w = self.flow.omega
-        j = np.arange(H + 1)
-
-        def E(mu):  # int_ta^tb e^{i mu w t} dt
-            mu = np.asarray(mu, dtype=float)
-            safe = np.where(mu == 0.0, 1.0, mu)
-            return np.where(mu == 0.0, tb - ta,
-                            (np.exp(1j * safe * w * tb) - np.exp(1j * safe * w * ta)) / (1j * safe * w))
-
-        k = d.ks[:, None]
-        E1, E2 = E(k - j), E(-(k + j))  # (n_k, H + 1)
-        Yf = Y.reshape(len(d.ks), -1)
-        out = 0.5 * (E1.T @ Yf + E2.T @ np.conj(Yf))
-        return out.reshape((H + 1,) + Y.shape[1:])
-
-    def _t_integrals(self, ta: float, tb: float, mu: np.ndarray) -> np.ndarray:
-        """``int_ta^tb t e^{mu (t - ta)} dt`` for every ``mu``: ``ta D phi1(mu D) + D^2
-        psi(mu D)`` with ``D = tb - ta``, ``phi1(x) = (e^x - 1) / x`` and ``psi(x) = int_0^1 u
-        e^{x u} du = (e^x (x - 1) + 1) / x^2`` (its series below ``|x| = 1/2``, where the closed
-        form cancels)."""
-        D = tb - ta
-        x = np.asarray(mu, dtype=complex) * D
-        small = np.abs(x) < 0.5
-        xs = np.where(small, 1.0, x)
-        tiny = np.abs(x) < 1e-8
-        xt = np.where(tiny, 1.0, x)
-        phi1 = np.where(tiny, 1.0 + 0.5 * x, np.expm1(xt) / xt)
-        psi = (np.exp(xs) * (xs - 1.0) + 1.0) / (xs * xs)
-        if small.any():  # sum_k x^k / (k! (k + 2)): 18 terms reach round-off for |x| < 1/2
-            xx, term, ser = x[small], np.ones(int(small.sum()), dtype=complex), np.zeros(int(small.sum()), dtype=complex)
-            for k in range(18):
-                ser += term / (k + 2)
-                term = term * xx / (k + 1)
-            psi[small] = ser
-        return ta * D * phi1 + D * D * psi
-
-    @staticmethod
-    def _real(C: np.ndarray, H: int) -> np.ndarray:
-        """Real coefficients ``[c0, c1, s1, ...]`` from ``(w / pi) int q e^{-ikwt} dt`` (rows k)."""
-        out = np.zeros((2 * H + 1,) + C.shape[1:])
-        out[0] = 0.5 * np.real(C[0])
-        out[1::2] = np.real(C[1:])
-        out[2::2] = -np.imag(C[1:])
-        return out
-
-    def coefficients(self, H: int) -> tuple[np.ndarray, np.ndarray]:
-        """Real Fourier coefficients ``[c0, c1, s1, ..., cH, sH]`` of the displacements (shape
-        ``(2H + 1, n)``) and of the contact forces (``(2H + 1, n_contacts)``; impulses at the
-        impacts, the closed-form forces of closed massless contacts) over the run, in the phase
-        ``theta = w t`` (the conventions of :mod:`femodes.hbm.harmonics`). Exact when the run is
-        one period of a periodic orbit."""
-        f = self.flow
-        w = f.omega
-        k = np.arange(H + 1)
-        Ic = np.zeros((H + 1, f.n), dtype=complex)  # int q(t) e^{-i k w t} dt
-        Il = np.zeros((H + 1, len(f.dofs)), dtype=complex)  # the same for the massless contacts' forces
-        for s, (ta, tb, z, closed) in enumerate(self.segments):
-            m, d = f.mode(closed)
-            J = self._segment_integrals(H, s)
-            Ic += (J.T * z) @ m.Rq.T + self._harmonic_integrals(H, ta, tb, d, d.Yq)
-            if closed:
-                js = sorted(closed)
-                Il[:, js] += (J.T * z) @ m.Re[js].T + self._harmonic_integrals(H, ta, tb, d, d.Ye[:, js])
-        Q = self._real(Ic * (w / math.pi), H)
-        P = self._real(Il * (w / math.pi), H)
-        for t, c, imp in self.impacts:
-            ph = w * t * k[1:]
-            P[0, c] += imp * w / (2.0 * math.pi)
-            P[1::2, c] += imp * w / math.pi * np.cos(ph)
-            P[2::2, c] += imp * w / math.pi * np.sin(ph)
-        return Q, P
-
-    def coefficient_omega(self, H: int) -> np.ndarray:
-        """``d Q / d w`` of :meth:`coefficients` (shape ``(2H + 1, n)``; a variational run) with
-        the start and end phases held fixed, as :attr:`x_end_omega`. In the phase ``theta = w
-        t``, ``Q = (1/pi) int q(theta / w; w) e^{-i k theta} d theta``, so ``dQ/dw = (w/pi) int
-        (sigma_q(t) - (t/w) q'(t)) e^{-i k w t} dt`` with ``sigma_q`` the displacements' change
-        at a fixed time. On a segment ``sigma = P(t) + V e^{Lambda (t - t_a)} V^-1 (sigma(t_a) -
-        P(t_a))``, ``P = d x_p / d w`` (:meth:`_ModeAt.particular_omega`): the integrals of
-        exponentials and of ``t`` times exponentials (:meth:`_t_integrals`), in closed form."""
-        if self._Phi is None:
-            raise ValueError("coefficient_omega needs a run with variational=True")
-        f = self.flow
-        w = f.omega
-        dI = np.zeros((H + 1, f.n), dtype=complex)
-        kk = np.arange(H + 1)
-        for s, ((ta, tb, z, closed), sig) in enumerate(zip(self.segments, self._sigmas)):
-            m, d = f.mode(closed)
-            J0 = self._segment_integrals(H, s)  # (2nI, H + 1)
-            J1 = np.exp(-1j * kk * w * ta)[None, :] * self._t_integrals(ta, tb, np.subtract.outer(m.lam, 1j * kk * w))
-            zs = m.Vinv @ (sig - d.particular_omega(ta))
-            # sigma_q's part t i k Yq_k e^{i k w t} (the phases' change at a fixed time) and the
-            # forced part of (t/w) q' are the same: they cancel and are left out
-            dI += (J0.T * zs) @ m.Rq.T + self._harmonic_integrals(H, ta, tb, d, d.dX @ m.Lq.T)
-            dI -= ((J1.T * (m.lam * z)) @ m.Rq.T) / w
-        return self._real(dI * (w / math.pi), H)
-
-    def _segment_integrals(self, H: int, s: int) -> np.ndarray:
-        """:meth:`_integrals` of segment ``s`` in its mode, computed once per run and ``H``
-        (:meth:`coefficients`, :meth:`coefficient_sensitivity` and :meth:`coefficient_omega` all
-        need them)."""
-        key = (H, s)
-        J = self._J.get(key)
-        if J is None:
-            ta, tb, _, closed = self.segments[s]
-            J = self._J[key] = self._integrals(H, ta, tb, self.flow.mode(closed)[0].lam)
-        return J
-
-    def coefficient_sensitivity(self, H: int) -> np.ndarray:
-        """``d Q / d x0`` of :meth:`coefficients`, shape ``(2H + 1, n, 2n)`` (a variational run):
-        on each segment ``dq(t)/dx0 = L_q V e^{Lambda (t - t_a)} V^-1 Phi_a`` with ``Phi_a`` the
-        sensitivity at its start (saltation included; q is continuous at the events, so a shift of
-        an event time adds nothing else)."""
-        if self._Phi is None:
-            raise ValueError("coefficient_sensitivity needs a run with variational=True")
-        f = self.flow
-        w = f.omega
-        Ic = np.zeros((H + 1, f.n, 2 * f.n), dtype=complex)
-        for s, ((ta, tb, _, closed), Phi_a) in enumerate(zip(self.segments, self.sensitivities)):
-            m, _ = f.mode(closed)
-            J = self._segment_integrals(H, s)
-            Zm = m.Vinv @ Phi_a  # (modes, 2n columns)
-            Ic += (m.Rq[None, :, :] * J.T[:, None, :]) @ Zm  # sum over m of J[m, k] Rq[d, m] Zm[m, c]
-        return self._real(Ic * (w / math.pi), H)
-
-
-# ------------------------------------------------------------------------------ the exact branch
-#: Relative error stated for a fold of :func:`exact_frequency_response` that is the extreme
-#: frequency of its neighbours: its location by the continuation (secant on ``dw/ds``) measured
-#: 3.2e-8 and 2.5e-13 against the seed cases' references, below 1e-9 against the shooting
-#: refinement on the 2-DOF massless model (tests/test_exact_branch.py).
-EXACT_FOLD_RTOL = 1e-6
-#: Points on either side of a fold that :attr:`ExactBranch.fold_omega` looks at (and
-#: :func:`fold_is_upper`). With a finite-difference ``dr/dw`` the continuation detected the lower
-#: fold of the cantilever of ``benchmarks/bench_cantilever_time.py`` at 3.7193289, a point between
-#: two of larger frequency on one side and smaller on the other (a kink); the extreme of the 3
-#: points on either side was 3.7193164, their range 2.9e-5 relative; local continuations with
-#: short steps give 3.719311942. Detected folds are now refined (:func:`_refine_fold`).
-FOLD_WINDOW = 3
-#: Default Newton tolerance of :func:`exact_frequency_response`, relative to the larger of the
-#: largest gap and the start state of the response without contact at the first frequency. On the
-#: cantilever of ``benchmarks/bench_cantilever_time.py`` (scale 0.02) the continuation's default
-#: 1e-10 was not reached: the corrector stalled at residuals of 4e-9, 2e-7 of the scale (stiff
-#: modes: event times to round-off still leave that much in their velocities).
-EXACT_BRANCH_RTOL = 1e-6
-
-
-def fold_is_upper(omega: np.ndarray, j: int) -> bool:
-    """Whether the fold at point ``j`` of a branch is a largest frequency: ``omega[j]`` at least
-    the mean of the frequencies :data:`FOLD_WINDOW` points before and after it (fewer at the
-    ends)."""
-    lo, hi = max(j - FOLD_WINDOW, 0), min(j + FOLD_WINDOW, omega.size - 1)
-    return bool(omega[j] >= 0.5 * (omega[lo] + omega[hi]))
-
-
-def _fold_window(omega: np.ndarray, j: int) -> tuple[np.ndarray, bool, float]:
-    """The frequencies of fold ``j`` and of the :data:`FOLD_WINDOW` points on either side of it,
-    whether it is an upper fold (:func:`fold_is_upper`), and their extreme frequency that way."""
-    win = omega[max(j - FOLD_WINDOW, 0):min(j + FOLD_WINDOW + 1, omega.size)]
-    upper = fold_is_upper(omega, j)
-    return win, upper, float(win.max() if upper else win.min())
-
-
-class ExactBranch:
-    """Periodic orbits of a linear model with rigid stops traced by continuation in the forcing
-    frequency (:func:`exact_frequency_response`).
-
-    Attributes
-    ----------
-    omega : ndarray (n_points,)
-    states : ndarray (n_points, 2 n_dofs)
-        Start states ``[q; v]`` at ``t = 0``, periodic to the continuation's Newton tolerance
-        (massless DOFs' entries consistent with the others).
-    atol : float
-        That tolerance: ``|x(T) - x(0)|`` of the inertial entries is about that small at every
-        point (Newton also stops on a step below its ``xtol``).
-    folds : tuple of int
-        Indices of the folds (turning points in ``omega``) the continuation located, or only
-        detected (the point nearer to the sign change of ``dw/ds``).
-    fold_omega, fold_error : ndarray (len(folds),)
-        The folds' frequencies and relative errors: a located fold that is the extreme frequency
-        of the :data:`FOLD_WINDOW` points on either side is taken as it is, with the error
-        :data:`EXACT_FOLD_RTOL`; otherwise the extreme frequency of those points, with their
-        range as the error. A fold the continuation detected but did not locate (a grazing at
-        the turn: the corrector fails there) is refined by short-step continuations toward it
-        from both sides (:func:`_refine_fold`): the extreme frequency they and the branch reach,
-        with the larger distance of either side's extreme from it (at least
-        :data:`EXACT_FOLD_RTOL`) as the error.
-    fold_upper : ndarray of bool (len(folds),)
-        Whether a fold is a largest frequency (the branch turns back from increasing ``omega``;
-        :func:`fold_is_upper`).
-    pieces : tuple of int
-        Start indices of the pieces: ``(0,)``, or ``(0, k)`` when the continuation stopped inside
-        the span (a grazing orbit) and points ``k:`` were traced back from the other end.
-    success, status, message
-        Whether the pieces cover the span; the status (:data:`~femodes.solvers.STATUS_MESSAGES`)
-        and message of the first continuation, and of the second if there is one.
-    runs : int
-        Runs of the flow (the cost).
-    flow : LinearImpactFlow
-    """
-
-    def __init__(self, flow: LinearImpactFlow, omega, states, results, folds, runs: int, atol: float,
-                 refined: dict | None = None, orbits: list | None = None):
-        self.flow, self.atol = flow, float(atol)
-        self.omega = np.asarray(omega, dtype=float)
-        self.states = np.asarray(states, dtype=float)
-        self.folds = tuple(sorted(int(i) for i in folds))
-        self.fold_omega, self.fold_error, self.fold_upper = self._fold_frequencies()
-        for k, j in enumerate(self.folds):  # detected folds refined by short-step continuations
-            if refined and j in refined:
-                self.fold_omega[k], self.fold_error[k] = refined[j]
-        first = results[0]
-        self.pieces = (0,) if len(results) == 1 else (0, len(first.p))
-        # covered: the first run reached the end, or the second (backward) reached where it stopped
-        self.success = first.status == 0 or (len(results) == 2 and results[1].status == 0)
-        self.status = int(first.status)
-        self.message = "; ".join(f"{'forward' if k == 0 else 'back'}: {r.message}" for k, r in enumerate(results))
-        self.runs = int(runs)
-        self._orbits = orbits
-
-    def __len__(self) -> int:
-        return self.omega.size
-
-    def _fold_frequencies(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:attr:`fold_omega`, :attr:`fold_error`, :attr:`fold_upper`."""
-        w = self.omega
-        out_w, out_e = np.zeros(len(self.folds)), np.zeros(len(self.folds))
-        out_u = np.zeros(len(self.folds), dtype=bool)
-        for k, j in enumerate(self.folds):
-            win, out_u[k], extreme = _fold_window(w, j)
-            if w[j] == extreme:  # the located fold is the extreme frequency around it
-                out_w[k], out_e[k] = w[j], EXACT_FOLD_RTOL
-            else:  # it is not (a kink of the branch next to it): the sampled extreme, and the window's range
-                out_w[k], out_e[k] = extreme, float(np.ptp(win)) / abs(extreme)
-        return out_w, out_e, out_u
-
-    def orbit(self, i: int) -> FlowRun:
-        """The run of point ``i`` over one forcing period (its impacts, switches, displacements):
-        the continuation's own (kept), else run again."""
-        if self._orbits is not None and self._orbits[i] is not None:
-            return self._orbits[i]
-        return self.flow.at(self.omega[i]).run(self.states[i], 0.0)
-
-    def amplitude(self, dof, samples: int = 400, points=None) -> np.ndarray:
-        """``max_t |q_dof(t)|`` of every orbit (or of ``points``) on ``samples`` points per period
-        (those of :meth:`femodes.Branch.amplitude` are on the truncated Fourier series); ``dof``
-        a DOF or a list of DOFs (the largest over them)."""
-        points = range(len(self)) if points is None else points
-        out = []
-        for i in points:
-            t = np.linspace(0.0, 2.0 * math.pi / self.omega[i], samples)
-            out.append(float(np.max(np.abs(self.orbit(i).displacement(t)[:, dof]))))
-        return np.asarray(out)
-
-    def coefficients(self, i: int, H: int) -> tuple[np.ndarray, np.ndarray]:
-        """Exact Fourier coefficients of point ``i`` to ``H`` harmonics (:meth:`FlowRun.coefficients`)."""
-        return self.orbit(i).coefficients(H)
-
-
-#: Runs of the continuation's residual kept until it accepts a point (the corrector's last
-#: iterate is evaluated last, or nearly: fold location and tangents come between).
-RECENT_RUNS = 32
-
-
 def periodicity_residual(flow: LinearImpactFlow, x: np.ndarray, omega: float, t0: float = 0.0,
                          variational: bool = True):
     """``(r, dr/dx, dr/dw, run)`` of ``r = x(t0 + T) - x``, one forcing period ``T = 2 pi / w`` of
     the exact flow from ``x(t0) = x``: ``dr/dx = Phi - I`` with the monodromy matrix and ``dr/dw``
     the end state's change with ``w`` at the fixed start time (:attr:`FlowRun.x_end_omega`), both
     from the variational run; without ``variational`` the two derivatives are None. The one
-    periodicity residual of the exact branch (:class:`_ShootingResidual`, inertial entries) and
+    periodicity residual of the exact branch (:func:`femodes.exact_frequency_response`, inertial entries) and
     of the shooting refinement of :mod:`femodes.accuracy` (full state, bordered by a hyperplane)."""
     run = flow.at(omega).run(x, t0, variational=variational)
     r = run.x_end - x
@@ -953,216 +360,43 @@ def periodicity_residual(flow: LinearImpactFlow, x: np.ndarray, omega: float, t0
     return r, run.Phi - np.eye(x.size), run.x_end_omega, run
 
 
-class _ShootingResidual:
-    """``r(x, w) = x(T) - x`` over one forcing period ``T = 2 pi / w`` from ``x(0) = x`` (the
-    inertial entries of the state), with ``dr/dx = Phi - I`` and ``dr/dw`` from the variational
-    run (:attr:`FlowRun.x_end_omega`). The last :data:`RECENT_RUNS` runs (:meth:`FlowRun.plain`)
-    are kept by start state and frequency; :meth:`keep` (the continuation's callback) moves an
-    accepted point's into ``orbits``: its orbit and its massless DOFs' entries."""
-
-    def __init__(self, flow: LinearImpactFlow):
-        self.flow, self.S = flow, flow.state_index
-        self.massless = np.setdiff1d(np.arange(2 * flow.n), flow.state_index)
-        self.runs = 0
-        self.recent: collections.OrderedDict = collections.OrderedDict()
-        self.orbits: dict = {}
-
-    def keep(self, y: np.ndarray, w: float) -> None:
-        key = (np.asarray(y, dtype=float).tobytes(), float(w))
-        run = self.recent.get(key)
-        if run is not None:
-            self.orbits[key] = run
-
-    def callback(self, then=None):
-        """A continuation callback that keeps every accepted point's run, then calls ``then``."""
-        def cb(point):
-            self.keep(point.x, point.p)
-            return None if then is None else then(point)
-        return cb
-
-    def full(self, y: np.ndarray) -> np.ndarray:
-        x = np.zeros(2 * self.flow.n)
-        x[self.S] = y
-        return x
-
-    def residual(self, y: np.ndarray, w: float):
-        S = self.S
-        x = self.full(y)
-        self.runs += 1
-        try:
-            r, drdx, drdw, run = periodicity_residual(self.flow, x, w)
-        except ValueError:
-            # an iterate the flow cannot start from (inside an obstacle, w <= 0, an accumulation of
-            # events): a non-finite residual, which makes Newton's line search cut the step
-            nan = np.full(S.size, np.nan)
-            return nan, np.full((S.size, S.size), np.nan), nan
-        self.recent[(y.tobytes(), float(w))] = run.plain()
-        if len(self.recent) > RECENT_RUNS:
-            self.recent.popitem(last=False)
-        return r[S], drdx[np.ix_(S, S)], drdw[S]
-
-
 def undamped(model: StructuralModel, restitution: float = 1.0) -> bool:
     """True when nothing in ``model`` dissipates energy: no damping matrix entry, no modal damping,
-    and elastic impacts (``restitution >= 1``); :func:`exact_frequency_response` refuses such a
+    and elastic impacts (``restitution >= 1``); :func:`femodes.exact_frequency_response` refuses such a
     model (its forced orbits are unbounded at the resonances)."""
     return not model.has_damping and restitution >= 1.0
 
 
-def exact_frequency_response(model: StructuralModel, span, *, x0=None, restitution: float = 1.0,
-                             options=None) -> ExactBranch:
-    """The forced response of a linear model with rigid stops, orbit by exact orbit.
-
-    Pseudo-arclength continuation (:func:`femodes.solvers.continuation`) of the periodic orbits
-    of :class:`LinearImpactFlow` in the forcing frequency: the unknowns are the start state at
-    ``t = 0`` (the forcing fixes the phase), the residual ``x(T) - x(0)`` with the monodromy
-    matrix (saltation at impacts) as its Jacobian. No harmonics and no time step: every point
-    is a periodic orbit of the semi-discrete model to round-off, which is what harmonic balance
-    converges to as H grows; folds are located as turning points. The orbits need not be
-    stable (:func:`femodes.stability` or a time integration says which are).
-
-    Parameters
-    ----------
-    model : StructuralModel
-        Linear, with unilateral contacts (on DOFs with or without mass) and harmonic forcing;
-        no smooth nonlinear laws or penalty contacts (:func:`exact_flow_unsupported` says why
-        a model is refused).
-    span : (float, float)
-        Forcing frequencies ``(w_start, w_end)`` in rad/s, positive; may decrease.
-    x0 : array_like (2 n_dofs,), optional
-        Start state ``[q; v]`` at ``w_start``; default: the response without contact there
-        (right when it keeps off the stops, a first guess otherwise).
-    restitution : float
-        Newton's coefficient of the impacts on DOFs with mass (1: the limit of harmonic balance).
-    options : ContinuationOptions, optional
-        Default: ``max_points=3000`` and Newton's ``atol`` :data:`EXACT_BRANCH_RTOL` times the
-        larger of the largest gap and the size of the start state without contact at
-        ``w_start``.
-
-    Returns
-    -------
-    ExactBranch
-        ``success``/``message`` report how the continuation ended; never raises on numerical
-        failure.
-
-    Raises
-    ------
-    TypeError
-        ``model`` is not a model, ``options`` not a ContinuationOptions.
-    ValueError
-        A model the flow cannot take, a bad span or ``x0``.
-    """
-    owner = "exact_frequency_response"
-    if not isinstance(model, StructuralModel):
-        raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
-    try:
-        w0, w1 = (float(span[0]), float(span[1]))
-    except (TypeError, ValueError, IndexError):
-        raise ValueError(f"{owner}: span must be two forcing frequencies (w_start, w_end), got {span!r}") from None
-    if len(span) != 2 or not (math.isfinite(w0) and math.isfinite(w1) and w0 > 0.0 and w1 > 0.0) or w0 == w1:
-        raise ValueError(f"{owner}: span must be two different finite positive frequencies, got {span!r}")
-    if not model.forces:
-        raise ValueError(f"{owner}: the model has no harmonic forcing (add one with with_forcing)")
-    if undamped(model, restitution):
-        raise ValueError(f"{owner}: the model has no damping (C = 0) and restitution = {restitution:g}: nothing "
-                         "dissipates, so near a resonance of the impacting structure the forced orbits grow without "
-                         "bound and the continuation cannot pass it (an undamped oscillator against a stop ran 3000 "
-                         "points to a step-size failure); add damping (model.with_damping(alpha=..., beta=...) or "
-                         "modal=...) or use restitution < 1")
-    flow = LinearImpactFlow(model, w0, restitution=restitution)
-    n2 = 2 * model.n_dofs
-    particular = flow.particular(0.0)
-    if x0 is None:
-        x0 = particular
-    else:
-        x0 = np.asarray(x0, dtype=float)
-        if x0.shape != (n2,) or not np.all(np.isfinite(x0)):
-            raise ValueError(f"{owner}: x0 must be {n2} finite numbers [q; v], got shape {x0.shape}")
-    if options is None:
-        scale = max(float(np.linalg.norm(particular[flow.state_index])), float(np.max(np.abs(flow.gaps), initial=0.0)))
-        base = ContinuationOptions()
-        options = ContinuationOptions(max_points=3000, newton=dataclasses.replace(
-            base.newton, atol=EXACT_BRANCH_RTOL * max(scale, 1e-300)))
-    elif not isinstance(options, ContinuationOptions):
-        raise TypeError(f"{owner}: options must be a ContinuationOptions or None, got {type(options).__name__}")
-    problem = _ShootingResidual(flow)
-    options = dataclasses.replace(options, callback=problem.callback(options.callback))
-    res = continuation(problem, (w0, w1), x0=x0[flow.state_index], options=options)
-    pieces = [res]
-    if res.status == 4 and len(res.p):
-        # the corrector gave up inside the span (a grazing orbit: the flow's derivative jumps
-        # there): trace the rest back from the other end, from its response without contact
-        w_stop = float(res.p[-1])
-        back = continuation(problem, (w1, w_stop), x0=flow.at(w1).particular(0.0)[flow.state_index], options=options)
-        log.info("%s: stopped at w = %.6g (%s); traced back from w = %.6g to %.6g (%s)", owner, w_stop, res.message,
-                 w1, float(back.p[-1]) if len(back.p) else w1, back.message)
-        if len(back.p):
-            pieces.append(back)
-    def joined(arrays):  # the pieces' arrays in the branch's order: the back piece reversed
-        return np.concatenate([np.asarray(a, dtype=float)[::1 if k == 0 else -1] for k, a in enumerate(arrays)])
-
-    omega = joined([r.p for r in pieces])
-    ys = joined([np.reshape(r.x, (len(r.p), flow.state_index.size)) for r in pieces])
-    steps = joined([r.step for r in pieces])
-    folds, located = list(res.folds), set(res.located)
-    if len(pieces) == 2:  # the back piece's index i is the branch's omega.size - 1 - i
-        folds += [omega.size - 1 - int(i) for i in sorted(pieces[1].folds, reverse=True)]
-        located |= {omega.size - 1 - int(i) for i in pieces[1].located}
-    # the refinement steps in the first run's arclength norm (scales), comparable with its steps
-    scaled = dataclasses.replace(options, x_scale=np.asarray(res.x_scale), p_scale=float(res.p_scale))
-    refined = {j: got for j in folds if j not in located
-               and (got := _refine_fold(problem, omega, ys, steps, j, scaled)) is not None}
-    # the points' orbits: the continuation's runs from them (one more run where its last step was
-    # not evaluated), and from those the massless DOFs' entries (consistent with the inertial
-    # ones, which are the continuation's own: periodic to its Newton tolerance)
-    states = np.zeros((omega.size, n2))
-    orbits = []
-    for i, (y, w) in enumerate(zip(ys, omega)):
-        states[i] = problem.full(y)
-        run = problem.orbits.get((y.tobytes(), float(w)))
-        if run is None:
-            problem.runs += 1
-            run = flow.at(w).run(states[i], 0.0)
-        orbits.append(run)
-        states[i, problem.massless] = run.x_end[problem.massless]
-    problem.orbits.clear()
-    problem.recent.clear()
-    return ExactBranch(flow, omega, states, pieces, folds, problem.runs, options.newton.atol, refined, orbits)
+# ------------------------------------------------------------------ names that moved up (issue 39)
+#: The exact branch is an analysis (layer 5) with its own result type (layer 4): these names live
+#: in :mod:`femodes.exact_response` and :mod:`femodes.exact_branch` now. The old paths
+#: (``femodes.time.exact.X``, ``femodes.time.X``) still work for one release, with a
+#: DeprecationWarning; the discretise layer does not import them (the layers' arrows point down).
+MOVED = {
+    "exact_frequency_response": "femodes.exact_response",
+    "EXACT_BRANCH_RTOL": "femodes.exact_response",
+    "RECENT_RUNS": "femodes.exact_response",
+    "REFINE_FOLD_POINTS": "femodes.exact_response",
+    "ExactBranch": "femodes.exact_branch",
+    "EXACT_FOLD_RTOL": "femodes.exact_branch",
+    "FOLD_WINDOW": "femodes.exact_branch",
+    "fold_is_upper": "femodes.exact_branch",
+}
 
 
-#: Points of :func:`_refine_fold`'s continuations toward a fold, from either side.
-REFINE_FOLD_POINTS = 60
+def moved(old: str, name: str):
+    """The object ``name`` that moved from module ``old`` to its :data:`MOVED` place, with a
+    DeprecationWarning that names the new import."""
+    new = MOVED[name]
+    public = f"femodes.{name}" if name in ("exact_frequency_response", "ExactBranch") else f"{new}.{name}"
+    warnings.warn(f"{old}.{name} moved to {public} (the exact branch is an analysis, no longer part of the time "
+                  f"integration); import it from there: the old path is deprecated and will be removed",
+                  DeprecationWarning, stacklevel=3)
+    return getattr(importlib.import_module(new), name)
 
 
-def _refine_fold(problem: _ShootingResidual, omega: np.ndarray, ys: np.ndarray, steps: np.ndarray, j: int,
-                 options: ContinuationOptions) -> tuple[float, float] | None:
-    """A fold ``j`` the continuation detected but did not locate: where the corrector fails at
-    the turn (a grazing there), the branch jumped across it. Continuations with a quarter of the
-    steps into and out of ``j`` (:data:`REFINE_FOLD_POINTS` points at most) from the points two before and two
-    after ``j`` toward it, beyond it in frequency, in the first run's arclength scales: ``(the
-    extreme frequency of theirs and the branch's points, the larger distance of either side's
-    extreme from it relative to it (at least EXACT_FOLD_RTOL))``, or None if a side gets no
-    point (the sampled window then stands). On the cantilever of ``benchmarks/bench_cantilever_time.py``
-    (3 % modal damping) the lower fold was detected at 3.7193283 before the continuation located
-    sharp folds (``_FOLD_SHARP_ITER``); the two sides reached 3.71931195 and 3.7193120 (233 runs),
-    4.4e-6 lower, where the fold search of :mod:`femodes.accuracy` puts it (3.7193120 +- 2.3e-7).
-    Seed case 2's lower fold, a grazing where the corrector fails, is still refined so."""
-    upper, extreme = _fold_window(omega, j)[1:]
-    lo, hi = max(j - 2, 0), min(j + 2, omega.size - 1)
-    if lo == j or hi == j:
-        return None
-    step = max(0.25 * float(np.max(steps[j - 1:j + 2])), options.min_step)  # the steps into and out of j
-    opt = dataclasses.replace(options, step=step, max_step=step, max_points=REFINE_FOLD_POINTS, callback=None)
-    ext = []
-    for k in (lo, hi):
-        reach = 10.0 * abs(omega[k] - omega[j]) + EXACT_FOLD_RTOL * abs(omega[j])
-        end = omega[k] + reach if upper else omega[k] - reach
-        r = continuation(problem, (float(omega[k]), float(end)), x0=ys[k], options=opt)
-        if len(r.p) < 2:
-            return None
-        p = np.asarray(r.p, dtype=float)
-        ext.append(float(p.max() if upper else p.min()))
-    # the branch's own points bound the fold too: the extreme of all, and how far each side fell short
-    best = max(ext + [extreme]) if upper else min(ext + [extreme])
-    log.info("exact branch: fold %d detected at w = %.8g, refined from both sides to %.8g and %.8g", j, omega[j], *ext)
-    return best, max(max(abs(best - e) for e in ext) / abs(best), EXACT_FOLD_RTOL)
+def __getattr__(name: str):
+    if name in MOVED:
+        return moved(__name__, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+

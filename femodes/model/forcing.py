@@ -1,0 +1,122 @@
+"""Harmonic forces on a model's DOFs (:meth:`~femodes.StructuralModel.with_forcing`): a force on a
+DOF or named point, a resultant on a named boundary of a meshed solid shared by its nodes with the
+consistent weights, and forces given in physical components at nodes whose DOFs are rotated into
+a nodal frame (``R^T f``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+
+from ..laws import Location
+from .declarations import Attached, HarmonicForce
+from .dofs import DofMap
+from .frames import frame_forces
+
+__all__ = ["bind_forces"]
+
+log = logging.getLogger(__name__)
+
+
+def bind_forces(model, forces) -> list[Attached]:
+    """The harmonic ``forces`` bound to the DOFs of ``model`` (one or more ``Attached`` each)."""
+    if not forces:
+        raise ValueError("with_forcing: give at least one HarmonicForce")
+    new: list[Attached] = []
+    dm = model.dofmap
+    for f in forces:
+        if not isinstance(f, HarmonicForce):
+            raise TypeError(f"with_forcing: expected HarmonicForce, got {type(f).__name__}")
+        owner = f"with_forcing: HarmonicForce(at={f.at!r})"
+        framed = _frame_group(dm, f.at, owner)
+        if framed is not None:
+            dofs, weights = framed
+            new.extend(Attached(dataclasses.replace(f, at=int(d), amplitude=f.amplitude * float(w)), int(d))
+                       for d, w in zip(dofs, weights) if w != 0.0)
+            continue
+        group = dm.group_of(f.at)
+        if group is None:
+            rotated = _rotated_point(dm, f.at)
+            if rotated is None:
+                new.append(Attached(f, model.dof(f.at, "with_forcing: HarmonicForce")))
+            else:
+                new.extend(_rotated_force(dm, f, *rotated, 1.0, owner))
+            continue
+        name, c = group
+        nodes = np.asarray(dm.groups[name])
+        dofs = dm.node_dof[nodes, c]
+        weights = np.asarray(dm.group_weights[name], dtype=float)
+        if np.any(dofs == -2):
+            raise ValueError(f"with_forcing: HarmonicForce(at={f.at!r}): boundary {name!r} is not kept in this "
+                             f"reduced model; attach the force before reducing")
+        lost = float(weights[dofs < 0].sum())
+        if lost > 0:
+            log.info("with_forcing: %.3g %% of the force on %r acts on supported nodes", 100 * lost, name)
+        for node, d, w in zip(nodes, dofs, weights):
+            if d < 0 or w == 0.0:
+                continue
+            if int(node) in dm.frames:
+                new.extend(_rotated_force(dm, f, int(node), c, float(w), owner))
+            else:
+                new.append(Attached(dataclasses.replace(f, at=int(d), amplitude=f.amplitude * float(w)), int(d)))
+    return new
+
+
+def _frame_group(dm: DofMap, at: Location, owner: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(dofs, weights)`` of ``at=(boundary, nodal-frame component)`` (e.g. ``("right", "u_n")``),
+    else None; every free node of the boundary must be rotated."""
+    if not (dm.frames and isinstance(at, tuple) and len(at) == 2 and at[0] in dm.groups
+            and at[0] not in dm.locations and at[1] not in dm.components and at[1] not in dm.aliases):
+        return None
+    name, comp = at
+    nodes = np.asarray(dm.groups[name])
+    weights = np.asarray(dm.group_weights[name], dtype=float)
+    dofs = np.full(nodes.size, -1, dtype=int)
+    for j, k in enumerate(nodes):
+        row = dm.node_dof[k]
+        if np.all(row == -1):
+            continue  # a supported node: its share goes to the support
+        frame = dm.frames.get(int(k))
+        if frame is None or comp not in frame.components:
+            raise ValueError(
+                f"{owner}: node {int(k)} of {name!r} has no nodal-frame component {comp!r} (only nodes rotated "
+                f"by a contact with an inclined or negative normal have u_n, u_t...); give a physical component "
+                f"of {list(dm.components)}"
+            )
+        dofs[j] = row[frame.components.index(comp)]
+        if dofs[j] == -2:
+            raise ValueError(f"{owner}: boundary {name!r} is not kept in this reduced model; attach the force "
+                             "before reducing")
+    lost = float(weights[dofs < 0].sum())
+    if lost > 0:
+        log.info("with_forcing: %.3g %% of the force on %r acts on supported nodes", 100 * lost, name)
+    return dofs[dofs >= 0], weights[dofs >= 0]
+
+
+def _rotated_point(dm: DofMap, at: Location) -> tuple[int, int] | None:
+    """``(node, physical component)`` if ``at`` names a physical component (or only the point,
+    i.e. its first component) of a named point whose DOFs are rotated, else None."""
+    if not dm.frames:
+        return None
+    if isinstance(at, str) and at in dm.locations and at not in dm.dof_names:
+        loc, comp = at, dm.components[0]
+    elif isinstance(at, tuple) and len(at) == 2 and at[0] in dm.locations:
+        loc, comp = at
+    else:
+        return None
+    node = int(dm.locations[loc])
+    if node not in dm.frames or comp in dm.frames[node].components:
+        return None
+    return node, dm.component_index(comp)
+
+
+def _rotated_force(dm: DofMap, f: HarmonicForce, node: int, c: int, weight: float, owner: str) -> list:
+    """The share ``weight`` of force ``f`` along physical component ``c`` of rotated ``node``, on
+    the node's nodal-frame DOFs (``R^T e_c``)."""
+    dofs = dm.node_dof[node]
+    if np.any(dofs < 0):
+        raise ValueError(f"{owner}: the DOFs of rotated node {node} are not all kept in this reduced model; "
+                         f"attach the force before reducing or keep the node (craig_bampton(keep=...))")
+    return frame_forces(f, dm.frames[node].rotation, dofs, c, weight)

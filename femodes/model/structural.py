@@ -1,0 +1,294 @@
+"""The model: :class:`StructuralModel`, ``M q'' + C q' + K q + f_nl(q) = f(t) - w_c p`` on the free
+DOFs, with its declarations. A frozen value: every ``with_*`` returns a new model; the work is done
+by the modules of :mod:`femodes.model` (damping, forcing, contact, probes, checks)."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..laws import Location
+from .checks import check_fields
+from .contact import add_contacts
+from .damping import DENSE_DAMPING_MAX_DOFS, LowRankDamping, damped
+from .declarations import HarmonicForce, bind_nonlinearities
+from .dofs import DofMap
+from .forcing import bind_forces
+from .probes import probe_weights
+
+__all__ = ["StructuralModel"]
+
+
+@dataclass(frozen=True, eq=False)
+class StructuralModel:
+    """Linear structure with nonlinear declarations.
+
+    ``M q'' + C q' + K q + f_nl(q) = f(t) - w_c p`` on ``n_dofs`` free DOFs.
+
+    Parameters
+    ----------
+    M, K : array_like or scipy.sparse matrix
+        Symmetric mass (positive semidefinite, not zero) and stiffness (positive semidefinite)
+        matrices, ``n_dofs x n_dofs``.
+    C : array_like or sparse, optional
+        Symmetric damping matrix (zero if omitted): the sparse part of the damping.
+    dof_names : sequence of str, optional
+        Names of the DOFs of a discrete system (then ``at="x1"`` works).
+    C_lowrank : LowRankDamping, optional
+        Low-rank part of the damping, set by ``with_damping(modal=...)``: the damping matrix is
+        ``C + U diag(d) U^T`` (see :class:`LowRankDamping`). Use :meth:`apply_damping` for
+        products and :meth:`damping_matrix` for the assembled matrix (small models, checks);
+        ``C`` alone is only the sparse part (zero for modal damping).
+    frame : scipy.sparse matrix, optional
+        Nodal rotations of a meshed solid (set by ``with_contact`` for inclined or negative
+        contact normals): the physical displacement on the free DOFs of the FE field is
+        ``u = frame @ q``, ``frame`` orthogonal and block diagonal (one rotation per rotated node,
+        :class:`NodalFrame` in ``dofmap.frames``; the identity elsewhere). ``M``, ``K``, ``C`` and
+        the forces are the transformed ``T^T A T``, ``T^T f``. None (the default): ``q`` is
+        physical.
+    damping_spec : tuple, optional
+        The arguments of the last :meth:`with_damping` as ``(name, value)`` pairs and the
+        ``"fingerprint"`` of the matrices it made (empty when the damping was given as a matrix):
+        :meth:`with_contact` recomputes the damping from them when it redistributes mass, unless
+        the matrices were replaced since (a warning; they are then kept).
+
+    Notes
+    -----
+    FE constructors (:func:`femodes.bar`, :func:`femodes.beam`) fill ``dofmap`` and ``fe`` (the
+    mesh, the scikit-fem basis and the free DOFs of the full field).
+    """
+
+    M: Any
+    K: Any
+    C: Any = None
+    dof_names: Sequence[str] | None = None
+    dofmap: DofMap | None = None
+    forces: tuple = ()
+    contacts: tuple = ()
+    nonlinearities: tuple = ()
+    fe: Any = None
+    damping_info: str = "none"
+    mass_redistribution: tuple = ()
+    C_lowrank: LowRankDamping | None = None
+    frame: Any = None
+    damping_spec: tuple = ()
+
+    def __post_init__(self):
+        check_fields(self)
+
+    @property
+    def n_dofs(self) -> int:
+        return self.M.shape[0]
+
+    @property
+    def n_contacts(self) -> int:
+        return len(self.contacts)
+
+    @property
+    def is_reduced(self) -> bool:
+        return False
+
+    @property
+    def has_damping(self) -> bool:
+        """True if the damping (sparse or low-rank part) is not zero (stored zeros do not count)."""
+        return bool(self.C.count_nonzero()) or (self.C_lowrank is not None and bool(np.any(self.C_lowrank.d)))
+
+    def apply_damping(self, V: np.ndarray) -> np.ndarray:
+        """The damping matrix times ``V`` (shape ``(n,)`` or ``(n, k)``): ``C V + U diag(d) U^T V``."""
+        out = self.C @ V
+        if self.C_lowrank is not None:
+            out = out + self.C_lowrank.matmul(V)
+        return out
+
+    def damping_matrix(self) -> sp.csr_matrix:
+        """The assembled damping matrix ``C + U diag(d) U^T`` (``C`` itself without a low-rank part).
+
+        With a low-rank part the matrix is dense: for small models and checks only; refused
+        above :data:`DENSE_DAMPING_MAX_DOFS` DOFs.
+        """
+        lr = self.C_lowrank
+        if lr is None:
+            return self.C
+        if self.n_dofs > DENSE_DAMPING_MAX_DOFS:
+            raise ValueError(
+                f"damping_matrix: the modal damping of this {self.n_dofs}-DOF model is kept as a low-rank part; "
+                f"assembling it would store {self.n_dofs}^2 entries (use apply_damping, or C and C_lowrank)"
+            )
+        return sp.csr_matrix(self.C.toarray() + lr.toarray())
+
+    def dof(self, at: Location, owner: str = "dof") -> int:
+        """Model DOF index of a location (see :class:`DofMap`); ``owner`` starts error messages."""
+        return self.dofmap.index(at, owner)
+
+    def probe(self, at: Location, how: str = "mean", owner: str = "probe") -> np.ndarray:
+        """Weights ``w`` that read a response at ``at`` from the model's DOFs: ``w @ q``.
+
+        A DOF location gives its unit vector (shape ``(n_dofs,)``). A named boundary of a meshed
+        solid (``"tip"`` or ``("tip", "u_z")``; first component by default) gives, with
+        ``how="mean"``, its average displacement in that component (the consistent weights of
+        :attr:`DofMap.group_weights`, supported nodes counting as zero; shape ``(n_dofs,)``),
+        and with ``how="max"`` one row per free node (shape ``(k, n_dofs)``: take the largest).
+        A Craig-Bampton model reads boundaries of its parent, kept or not (``w_parent @ T``), so
+        responses anywhere need no new model.
+        """
+        return probe_weights(self.dofmap, at, how, owner)
+
+    def force_vectors(self) -> dict:
+        """Complex force amplitude per harmonic: ``{k: F_k}`` with ``f(t) = Re sum F_k e^{i k w t}``."""
+        out: dict = {}
+        for a in self.forces:
+            f = a.item
+            vec = out.setdefault(f.harmonic, np.zeros(self.n_dofs, dtype=complex))
+            vec[a.dof] += f.amplitude * np.exp(1j * f.phase)
+        return out
+
+    # -- frozen updates -------------------------------------------------------------------------
+    def with_damping(self, alpha: float = 0.0, beta: float = 0.0, *, modal: Any = None, n_modes: int | None = None) -> StructuralModel:
+        """Return a copy with damping (replacing any previous one).
+
+        Rayleigh: ``C = alpha M + beta K`` (sparse). Modal: ``modal`` is a damping ratio (scalar)
+        or a sequence of ratios ``zeta_j`` for the first ``n_modes`` modes (default: the length of
+        the sequence, or for a scalar 20 modes, fewer if the model has fewer DOFs with mass),
+        ``C = M Phi diag(2 zeta_j w_j) Phi^T M`` with mass-normalised modes ``Phi``. That matrix is
+        dense, so it is kept as a low-rank part ``C_lowrank = LowRankDamping(U = M Phi, d = 2 zeta
+        w)`` next to a zero sparse ``C``; every analysis uses it exactly and at the cost of a
+        sparse one (no DOF limit).
+
+        The arguments are kept (``damping_spec``): a later :meth:`with_contact` that
+        redistributes the contact nodes' mass recomputes the damping from the new mass matrix (and
+        modes), so ``with_damping`` may come before or after ``with_contact``.
+        """
+        return damped(self, alpha, beta, modal, n_modes)
+
+    def with_forcing(self, *forces: HarmonicForce) -> StructuralModel:
+        """Return a copy with these harmonic point forces added.
+
+        On a named boundary of a meshed solid (``at=("tip", "u_y")``, or ``at="tip"`` for the
+        first component) the amplitude is the *resultant* force, shared by the boundary's nodes
+        with the consistent weights ``int N_k ds / int ds`` (a uniform traction of that
+        resultant; ``DofMap.group_weights``). The share of supported nodes goes to the support
+        (logged).
+
+        A force given in a physical component (``"u_x"``...) on a node whose DOFs are rotated
+        (a contact with an inclined or negative normal, ``dofmap.frames``) is rotated into the
+        node's DOFs: ``f_q = R^T f`` (one force per nodal-frame component, nonzero parts only,
+        so a load along ``n`` given by its x and y parts also loads ``u_t`` with parts that
+        cancel). ``at=(point, "u_n")`` names the normal DOF of such a node directly, and
+        ``at=(boundary, "u_n")`` (or ``"u_t"``...) the normal DOFs of a boundary whose free nodes
+        are all rotated (a resultant along the normals, shared with the boundary's weights).
+        """
+        return dataclasses.replace(self, forces=tuple(self.forces) + tuple(bind_forces(self, forces)))
+
+    def without_forcing(self) -> StructuralModel:
+        """Return a copy with no forcing (the autonomous system, for nonlinear modes)."""
+        return dataclasses.replace(self, forces=())
+
+    def with_contact(self, *laws, contact_mass=None) -> StructuralModel:
+        """Return a copy with these contact laws (UnilateralContact or PenaltyContact) added.
+
+        A law on a named boundary of a meshed solid (``at="right"`` with ``direction=(1.0, 0.0)``,
+        or ``at=("right", "u_x")``) becomes one law per node of that boundary (every Lagrange
+        node: the P2 mid-side nodes carry contact too, so that no part of the discrete boundary
+        can pass through the obstacle unchecked), on the component along ``direction``, with its
+        gap evaluated at the node when ``gap`` is callable (``at="right"`` without a direction
+        uses the first component, ``u_x``). Nodes where that component is supported are skipped
+        (logged count). ``model.contacts`` holds one ``Attached(law, dof)`` per contact DOF, and
+        every law acts on one model DOF with ``g_N = gap - q_dof``.
+
+        Inclined or negative normals (``direction=(0.8, 0.6)``, ``(-1.0, 0.0)``): the DOFs of each
+        contact node are rotated into a nodal frame (:func:`nodal_frame`, a proper rotation ``R``
+        whose column ``slot`` is the normal ``n``; ``slot`` is the axis nearest to ``n``), so that
+        the model DOF in that slot is ``u_n = n . u`` and the law acts on it. With the sparse
+        orthogonal ``T`` of these rotations (identity elsewhere) the physical displacement is
+        ``u = T q``: ``K``, ``M``, ``C`` (and a modal low-rank part) become ``T^T A T`` and the
+        forces already attached ``T^T f``, before the contact mass is redistributed, so the
+        redistribution acts on ``u_n``. ``model.frame`` holds ``T`` (composed over calls) and
+        ``dofmap.frames`` the rotation of each node: :meth:`full_field` (hence every mesh output)
+        is physical, :meth:`with_forcing` rotates forces given in ``u_x, u_y(, u_z)``, and the
+        rotated DOFs are named ``"u_n"``, ``"u_t"`` (2-D) or ``"u_t1"``, ``"u_t2"`` (3-D)
+        (``at=(point, "u_n")``; ``at=(point, "u_x")`` of a rotated node is an error). A node
+        constrained in some components only, a node that would carry two different normals,
+        and an inclined normal on a reduced model (rotate before ``craig_bampton``) are errors;
+        nodes supported in every component are skipped. Positive-axis directions rotate nothing
+        (``frame`` stays None).
+
+        Parameters
+        ----------
+        contact_mass : RedistributeMass or ConsistentMass, optional
+            What happens to the mass of each new contact DOF. ``fm.RedistributeMass()`` moves it
+            to the neighbours (zero mass at the contact node, total mass and centre of mass
+            conserved; Khenous, Laborde & Renard 2008; for solids see
+            :func:`femodes.fe.redistribution.redistribute_surface_mass`); ``fm.ConsistentMass()``
+            keeps it. Default: ``RedistributeMass()`` for complementarity contacts of FE models,
+            where a massful contact node makes the nonsmooth modes ill-posed under mesh
+            refinement (Thorin & Legrand 2018), ``ConsistentMass()`` for penalty contacts and
+            discrete models. For a rotated normal ``n`` the redistribution runs in the frame
+            where ``n`` is a coordinate axis (every node not rotated otherwise is turned by the
+            same ``R``, coordinates by ``R^T``): there it is the computation of a positive-axis
+            normal, so a rotated model is the rotation of the axis-aligned one. Nodes with
+            other nodal frames, partial supports or massless DOFs near the contact keep their
+            own DOFs in that frame (mass conservation along ``n`` is then approximate there).
+        """
+        return add_contacts(self, laws, contact_mass)
+
+    def with_nonlinearity(self, *laws) -> StructuralModel:
+        """Return a copy with these smooth nonlinear laws (e.g. CubicSpring) added."""
+        new = bind_nonlinearities(self, laws)
+        return dataclasses.replace(self, nonlinearities=tuple(self.nonlinearities) + tuple(new))
+
+    # -- fields ---------------------------------------------------------------------------------
+    def nonlinear_dofs(self) -> np.ndarray:
+        """Sorted unique DOFs that carry contact or nonlinear laws."""
+        d = [a.dof for a in self.contacts] + [a.dof for a in self.nonlinearities]
+        return np.unique(np.asarray(d, dtype=int))
+
+    def expand(self, q: np.ndarray) -> np.ndarray:
+        """Model DOFs -> model DOFs (identity; a reduced model maps to its parent's DOFs)."""
+        return np.asarray(q)
+
+    @property
+    def mesh_owner(self) -> StructuralModel | None:
+        """The model that owns the FE mesh: this one for FE models, None for discrete ones
+        (a reduced model answers with its parent's owner)."""
+        return self if self.fe is not None else None
+
+    def to_owner(self, q: np.ndarray) -> np.ndarray:
+        """Coordinates ``(..., n_dofs)`` on the DOFs of :attr:`mesh_owner` (identity here; a
+        reduced model expands through every reduction level). These are the owner's model DOFs,
+        nodal-frame components at rotated nodes; :meth:`full_field` gives the physical field."""
+        return np.asarray(q)
+
+    def fe_dof(self, dof: int) -> int | None:
+        """Index in the full FE field of a DOF of this model; None for a discrete model (and for
+        the modal coordinates of a reduced one). A DOF of a rotated node (``dofmap.frames``)
+        occupies the FE DOF of its component slot; its physical direction is
+        ``dofmap.axis(node, slot)``."""
+        return None if self.fe is None else int(np.asarray(self.fe.free)[dof])
+
+    def full_field(self, q: np.ndarray) -> np.ndarray:
+        """FE field with constrained DOFs set to zero, ``(..., n_fe_dofs)``; identity for discrete models.
+
+        The field is physical: the DOFs of rotated nodes (:attr:`frame`) are turned back into
+        their components along x, y(, z).
+        """
+        q = np.asarray(q)
+        if self.fe is None:
+            return q
+        if self.frame is not None:
+            flat = q.reshape(-1, q.shape[-1])
+            q = np.asarray(self.frame @ flat.T).T.reshape(q.shape)
+        out = np.zeros(q.shape[:-1] + (self.fe.n_full,), dtype=q.dtype)
+        out[..., self.fe.free] = q
+        return out
+
+    def __repr__(self) -> str:
+        kind = "discrete" if self.fe is None else self.fe.kind
+        return (
+            f"StructuralModel({kind}, n_dofs={self.n_dofs}, damping={self.damping_info}, forces={len(self.forces)}, "
+            f"contacts={len(self.contacts)}, nonlinearities={len(self.nonlinearities)})"
+        )
