@@ -361,8 +361,11 @@ def _dense(J0, J1, J2, base, algebraic=None, vectors=True):
     return _dense_pencil(_dense_array(J0), _dense_array(J1), _dense_array(J2), base, vectors)
 
 
-#: Hill problems of at most this many unknowns are eliminated with dense arrays (:func:`_dense`).
-SMALL = 1000
+#: Hill problems of at most this many unknowns are eliminated with dense arrays (:func:`_dense`):
+#: scipy.sparse's per-call overhead dominates below it (the 11-DOF blade of blade_casing.py, 225
+#: unknowns); above it the algebraic block is sliced sparse (a 27-contact blade: 594 of 660, 3 %
+#: nonzeros, which a dense slice and its conversion back to sparse cost 2x the factorisation).
+SMALL = 300
 
 
 def _dense_array(A) -> np.ndarray:
