@@ -98,26 +98,3 @@ def _warn_unmet(branch: Branch, max_harmonics: int) -> None:
     log.warning("accuracy: rtol = %g not met at %d of %d points%s: %s; branch.accuracy.met tells which",
                 acc.rtol, int(miss.sum()), len(branch), f", including the folds at {', '.join(folds)}" if folds else "",
                 "; ".join(f"{n} {words[k][1]}" for k, n in counts.items() if n))
-
-
-def _warn_unmet(branch: Branch, max_harmonics: int) -> None:
-    """A warning that says where ``rtol`` is not met (points, folds and why), if anywhere."""
-    acc = branch.accuracy
-    miss = ~acc.met
-    if not miss.any():
-        return
-    if acc.caveat:  # not the family asked for: no point is converged, whatever its error
-        log.warning("accuracy: rtol = %g is met at no point: %s", acc.rtol, acc.caveat)
-        return
-    # per method: its name in the fold list, and why its points miss rtol
-    words = {"doubling": ("levels", f"by the levels (bracket or estimate wider than rtol up to H = {max_harmonics}, "
-                                    "or levels that do not contract)"),
-             "shooting": ("exact orbit", "by the exact orbit (the point's error above rtol)"),
-             "failed": ("no estimate", "without an estimate"),
-             "truncation": ("truncation", "folds of the truncation (none in the limit)"),
-             "none": ("not estimated", "whose harmonic truncation was not estimated")}
-    counts = {k: int(np.sum(miss & (acc.method == k))) for k in ERROR_METHODS}
-    folds = [f"w = {float(branch.omega[i]):.6g} ({words[str(acc.method[i])][0]})" for i in branch.folds if miss[i]]
-    log.warning("accuracy: rtol = %g not met at %d of %d points%s: %s; branch.accuracy.met tells which",
-                acc.rtol, int(miss.sum()), len(branch), f", including the folds at {', '.join(folds)}" if folds else "",
-                "; ".join(f"{n} {words[k][1]}" for k, n in counts.items() if n))
