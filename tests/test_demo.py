@@ -22,8 +22,9 @@ import pytest  # noqa: E402
 import femodes as fm  # noqa: E402
 from femodes.app import demo  # noqa: E402
 
-#: The demo's budget is ~60 s on a 2-core machine; the hard limit leaves room for a loaded runner.
-TIME_LIMIT = 90
+#: A hang guard, not a speed test (the demo's speed is measured by `femodes demo` itself): 16 s of
+#: CPU, 40 s wall on a 2-core machine at load 7; 90 s was exceeded at load 8 by three test suites.
+TIME_LIMIT = 300
 W1 = 3.516184  # linear w1 of the Craig-Bampton model (the demo's table: 3.51618400 rad/s)
 W2 = 22.047341  # linear w2 of the same model
 GAP = 0.01
