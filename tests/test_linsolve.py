@@ -603,3 +603,21 @@ def test_dense_solve_keeps_the_whole_lu_where_elimination_does_not_apply(monkeyp
     assert F.schur is None and F.lu is not None
     assert np.abs(A @ y - b).max() <= 64 * np.finfo(float).eps * (np.abs(A).sum(axis=1).max() * np.abs(y).max()
                                                                   + np.abs(b).max())
+
+
+def test_module_constants_are_deprecated_names_of_the_options():
+    """femodes 0.1's module constants read the defaults of BlockSolverOptions, with a warning; the
+    former BlockLU signature (a = f^2, b = f) gives the same factorisation, with a warning."""
+    import femodes.hbm.linsolve as ls
+
+    defaults = BlockSolverOptions()
+    for name, option in ls._DEPRECATED_CONSTANTS.items():
+        with pytest.warns(DeprecationWarning, match=f"linsolve.{name} is deprecated"):
+            assert getattr(ls, name) == getattr(defaults, option)
+    assert len(ls._DEPRECATED_CONSTANTS) == 15
+    model, h = CASES["beam-mixed-laws"]()
+    pat = forced(model, h).system.block_pattern()
+    R = np.random.default_rng(7).standard_normal((pat.perm.size, 2)) + 0j
+    with pytest.warns(DeprecationWarning, match="BlockLU"):
+        old = ls.BlockLU(pat, 1.5 ** 2, 1.5, 0.02)
+    np.testing.assert_array_equal(old.solve(R), ls.BlockLU(pat, 1.5, 0.02).solve(R))
