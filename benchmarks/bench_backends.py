@@ -16,7 +16,7 @@ spd       ``factorize(K_II, positive_definite=True)`` (interior = all DOFs but t
           then one solve with the ``n_b`` columns of ``K_IB`` (the constraint modes).
 complex   the harmonic block ``Z = K_II - w^2 M_II + i w C_II`` at ``w = 1.5`` (between
           eigenfrequencies), ``factorize(Z, symmetric=True)`` (SuperLU with the options of the
-          HBM block solver, ``linsolve.SUPERLU_OPTIONS``), then one solve with ``n_b`` columns.
+          HBM block solver, ``BlockSolverOptions().superlu_options``), then one solve with ``n_b`` columns.
 cb        the whole ``fm.craig_bampton(model, n_modes=20)`` under ``FEMODES_SPARSE_BACKEND``.
 
 Results: ``benchmarks/results_backends.json``; summary: ``benchmarks/README_backends.md``.
@@ -42,7 +42,9 @@ from threadpoolctl import threadpool_limits  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import femodes as fm  # noqa: E402
 from femodes import sparse_direct as sd  # noqa: E402
-from femodes.hbm.linsolve import SUPERLU_OPTIONS  # noqa: E402
+from femodes.hbm.linsolve import BlockSolverOptions  # noqa: E402
+
+SUPERLU_OPTIONS = BlockSolverOptions().superlu_options
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import cpu_model  # noqa: E402

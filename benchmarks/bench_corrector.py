@@ -211,10 +211,10 @@ def micro(N: int, case: str, H: int, points: int) -> None:
     s = pr.system
     pat = s.block_pattern()
     f = H * 1.55
-    lu = ls.BlockLU(pat, f * f, f, 0.0)
+    lu = ls.BlockLU(pat, f)
     one = np.ones((pat.perm.size, 1), dtype=complex)
     many = np.ones((pat.perm.size, max(pat.bdofs.size, 1)), dtype=complex, order="F")
-    t_lu = med(lambda: ls.BlockLU(pat, f * f, f, 0.0))
+    t_lu = med(lambda: ls.BlockLU(pat, f))
     t_1 = med(lambda: lu.solve(one))
     t_nb = med(lambda: lu.solve(many))
     t_lf = med(lambda: ls.LinearFactors(s, 1.55, 0.0), R=5)
@@ -235,7 +235,7 @@ def micro(N: int, case: str, H: int, points: int) -> None:
     print(f"  contraction at the last of {points} points, w = {w:.5f}: forward error of pass 1, 2, ... "
           f"(relative to max |x|) and q = |d_j| / |d_(j-1)|")
     for dw in (1e-7, 1e-6, 1e-5, 1e-4, 1e-3):
-        P = ls._Factorization(Jb, None, ls.LinearFactors(s, w * (1 - dw), 0.0))
+        P = ls.StructuredFactorization(Jb, None, ls.LinearFactors(s, w * (1 - dw), 0.0))
         xr = P._solve(e[:, None])[:, 0]
         errs, qs, d_prev = [float(np.max(np.abs(xr - xe)) / np.max(np.abs(xe)))], [], float(np.max(np.abs(xr)))
         for _ in range(7):

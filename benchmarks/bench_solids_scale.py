@@ -261,13 +261,13 @@ def _block(model):
     pat = build_pattern(model.M, model.K, model.C, bd)
     pattern_s = time.perf_counter() - t
     a, b = OMEGA_BLOCK ** 2, OMEGA_BLOCK
-    vals = pat.kv - a * pat.mv + 1j * b * pat.cv
+    vals = pat.II.harmonic(OMEGA_BLOCK)
     nI = pat.perm.size
     Z_rcm = sp.csc_matrix((vals, (pat.rows, pat.cols)), shape=(nI, nI))
     # condensation columns Z_II^-1 Z_Ib (in the RCM order of Z_rcm)
     inv = np.empty(nI, dtype=int)
     inv[pat.perm] = np.arange(nI)
-    Zib = pat.Kib - a * pat.Mib + 1j * b * pat.Cib
+    Zib = pat.Ib.harmonic(OMEGA_BLOCK)
     cols = np.zeros((nI, bd.size), dtype=complex)
     cols[inv[pat.R]] = Zib
     return pat, (a, b), Z_rcm, cols, pattern_s
@@ -300,12 +300,12 @@ def _floor(model, variant: str, rec: dict, budget: float, repeat: int) -> None:
             raise MemoryError(f"band storage {band_bytes / 2**30:.1f} GiB > {BAND_MAX_BYTES / 2**30:.0f} GiB (kl={pat.kl})")
         if variant == "band":
             pat.banded = True
-        from femodes.hbm import linsolve
+        from femodes.hbm.linsolve import BlockSolverOptions
 
-        opts = getattr(linsolve, "SUPERLU_OPTIONS", {})
+        opts = BlockSolverOptions().superlu_options
         rec["path"] = (f"LAPACK band LU, kl={pat.kl}" if pat.banded else
                        f"SuperLU {opts.get('permc_spec', 'COLAMD')} on the RCM order")
-        med, times, lu = _repeat(lambda: BlockLU(pat, a, b, 0.0), budget, repeat)
+        med, times, lu = _repeat(lambda: BlockLU(pat, b), budget, repeat)
         # BlockLU takes and returns the original interior order
         perm = pat.perm
         rhs_o = np.empty_like(rhs)
@@ -404,8 +404,8 @@ def _hbm_setup(model, rec: dict, budget: float, repeat: int) -> None:
 
 #: Sources whose version a measurement depends on (others edit the checkout meanwhile): their
 #: SHA-1 prefixes are stored with every run.
-CODE_FILES = ("femodes/hbm/linsolve.py", "femodes/hbm/system.py", "femodes/fe/solid.py", "femodes/eigen.py",
-              "femodes/reduction.py", "femodes/model.py", "femodes/fe/redistribution.py")
+CODE_FILES = ("femodes/hbm/linsolve/blocks.py", "femodes/hbm/linsolve/factors.py", "femodes/hbm/system.py",
+              "femodes/fe/solid.py", "femodes/eigen.py", "femodes/reduction.py", "femodes/model.py", "femodes/fe/redistribution.py")
 
 
 def code_versions() -> dict:

@@ -1,8 +1,9 @@
 """femodes: nonlinear vibration modes of finite-element structures with unilateral contact.
 
 The public face of the package. Layers, from the bottom: solvers, laws, models (fe, model,
-reduction, linear, eigen, sparse_direct), discretise (hbm, time), results (results, store, exact_branch),
-analyses, outputs (fields, plot, io, viz), application (app); README "How the code is organised".
+reduction, linear, eigen, sparse_direct, dynamic_stiffness), discretise (hbm, time), results
+(results, store, exact_branch), analyses, outputs (fields, plot, io, viz), application (app); README
+"How the code is organised".
 """
 
 from .fe import Material, Section, bar, beam, box_mesh, line_mesh, load_mesh, rectangle_mesh, solid

@@ -12,6 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .dynamic_stiffness import DynamicStiffness
 from .eigen import IllConditionedWarning, eigenvalue_floor, normal_modes
 from .model import StructuralModel, low_rank_solver
 from .sparse_direct import factorize
@@ -148,18 +149,17 @@ class LinearResponse:
         return a if dof is None else a[:, dof]
 
 
-def _solve_lowrank(Z, lr, w: float, F: np.ndarray) -> np.ndarray:
-    """``(Z + i w U diag(d) U^T) q = F`` by Woodbury on the LU of the sparse part ``Z``; if ``Z``
-    alone is singular (an undamped resonance of the sparse part that the modal damping damps),
-    SuperLU on the sparse augmented system ``[[Z, i w U diag(d)], [U^T, -I]] [q; y] = [F; 0]``."""
+def _solve_lowrank(Z, lr, g: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """``(Z + U diag(g) U^T) q = F`` (``g = i w d``) by Woodbury on the LU of the sparse part ``Z``;
+    if ``Z`` alone is singular (an undamped resonance of the sparse part that the modal damping
+    damps), SuperLU on the sparse augmented system ``[[Z, U diag(g)], [U^T, -I]] [q; y] = [F; 0]``."""
     try:
         lu = factorize(Z)
     except RuntimeError:
         m = lr.rank
-        A = sp.bmat([[Z, sp.csr_matrix(lr.U * (1j * w * lr.d))], [sp.csr_matrix(lr.U.T), -sp.identity(m)]],
-                    format="csc")
+        A = sp.bmat([[Z, sp.csr_matrix(lr.U * g)], [sp.csr_matrix(lr.U.T), -sp.identity(m)]], format="csc")
         return spla.splu(A).solve(np.concatenate([np.asarray(F, dtype=complex), np.zeros(m, dtype=complex)]))[: Z.shape[0]]
-    return low_rank_solver(lu.solve, lr.U, 1j * w * lr.d, lr.U, matvec=lambda x: Z @ x)(F)
+    return low_rank_solver(lu.solve, lr.U, g, lr.U, matvec=lambda x: Z @ x)(F)
 
 
 def linear_response(model: StructuralModel, omega, *, force=None) -> LinearResponse:
@@ -190,15 +190,15 @@ def linear_response(model: StructuralModel, omega, *, force=None) -> LinearRespo
         if F.shape != (model.n_dofs,) or not np.all(np.isfinite(F)):
             raise ValueError(f"linear_response: force must be a finite vector of length {model.n_dofs}, got shape {F.shape}")
     out = np.empty((w.size, model.n_dofs), dtype=complex)
-    K, M, C = model.K.tocsc(), model.M.tocsc(), model.C.tocsc()
     lr = model.C_lowrank  # modal damping U diag(d) U^T: Woodbury on the sparse part (StructuralModel)
+    stiffness = DynamicStiffness(model.K.tocsc(), model.M.tocsc(), model.C.tocsc(), lr)
     for i, wi in enumerate(w):
-        Z = (K - wi**2 * M + 1j * wi * C).tocsc()
+        Z = stiffness.harmonic(wi).tocsc()
         try:
             if lr is None:
                 out[i] = factorize(Z).solve(F)
             else:
-                out[i] = _solve_lowrank(Z, lr, wi, F)
+                out[i] = _solve_lowrank(Z, lr, stiffness.lowrank_gain(wi), F)
         except RuntimeError as exc:
             raise ValueError(
                 f"linear_response: the dynamic stiffness is singular at omega={wi:g} (undamped resonance); "

@@ -21,6 +21,7 @@ LAYERS = {
     "femodes.solvers": 0,
     "femodes.laws": 1,
     "femodes.eigen": 2,
+    "femodes.dynamic_stiffness": 2,
     "femodes.sparse_direct": 2,
     "femodes.fe": 2,
     "femodes.model": 2,

@@ -18,6 +18,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from femodes.dynamic_stiffness import CoefficientStiffness, DynamicStiffness
+
 from femodes.hbm import Harmonics
 from femodes.hbm.hill import hill_exponents
 
@@ -44,6 +46,7 @@ class MathieuSystem:
         self.D1 = sp.csr_matrix(np.asarray(self.h.derivative_domega()))
         eye = sp.identity(self.h.n_coef, format="csr")
         self.IM, self.IC, self.AM = sp.kron(eye, self.M), sp.kron(eye, self.C), sp.kron(self.D1, self.M)
+        self.stiffness = CoefficientStiffness(DynamicStiffness(sp.csr_matrix((1, 1)), self.M, self.C), self.D1)
         self.nonlinear_dofs = np.array([0])
         E, Pa = np.asarray(self.h.synthesis()), np.asarray(self.h.analysis())
         self.cos = Pa @ (np.cos(self.h.phases())[:, None] * E)

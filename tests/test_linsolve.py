@@ -8,6 +8,7 @@ backward stable, so they can differ by that much and no more).
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -16,42 +17,43 @@ import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
 import femodes as fm
-from femodes.hbm.linsolve import HarmonicBlockJacobian, _Generic
+from femodes.hbm.linsolve import (AssembledFactorization, BlockSolverOptions, DenseFactorization, ForceSchur,
+                                  HarmonicBlockJacobian, StructuredFactorization)
 from femodes.hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from femodes.hbm import AssembledSolver, BlockSolver
 from femodes.solvers.continuation import bordered_matrix, bordered_solver
 
-
-@pytest.fixture(autouse=True)
-def always_structured(monkeypatch):
-    """Small systems normally go to LAPACK (DENSE_MAX_SIZE) or SuperLU (STRUCTURED_MIN_SIZE); test
-    the structure at any size."""
-    import femodes.hbm.linsolve as ls
-
-    monkeypatch.setattr(ls, "STRUCTURED_MIN_SIZE", 0)
-    monkeypatch.setattr(ls, "DENSE_MAX_SIZE", 0)
+#: Small systems normally go to LAPACK (dense_max_size) or SuperLU (structured_min_size): the
+#: solvers of this module take the structured path at any size
+STRUCTURED = BlockSolverOptions(structured_min_size=0, dense_max_size=0)
 
 
-def test_small_systems_use_lapack_then_superlu(monkeypatch):
-    import femodes.hbm.linsolve as ls
+def structured(**kw) -> BlockSolver:
+    """A block solver with the :data:`STRUCTURED` options (changed by ``options=dict(...)``)."""
+    return BlockSolver(options=dataclasses.replace(STRUCTURED, **kw.pop("options", {})), **kw)
 
-    monkeypatch.setattr(ls, "STRUCTURED_MIN_SIZE", 2000)
+
+def forced(model, h, solver=None) -> ForcedResponseProblem:
+    """The forced-response problem of ``model`` solved by ``solver`` (default :func:`structured`)."""
+    return ForcedResponseProblem(model, h, solver=structured() if solver is None else solver)
+
+
+def test_small_systems_use_lapack_then_superlu():
     model, h = CASES["chain"]()
-    pr = ForcedResponseProblem(model, h)
+    pr = forced(model, h)
     x = state(pr, 1, 0.5)
     _, J, _ = pr.residual(x, 1.1)
     assert J.shape[0] <= 500
-    monkeypatch.setattr(ls, "DENSE_MAX_SIZE", 500)
-    F = J.factorize()
-    assert isinstance(F, ls._Dense)
+    F = BlockSolver(options=BlockSolverOptions(dense_max_size=500)).factorize(J)
+    assert isinstance(F, DenseFactorization)
     # the dense assembly is the sparse one, entry for entry (bordered too)
     Jb = J.bordered(np.ones((J.shape[0], 1)), np.ones((1, J.shape[0])), np.array([[2.0]]))
     for A in (J, 2.5 * J, Jb):
         np.testing.assert_array_equal(A.toarray(), A.tocsr().toarray())
     b = np.linspace(-1.0, 1.0, J.shape[0])
     assert backward_error(J, F.solve(b), b) < 1e3 * np.finfo(float).eps
-    monkeypatch.setattr(ls, "DENSE_MAX_SIZE", 10)
-    assert isinstance(J.factorize(), _Generic)
+    assert isinstance(BlockSolver(options=BlockSolverOptions(dense_max_size=10)).factorize(J), AssembledFactorization)
+    assert isinstance(J.factorize(), StructuredFactorization)  # the problem's solver: STRUCTURED
 
 
 def backward_error(J, x, b):
@@ -119,7 +121,7 @@ def state(pr, seed, amp):
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_structured_solve_matches_superlu(name):
     model, h = CASES[name]()
-    pr = ForcedResponseProblem(model, h)
+    pr = forced(model, h)
     pg = ForcedResponseProblem(model, h, solver=AssembledSolver())
     x = state(pr, 1, 1e-3 if "bar" in name or "beam" in name else 0.5)
     r, J, rp = pr.residual(x, 1.3)
@@ -145,7 +147,7 @@ def test_structured_solve_matches_superlu(name):
 def test_bordered_systems_match(name):
     """Nonlinear-mode border (w, xi) plus the continuation's arclength border, at xi != 0."""
     model, h = CASES[name]()
-    nn = NonlinearModeProblem(model, h)
+    nn = NonlinearModeProblem(model, h, solver=structured())
     x = nn.linear_guess(1e-4)
     x[:-2] += 1e-4 * np.random.default_rng(4).standard_normal(nn.size - 2)
     x[-1] = 0.03  # xi
@@ -167,7 +169,7 @@ def test_bordered_systems_match(name):
 def test_fold_border_is_solved_accurately():
     """At a fold J (without border) is singular; the border lives in the dense Schur part."""
     model = chain(3)
-    pr = ForcedResponseProblem(model, fm.Harmonics(5))
+    pr = forced(model, fm.Harmonics(5))
     x = state(pr, 7, 0.3)
     _, J, rp = pr.residual(x, 1.0)
     # make the core exactly singular: duplicate a column direction through the border instead
@@ -187,13 +189,13 @@ def test_free_structure_is_held_by_its_contact():
              .with_damping(alpha=0.05)
              .with_forcing(fm.HarmonicForce(at="tip", amplitude=1.0))
              .with_contact(fm.UnilateralContact(at="tip", gap=0.0, c=1.0)))
-    pr = ForcedResponseProblem(model, fm.Harmonics(3))
+    pr = forced(model, fm.Harmonics(3))
     s = pr.system
     P = np.zeros((s.h.n_coef, 1))
     P[0] = 10.0  # contact closed all period: the contact holds the rigid-body motion
     _, J, _ = pr.residual(s.join(np.zeros((s.h.n_coef, s.n)), P), 1.0)
     fac = J.factorize()
-    assert not isinstance(fac, _Generic)
+    assert not isinstance(fac, AssembledFactorization)
     b = np.random.default_rng(9).standard_normal(pr.size)
     assert backward_error(J, fac.solve(b), b) < 1e-13
 
@@ -204,17 +206,17 @@ def test_interior_resonance_falls_back_to_superlu():
     model = (fm.StructuralModel(M=np.eye(2), K=[[4.0, -1.0], [-1.0, 1.0]])
              .with_forcing(fm.HarmonicForce(at=0, amplitude=1.0))
              .with_contact(fm.UnilateralContact(at=1, gap=0.1)))
-    pr = ForcedResponseProblem(model, fm.Harmonics(3))
+    pr = forced(model, fm.Harmonics(3))
     _, J, _ = pr.residual(state(pr, 1, 0.3), 2.0)
     fac = J.factorize()
-    assert isinstance(fac, _Generic)
+    assert isinstance(fac, AssembledFactorization)
     b = np.random.default_rng(9).standard_normal(pr.size)
     assert backward_error(J, fac.solve(b), b) < 1e-13
 
 
 def test_singular_jacobian_raises():
     model, h = CASES["chain"]()
-    pr = ForcedResponseProblem(model, h)
+    pr = forced(model, h)
     _, J, _ = pr.residual(state(pr, 1, 0.5), 1.1)
     Jb = J.bordered(np.zeros((pr.size, 1)), np.zeros((1, pr.size)), np.zeros((1, 1)))
     with pytest.raises(RuntimeError):
@@ -223,7 +225,7 @@ def test_singular_jacobian_raises():
 
 def test_factorisations_are_reused_at_the_same_frequency():
     model, h = CASES["bar"]()
-    pr = ForcedResponseProblem(model, h)
+    pr = forced(model, h)
     s = pr.system
     F1 = s.linear_factors(1.3)
     assert s.linear_factors(1.3) is F1
@@ -239,36 +241,21 @@ def test_factorisations_are_reused_at_the_same_frequency():
 
 def test_threads_give_identical_results():
     model, h = CASES["bar"]()
-    b = np.random.default_rng(10).standard_normal(ForcedResponseProblem(model, h).size)
+    b = np.random.default_rng(10).standard_normal(forced(model, h).size)
     out = []
-    import femodes.hbm.linsolve as ls
-
-    ls.THREAD_MIN_SIZE, keep = 0, ls.THREAD_MIN_SIZE
     for threads in (1, 2):
-        pr = ForcedResponseProblem(model, h)
+        pr = forced(model, h, structured(options=dict(thread_min_size=0)))
         pr.system.threads = threads
         _, J, _ = pr.residual(state(pr, 1, 1e-3), 1.2)
         out.append(J.factorize().solve(b))
         assert pr.system.linear_factors(1.2).threads == threads
-    ls.THREAD_MIN_SIZE = keep
     np.testing.assert_array_equal(out[0], out[1])
 
 
-def test_superlu_interior_path(monkeypatch):
+def test_superlu_interior_path():
     """Wide-band interiors (reduced models, 2-D patterns) use SuperLU per harmonic: same result."""
-    import femodes.hbm.linsolve as ls
-    import femodes.hbm.system
-
     model, h = CASES["beam-mixed-laws"]()
-    real_build = ls.build_pattern
-
-    def no_band(*a, **k):
-        p = real_build(*a, **k)
-        p.banded = False
-        return p
-
-    monkeypatch.setattr(femodes.hbm.system, "build_pattern", no_band)
-    pr = ForcedResponseProblem(model, h)
+    pr = forced(model, h, structured(options=dict(band_max_fill=0.0)))  # no band is narrow enough
     _, J, _ = pr.residual(state(pr, 1, 1e-3), 1.3)
     assert not pr.system.block_pattern().banded
     b = np.random.default_rng(11).standard_normal(pr.size)
@@ -290,7 +277,7 @@ def solid_model(dim):
 
 def test_band_or_superlu_from_the_pattern():
     """Line meshes and the dense interiors of reduced models keep the band LU; 2-D/3-D meshes, whose
-    band storage is 10x their nonzeros, go to SuperLU (ls.BAND_MAX_FILL)."""
+    band storage is 10x their nonzeros, go to SuperLU (BlockSolverOptions.band_max_fill)."""
     import femodes.hbm.linsolve as ls
 
     def pattern(model):
@@ -312,27 +299,17 @@ def test_band_or_superlu_from_the_pattern():
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-def test_superlu_interior_of_solids_matches_band_and_assembled(dim, monkeypatch):
+def test_superlu_interior_of_solids_matches_band_and_assembled(dim):
     """The SuperLU interior (minimum degree on Z + Z^T, diagonal pivots preferred) solves the Newton
     system of a meshed solid to round-off, at a frequency whose harmonic blocks are indefinite (kw
     between eigenfrequencies), and agrees with the band LU and with SuperLU on the assembled J."""
-    import femodes.hbm.linsolve as ls
-    import femodes.hbm.system
-
     model, h, w = solid_model(dim), fm.Harmonics(4), 2.3
     lam = np.sort(fm.linear_modes(model, 8).omega)
     assert any(lam[0] < k * w < lam[-1] for k in range(1, 5))  # indefinite blocks
     out = []
     for band in (False, True):
-        real_build = ls.build_pattern
-
-        def build(*a, band=band, **k):
-            p = real_build(*a, **k)
-            p.banded = band
-            return p
-
-        monkeypatch.setattr(femodes.hbm.system, "build_pattern", build)
-        pr = ForcedResponseProblem(model, h)
+        # any band is narrow enough, or none is
+        pr = forced(model, h, structured(options=dict(band_max_fill=np.inf if band else 0.0)))
         x = state(pr, 1, 1e-3)
         _, J, _ = pr.residual(x, w)
         assert isinstance(J, HarmonicBlockJacobian)
@@ -351,7 +328,7 @@ def test_superlu_interior_of_solids_matches_band_and_assembled(dim, monkeypatch)
 def test_reduced_model_uses_structure():
     model = beam_model()
     rom = fm.craig_bampton(model, n_modes=8)
-    pr = ForcedResponseProblem(rom, fm.Harmonics(6))
+    pr = forced(rom, fm.Harmonics(6))
     _, J, _ = pr.residual(state(pr, 1, 1e-3), 2.0)
     b = np.random.default_rng(12).standard_normal(pr.size)
     xs = J.factorize().solve(b)
@@ -365,7 +342,7 @@ def test_continuation_structured_equals_assembled():
     opts = fm.ContinuationOptions(step=0.05, max_step=0.2, max_points=40,
                                   newton=fm.NewtonOptions(atol=1e-10, max_iter=20))
     out = []
-    for solver in (BlockSolver(), AssembledSolver()):
+    for solver in (structured(), AssembledSolver()):
         pr = ForcedResponseProblem(model, h, solver=solver)
         out.append(fm.continuation(pr, (1.0, 2.5), options=opts))
     a, b = out
@@ -400,7 +377,7 @@ def test_reused_factors_solve_like_a_fresh_factorisation(dw, bordered):
     """Solves with the factors of w0 (refined against J(w)) agree with SuperLU on J(w) within
     the forward error its conditioning allows, at the backward error of a fresh factorisation."""
     model, h = CASES["bar"]()
-    solver = BlockSolver(reuse=True, max_passes=60)  # no cost budget: the refinement itself is tested
+    solver = structured(reuse=True, max_passes=60)  # no cost budget: the refinement itself is tested
     J, fac, Jg = _reused_pair(model, h, 1.3, 1.3 * (1 + dw), solver, bordered=bordered)
     assert not fac.exact and fac.F.omega == 1.3
     b = np.random.default_rng(2).standard_normal(J.shape[0])
@@ -410,7 +387,7 @@ def test_reused_factors_solve_like_a_fresh_factorisation(dw, bordered):
     assert backward_error(J, xs, b) < 1e-13
     assert np.max(np.abs(xs - xg)) <= forward_tol(Jg) * np.max(np.abs(xg))
     # the fresh factorisation at w agrees with it to the same tolerance
-    xf = BlockSolver(reuse=False).factorize(J).solve(b)
+    xf = structured(reuse=False).factorize(J).solve(b)
     assert np.max(np.abs(xs - xf)) <= forward_tol(Jg) * np.max(np.abs(xg))
 
 
@@ -425,16 +402,16 @@ def test_reuse_refactorises_across_an_interior_eigenfrequency(caplog):
              .with_forcing(fm.HarmonicForce(at="tip", amplitude=1.0))
              .with_contact(fm.UnilateralContact(at="tip", gap=1e-3)))
     h = fm.Harmonics(3)
-    pat = ForcedResponseProblem(model, h).system.block_pattern()
+    pat = forced(model, h).system.block_pattern()
     M, K = model.M.tocsr(), model.K.tocsr()
     I = pat.interior
     lam1 = sla.eigh(K[I][:, I].toarray(), M[I][:, I].toarray(), eigvals_only=True, subset_by_index=[0, 0])[0]
     w1 = np.sqrt(lam1)                               # first interior eigenfrequency (~ pi)
-    s = ForcedResponseProblem(model, h).system
+    s = forced(model, h).system
     P = np.zeros((s.h.n_coef, 1))
     P[0] = 10.0                                      # contact force > 0 all period: stop closed
     x = s.join(np.zeros((s.h.n_coef, s.n)), P)
-    solver = BlockSolver(reuse=True, max_passes=60)  # no cost budget: only the contraction decides
+    solver = structured(reuse=True, max_passes=60)  # no cost budget: only the contraction decides
     J, fac, Jg = _reused_pair(model, h, w1 * (1 - 2e-3), w1 * (1 + 2e-3), solver, x=x)
     assert not fac.exact
     b = np.random.default_rng(3).standard_normal(J.shape[0])
@@ -457,6 +434,8 @@ def test_reuse_switch_and_options():
     assert fac.exact and fac.F.omega == J.omega and solver.stats["reused"] == 0
     assert solver.stats["factorizations"] == 2
     assert repr(solver) == "BlockSolver()" and repr(BlockSolver(reuse=True)) == "BlockSolver(reuse=True)"
+    assert repr(BlockSolver(options=BlockSolverOptions(dense_max_size=10))) == (
+        f"BlockSolver(options={BlockSolverOptions(dense_max_size=10)!r})")
     assert BlockSolver().reuse is False  # measured slower on the bars of benchmarks/README_corrector.md
     # beyond the window: factorised afresh
     solver = BlockSolver(reuse=True, reuse_window=1e-3)
@@ -468,18 +447,22 @@ def test_reuse_switch_and_options():
         BlockSolver(reuse_window=-0.1)
     with pytest.raises(ValueError):
         BlockSolver(max_passes=0)
+    with pytest.raises(TypeError):
+        BlockSolver(options=dict(dense_max_size=10))
+    with pytest.raises(ValueError, match="dense_fill must be a non-negative number, got -0.1"):
+        BlockSolverOptions(dense_fill=-0.1)
+    with pytest.raises(TypeError, match="superlu_symmetric_mode must be True or False"):
+        BlockSolverOptions(superlu_symmetric_mode=1)
+    assert BlockSolverOptions().superlu_options == dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
+                                                        options=dict(SymmetricMode=True))
 
 
-def test_kept_condensation_columns_change_nothing_but_round_off(monkeypatch):
+def test_kept_condensation_columns_change_nothing_but_round_off():
     """W = Z_II^-1 Z_Ib kept (back substitution by products) or not (a second band solve)."""
-    import femodes.hbm.linsolve as ls
-
     model, h = CASES["bar"]()
     out = []
     for keep in (True, False):
-        if not keep:
-            monkeypatch.setattr(ls, "KEEP_W_MAX_BYTES", 0)
-        pr = ForcedResponseProblem(model, h, solver=BlockSolver(reuse=False))
+        pr = forced(model, h, structured(reuse=False, options={} if keep else dict(keep_w_max_bytes=0)))
         _, J, rp = pr.residual(state(pr, 1, 1e-3), 1.3)
         Jb = bordered_matrix(J, rp, np.random.default_rng(4).standard_normal(pr.size + 1))
         fac = Jb.factorize()
@@ -503,7 +486,7 @@ def test_continuation_same_branch_with_and_without_reuse():
                                   newton=fm.NewtonOptions(atol=1e-10, max_iter=20))
     out, solvers = [], []
     for reuse in (False, True):
-        solver = BlockSolver(reuse=reuse, max_passes=8)
+        solver = structured(reuse=reuse, max_passes=8)
         out.append(fm.continuation(ForcedResponseProblem(model, h, solver=solver), (1.0, 2.5), options=opts))
         solvers.append(solver)
     a, b = out
@@ -517,15 +500,12 @@ def test_continuation_same_branch_with_and_without_reuse():
 
 
 def test_block_solver_factorises_half_full_systems_densely(monkeypatch):
-    """Above DENSE_MAX_SIZE, a system whose nonlinear block fills at least DENSE_FILL of the
+    """Above dense_max_size, a system whose nonlinear block fills at least dense_fill of the
     matrix (a 1-DOF contact at H = 80: two dense 161 x 161 blocks in 322 unknowns) is factorised
     by LAPACK, a sparse one of similar size (20-DOF cantilever, one contact, H = 10: 441
     unknowns) by SuperLU; both solve as the assembled matrix does (to 1e-10 relative: the
     systems' condition numbers are below 1e5)."""
-    from femodes.hbm import linsolve as ls
-
-    monkeypatch.setattr(ls, "STRUCTURED_MIN_SIZE", 2000)  # the defaults (the module's fixture lowers them)
-    monkeypatch.setattr(ls, "DENSE_MAX_SIZE", 250)
+    defaults = BlockSolverOptions()
     one = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]]).with_contact(fm.UnilateralContact(at=0, gap=1.0))
            .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
     mesh = fm.line_mesh(length=1.0, n_elements=10, boundaries={"clamp": 0.0, "tip": 1.0})
@@ -533,16 +513,16 @@ def test_block_solver_factorises_half_full_systems_densely(monkeypatch):
             .with_contact(fm.UnilateralContact(at="tip", gap=0.01)).with_damping(alpha=0.01)
             .with_forcing(fm.HarmonicForce(at="tip", amplitude=1.0)))
     rng = np.random.default_rng(2)
-    for model, H, kind in ((one, 80, ls._Dense), (beam, 10, ls._Generic)):
-        prob = ForcedResponseProblem(model, fm.Harmonics(H))
+    for model, H, kind in ((one, 80, DenseFactorization), (beam, 10, AssembledFactorization)):
+        prob = ForcedResponseProblem(model, fm.Harmonics(H))  # the default solver and options
         x = 0.3 * rng.standard_normal(prob.size)
         J = prob.residual(x, 1.1)[1]
         n = J.shape[0]
-        assert n > ls.DENSE_MAX_SIZE
-        assert (J.N.nnz >= ls.DENSE_FILL * n * n) == (kind is ls._Dense)
-        F = ls.BlockSolver().factorize(J)
+        assert n > defaults.dense_max_size
+        assert (J.N.nnz >= defaults.dense_fill * n * n) == (kind is DenseFactorization)
+        F = BlockSolver().factorize(J)
         assert type(F) is kind
-        if kind is ls._Dense:  # assembled from the cached dense operators (no CSR matrix), entry for entry
+        if kind is DenseFactorization:  # assembled from the cached dense operators (no CSR matrix), entry for entry
             Jb = J.bordered(np.ones((n, 1)), np.ones((1, n)), np.array([[2.0]]))
             sparse = [A.tocsr().toarray() for A in (J, 2.5 * J, Jb)]
             with monkeypatch.context() as m:
@@ -551,7 +531,7 @@ def test_block_solver_factorises_half_full_systems_densely(monkeypatch):
                     np.testing.assert_array_equal(A.toarray(), S)
         b = rng.standard_normal(n)
         y = F.solve(b)
-        np.testing.assert_allclose(y, ls.AssembledSolver().factorize(J).solve(b), rtol=0, atol=1e-10 * np.abs(y).max())
+        np.testing.assert_allclose(y, AssembledSolver().factorize(J).solve(b), rtol=0, atol=1e-10 * np.abs(y).max())
 
 
 def _one_dof(damping=0.1, cubic=False):
@@ -560,23 +540,18 @@ def _one_dof(damping=0.1, cubic=False):
     return m.with_nonlinearity(fm.CubicSpring(at=0, k3=0.5)) if cubic else m
 
 
-def test_dense_solve_eliminates_displacements_first(monkeypatch):
+def test_dense_solve_eliminates_displacements_first():
     """Half-full systems without displacement-displacement nonlinear terms (complementarity
     contacts only) eliminate the displacements harmonic by harmonic and factorise the Schur
     complement on the contact forces (half the size for a 1-DOF contact): the same solution as
     the LU of the whole matrix, to the backward-error test of the structured solver (64 eps
     ||J|| |x|); several right-hand sides, a border, EPMC's xi."""
-    from femodes.hbm import linsolve as ls
-
     rng = np.random.default_rng(5)
     # the defaults: a 1-DOF contact at H = 120 (483 unknowns) goes to LAPACK with the elimination
-    with monkeypatch.context() as m:
-        m.setattr(ls, "STRUCTURED_MIN_SIZE", 2000)
-        m.setattr(ls, "DENSE_MAX_SIZE", 250)
-        prob = ForcedResponseProblem(_one_dof(), fm.Harmonics(120))
-        F = ls.BlockSolver().factorize(prob.residual(0.3 * rng.standard_normal(prob.size), 1.1)[1])
-        assert type(F) is ls._Dense and F.schur is not None
-    monkeypatch.setattr(ls, "SCHUR_MIN_SIZE", 0)  # down to the small systems of the test
+    prob = ForcedResponseProblem(_one_dof(), fm.Harmonics(120))
+    F = BlockSolver().factorize(prob.residual(0.3 * rng.standard_normal(prob.size), 1.1)[1])
+    assert type(F) is DenseFactorization and F.schur is not None
+    always = BlockSolverOptions(schur_min_size=0)  # down to the small systems of the test
     for H, xi in ((80, 0.0), (40, 0.03)):
         prob = ForcedResponseProblem(_one_dof(), fm.Harmonics(H))
         x = 0.3 * rng.standard_normal(prob.size)
@@ -585,8 +560,8 @@ def test_dense_solve_eliminates_displacements_first(monkeypatch):
             J = HarmonicBlockJacobian(J.system, J.omega, xi, J.N, scale=J.scale)
         n = J.shape[0]
         Jb = J.bordered(rng.standard_normal((n, 1)), rng.standard_normal((1, n)), np.array([[2.0]]))
-        F = ls._Dense(Jb)
-        assert isinstance(F.schur, ls._ForceSchur) and F.lu is None
+        F = DenseFactorization(Jb, always)
+        assert isinstance(F.schur, ForceSchur) and F.lu is None
         assert F.schur.lu[0].shape[0] == prob.system.np + 1  # forces and the border only
         A = Jb.toarray()
         B = rng.standard_normal((n + 1, 3))
@@ -605,28 +580,44 @@ def test_dense_solve_keeps_the_whole_lu_where_elimination_does_not_apply(monkeyp
     an undamped resonance (k w = 1) is singular or makes the Schur complement grow (no
     elimination: the whole matrix is pivoted); an inaccurate solve falls back to the LU of the
     whole matrix."""
-    from femodes.hbm import linsolve as ls
-
-    monkeypatch.setattr(ls, "SCHUR_MIN_SIZE", 0)
+    always = BlockSolverOptions(schur_min_size=0)
     rng = np.random.default_rng(6)
     prob = ForcedResponseProblem(_one_dof(cubic=True), fm.Harmonics(40))
     J = prob.residual(0.3 * rng.standard_normal(prob.size), 1.1)[1]
-    F = ls._Dense(J)
+    F = DenseFactorization(J, always)
     assert F.schur is None and F.lu is not None
     undamped = ForcedResponseProblem(_one_dof(damping=0.0), fm.Harmonics(40))
     x = 0.3 * rng.standard_normal(undamped.size)
     for w, blocked in ((1.0, True), (1.0 + 1e-10, True), (0.5 + 0.1234, False)):
         J = undamped.residual(x, w)[1]
-        assert (ls._Dense(J).schur is None) == blocked
+        assert (DenseFactorization(J, always).schur is None) == blocked
     # a solve that the refinement cannot make accurate (here: an elimination that returns
     # zeros) is redone by the LU of the whole matrix, which is kept from then on
     J = undamped.residual(x, 0.5 + 0.1234)[1]
-    F = ls._Dense(J)
+    F = DenseFactorization(J, always)
     assert F.schur is not None
-    monkeypatch.setattr(ls._ForceSchur, "_solve", lambda self, B: np.zeros_like(B))
+    monkeypatch.setattr(ForceSchur, "_solve", lambda self, B: np.zeros_like(B))
     b = rng.standard_normal(J.shape[0])
     y = F.solve(b)
     A = J.toarray()
     assert F.schur is None and F.lu is not None
     assert np.abs(A @ y - b).max() <= 64 * np.finfo(float).eps * (np.abs(A).sum(axis=1).max() * np.abs(y).max()
                                                                   + np.abs(b).max())
+
+
+def test_module_constants_are_deprecated_names_of_the_options():
+    """femodes 0.1's module constants read the defaults of BlockSolverOptions, with a warning; the
+    former BlockLU signature (a = f^2, b = f) gives the same factorisation, with a warning."""
+    import femodes.hbm.linsolve as ls
+
+    defaults = BlockSolverOptions()
+    for name, option in ls._DEPRECATED_CONSTANTS.items():
+        with pytest.warns(DeprecationWarning, match=f"linsolve.{name} is deprecated"):
+            assert getattr(ls, name) == getattr(defaults, option)
+    assert len(ls._DEPRECATED_CONSTANTS) == 15
+    model, h = CASES["beam-mixed-laws"]()
+    pat = forced(model, h).system.block_pattern()
+    R = np.random.default_rng(7).standard_normal((pat.perm.size, 2)) + 0j
+    with pytest.warns(DeprecationWarning, match="BlockLU"):
+        old = ls.BlockLU(pat, 1.5 ** 2, 1.5, 0.02)
+    np.testing.assert_array_equal(old.solve(R), ls.BlockLU(pat, 1.5, 0.02).solve(R))

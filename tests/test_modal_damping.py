@@ -22,10 +22,9 @@ import pytest
 import scipy.sparse as sp
 
 import femodes as fm
-import femodes.hbm.linsolve as linsolve
 from femodes.app.scaling.child import _nnz
 from femodes.app.scaling.records import ScalingRecord, _note
-from femodes.hbm.linsolve import AssembledSolver, BlockSolver
+from femodes.hbm.linsolve import AssembledFactorization, AssembledSolver, BlockSolver, StructuredFactorization
 from femodes.hbm.system import HBMSystem
 from femodes.model import DENSE_DAMPING_MAX_DOFS, LowRankDamping, low_rank_solver
 from femodes.runs import model_fingerprint
@@ -140,8 +139,8 @@ def test_hbm_residual_jacobian_newton_step(ne, H, solver):
         b = rng.standard_normal(s1.size)
         x2 = J2.factorize().solve(b)
         assert rel(J1.factorize().solve(b), x2) < 1e-9
-        assert rel(linsolve._Factorization(J1, None).solve(b), x2) < 1e-9
-        assert rel(linsolve._Generic(J1).solve(b), x2) < 1e-9
+        assert rel(StructuredFactorization(J1, None).solve(b), x2) < 1e-9
+        assert rel(AssembledFactorization(J1).solve(b), x2) < 1e-9
         cols, rows = rng.standard_normal((s1.size, 2)), rng.standard_normal((2, s1.size))
         corner = rng.standard_normal((2, 2))
         B1, B2 = (3.0 * J1).bordered(cols, rows, corner), (3.0 * J2).bordered(cols, rows, corner)
@@ -149,7 +148,7 @@ def test_hbm_residual_jacobian_newton_step(ne, H, solver):
         z1 = B1.factorize().solve(bb)
         assert rel(z1, B2.factorize().solve(bb)) < 1e-9
         assert rel(B1 @ z1, bb) < 1e-9
-        assert rel(linsolve._Factorization(B1, None).solve(bb), z1) < 1e-9
+        assert rel(StructuredFactorization(B1, None).solve(bb), z1) < 1e-9
     # the linear solve of the forced structure (initial guesses)
     assert rel(s1.solve_linear(s1.force(), w), s2.solve_linear(s2.force(), w)) < 1e-9
     # the Jacobian stays sparse: its stored entries are those of the undamped one plus U and d
@@ -167,7 +166,7 @@ def test_structured_solver_is_used_and_handles_a_singular_interior(monkeypatch):
     s1, s2 = HBMSystem(model, h), HBMSystem(ref, h)
     x = np.zeros(s1.size)
     _, J1, _, _ = s1.residual(x, 2.0)
-    assert type(J1.factorize()).__name__ == "_Factorization"
+    assert type(J1.factorize()) is StructuredFactorization
     F = s1.linear_factors(2.0)
     assert F.rank == 10 and F.blocks[1].Zc.shape == (11, 11)
     assert not F.blocks[1].lu.complex  # the sparse part is undamped: real band LU
@@ -312,7 +311,7 @@ def test_structured_condensation_paths(path):
         _, J1, _, _ = s1.residual(x, w, xi=xi)
         _, J2, _, _ = s2.residual(x, w, xi=xi)
         F = J1.factorize()
-        assert type(F).__name__ == "_Factorization"
+        assert type(F) is StructuredFactorization
         assert (F.F.modes is None) == (path == "general")
         assert F.ymodal is not None  # the modal coordinates eliminated harmonic by harmonic
         assert rel(F.solve(b), J2.factorize().solve(b)) < 1e-8

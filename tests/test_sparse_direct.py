@@ -131,11 +131,11 @@ def test_forced_backend_in_hbm_blocks(box, backend):
     assert not pat.banded and pat.symmetric
     R = np.random.default_rng(4).standard_normal((pat.perm.size, 2)) + 0j
     backend("superlu")
-    lu0 = BlockLU(pat, 2.25, 1.5, 0.0)
+    lu0 = BlockLU(pat, 1.5)
     ref = {trans: lu0.solve(R, trans=trans) for trans in (False, True)}
     for name in INSTALLED:
         backend(name)
-        lu = BlockLU(pat, 2.25, 1.5, 0.0)
+        lu = BlockLU(pat, 1.5)
         assert lu.factor.backend == ("superlu" if name == "cholmod" else name)  # CHOLMOD: SPD only
         for trans in (False, True):
             assert np.abs(lu.solve(R, trans=trans) - ref[trans]).max() <= tol * np.abs(ref[trans]).max()

@@ -33,17 +33,18 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..dynamic_stiffness import DynamicStiffness
+
 __all__ = ["HarmonicBlock", "harmonic_block", "distributed_newton_step", "assembled_jacobian"]
 
 
 def harmonic_block(K, M, C, omega: float, k: int) -> sp.csc_matrix:
-    """``Z_k`` of the module docstring (``K`` for ``k = 0``; ``2n x 2n`` on ``[c_k; s_k]``)."""
+    """``Z_k`` of the module docstring (``K`` for ``k = 0``; ``2n x 2n`` on ``[c_k; s_k]``):
+    the real form of the dynamic stiffness at ``k w`` (:meth:`DynamicStiffness.real_block`)."""
     K, M, C = (sp.csr_matrix(A) for A in (K, M, C))
     if k == 0:
         return K.tocsc()
-    D = K - (k * omega) ** 2 * M
-    W = (k * omega) * C
-    return sp.bmat([[D, W], [-W, D]], format="csc")
+    return DynamicStiffness(K, M, C).real_block(k * omega)
 
 
 class HarmonicBlock:

@@ -1,7 +1,7 @@
 """Discretise layer: harmonic balance (Fourier layout, exact positive part, dynamic stiffness, HBM problems, block solver)."""
 
 from .harmonics import Harmonics
-from .linsolve import AssembledSolver, BlockSolver, HarmonicBlockJacobian
+from .linsolve import AssembledSolver, BlockSolver, BlockSolverOptions, HarmonicBlockJacobian
 from .positive_part import ExactProjection, SampledProjection
 from .problems import ForcedResponseProblem, HBMUnknowns, NonlinearModeProblem, PeriodDrivenModeProblem
 from .system import HBMSystem, default_contact_parameter
@@ -9,4 +9,4 @@ from .trigroots import ColleagueRoots, CompanionRoots, GridRoots
 
 __all__ = ["Harmonics", "HarmonicBlockJacobian", "ForcedResponseProblem", "NonlinearModeProblem", "PeriodDrivenModeProblem", "HBMUnknowns",
            "HBMSystem", "default_contact_parameter", "ExactProjection", "SampledProjection", "BlockSolver",
-           "AssembledSolver", "ColleagueRoots", "CompanionRoots", "GridRoots"]
+           "BlockSolverOptions", "AssembledSolver", "ColleagueRoots", "CompanionRoots", "GridRoots"]

@@ -164,11 +164,8 @@ def hill_matrices(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0.
     (module docstring); ``J0`` is the harmonic balance Jacobian of ``system``."""
     _, J, _, _ = system.residual(np.asarray(x, dtype=float), float(omega), xi=float(xi), forced=False)
     J0 = J.tocsr()
-    # the system's cached Kronecker operators (built once per system, not per point)
-    J1q = system.IC + 2.0 * omega * system.AM
-    if xi:
-        J1q = J1q - xi * system.IM
-    J2q = system.IM
+    # the dynamic stiffness at d/dt + s (its cached Kronecker operators, built once per system)
+    J1q, J2q = system.stiffness.exponent_terms(omega, xi)
     pad = system.size - system.nq
 
     def embed(A):

@@ -30,24 +30,27 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..dynamic_stiffness import CoefficientStiffness, DynamicStiffness, mul_rows
 from ..laws import CubicSpring, PenaltyContact, UnilateralContact
 from ..model import StructuralModel, low_rank_solver
 from ..sparse_direct import factorize
 from .harmonics import Harmonics
 from ..solvers.checks import check_memory
-from .linsolve import (DENSE_MAX_SIZE, BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure,
+from .linsolve import (DEFAULT_OPTIONS, BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure,
                        build_pattern, solver_memory)
+from .linsolve.lowrank import split_lowrank
 from .positive_part import ExactProjection
 
 __all__ = ["HBMSystem", "default_contact_parameter", "default_contact_parameters"]
 
 log = logging.getLogger(__name__)
 
+#: Systems with at most this many displacement coefficients (and no low-rank damping) take the
+#: linear part of the residual from cached dense operators (the size up to which the block solver
+#: factorises densely too, ``BlockSolverOptions.dense_max_size``).
+DENSE_MAX_SIZE = DEFAULT_OPTIONS.dense_max_size
 
-def _mul(A: sp.spmatrix, Q: np.ndarray) -> np.ndarray:
-    """``(A @ Q.T).T`` for ``Q`` of shape (n_coef, n): the product on a contiguous copy (scipy
-    would copy the strided view once per product anyway; this is ~2x faster at 1e5 DOFs)."""
-    return np.ascontiguousarray((A @ np.ascontiguousarray(Q.T)).T)
+_mul = mul_rows
 
 
 def default_contact_parameter(model: StructuralModel, dof: int) -> float:
@@ -167,6 +170,8 @@ class HBMSystem:
         self.solver = BlockSolver() if solver is None else solver
         if not callable(getattr(self.solver, "factorize", None)):
             raise TypeError(f"solver must be BlockSolver() or AssembledSolver(), got {solver!r}")
+        # the block solver's tuning also shapes the interior blocks and factors cached here
+        self.solver_options = self.solver.options if isinstance(self.solver, BlockSolver) else DEFAULT_OPTIONS
         n, nc = model.n_dofs, harmonics.n_coef
         self.n = n
         self.unilateral: list[_Contact] = []
@@ -191,6 +196,10 @@ class HBMSystem:
         # fast paths (residual, Jacobian products, block solver); C above is the sparse part
         lr = model.C_lowrank
         self.C_lr = lr if lr is not None and lr.rank else None
+        #: the dynamic stiffness S(w) on the coefficients (femodes.dynamic_stiffness): every
+        #: linear operator of the harmonic balance comes from it
+        self.stiffness = CoefficientStiffness(DynamicStiffness(self.K, self.M, self.C, self.C_lr), self.D1,
+                                              damping_matrix=model.damping_matrix)
         # period-average weights for energies: <u.v> = sum_a w_a U_a V_a
         self.w = np.asarray(harmonics.norm_weights())
         self.E = np.asarray(harmonics.synthesis())
@@ -221,130 +230,66 @@ class HBMSystem:
                      "boundary)" + (", and Rayleigh instead of modal damping (its modes join the complement)" if rank
                                     else ""))
 
-    # Kronecker-product operators (n_coef n x n_coef n): built only on demand (assembled Jacobian,
-    # comparisons); the residual and the structured solver work on (n_coef, n) arrays instead.
-    def _kron(self, key, left, A):
-        if key not in self._cache:
-            self._cache[key] = sp.kron(left, A, format="csr")
-        return self._cache[key]
-
+    # Kronecker-product operators (n_coef n x n_coef n) of the dynamic stiffness: built only on
+    # demand (assembled Jacobian, comparisons, Hill's method); the residual and the structured
+    # solver work on (n_coef, n) arrays instead (CoefficientStiffness).
     @property
     def A2(self):
-        return self._kron("A2", self.D1 @ self.D1, self.M)
+        return self.stiffness.term("A2")
 
     @property
     def C_full(self):
         """The whole damping matrix, assembled (``C`` itself without a low-rank part; dense with
-        one: only the assembled operators below use it, for small systems and checks)."""
-        if self.C_lr is None:
-            return self.C
-        if "C_full" not in self._cache:
-            self._cache["C_full"] = self.model.damping_matrix().tocsr()
-        return self._cache["C_full"]
+        one: only the assembled operators use it, for small systems and checks)."""
+        return self.stiffness.C_full
 
     @property
     def A1(self):
-        return self._kron("A1", self.D1, self.C_full)
+        return self.stiffness.term("A1")
 
     @property
     def A0(self):
-        return self._kron("A0", sp.identity(self.h.n_coef, format="csr"), self.K)
+        return self.stiffness.term("A0")
 
     @property
     def AM(self):
-        return self._kron("AM", self.D1, self.M)  # for the artificial damping of EPMC and Hill's method
+        return self.stiffness.term("AM")  # for the artificial damping of EPMC and Hill's method
 
     @property
     def IM(self):
-        return self._kron("IM", sp.identity(self.h.n_coef, format="csr"), self.M)  # Hill's method: s^2 term
+        return self.stiffness.term("IM")  # Hill's method: s^2 term
 
     @property
     def IC(self):
-        return self._kron("IC", sp.identity(self.h.n_coef, format="csr"), self.C_full)  # Hill's method: s term
+        return self.stiffness.term("IC")  # Hill's method: s term
 
     def apply_linear(self, q: np.ndarray, omega: float, xi: float = 0.0, *, absolute: bool = False) -> np.ndarray:
         """``S(w) q - xi w (D1 x M) q`` without forming the Kronecker products (``absolute``: an
         upper bound of ``|S| |q|`` for tolerances)."""
         Q = np.asarray(q, dtype=float).reshape(self.h.n_coef, self.n)
-        M, K, C, D1 = self.M, self.K, self.C, self.D1
-        if absolute:
-            M, K, C, D1 = self._abs_operators()
-            omega, xi = abs(omega), -abs(xi)
-        MQ = _mul(M, Q)
-        out = _mul(K, Q)
-        out += (omega * omega) * (D1 @ (D1 @ MQ))
-        CQ = _mul(C, Q) if C.nnz else np.zeros_like(Q)
-        if self.C_lr is not None:
-            CQ += self.C_lr.abs_bound_rows(Q) if absolute else self.C_lr.rmatmul_rows(Q)
-        if xi:
-            CQ -= xi * MQ
-        out += omega * (D1 @ CQ)
-        return out.ravel()
-
-    def _abs_operators(self):
-        """``|M|, |K|, |C|, |D1|`` (cached: the Newton tolerance asks for them every iteration)."""
-        if "abs" not in self._cache:
-            self._cache["abs"] = (abs(self.M), abs(self.K), abs(self.C), abs(self.D1))
-        return self._cache["abs"]
+        return self.stiffness.apply(Q, omega, xi, absolute=absolute).ravel()
 
     def abs_row_sums(self) -> tuple[float, float, float]:
         """``max_i sum_j |A_ij|`` of ``K, M, C`` (for norm bounds of the Jacobian)."""
-        absM, absK, absC, _ = self._abs_operators()
-        rs = [float(A.sum(axis=1).max()) if A.nnz else 0.0 for A in (absK, absM, absC)]
-        if self.C_lr is not None:
-            rowC = np.asarray(absC.sum(axis=1)).ravel() + self.C_lr.abs_row_sums()
-            rs[2] = float(rowC.max())
-        return rs[0], rs[1], rs[2]
+        return self.stiffness.abs_row_sums()
 
     def lowrank_modes(self):
         """``(Phi, w^2, rows, E_rows)`` if the low-rank damping comes from modes of this system's
-        matrices (``U = M_0 Phi``, ``K Phi = M_0 Phi diag(w^2)``) and there is no sparse damping
-        part, else None. Then, with ``E = M Phi - U`` (zero but on the few ``rows`` where the mass
-        changed after ``with_damping``: ``with_contact`` redistributes the contact node's mass),
-        ``(K - c M) Phi = U diag(w^2 - c) - c E`` for ``c = a + i b xi`` up to round-off (used by
-        the block solver).
-
-        ``K Phi = U diag(w^2)`` is checked mode by mode (max norm) against the round-off of the
-        products, ``1e3 eps max(|K| |phi_j| + w_j^2 |M| |phi_j|)``: that is the accuracy of any
-        product with ``K`` (on a 1e5-DOF bar the first mode's relative residual is 3e-6, all of
-        it round-off of ``K phi``; measured residuals are 1-8 eps of that bound at 1e3-1e5 DOFs),
-        so the condensation is exact to the level the block solver's refinement test accepts.
-        More than 64 changed rows of ``M``: None (the general path, ``m`` solves per harmonic)."""
-        if "lr_modes" not in self._cache:
-            lr, out = self.C_lr, None
-            if lr is not None and lr.modes is not None and not self.C.nnz:
-                Phi, lam = np.asarray(lr.modes), np.asarray(lr.eigenvalues)
-                U = lr.U
-                aPhi = np.abs(Phi)
-                aUlam = np.abs(U) * lam
-                tol = 1e3 * np.finfo(float).eps
-                EK = self.K @ Phi - U * lam
-                ok_k = bool(np.all(np.abs(EK).max(axis=0) <= tol * (abs(self.K) @ aPhi + aUlam).max(axis=0)))
-                EM = self.M @ Phi - U
-                bound = tol * (abs(self.M) @ aPhi + np.abs(U)).max(axis=0)
-                rows = np.flatnonzero(np.any(np.abs(EM) > bound, axis=1))
-                if ok_k and rows.size <= 64:
-                    out = (Phi, lam, rows, EM[rows])
-            self._cache["lr_modes"] = out
-        return self._cache["lr_modes"]
+        matrices, else None (:meth:`~femodes.dynamic_stiffness.DynamicStiffness.lowrank_modes`)."""
+        return self.stiffness.Z.lowrank_modes()
 
     def lowrank_border(self, omega: float):
-        """The low-rank damping of ``S(w)`` as a border, for the assembled solvers: ``S(w) =
-        S_sparse(w) + B (I x U^T)`` with ``B = w (D1 x U diag(d))`` (``nq x n_coef m``, sparse)
-        and the modal coordinates ``y = (I x U^T) q``; None without a low-rank part."""
-        if self.C_lr is None:
-            return None
-        U, d = self.C_lr.U, self.C_lr.d
-        if "lr_rows" not in self._cache:
-            eye = sp.identity(self.h.n_coef, format="csr")
-            self._cache["lr_rows"] = sp.kron(eye, sp.csr_matrix(U.T), format="csr")
-            self._cache["lr_cols"] = sp.kron(self.D1, sp.csr_matrix(U * d), format="csr")
-        return omega * self._cache["lr_cols"], self._cache["lr_rows"]
+        """The low-rank damping of ``S(w)`` as a border, for the assembled solvers
+        (:meth:`~femodes.dynamic_stiffness.CoefficientStiffness.lowrank_border`)."""
+        return self.stiffness.lowrank_border(omega)
 
     def block_pattern(self):
-        """Interior/boundary split and sparsity pattern for the structured solver (cached)."""
+        """Interior/boundary split and sparsity pattern for the structured solver (cached), with
+        the split of the modal damping's low-rank part."""
         if "pattern" not in self._cache:
-            self._cache["pattern"] = build_pattern(self.M, self.K, self.C, self.nonlinear_dofs)
+            pat = build_pattern(self.M, self.K, self.C, self.nonlinear_dofs, band_max_fill=self.solver_options.band_max_fill)
+            pat.lowrank = split_lowrank(pat, self.stiffness.Z)
+            self._cache["pattern"] = pat
         return self._cache["pattern"]
 
     def linear_factors(self, omega: float, xi: float = 0.0, threads: int | None = None):
@@ -417,22 +362,12 @@ class HBMSystem:
     def linear_operator(self, omega: float) -> sp.csr_matrix:
         """``S(w)`` (sparse, block diagonal over harmonics; with modal damping its blocks are
         dense: assembled checks and small systems only, the solvers use :meth:`lowrank_border`)."""
-        return (omega * omega) * self.A2 + omega * self.A1 + self.A0
+        return self.stiffness.operator(omega)
 
     def dense_linear_operator(self, omega: float, xi: float = 0.0) -> np.ndarray:
         """``S(w) - xi w (D1 x M)`` as a dense array (small systems; the dense operators are
         cached on first use)."""
-        A2, A1, A0, AM = self._dense_operators()
-        S = (omega * omega) * A2 + omega * A1 + A0
-        if xi:
-            S -= (xi * omega) * AM
-        return S
-
-    def _dense_operators(self) -> tuple:
-        """``A2, A1, A0, AM`` as dense arrays (small systems; cached on first use)."""
-        if "dense" not in self._cache:
-            self._cache["dense"] = tuple(A.toarray() for A in (self.A2, self.A1, self.A0, self.AM))
-        return self._cache["dense"]
+        return self.stiffness.dense_operator(omega, xi)
 
     def solve_linear(self, rhs: np.ndarray, omega: float) -> np.ndarray:
         """Solve ``S(w) q = rhs`` (the linear structure, no contact) harmonic by harmonic.
@@ -443,21 +378,23 @@ class HBMSystem:
         h, n = self.h, self.n
         R = np.asarray(rhs, dtype=float).reshape(h.n_coef, n)
         if "pattern_all" not in self._cache:
-            self._cache["pattern_all"] = build_pattern(self.M, self.K, self.C, np.zeros(0, dtype=int))
+            self._cache["pattern_all"] = build_pattern(self.M, self.K, self.C, np.zeros(0, dtype=int),
+                                                       band_max_fill=self.solver_options.band_max_fill)
         pat = self._cache["pattern_all"]
+        superlu = self.solver_options.superlu_options
         out = np.empty_like(R)
         try:
-            out[0] = BlockLU(pat, 0.0, 0.0, 0.0).solve(R[0][:, None]).real[:, 0]
+            out[0] = BlockLU(pat, 0.0, superlu_options=superlu).solve(R[0][:, None]).real[:, 0]
             for k in range(1, h.n_harmonics + 1):
                 f = k * omega / h.subharmonic
                 c, si = h.cos_index(k), h.sin_index(k)
-                lu = BlockLU(pat, f * f, f, 0.0)
+                lu = BlockLU(pat, f, superlu_options=superlu)
                 rhs = (R[c] - 1j * R[si])[:, None]
                 if self.C_lr is None:
                     z = lu.solve(rhs)[:, 0]
-                else:  # Z = Z_sparse + i f U diag(d) U^T: Woodbury on the harmonic block
+                else:  # Z = Z_sparse + U diag(i f d) U^T: Woodbury on the harmonic block
                     U = self.C_lr.U
-                    z = low_rank_solver(lu.solve, U, 1j * f * self.C_lr.d, U)(rhs)[:, 0]
+                    z = low_rank_solver(lu.solve, U, self.stiffness.Z.lowrank_gain(f), U)(rhs)[:, 0]
                 out[c], out[si] = z.real, -z.imag
         except StructureFailure:
             out = self._solve_linear_lsqr(R, omega)
@@ -470,8 +407,7 @@ class HBMSystem:
         if border is None:
             return spla.lsqr(self.linear_operator(omega), R.ravel())[0].reshape(R.shape)
         B, Ur = border
-        S = (omega * omega) * self._kron("A2", self.D1 @ self.D1, self.M) + omega * self._kron(
-            "A1s", self.D1, self.C) + self.A0
+        S = self.stiffness.operator(omega, lowrank=False)
         m = Ur.shape[0]
         A = sp.bmat([[S, B], [Ur, -sp.identity(m)]], format="csr")
         rhs = np.concatenate([R.ravel(), np.zeros(m)])
@@ -499,46 +435,15 @@ class HBMSystem:
 
     def _linear_residual(self, Q: np.ndarray, omega: float, xi: float, forced: bool):
         """Linear part ``S(w) q - xi w (D1 x M) q (- f)`` of the residual and its derivatives in
-        ``w`` and ``xi`` (zero on the contact-force rows)."""
+        ``w`` and ``xi`` (zero on the contact-force rows); small systems from the cached dense
+        operators (four small dense products instead of a dozen sparse ones)."""
         nq = self.nq
         if nq <= DENSE_MAX_SIZE and self.C_lr is None:
-            return self._linear_residual_dense(Q, omega, xi, forced)
-        MQ = _mul(self.M, Q)
-        D1MQ = self.D1 @ MQ
-        CQ = _mul(self.C, Q) if self.C.nnz else np.zeros_like(Q)
-        if self.C_lr is not None:
-            CQ += self.C_lr.rmatmul_rows(Q)
-        r = np.zeros(self.size)
-        Sq = _mul(self.K, Q) + (omega * omega) * (self.D1 @ D1MQ) + omega * (self.D1 @ CQ)
-        if xi:
-            Sq -= (xi * omega) * D1MQ
-        r[:nq] = Sq.ravel()
-        if forced:
-            r[:nq] -= self.force()
-        dS = (2.0 * omega) * (self.D1 @ D1MQ) + self.D1 @ CQ
-        if xi:
-            dS -= xi * D1MQ
-        dr_domega = np.zeros(self.size)
-        dr_domega[:nq] = dS.ravel()
-        dr_dxi = np.zeros(self.size)
-        dr_dxi[:nq] = -omega * D1MQ.ravel()
-        return r, dr_domega, dr_dxi
-
-    def _linear_residual_dense(self, Q: np.ndarray, omega: float, xi: float, forced: bool):
-        """:meth:`_linear_residual` of a small system from its cached dense operators
-        (:meth:`dense_linear_operator`): four small dense products instead of a dozen sparse ones
-        (the 1-DOF seed case: 15 against 90 us)."""
-        nq = self.nq
-        A2, A1, A0, AM = self._dense_operators()
-        q = Q.reshape(-1)
-        y2, y1, ym = A2 @ q, A1 @ q, AM @ q
+            terms = self.stiffness.dense_residual(Q.reshape(-1), omega, xi)
+        else:
+            terms = [t.ravel() for t in self.stiffness.residual(Q, omega, xi)]
         r, dr_domega, dr_dxi = np.zeros(self.size), np.zeros(self.size), np.zeros(self.size)
-        r[:nq] = (omega * omega) * y2 + omega * y1 + A0 @ q
-        dr_domega[:nq] = (2.0 * omega) * y2 + y1
-        dr_dxi[:nq] = -omega * ym
-        if xi:
-            r[:nq] -= (xi * omega) * ym
-            dr_domega[:nq] -= xi * ym
+        r[:nq], dr_domega[:nq], dr_dxi[:nq] = terms
         if forced:
             r[:nq] -= self.force()
         return r, dr_domega, dr_dxi

@@ -1,0 +1,194 @@
+"""Discretise layer: ``BlockSolver``, the default linear solver strategy of the harmonic balance.
+
+It picks the factorisation of each Jacobian from its size and fill (``BlockSolverOptions``):
+LAPACK on the dense matrix for small or half-full systems (:mod:`.assembled`), SuperLU on the
+assembled matrix for mid-size ones, and from ``structured_min_size`` unknowns the structured
+factorisation (:mod:`.factorization`), optionally reusing the factors of a nearby frequency
+(:mod:`.reuse`); a structure that does not apply (an interior resonance) falls back to SuperLU.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import weakref
+
+import numpy as np
+
+from .assembled import AssembledFactorization, DenseFactorization
+from .blocks import StructureFailure
+from .factorization import StructuredFactorization
+from .jacobian import HarmonicBlockJacobian
+from .options import DEFAULT_OPTIONS, BlockSolverOptions
+from .reuse import ReusedFactorization, ReuseState, budget_from_factors
+
+__all__ = ["BlockSolver", "STAT_KEYS"]
+
+log = logging.getLogger(__name__)
+
+#: Counters of :attr:`BlockSolver.stats`.
+STAT_KEYS = ("factorizations", "reused", "solves_reused", "passes", "refactorized")
+
+
+class BlockSolver:
+    """Linear solver strategy of the harmonic balance (the default): per-harmonic band LU of the
+    linear DOFs and a dense Schur complement on the nonlinear DOFs and borders
+    (:mod:`femodes.hbm.linsolve`); systems up to ``options.dense_max_size`` unknowns (or below
+    ``options.structured_min_size`` and at least ``options.dense_fill`` full) are assembled
+    densely for LAPACK, larger ones below ``structured_min_size`` and blocks that cannot be
+    factorised (an interior resonance) go to SuperLU on the assembled matrix.
+
+    Parameters
+    ----------
+    reuse : bool, default False
+        Reuse the per-harmonic factors of a nearby frequency (:mod:`femodes.hbm.linsolve.reuse`):
+        a Jacobian at ``w`` within ``reuse_window`` (relative) of the frequency ``w0`` of the
+        factors this solver used last for the same system (and at the same ``xi``) is solved
+        with them as a preconditioner, refined against the true Jacobian to the backward-error
+        test of a fresh factorisation (and a forward one), and factorised at ``w`` when the
+        refinement would need more passes than a factorisation costs. Off by default: on the
+        bars of ``benchmarks/README_corrector.md`` (1e4-1e5 DOFs, H = 10) it saved 2-33 % of the
+        factorisations but no time (+2 % to +11 % per point against ``False``).
+    reuse_window : float, default 0.05
+        Largest ``|w - w0| / |w0|`` tried.
+    max_passes : int, optional
+        Passes (solves with the reused factors) allowed per solve; default from the cost model
+        of :meth:`passes_budget`.
+    options : BlockSolverOptions, optional
+        The tuning (thresholds of the paths, memory kept, cost model); default the measured one.
+
+    Attributes
+    ----------
+    stats : dict
+        Counters since construction (or :meth:`reset_stats`): ``factorizations`` (per-harmonic
+        factor sets built through this solver), ``reused`` (factorisations served by factors of
+        another frequency), ``solves_reused`` and ``passes`` (solves with them and their passes),
+        ``refactorized`` (solves whose refinement did not contract fast enough: factorised
+        afresh).
+    """
+
+    def __init__(self, *, reuse: bool = False, reuse_window: float = 0.05, max_passes: int | None = None,
+                 options: BlockSolverOptions | None = None):
+        if not isinstance(reuse, (bool, np.bool_)):
+            raise TypeError(f"reuse must be True or False, got {reuse!r}")
+        if not (isinstance(reuse_window, (int, float)) and 0.0 <= float(reuse_window) < 1.0):
+            raise ValueError(f"reuse_window must be in [0, 1), got {reuse_window!r}")
+        if max_passes is not None and (not isinstance(max_passes, (int, np.integer)) or max_passes < 1):
+            raise ValueError(f"max_passes must be a positive integer or None, got {max_passes!r}")
+        if options is not None and not isinstance(options, BlockSolverOptions):
+            raise TypeError(f"options must be a BlockSolverOptions, got {options!r}")
+        self.reuse = bool(reuse)
+        self.reuse_window = float(reuse_window)
+        self.max_passes = None if max_passes is None else int(max_passes)
+        self.options = DEFAULT_OPTIONS if options is None else options
+        self._states: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+        self.stats = dict.fromkeys(STAT_KEYS, 0)
+
+    def reset_stats(self) -> None:
+        self.stats = dict.fromkeys(STAT_KEYS, 0)
+
+    def __getstate__(self):
+        d = dict(self.__dict__)
+        d["_states"] = None  # factors are not pickled
+        return d
+
+    def __setstate__(self, d):
+        d.setdefault("options", DEFAULT_OPTIONS)  # pickled before the options existed
+        self.__dict__.update(d)
+        self._states = weakref.WeakKeyDictionary()
+
+    def factorize(self, J: HarmonicBlockJacobian, *, threads: int | None = None):
+        n, o = J.shape[0], self.options
+        if n <= o.dense_max_size or (n < o.structured_min_size and J.N.nnz >= o.dense_fill * n * n):
+            return DenseFactorization(J, o)
+        if n < o.structured_min_size:
+            return AssembledFactorization(J)
+        try:
+            state = self._state(J.system)
+            F = self._reusable(J, state)
+            if F is not None:
+                try:
+                    fac = (StructuredFactorization(J, threads, F) if F.omega == J.omega
+                           else ReusedFactorization(J, threads, F, self, state))
+                except (StructureFailure, RuntimeError) as exc:  # P singular where J need not be
+                    log.debug("reused factors not applicable (%s); factorising at w", exc)
+                else:
+                    if not fac.exact:
+                        self.stats["reused"] += 1
+                    return fac
+            return self.fresh_factorization(J, threads, state)
+        except StructureFailure as exc:
+            log.debug("structured HBM factorisation not applicable (%s); SuperLU on the assembled matrix", exc)
+            return AssembledFactorization(J)
+
+    # -- reuse ------------------------------------------------------------------------------
+    def _state(self, system) -> ReuseState | None:
+        try:
+            st = self._states.get(system)
+            if st is None:
+                st = self._states[system] = ReuseState()
+            return st
+        except TypeError:  # not weak-referenceable / hashable: no reuse
+            return None
+
+    def fresh_factorization(self, J: HarmonicBlockJacobian, threads: int | None,
+                            state: ReuseState | None) -> StructuredFactorization:
+        """The exact factorisation at ``(J.omega, J.xi)`` (the system's cached factors if they are
+        at that frequency); they become the base of later reuse."""
+        F = J.system.linear_factors(J.omega, J.xi, threads)
+        if state is not None and F is not state.F:
+            self.stats["factorizations"] += 1
+            state.F = F
+        return StructuredFactorization(J, threads, F)
+
+    def _reusable(self, J: HarmonicBlockJacobian, state: ReuseState | None):
+        """The factors to solve ``J`` with if they are at another, close frequency and the last
+        measured contraction predicts a refinement within budget; else None."""
+        if not self.reuse or state is None or state.F is None:
+            return None
+        F0 = state.F
+        if F0.xi != J.xi or F0.pat is not J.system.block_pattern():
+            return None
+        if F0.omega == J.omega:
+            return F0
+        if F0.omega == 0.0:
+            return None
+        dw = abs(J.omega - F0.omega) / abs(F0.omega)
+        if not dw <= self.reuse_window:
+            return None
+        if state.rate is not None:  # passes predicted from the last measured contraction
+            q = state.rate * dw
+            budget = self.max_passes if self.max_passes is not None else budget_from_factors(F0, self.options)
+            if q >= 0.5 or max(2, math.ceil(math.log(self.options.reuse_forward_tol) / math.log(q))) > budget:
+                return None
+        return F0
+
+    def passes_budget(self, fac: StructuredFactorization) -> int:
+        """Passes a reused solve may take before it refactorises: ``max_passes``, or the cost
+        model of :func:`~femodes.hbm.linsolve.reuse.budget_from_factors`."""
+        if self.max_passes is not None:
+            return self.max_passes
+        return budget_from_factors(fac.F, self.options)
+
+    def record_reuse(self, state: ReuseState, fac: StructuredFactorization, passes: int, worst: float,
+                     ok: bool) -> None:
+        """Count a reused solve and remember its contraction per unit relative offset."""
+        self.stats["solves_reused"] += 1
+        self.stats["passes"] += passes
+        dw = abs(fac.J.omega - fac.F.omega) / abs(fac.F.omega)
+        if dw > 0 and worst > 0:
+            state.rate = worst / dw  # contraction per unit relative offset, for the next prediction
+        if not ok:
+            self.stats["refactorized"] += 1
+
+    def __repr__(self) -> str:
+        args = []
+        if self.reuse:
+            args.append("reuse=True")
+        if self.reuse_window != 0.05:
+            args.append(f"reuse_window={self.reuse_window!r}")
+        if self.max_passes is not None:
+            args.append(f"max_passes={self.max_passes!r}")
+        if self.options != DEFAULT_OPTIONS:
+            args.append(f"options={self.options!r}")
+        return f"BlockSolver({', '.join(args)})"
