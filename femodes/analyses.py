@@ -440,7 +440,7 @@ def nonlinear_mode(
     model: StructuralModel,
     mode: int = 1,
     energy: tuple[float, float] = (1e-3, 1.0),
-    harmonics: Harmonics | int = 10,
+    harmonics: Harmonics | int | None = None,
     *,
     options: ContinuationOptions | None = None,
     projection=None,
@@ -477,6 +477,10 @@ def nonlinear_mode(
     ``branch.meta["energy_continuation"]`` says why. ``past_grazing=None`` keeps the energy
     continuation's branch whatever it follows.
 
+    ``harmonics`` (a :class:`~femodes.Harmonics` or an int) is required, as in
+    :func:`frequency_response`; leaving it out is deprecated: it still means 10 harmonics, with a
+    ``DeprecationWarning``.
+
     Returns
     -------
     Branch
@@ -484,6 +488,11 @@ def nonlinear_mode(
     """
     model = _check_model(model, "nonlinear_mode")
     checkpoint = checkpoint_spec(checkpoint, "nonlinear_mode")
+    if harmonics is None:
+        warnings.warn("nonlinear_mode without harmonics= is deprecated (it uses 10); pass harmonics=10 (or a "
+                      "femodes.Harmonics), as frequency_response requires", DeprecationWarning,
+                      stacklevel=3)  # 3: the caller's line, past limit_blas_threads' wrapper
+        harmonics = 10
     h = _harmonics(harmonics, "nonlinear_mode")
     _options(options, "nonlinear_mode")
     refinement_options(rtol, max_harmonics, h.n_harmonics, "nonlinear_mode")
