@@ -965,7 +965,7 @@ def _write_plot(case: Case, model, branch, out: Path) -> Path:
     else:
         rd = case.data.get("outputs", {}).get("response_dof")
         dof = model.dof(_location(rd)) if rd is not None else model.forces[0].dof
-        fm.plot.frequency_response(branch, dof, ax=ax)
+        fm.plot.frequency_amplitude(branch, dof, ax=ax)
         png = out / "response.png"
     ax.set_title(f"{case.path.name}: {branch.kind}")
     fig.tight_layout()
