@@ -93,3 +93,24 @@ def test_plot_ax_by_position_is_deprecated(forced, name, args, keywords):
     with pytest.raises(TypeError, match="multiple values for argument 'ax'"):
         getattr(fm.plot, name)(source, *args, ax, ax=ax)
     plt.close("all")
+
+
+def test_rectangle_mesh_quad_is_deprecated_for_quadrilaterals():
+    """The cells named in full in both structured meshes: rectangle_mesh(quadrilaterals=), as
+    box_mesh(hexahedra=)."""
+    with pytest.warns(DeprecationWarning, match=r"quadrilaterals=") as record:
+        old = fm.rectangle_mesh(1.0, 0.1, 4, 2, quad=True)
+    assert record[0].filename == __file__
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)
+        new = fm.rectangle_mesh(1.0, 0.1, 4, 2, quadrilaterals=True)
+        tri = fm.rectangle_mesh(1.0, 0.1, 4, 2)
+    assert type(old) is type(new) and type(new).__name__.startswith("MeshQuad") and type(tri).__name__.startswith("MeshTri")
+    np.testing.assert_array_equal(old.p, new.p)
+    np.testing.assert_array_equal(old.t, new.t)
+    with pytest.warns(DeprecationWarning):
+        assert type(fm.rectangle_mesh(1.0, 0.1, 4, 2, quad=False)).__name__.startswith("MeshTri")
+    with pytest.raises(TypeError, match="not both"):
+        fm.rectangle_mesh(1.0, 0.1, 4, 2, quadrilaterals=True, quad=True)
+    with pytest.raises(TypeError, match="'quadrilaterals' must be True or False"):
+        fm.rectangle_mesh(1.0, 0.1, 4, 2, quadrilaterals="yes")

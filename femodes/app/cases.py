@@ -689,7 +689,7 @@ def _mesh(case: Case, api: _Api):
         g = {k: mesh_t[k] for k in ("length", "height", "width", "nx", "ny", "nz") if k in mesh_t}
         if "nz" in mesh_t:
             return api("mesh", list(g) + ["hexahedra"], fm.box_mesh, **g, hexahedra=mesh_t.get("hexahedra", False))
-        return api("mesh", list(g) + ["quad"], fm.rectangle_mesh, **g, quad=mesh_t.get("quad", False))
+        return api("mesh", list(g) + ["quad"], fm.rectangle_mesh, **g, quadrilaterals=mesh_t.get("quad", False))
     return api("mesh", ["boundaries", "n_elements", "length", "grading"], fm.line_mesh,
                mesh_t.get("length", 1.0), mesh_t["n_elements"], boundaries=mesh_t.get("boundaries"),
                grading=mesh_t.get("grading", 1.0))
