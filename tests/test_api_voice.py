@@ -114,3 +114,24 @@ def test_rectangle_mesh_quad_is_deprecated_for_quadrilaterals():
         fm.rectangle_mesh(1.0, 0.1, 4, 2, quadrilaterals=True, quad=True)
     with pytest.raises(TypeError, match="'quadrilaterals' must be True or False"):
         fm.rectangle_mesh(1.0, 0.1, 4, 2, quadrilaterals="yes")
+
+
+@pytest.mark.parametrize("name", ["shoot", "monodromy", "trajectory"])
+def test_time_state0_keyword_is_deprecated_for_x0(name):
+    """The start state ``[q; v]`` (or first guess) of the event-driven flow is ``x0``, as in
+    exact_frequency_response(x0=) and semismooth_newton; ``state0=`` still works and warns."""
+    model = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]])
+             .with_forcing(fm.HarmonicForce(at=0, amplitude=1.0)))
+    f = getattr(fm.time, name)
+    extra = {"t": np.linspace(0.0, 1.0, 5)} if name == "trajectory" else {}
+    with pytest.warns(DeprecationWarning, match=r"x0=") as record:
+        old = f(model, 1.2, state0=[0.0, 0.0], **extra)
+    assert record[0].filename == __file__
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)
+        new = f(model, 1.2, x0=[0.0, 0.0], **extra)
+        assert type(f(model, 1.2, [0.0, 0.0], **extra)) is type(new)
+    value = (lambda r: r) if name == "trajectory" else (lambda r: r.x if name == "shoot" else r.matrix)
+    np.testing.assert_array_equal(value(old), value(new))
+    with pytest.raises(TypeError, match="not both"):
+        f(model, 1.2, [0.0, 0.0], state0=[0.0, 0.0], **extra)
