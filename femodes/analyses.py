@@ -435,12 +435,22 @@ def nonlinear_mode_options(problem: NonlinearModeProblem, x0: np.ndarray,
     return options
 
 
+class _Required:
+    """Default of ``nonlinear_mode``'s ``harmonics`` while leaving it out is deprecated."""
+
+    def __repr__(self) -> str:
+        return "<required>"
+
+
+_REQUIRED = _Required()
+
+
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def nonlinear_mode(
     model: StructuralModel,
     mode: int = 1,
     energy: tuple[float, float] = (1e-3, 1.0),
-    harmonics: Harmonics | int | None = None,
+    harmonics: Harmonics | int = _REQUIRED,  # type: ignore[assignment]  # required, after a deprecation
     *,
     options: ContinuationOptions | None = None,
     projection=None,
@@ -488,7 +498,7 @@ def nonlinear_mode(
     """
     model = _check_model(model, "nonlinear_mode")
     checkpoint = checkpoint_spec(checkpoint, "nonlinear_mode")
-    if harmonics is None:
+    if harmonics is _REQUIRED:  # not None: an explicit None stays the TypeError it was
         warnings.warn("nonlinear_mode without harmonics= is deprecated (it uses 10); pass harmonics=10 (or a "
                       "femodes.Harmonics), as frequency_response requires", DeprecationWarning,
                       stacklevel=3)  # 3: the caller's line, past limit_blas_threads' wrapper
