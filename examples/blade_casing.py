@@ -49,7 +49,7 @@ def casing_gap(x):
     return np.sqrt(R_C**2 - x[1] ** 2) - R_HUB - x[0]
 
 
-mesh = fm.rectangle_mesh(L, CHORD, NX, NY, quad=True).translated([0.0, -CHORD / 2])
+mesh = fm.rectangle_mesh(L, CHORD, NX, NY, quadrilaterals=True).translated([0.0, -CHORD / 2])
 bare = fm.solid(mesh, STEEL, clamped="left", order=2, plane="stress", thickness=THICKNESS,
                 points={"tip_mid": (L, 0.0)})
 model = bare.with_contact(fm.UnilateralContact(at="right", gap=casing_gap, direction=(1.0, 0.0)))

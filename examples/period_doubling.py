@@ -85,7 +85,7 @@ def main(out="out"):
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.6))
-    fm.plot.frequency_response(branch, 0, ax=ax1, label="period 1")
+    fm.plot.frequency_amplitude(branch, 0, ax=ax1, label="period 1")
     amp2 = doubled.amplitude(0)
     ax1.plot(doubled.omega, amp2, "-", color="C3", label="period 2 (switch_branch)")
     ax1.axhline(GAP, color="0.5", lw=0.8, ls=":")

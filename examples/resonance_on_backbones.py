@@ -63,7 +63,7 @@ def _beam():
 
 
 def _blade2d():
-    mesh = fm.rectangle_mesh(0.5, 0.04, 12, 2, quad=True).translated([0.0, -0.02])
+    mesh = fm.rectangle_mesh(0.5, 0.04, 12, 2, quadrilaterals=True).translated([0.0, -0.02])
     bare = fm.solid(mesh, fm.Material(E=210e9, rho=7800.0, nu=0.3), clamped="left", order=2, plane="stress",
                     thickness=0.01, points={"corner": (0.5, 0.02)})
     model = bare.with_contact(fm.UnilateralContact(at="right", gap=0.5e-3, direction=(0.0, 1.0)))

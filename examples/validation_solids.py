@@ -135,7 +135,7 @@ def axial_bar(nx, mass=None):
 
 
 def axial_strip(nx, mass=None, c_face=C_BAR, ny=2):
-    strip = fm.solid(fm.rectangle_mesh(1.0, HEIGHT, nx, ny, quad=True), fm.Material(E=1.0, rho=1.0, nu=0.0),
+    strip = fm.solid(fm.rectangle_mesh(1.0, HEIGHT, nx, ny, quadrilaterals=True), fm.Material(E=1.0, rho=1.0, nu=0.0),
                      supports={"left": ("u_x",), "bottom": ("u_y",), "top": ("u_y",)})
     if c_face is None:  # femodes' default: c_j = 1 / (K^-1)_jj at every node
         return strip.with_contact(fm.UnilateralContact(at="right", gap=GAP, direction=(1.0, 0.0)), contact_mass=mass)
@@ -221,7 +221,7 @@ def beam(nx, mass=None):
 
 def blade(slenderness, nx, mass=None):
     h = 1.0 / slenderness
-    b = fm.solid(fm.rectangle_mesh(1.0, h, nx, 1, quad=True), fm.Material(E=12.0 / h**3, rho=1.0 / h, nu=0.0),
+    b = fm.solid(fm.rectangle_mesh(1.0, h, nx, 1, quadrilaterals=True), fm.Material(E=12.0 / h**3, rho=1.0 / h, nu=0.0),
                  clamped="left", order=2)
     return b.with_contact(*face_contacts(b, "right", "u_y", C_BEAM), contact_mass=mass)
 

@@ -435,12 +435,22 @@ def nonlinear_mode_options(problem: NonlinearModeProblem, x0: np.ndarray,
     return options
 
 
+class _Required:
+    """Default of ``nonlinear_mode``'s ``harmonics`` while leaving it out is deprecated."""
+
+    def __repr__(self) -> str:
+        return "<required>"
+
+
+_REQUIRED = _Required()
+
+
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def nonlinear_mode(
     model: StructuralModel,
     mode: int = 1,
     energy: tuple[float, float] = (1e-3, 1.0),
-    harmonics: Harmonics | int = 10,
+    harmonics: Harmonics | int = _REQUIRED,  # type: ignore[assignment]  # required, after a deprecation
     *,
     options: ContinuationOptions | None = None,
     projection=None,
@@ -477,6 +487,10 @@ def nonlinear_mode(
     ``branch.meta["energy_continuation"]`` says why. ``past_grazing=None`` keeps the energy
     continuation's branch whatever it follows.
 
+    ``harmonics`` (a :class:`~femodes.Harmonics` or an int) is required, as in
+    :func:`frequency_response`; leaving it out is deprecated: it still means 10 harmonics, with a
+    ``DeprecationWarning``.
+
     Returns
     -------
     Branch
@@ -484,6 +498,11 @@ def nonlinear_mode(
     """
     model = _check_model(model, "nonlinear_mode")
     checkpoint = checkpoint_spec(checkpoint, "nonlinear_mode")
+    if harmonics is _REQUIRED:  # not None: an explicit None stays the TypeError it was
+        warnings.warn("nonlinear_mode without harmonics= is deprecated (it uses 10); pass harmonics=10 (or a "
+                      "femodes.Harmonics), as frequency_response requires", DeprecationWarning,
+                      stacklevel=3)  # 3: the caller's line, past limit_blas_threads' wrapper
+        harmonics = 10
     h = _harmonics(harmonics, "nonlinear_mode")
     _options(options, "nonlinear_mode")
     refinement_options(rtol, max_harmonics, h.n_harmonics, "nonlinear_mode")

@@ -9,6 +9,7 @@ import collections
 import dataclasses
 import logging
 import math
+import warnings
 
 import numpy as np
 
@@ -82,8 +83,8 @@ class _ShootingResidual:
         return r[S], drdx[np.ix_(S, S)], drdw[S]
 
 
-def exact_frequency_response(model: StructuralModel, span, *, x0=None, restitution: float = 1.0,
-                             options=None) -> ExactBranch:
+def exact_frequency_response(model: StructuralModel, omega=None, *, x0=None, restitution: float = 1.0,
+                             options=None, span=None) -> ExactBranch:
     """The forced response of a linear model with rigid stops, orbit by exact orbit.
 
     Pseudo-arclength continuation (:func:`femodes.solvers.continuation`) of the periodic orbits
@@ -100,8 +101,9 @@ def exact_frequency_response(model: StructuralModel, span, *, x0=None, restituti
         Linear, with unilateral contacts (on DOFs with or without mass) and harmonic forcing;
         no smooth nonlinear laws or penalty contacts (:func:`~femodes.time.exact.exact_flow_unsupported` says why
         a model is refused).
-    span : (float, float)
-        Forcing frequencies ``(w_start, w_end)`` in rad/s, positive; may decrease.
+    omega : (float, float)
+        Forcing frequencies ``(w_start, w_end)`` in rad/s, positive; may decrease (as
+        :func:`femodes.frequency_response`).
     x0 : array_like (2 n_dofs,), optional
         Start state ``[q; v]`` at ``w_start``; default: the response without contact there
         (right when it keeps off the stops, a first guess otherwise).
@@ -111,6 +113,8 @@ def exact_frequency_response(model: StructuralModel, span, *, x0=None, restituti
         Default: ``max_points=3000`` and Newton's ``atol`` :data:`EXACT_BRANCH_RTOL` times the
         larger of the largest gap and the size of the start state without contact at
         ``w_start``.
+    span : (float, float), optional
+        Deprecated spelling of ``omega`` (a ``DeprecationWarning``; removed in a later release).
 
     Returns
     -------
@@ -123,17 +127,25 @@ def exact_frequency_response(model: StructuralModel, span, *, x0=None, restituti
     TypeError
         ``model`` is not a model, ``options`` not a ContinuationOptions.
     ValueError
-        A model the flow cannot take, a bad span or ``x0``.
+        A model the flow cannot take, a bad ``omega`` or ``x0``.
     """
     owner = "exact_frequency_response"
+    if span is not None:
+        if omega is not None:
+            raise TypeError(f"{owner}: give omega= only (span= is its deprecated spelling), not both")
+        warnings.warn(f"{owner}(model, span=...) is deprecated; use {owner}(model, omega=...), as "
+                      "frequency_response", DeprecationWarning, stacklevel=2)
+        omega = span
+    if omega is None:
+        raise TypeError(f"{owner}: missing the forcing frequencies omega=(w_start, w_end)")
     if not isinstance(model, StructuralModel):
         raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
     try:
-        w0, w1 = (float(span[0]), float(span[1]))
+        w0, w1 = (float(omega[0]), float(omega[1]))
     except (TypeError, ValueError, IndexError):
-        raise ValueError(f"{owner}: span must be two forcing frequencies (w_start, w_end), got {span!r}") from None
-    if len(span) != 2 or not (math.isfinite(w0) and math.isfinite(w1) and w0 > 0.0 and w1 > 0.0) or w0 == w1:
-        raise ValueError(f"{owner}: span must be two different finite positive frequencies, got {span!r}")
+        raise ValueError(f"{owner}: omega must be two forcing frequencies (w_start, w_end), got {omega!r}") from None
+    if len(omega) != 2 or not (math.isfinite(w0) and math.isfinite(w1) and w0 > 0.0 and w1 > 0.0) or w0 == w1:
+        raise ValueError(f"{owner}: omega must be two different finite positive frequencies, got {omega!r}")
     if not model.forces:
         raise ValueError(f"{owner}: the model has no harmonic forcing (add one with with_forcing)")
     if undamped(model, restitution):

@@ -1,12 +1,14 @@
 """Outputs layer: matplotlib figures of branches and periodic solutions.
 
-Every function draws on ``ax`` (a new figure if ``ax`` is None) and returns the Axes, except
+Every function draws on the keyword ``ax=`` (a new figure if ``ax`` is None; passing it by
+position is deprecated) and returns the Axes, except
 :func:`contact_pressure`, which draws a map, a side panel and a colour bar and returns the Figure.
 matplotlib is imported only when a function is called (``pip install 'femodes[plot]'``).
 
 - :func:`frequency_energy`: backbones (nonlinear modes) and forced curves, frequency against
   energy (log axis).
-- :func:`frequency_response`: amplitude of one DOF against frequency, folds marked.
+- :func:`frequency_amplitude`: amplitude of one DOF against frequency, folds marked (was
+  ``frequency_response``, the name of the analysis: a deprecated alias).
 - :func:`time_history`: one DOF over time, contact forces on a twin axis.
 - :func:`phase_portrait`: velocity against displacement of one DOF.
 - :func:`mode_shape`: deflection snapshots along the mesh (reduced models expanded).
@@ -16,15 +18,17 @@ matplotlib is imported only when a function is called (``pip install 'femodes[pl
 
 from __future__ import annotations
 
+import functools
 import logging
+import warnings
 from typing import Any
 
 import numpy as np
 
 from .results import Branch, PeriodicSolution
 
-__all__ = ["frequency_energy", "frequency_response", "time_history", "phase_portrait", "mode_shape",
-           "contact_pressure"]
+__all__ = ["frequency_energy", "frequency_amplitude", "time_history", "phase_portrait", "mode_shape",
+           "contact_pressure", "frequency_response"]
 
 log = logging.getLogger(__name__)
 
@@ -35,6 +39,38 @@ def _plt():
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ImportError("femodes.plot needs matplotlib: pip install 'femodes[plot]'") from exc
     return plt
+
+
+def _to_keywords(f, n_positional: int, names: tuple[str, ...], args: tuple, kwargs: dict, stacklevel: int):
+    """Move the arguments past the first ``n_positional`` to the keywords ``names`` they used to
+    fill by position, with a DeprecationWarning (``ax`` and those after it are keyword-only)."""
+    if len(args) <= n_positional:
+        return args, kwargs
+    extra = args[n_positional:]
+    if len(extra) > len(names):
+        raise TypeError(f"{f.__name__}() takes at most {n_positional + len(names)} positional arguments "
+                        f"({n_positional} without deprecation), got {len(args)}")
+    given = names[:len(extra)]
+    for name in given:
+        if name in kwargs:
+            raise TypeError(f"{f.__name__}() got multiple values for argument {name!r}")
+    keywords = ", ".join(f"{n}=..." for n in given)
+    warnings.warn(f"femodes.plot.{f.__name__}: passing {', '.join(given)} by position is deprecated; pass "
+                  f"{keywords}", DeprecationWarning, stacklevel=stacklevel + 1)
+    return args[:n_positional], {**kwargs, **dict(zip(given, extra))}
+
+
+def _positional_deprecated(n_positional: int, *names: str):
+    """Decorator: ``names`` (keyword-only now) are still accepted by position after the first
+    ``n_positional`` arguments, with a DeprecationWarning naming the keywords."""
+    def decorate(f):
+        @functools.wraps(f)
+        def wrapper(*args, **kwargs):
+            args, kwargs = _to_keywords(f, n_positional, names, args, kwargs, stacklevel=2)
+            return f(*args, **kwargs)
+        wrapper.positional = (n_positional, names)
+        return wrapper
+    return decorate
 
 
 def _axes(ax: Any, owner: str):
@@ -98,7 +134,8 @@ def _check_solution(solution: Any, owner: str) -> PeriodicSolution:
     return solution
 
 
-def frequency_energy(branches: Any, ax: Any = None, *, labels: Any = None, hz: bool = False,
+@_positional_deprecated(1, "ax")
+def frequency_energy(branches: Any, *, ax: Any = None, labels: Any = None, hz: bool = False,
                      mark_folds: bool = True, show_points: bool = False):
     """Frequency-energy plot: backbones and forced curves on the same axes.
 
@@ -166,8 +203,9 @@ def frequency_energy(branches: Any, ax: Any = None, *, labels: Any = None, hz: b
     return ax
 
 
-def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str | None = None, hz: bool = False,
-                       mark_folds: bool = True, how: str = "mean"):
+@_positional_deprecated(2, "ax")
+def frequency_amplitude(branch: Branch, dof: Any, *, ax: Any = None, label: str | None = None, hz: bool = False,
+                        mark_folds: bool = True, how: str = "mean"):
     """Amplitude ``max_t |q_dof(t)|`` against frequency, folds marked.
 
     Parameters
@@ -197,7 +235,7 @@ def frequency_response(branch: Branch, dof: Any, ax: Any = None, *, label: str |
         than folds (period doubling squares, Neimark-Sacker diamonds, branch points circles,
         nonsmooth triangles).
     """
-    owner = "frequency_response"
+    owner = "frequency_amplitude"
     if not isinstance(branch, Branch):
         raise TypeError(f"{owner}: branch must be a Branch, got {type(branch).__name__}")
     W, dof_label = _reader(branch, dof, owner, branch.Q.shape[2], how)
@@ -257,8 +295,9 @@ def _default_dof(solution: PeriodicSolution) -> int:
     return int(solution.contacts.dofs[0]) if solution.contacts.dofs else 0
 
 
-def time_history(solution: PeriodicSolution, dof: Any = None, ax: Any = None, n_periods: float = 1,
-                 *, n_points: int = 400, contact: bool = True, how: str = "mean"):
+@_positional_deprecated(2, "ax", "n_periods")
+def time_history(solution: PeriodicSolution, dof: Any = None, *, ax: Any = None, n_periods: float = 1,
+                 n_points: int = 400, contact: bool = True, how: str = "mean"):
     """Displacement of one DOF over time, contact forces on a twin axis.
 
     Parameters
@@ -318,7 +357,8 @@ def time_history(solution: PeriodicSolution, dof: Any = None, ax: Any = None, n_
     return ax
 
 
-def phase_portrait(solution: PeriodicSolution, dof: Any, ax: Any = None, *, n_points: int = 400,
+@_positional_deprecated(2, "ax")
+def phase_portrait(solution: PeriodicSolution, dof: Any, *, ax: Any = None, n_points: int = 400,
                    label: str | None = None):
     """Phase portrait ``(q_dof, q'_dof)`` over one period.
 
@@ -357,7 +397,8 @@ def phase_portrait(solution: PeriodicSolution, dof: Any, ax: Any = None, *, n_po
     return ax
 
 
-def mode_shape(source: Any, model: Any = None, ax: Any = None, n_snapshots: int = 8, *, mode: int = 1,
+@_positional_deprecated(2, "ax", "n_snapshots")
+def mode_shape(source: Any, model: Any = None, *, ax: Any = None, n_snapshots: int = 8, mode: int = 1,
                cmap: str = "viridis", show_obstacle: bool = True):
     """Deflection snapshots along the structure over one period.
 
@@ -585,3 +626,13 @@ def contact_pressure(solution: PeriodicSolution, model: Any = None, *, boundary:
                 f"{low:.3g} (drawn as 0) and penetration up to {pen:.3g}; raise the harmonics "
                 "to reduce them", transform=ax.transAxes, fontsize="small", color="0.35", va="top")
     return fig
+
+
+def frequency_response(*args, **kwargs):
+    """Deprecated alias of :func:`frequency_amplitude` (the plot shared its name with the analysis
+    :func:`femodes.frequency_response`); a DeprecationWarning, removed in a later release."""
+    warnings.warn("femodes.plot.frequency_response is deprecated; use femodes.plot.frequency_amplitude (same "
+                  "arguments)", DeprecationWarning, stacklevel=2)
+    n_positional, names = frequency_amplitude.positional
+    args, kwargs = _to_keywords(frequency_amplitude, n_positional, names, args, kwargs, stacklevel=2)
+    return frequency_amplitude.__wrapped__(*args, **kwargs)

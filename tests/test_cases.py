@@ -363,7 +363,7 @@ def test_strip2d_contact_case_builds_the_api_model_and_runs(tmp_path):
     case = cases.parse_case(text, tmp_path / "strip.toml")
     model, full = cases.build_model(case)
     assert model is full and model.fe.kind == "solid" and model.n_dofs == 2 * 21 * 3 - 2 * 3
-    ref = (fm.solid(fm.rectangle_mesh(1.0, 0.1, 20, 2, quad=True), fm.Material(E=1.0, rho=1.0, nu=0.3),
+    ref = (fm.solid(fm.rectangle_mesh(1.0, 0.1, 20, 2, quadrilaterals=True), fm.Material(E=1.0, rho=1.0, nu=0.3),
                     clamped="left", plane="stress", thickness=1.0)
            .with_damping(beta=0.02)
            .with_contact(fm.UnilateralContact(at="right", gap=0.01, direction=(1.0, 0.0)))

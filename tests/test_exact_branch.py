@@ -144,17 +144,29 @@ def test_coefficients_are_those_of_the_orbit(seed2):
 
 
 @pytest.mark.parametrize("kwargs, exc, match", [
-    (dict(span=(1.0, 1.0)), ValueError, "span"),
-    (dict(span=(-1.0, 2.0)), ValueError, "span"),
-    (dict(span=1.0), ValueError, "span"),
-    (dict(span=(0.5, 2.0), x0=[0.0]), ValueError, "x0"),
-    (dict(span=(0.5, 2.0), options=3), TypeError, "options"),
+    (dict(omega=(1.0, 1.0)), ValueError, "omega"),
+    (dict(omega=(-1.0, 2.0)), ValueError, "omega"),
+    (dict(omega=1.0), ValueError, "omega"),
+    (dict(omega=(0.5, 2.0), x0=[0.0]), ValueError, "x0"),
+    (dict(omega=(0.5, 2.0), options=3), TypeError, "options"),
+    (dict(), TypeError, "omega"),
+    (dict(omega=(0.5, 2.0), span=(0.5, 2.0)), TypeError, "not both"),
 ])
 def test_bad_input(kwargs, exc, match):
     with pytest.raises(exc, match=match):
         exact_frequency_response(_oscillator(0.2, 1.0, 2.5), **kwargs)
     with pytest.raises(TypeError, match="model must be a StructuralModel"):
         exact_frequency_response([[1.0]], (0.5, 2.0))
+
+
+def test_span_keyword_is_deprecated_for_omega():
+    """``span=`` was the name of the frequencies; ``omega=`` is, as in frequency_response. The old
+    keyword still runs the same branch, with a DeprecationWarning naming the new one."""
+    with pytest.warns(DeprecationWarning, match=r"omega="):
+        old = exact_frequency_response(_oscillator(0.2, 1.0, 2.5), span=(0.5, 0.6))
+    new = exact_frequency_response(_oscillator(0.2, 1.0, 2.5), omega=(0.5, 0.6))
+    assert old.success and new.success
+    np.testing.assert_array_equal(old.omega, new.omega)
 
 
 def test_models_the_flow_cannot_take():

@@ -47,7 +47,7 @@ def turned(mesh, R):
 
 
 def strip(R=None, *, quad=False, nu=0.3, nx=8, ny=2, order=1, clamped="left", **kw):
-    mesh = fm.rectangle_mesh(1.0, 0.1, nx, ny, quad=quad)
+    mesh = fm.rectangle_mesh(1.0, 0.1, nx, ny, quadrilaterals=quad)
     if R is not None:
         mesh = turned(mesh, R)
     return fm.solid(mesh, fm.Material(E=1.0, rho=1.0, nu=nu), clamped=clamped, order=order, **kw)

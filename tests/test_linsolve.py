@@ -265,7 +265,7 @@ def test_superlu_interior_path():
 def solid_model(dim):
     """A P2 strip of triangles (2-D) or a P2 box (3-D) with a stop on the tip face: wide blocks."""
     if dim == 2:
-        mesh, direction = fm.rectangle_mesh(1.0, 0.1, 20, 4, quad=False), [1.0, 0.0]
+        mesh, direction = fm.rectangle_mesh(1.0, 0.1, 20, 4, quadrilaterals=False), [1.0, 0.0]
         mat = fm.Material(E=1.0, rho=1.0, nu=0.3)
     else:
         mesh, direction = fm.box_mesh(1.0, 0.2, 0.1, 6, 2, 1), [1.0, 0.0, 0.0]

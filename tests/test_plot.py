@@ -80,13 +80,13 @@ def test_frequency_energy(study, tmp_path):
 def test_frequency_response(study, tmp_path):
     _, _, _, rom, forced = study
     tip = rom.dof("tip")
-    ax = plot.frequency_response(forced, tip)
+    ax = plot.frequency_amplitude(forced, tip)
     assert len(ax.get_lines()) == 1  # no folds on this branch
     np.testing.assert_array_equal(ax.get_lines()[0].get_xdata(), forced.omega)
     np.testing.assert_array_equal(ax.get_lines()[0].get_ydata(), forced.amplitude(tip))
     br = with_folds(forced, [5, 10])
     fig, existing = plt.subplots()
-    ax = plot.frequency_response(br, "tip", ax=existing)
+    ax = plot.frequency_amplitude(br, "tip", ax=existing)
     assert ax is existing
     lines = ax.get_lines()
     assert len(lines) == 2
@@ -95,13 +95,13 @@ def test_frequency_response(study, tmp_path):
     assert lines[1].get_marker() == "x"
     saved(ax, tmp_path / "fr.png")
     with pytest.raises(ValueError, match="dof"):
-        plot.frequency_response(forced, 99)
+        plot.frequency_amplitude(forced, 99)
     with pytest.raises(TypeError, match="dof"):
-        plot.frequency_response(forced, 1.5)
+        plot.frequency_amplitude(forced, 1.5)
     with pytest.raises(TypeError, match="branch"):
-        plot.frequency_response(forced[0], 0)
+        plot.frequency_amplitude(forced[0], 0)
     with pytest.raises(TypeError, match="ax"):
-        plot.frequency_response(forced, 0, ax="axes")
+        plot.frequency_amplitude(forced, 0, ax="axes")
 
 
 def test_time_history(study, tmp_path):

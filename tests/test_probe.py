@@ -55,12 +55,12 @@ def test_plots_at_a_boundary_of_a_reduced_model(blade):
     _, rom = blade
     w1 = float(fm.linear_modes(rom, 1).omega[0])
     b = fm.frequency_response(rom, (0.9 * w1, 0.95 * w1), 3, options=fm.ContinuationOptions(max_points=4))
-    ax = fm.plot.frequency_response(b, ("tip", "u_z"))
+    ax = fm.plot.frequency_amplitude(b, ("tip", "u_z"))
     amp = ax.lines[0].get_ydata()
     tip = rom.probe(("tip", "u_z"))
     expected = [np.max(np.abs(b[i].displacement(np.linspace(0, b[i].period, 513)) @ tip)) for i in range(len(b))]
     np.testing.assert_allclose(amp, expected, rtol=1e-3)  # 512 vs 513 samples of a smooth 3-harmonic signal
-    ax_max = fm.plot.frequency_response(b, ("tip", "u_z"), how="max")
+    ax_max = fm.plot.frequency_amplitude(b, ("tip", "u_z"), how="max")
     assert np.all(ax_max.lines[0].get_ydata() >= amp * (1 - 1e-12))  # no node moves less than the mean's max
     ax = fm.plot.time_history(b[len(b) - 1], ("tip", "u_z"), how="max")
     assert "tip u_z, max" in ax.get_ylabel()

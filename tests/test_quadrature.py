@@ -32,7 +32,7 @@ def affine(mesh):
 
 AFFINE = {
     "tri": lambda: affine(fm.rectangle_mesh(1.0, 0.3, 5, 3)),
-    "quad": lambda: affine(fm.rectangle_mesh(1.0, 0.3, 5, 3, quad=True)),
+    "quad": lambda: affine(fm.rectangle_mesh(1.0, 0.3, 5, 3, quadrilaterals=True)),
     "tet": lambda: affine(fm.box_mesh(1.0, 0.3, 0.2, 3, 2, 2)),
     "hex": lambda: affine(fm.box_mesh(1.0, 0.3, 0.2, 3, 2, 2, hexahedra=True)),
 }
@@ -143,7 +143,7 @@ def tapered_plate(n, hexahedra):
     3-D 0.1 thick, twisted by z += 0.2 x y). The map of the rectangle/box is bilinear in (x, y), so
     the Q1 geometry of every mesh represents the same domain exactly, and no cell is affine."""
     m = fm.box_mesh(1.5, 0.4, 0.1, 6 * n, 2 * n, n, hexahedra=True) if hexahedra else \
-        fm.rectangle_mesh(1.5, 0.4, 6 * n, 2 * n, quad=True)
+        fm.rectangle_mesh(1.5, 0.4, 6 * n, 2 * n, quadrilaterals=True)
     p = m.p.copy()
     x, y = m.p[0], m.p[1]
     p[1] = y * (1.0 - 0.5 * x / 1.5) + 0.1 * x

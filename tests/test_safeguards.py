@@ -622,7 +622,7 @@ def test_assembly_memory_estimate_is_near_the_measured_peak(quad):
 
     from femodes.fe.checks import assembly_memory
 
-    mesh = fm.rectangle_mesh(1.0, 0.1, 60, 6, quad=quad)
+    mesh = fm.rectangle_mesh(1.0, 0.1, 60, 6, quadrilaterals=quad)
     scalar = skfem.ElementQuad1() if quad else skfem.ElementTriP1()
     estimate = assembly_memory(mesh, skfem.ElementVector(scalar))
     tracemalloc.start()

@@ -229,7 +229,7 @@ def test_bad_input_names_the_argument():
     model = oscillator()
     with pytest.raises(ValueError, match=r"monodromy: period must be a positive finite number, got -1\.0"):
         monodromy(model, 1.0, [0.0, 0.0], period=-1.0)
-    with pytest.raises(ValueError, match=r"shoot: state0 must have shape \(2,\).*got shape \(3,\)"):
+    with pytest.raises(ValueError, match=r"shoot: x0 must have shape \(2,\).*got shape \(3,\)"):
         shoot(model, 1.0, [0.0, 0.0, 0.0])
     with pytest.raises(ValueError, match=r"shoot: omega must be a positive finite number, got 0"):
         shoot(model, 0, [0.0, 0.0])
@@ -242,7 +242,7 @@ def test_bad_input_names_the_argument():
     with pytest.raises(TypeError, match=r"monodromy: model must be a StructuralModel"):
         monodromy("model", 1.0, [0.0, 0.0])
     stop = model.with_contact(fm.UnilateralContact(at=0, gap=1.0))
-    with pytest.raises(ValueError, match=r"state0 starts inside the obstacle of contact 0"):
+    with pytest.raises(ValueError, match=r"x0 starts inside the obstacle of contact 0"):
         monodromy(stop, 1.0, [1.5, 0.0])
     with pytest.raises(ValueError, match=r"trajectory: t must be .* >= t0"):
         trajectory(model, 1.0, [0.0, 0.0], [-1.0])

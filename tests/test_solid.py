@@ -41,7 +41,7 @@ def distorted(mesh, amount=0.25, seed=0):
     return type(mesh)(p, mesh.t).with_boundaries({k: v for k, v in mesh.boundaries.items()})
 
 
-MESH_2D = {"tri": lambda: fm.rectangle_mesh(2.0, 1.0, 4, 3), "quad": lambda: fm.rectangle_mesh(2.0, 1.0, 4, 3, quad=True)}
+MESH_2D = {"tri": lambda: fm.rectangle_mesh(2.0, 1.0, 4, 3), "quad": lambda: fm.rectangle_mesh(2.0, 1.0, 4, 3, quadrilaterals=True)}
 MESH_3D = {"tet": lambda: fm.box_mesh(2.0, 1.0, 0.5, 3, 2, 2), "hex": lambda: fm.box_mesh(2.0, 1.0, 0.5, 2, 2, 1, hexahedra=True)}
 
 
@@ -151,7 +151,7 @@ def test_slender_cantilever_against_euler_bernoulli():
     L, h = 1.0, 0.02
     expected = 3.5160152 * np.sqrt(E * h**2 / 12 / (RHO * L**4))
     for quad in (True, False):
-        model = fm.solid(fm.rectangle_mesh(L, h, 100, 2, quad=quad), fm.Material(E=E, rho=RHO, nu=0.3),
+        model = fm.solid(fm.rectangle_mesh(L, h, 100, 2, quadrilaterals=quad), fm.Material(E=E, rho=RHO, nu=0.3),
                          clamped="left", order=2)
         assert lowest(model)[0] / expected - 1 == pytest.approx(0.0, abs=1e-3)
 
@@ -159,7 +159,7 @@ def test_slender_cantilever_against_euler_bernoulli():
 def test_strip_axial_mode_is_the_bar_mode():
     """nu = 0: the clamped strip has the bar's quarter-wave axial mode among its modes (measured: 1e-6)."""
     L = 1.0
-    model = fm.solid(fm.rectangle_mesh(L, 0.1, 40, 2, quad=True), fm.Material(E=E, rho=RHO, nu=0.0),
+    model = fm.solid(fm.rectangle_mesh(L, 0.1, 40, 2, quadrilaterals=True), fm.Material(E=E, rho=RHO, nu=0.0),
                      clamped="left", order=2)
     w = lowest(model, 6)
     expected = np.pi / 2 * np.sqrt(E / RHO) / L

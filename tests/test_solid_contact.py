@@ -12,7 +12,7 @@ from femodes.fe.redistribution import redistribute_surface_mass
 
 
 def strip(nx=20, ny=4, *, quad=False, order=1, nu=0.0, **kw):
-    return fm.solid(fm.rectangle_mesh(1.0, 0.1, nx, ny, quad=quad), fm.Material(E=1.0, rho=1.0, nu=nu),
+    return fm.solid(fm.rectangle_mesh(1.0, 0.1, nx, ny, quadrilaterals=quad), fm.Material(E=1.0, rho=1.0, nu=nu),
                     clamped="left", order=order, **kw)
 
 
@@ -176,7 +176,7 @@ def test_strip_held_at_the_stop_against_the_bar(quad, order):
 
 # -- harmonic balance accepts it ---------------------------------------------------------------------
 def test_frequency_response_smoke():
-    model = fm.solid(fm.rectangle_mesh(1.0, 0.1, 6, 1, quad=True), fm.Material(E=1.0, rho=1.0, nu=0.0), clamped="left")
+    model = fm.solid(fm.rectangle_mesh(1.0, 0.1, 6, 1, quadrilaterals=True), fm.Material(E=1.0, rho=1.0, nu=0.0), clamped="left")
     model = (model.with_damping(beta=1e-3)
              .with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=0.02))
              .with_contact(fm.UnilateralContact(at="right", gap=0.01, direction=(1.0, 0.0))))
@@ -212,7 +212,7 @@ def test_default_contact_parameters_batched_equal_one_by_one():
     single-DOF rule c = 1 / (K^-1)_dd, to round-off of the solve (cond(K) ~ 1e4 here: 1e-10)."""
     from femodes.hbm.system import default_contact_parameter, default_contact_parameters
 
-    m = fm.solid(fm.rectangle_mesh(2.0, 0.2, 20, 2, quad=True), fm.Material(E=1.0, rho=1.0, nu=0.3),
+    m = fm.solid(fm.rectangle_mesh(2.0, 0.2, 20, 2, quadrilaterals=True), fm.Material(E=1.0, rho=1.0, nu=0.3),
                  clamped="left").with_contact(fm.UnilateralContact(at="right", gap=0.01, direction=(1.0, 0.0)))
     dofs = [a.dof for a in m.contacts]
     batched = default_contact_parameters(m, dofs)

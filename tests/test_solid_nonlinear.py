@@ -38,7 +38,7 @@ def face_contacts(model, boundary, component, c_face):
 
 def axial_strip(nx, mass, ny=2):
     """Q1 strip, nu = 0, rollers on top and bottom (no rigid motion in y, no axial stiffening)."""
-    strip = fm.solid(fm.rectangle_mesh(1.0, HEIGHT, nx, ny, quad=True), fm.Material(E=1.0, rho=1.0, nu=0.0),
+    strip = fm.solid(fm.rectangle_mesh(1.0, HEIGHT, nx, ny, quadrilaterals=True), fm.Material(E=1.0, rho=1.0, nu=0.0),
                      supports={"left": ("u_x",), "bottom": ("u_y",), "top": ("u_y",)})
     return strip.with_contact(*face_contacts(strip, "right", "u_x", C_BAR), contact_mass=mass)
 
@@ -57,7 +57,7 @@ def forced(model):
 def blade(slenderness, nx):
     """Q2 cantilever strip, one element through the height, EI = rho A = 1, stop on the tip edge."""
     h = 1.0 / slenderness
-    b = fm.solid(fm.rectangle_mesh(1.0, h, nx, 1, quad=True), fm.Material(E=12.0 / h**3, rho=1.0 / h, nu=0.0),
+    b = fm.solid(fm.rectangle_mesh(1.0, h, nx, 1, quadrilaterals=True), fm.Material(E=12.0 / h**3, rho=1.0 / h, nu=0.0),
                  clamped="left", order=2)
     return b.with_contact(*face_contacts(b, "right", "u_y", C_BEAM))
 

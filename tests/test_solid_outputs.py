@@ -22,7 +22,7 @@ HAS_RENDER = importlib.util.find_spec("pyvista") is not None and importlib.util.
 #: name -> (mesh, order, options): 2-D Q1 (thickness 0.5), 2-D P2 triangles, 3-D Q1 hexahedra,
 #: 3-D P2 tetrahedra
 CASES = {
-    "quad-P1": (lambda: fm.rectangle_mesh(1.0, 0.1, 6, 2, quad=True), 1, {"thickness": 0.5}),
+    "quad-P1": (lambda: fm.rectangle_mesh(1.0, 0.1, 6, 2, quadrilaterals=True), 1, {"thickness": 0.5}),
     "tri-P2": (lambda: fm.rectangle_mesh(1.0, 0.1, 4, 2), 2, {}),
     "hex-P1": (lambda: fm.box_mesh(1.0, 0.2, 0.1, 3, 2, 1, hexahedra=True), 1, {}),
     "tet-P2": (lambda: fm.box_mesh(1.0, 0.2, 0.1, 2, 1, 1), 2, {}),
@@ -342,7 +342,7 @@ def test_contact_pressure_errors(solved):
     with pytest.raises(TypeError, match="PeriodicSolution"):
         fm.plot.contact_pressure(fm.linear_modes(model, 1), model)
     # a solid without contacts
-    free = fm.solid(fm.rectangle_mesh(1.0, 0.1, 4, 1, quad=True), fm.Material(E=1.0, rho=1.0, nu=0.0),
+    free = fm.solid(fm.rectangle_mesh(1.0, 0.1, 4, 1, quadrilaterals=True), fm.Material(E=1.0, rho=1.0, nu=0.0),
                     clamped="left").with_damping(beta=1e-2).with_forcing(fm.HarmonicForce(at=("right", "u_x"),
                                                                                          amplitude=0.01))
     lin = fm.frequency_response(free, omega=(1.0, 1.1), harmonics=1, options=fm.ContinuationOptions(max_points=2))

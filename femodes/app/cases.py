@@ -689,7 +689,7 @@ def _mesh(case: Case, api: _Api):
         g = {k: mesh_t[k] for k in ("length", "height", "width", "nx", "ny", "nz") if k in mesh_t}
         if "nz" in mesh_t:
             return api("mesh", list(g) + ["hexahedra"], fm.box_mesh, **g, hexahedra=mesh_t.get("hexahedra", False))
-        return api("mesh", list(g) + ["quad"], fm.rectangle_mesh, **g, quad=mesh_t.get("quad", False))
+        return api("mesh", list(g) + ["quad"], fm.rectangle_mesh, **g, quadrilaterals=mesh_t.get("quad", False))
     return api("mesh", ["boundaries", "n_elements", "length", "grading"], fm.line_mesh,
                mesh_t.get("length", 1.0), mesh_t["n_elements"], boundaries=mesh_t.get("boundaries"),
                grading=mesh_t.get("grading", 1.0))
@@ -965,7 +965,7 @@ def _write_plot(case: Case, model, branch, out: Path) -> Path:
     else:
         rd = case.data.get("outputs", {}).get("response_dof")
         dof = model.dof(_location(rd)) if rd is not None else model.forces[0].dof
-        fm.plot.frequency_response(branch, dof, ax=ax)
+        fm.plot.frequency_amplitude(branch, dof, ax=ax)
         png = out / "response.png"
     ax.set_title(f"{case.path.name}: {branch.kind}")
     fig.tight_layout()

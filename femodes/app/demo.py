@@ -463,7 +463,7 @@ def _stability_part(fm, plt, out: Path) -> tuple[list[str], Path]:
         except RuntimeError as exc:  # the HBM does not resolve its own doubling: say so, keep the rest
             log.warning("demo: %s", exc)
     fig, ax = plt.subplots(figsize=(7, 4.6))
-    fm.plot.frequency_response(branch, 0, ax=ax, label="period 1")
+    fm.plot.frequency_amplitude(branch, 0, ax=ax, label="period 1")
     if doubled is not None:
         ax.plot(doubled.omega, doubled.amplitude(0), "-", color="C3", label="period 2 (switch_branch)")
     ax.axhline(c["gap"], color="0.5", lw=0.8, ls=":")

@@ -824,7 +824,7 @@ def _check_grid(func: str, **counts: int) -> None:
 
 
 def rectangle_mesh(length: float = 1.0, height: float = 0.1, nx: int = 20, ny: int = 2, *,
-                   quad: bool = False) -> skfem.Mesh:
+                   quadrilaterals: bool = False, quad: bool | None = None) -> skfem.Mesh:
     """Structured mesh of the rectangle ``[0, length] x [0, height]`` (x: length, y: height).
 
     Parameters
@@ -833,9 +833,11 @@ def rectangle_mesh(length: float = 1.0, height: float = 0.1, nx: int = 20, ny: i
         Sides, finite and > 0.
     nx, ny : int
         Number of element divisions along x and y (>= 1).
-    quad : bool
+    quadrilaterals : bool
         Bilinear quadrilaterals (``skfem.MeshQuad``) instead of triangles (``skfem.MeshTri``,
-        each cell of the grid split in two).
+        each cell of the grid split in two); the cells named in full, as ``box_mesh(hexahedra=)``.
+    quad : bool, optional
+        Deprecated spelling of ``quadrilaterals`` (a ``DeprecationWarning``).
 
     Returns
     -------
@@ -848,10 +850,16 @@ def rectangle_mesh(length: float = 1.0, height: float = 0.1, nx: int = 20, ny: i
     height = _real(f, "argument 'height'", height, positive=True)
     nx, ny = _count(f, "nx", nx), _count(f, "ny", ny)
     _check_grid(f, nx=nx, ny=ny)
-    if not isinstance(quad, (bool, np.bool_)):
-        raise TypeError(f"{f}: argument 'quad' must be True or False, got {quad!r}")
+    if quad is not None:
+        if quadrilaterals is not False:
+            raise TypeError(f"{f}: give quadrilaterals= only (quad= is its deprecated spelling), not both")
+        warnings.warn(f"{f}(quad=...) is deprecated; use {f}(quadrilaterals=...), as box_mesh(hexahedra=...)",
+                      DeprecationWarning, stacklevel=2)
+        quadrilaterals = quad
+    if not isinstance(quadrilaterals, (bool, np.bool_)):
+        raise TypeError(f"{f}: argument 'quadrilaterals' must be True or False, got {quadrilaterals!r}")
     x, y = np.linspace(0.0, length, nx + 1), np.linspace(0.0, height, ny + 1)
-    mesh = (skfem.MeshQuad if quad else skfem.MeshTri).init_tensor(x, y)
+    mesh = (skfem.MeshQuad if quadrilaterals else skfem.MeshTri).init_tensor(x, y)
     return _faces(mesh, {"left": (0, 0.0), "right": (0, length), "bottom": (1, 0.0), "top": (1, height)})
 
 

@@ -55,7 +55,9 @@ are the independent reference for Hill's method.
 from __future__ import annotations
 
 import logging
+import functools
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -214,20 +216,20 @@ def _v_index(n: int, dof: int) -> int:
 # --------------------------------------------------------------------------------------------
 # Validation
 # --------------------------------------------------------------------------------------------
-def _state0(state0: Any, n: int, owner: str) -> np.ndarray:
+def _state0(x0: Any, n: int, owner: str) -> np.ndarray:
     try:
-        x = np.array(state0, dtype=float)
+        x = np.array(x0, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ValueError(
-            f"{owner}: state0 must be a real array [q; v] of shape ({2 * n},), got {show(state0)}"
+            f"{owner}: x0 must be a real array [q; v] of shape ({2 * n},), got {show(x0)}"
         ) from exc
     if x.shape != (2 * n,):
         raise ValueError(
-            f"{owner}: state0 must have shape ({2 * n},) (displacements then velocities of the {n} DOFs, "
+            f"{owner}: x0 must have shape ({2 * n},) (displacements then velocities of the {n} DOFs, "
             f"x = [q; v]), got shape {x.shape}"
         )
     if not np.all(np.isfinite(x)):
-        raise ValueError(f"{owner}: state0 contains NaN or infinite values: {show(state0)}")
+        raise ValueError(f"{owner}: x0 contains NaN or infinite values: {show(x0)}")
     return x
 
 
@@ -479,7 +481,7 @@ class _Run:
             g = self._gap(x, law, c)
             if g < -self._touch_tol(x, law):
                 raise _TrialFailure(
-                    f"{self.flow.owner}: state0 starts inside the obstacle of contact {j}: gap g_N = {g:.6g} < 0 "
+                    f"{self.flow.owner}: x0 starts inside the obstacle of contact {j}: gap g_N = {g:.6g} < 0 "
                     f"(q[{c}] = {x[c]:.9g}, gap {law.gap:.9g})"
                 )
 
@@ -565,13 +567,13 @@ class _Run:
         return x, self.segments
 
 
-def _setup(model, omega, state0, restitution, rtol, atol, owner):
+def _setup(model, omega, x0, restitution, rtol, atol, owner):
     w = check_positive("omega", omega, owner=owner)
     e = check_in_range("restitution", restitution, 0.0, 1.0, owner=owner)
     rtol = check_positive("rtol", rtol, owner=owner)
     atol = check_positive("atol", atol, owner=owner)
     flow = _Flow(model, w, e, rtol, atol, owner)
-    x0 = _state0(state0, flow.n, owner)
+    x0 = _state0(x0, flow.n, owner)
     return flow, x0
 
 
@@ -586,10 +588,27 @@ def _monodromy(flow: _Flow, x0: np.ndarray, t0: float, T: float) -> Monodromy:
 # --------------------------------------------------------------------------------------------
 # Public functions
 # --------------------------------------------------------------------------------------------
+def _state0_renamed(f):
+    """``state0=`` was the keyword of the start state; ``x0`` is, as everywhere else the unknown
+    ``[q; v]`` or first guess is given (``exact_frequency_response(x0=)``, ``semismooth_newton``).
+    The old keyword still works, with a DeprecationWarning."""
+    @functools.wraps(f)
+    def wrapper(*args, **kwargs):
+        if "state0" in kwargs:
+            if "x0" in kwargs or len(args) > 2:
+                raise TypeError(f"{f.__name__}: give x0 only (state0= is its deprecated spelling), not both")
+            warnings.warn(f"{f.__name__}(..., state0=...) is deprecated; use {f.__name__}(..., x0=...)",
+                          DeprecationWarning, stacklevel=2)
+            kwargs["x0"] = kwargs.pop("state0")
+        return f(*args, **kwargs)
+    return wrapper
+
+
+@_state0_renamed
 def monodromy(
     model: StructuralModel,
     omega: float,
-    state0,
+    x0,
     *,
     t0: float = 0.0,
     period: float | None = None,
@@ -613,7 +632,7 @@ def monodromy(
         PenaltyContact and CubicSpring laws; harmonic forcing ``Re sum_k F_k e^{i k omega t}``.
     omega : float
         Forcing frequency (rad/s); for an autonomous model it only sets the default period.
-    state0 : array_like (2 n_dofs,)
+    x0 : array_like (2 n_dofs,)
         State ``x(t0) = [q; v]``.
     t0 : float, default 0
         Start time (the phase of the forcing).
@@ -635,11 +654,11 @@ def monodromy(
     TypeError, ValueError
         Invalid arguments (the message names the argument and quotes the value); what the
         event-driven integration cannot do (massless contact DOF, singular M, chattering or
-        sticking with ``restitution < 1``, ``state0`` inside an obstacle), with a pointer to
+        sticking with ``restitution < 1``, ``x0`` inside an obstacle), with a pointer to
         Hill's method.
     """
     owner = "monodromy"
-    flow, x0 = _setup(model, omega, state0, restitution, rtol, atol, owner)
+    flow, x0 = _setup(model, omega, x0, restitution, rtol, atol, owner)
     t0 = check_finite("t0", t0, owner=owner)
     T = _period(model, flow.omega, period, owner)
     try:
@@ -648,10 +667,11 @@ def monodromy(
         raise ValueError(str(exc)) from None
 
 
+@_state0_renamed
 def trajectory(
     model: StructuralModel,
     omega: float,
-    state0,
+    x0,
     t,
     *,
     t0: float = 0.0,
@@ -659,7 +679,7 @@ def trajectory(
     rtol: float = 1e-11,
     atol: float = 1e-12,
 ) -> np.ndarray:
-    """States ``x(t) = [q(t); v(t)]`` of the event-driven flow from ``x(t0) = state0``.
+    """States ``x(t) = [q(t); v(t)]`` of the event-driven flow from ``x(t0) = x0``.
 
     The same integration as :func:`monodromy` without the variations (e.g. the extreme
     displacement of an orbit found by :func:`shoot`); at an impact time the state just before it.
@@ -674,7 +694,7 @@ def trajectory(
     ndarray (len(t), 2 n_dofs)
     """
     owner = "trajectory"
-    flow, x0 = _setup(model, omega, state0, restitution, rtol, atol, owner)
+    flow, x0 = _setup(model, omega, x0, restitution, rtol, atol, owner)
     t0 = check_finite("t0", t0, owner=owner)
     tt = np.atleast_1d(np.asarray(t, dtype=float))
     if tt.ndim != 1 or tt.size == 0 or not np.all(np.isfinite(tt)) or np.any(tt < t0):
@@ -695,7 +715,7 @@ def trajectory(
             out[sel] = s.sol(tt[sel]).T
             done |= sel
     out[~done] = x_end  # the last 1e-13 of the span when an event falls there
-    out[tt == t0] = x0  # state0 as given, even when it starts with an impact
+    out[tt == t0] = x0  # x0 as given, even when it starts with an impact
     return out
 
 
@@ -753,10 +773,11 @@ class _ShootingEquations:
         return r, J
 
 
+@_state0_renamed
 def shoot(
     model: StructuralModel,
     omega: float,
-    state0,
+    x0,
     *,
     period: float | None = None,
     restitution: float = 1.0,
@@ -779,7 +800,7 @@ def shoot(
     dissipation and then come in one-parameter families (energy), so ``Phi`` has the multiplier
     +1 twice and a phase condition alone leaves the bordered system singular. The orbit is
     therefore pinned at a turning point of DOF ``j = phase_dof``: ``v_j(t0) = 0`` (phase) and
-    ``q_j(t0) = state0[j]`` (amplitude, the member of the family), and the remaining ``2n - 2``
+    ``q_j(t0) = x0[j]`` (amplitude, the member of the family), and the remaining ``2n - 2``
     states and ``T`` solve the ``2n - 1`` periodicity equations other than that of ``q_j``
     (redundant by energy conservation; see ``_ShootingEquations``). The columns are ``Phi - I``
     for the states and the vector field ``f(x(t0 + T))`` for ``T``.
@@ -791,7 +812,7 @@ def shoot(
     omega : float
         Forcing frequency (rad/s); for an autonomous model the first guess of the orbit's
         angular frequency (``T = 2 pi / omega`` unless ``period`` is given).
-    state0 : array_like (2 n_dofs,)
+    x0 : array_like (2 n_dofs,)
         First guess of ``x(t0) = [q; v]``.
     period : float, optional
         Forced: ``nu 2 pi / omega`` for a period-``nu`` (sub-harmonic) orbit, default ``nu = 1``.
@@ -806,7 +827,7 @@ def shoot(
         Time of the state ``x0`` (phase of the forcing).
     phase_dof : int, optional
         Autonomous models: DOF pinned at its turning point; default the DOF with the largest
-        ``|q|`` in ``state0``. Refused for forced models.
+        ``|q|`` in ``x0``. Refused for forced models.
     rtol, atol : float
         Tolerances of ``solve_ivp``.
 
@@ -826,7 +847,7 @@ def shoot(
         :func:`monodromy`).
     """
     owner = "shoot"
-    flow, x = _setup(model, omega, state0, restitution, rtol, atol, owner)
+    flow, x = _setup(model, omega, x0, restitution, rtol, atol, owner)
     t0 = check_finite("t0", t0, owner=owner)
     T = _period(model, flow.omega, period, owner)
     tol = check_positive("tol", tol, owner=owner)
@@ -852,7 +873,7 @@ def shoot(
     try:
         problem(problem.z0)
     except _TrialFailure as exc:
-        raise ValueError(f"{str(exc)} (first guess state0)") from None
+        raise ValueError(f"{str(exc)} (first guess x0)") from None
     # One Newton for all of femodes: semismooth_newton with a monotone Armijo search (no
     # watchdog: each trial is a whole period of integration), the house's least-squares fallback
     # at a singular Phi - I, and the stopping rule max|x(T) - x0| <= tol max(1, max|x0|).
