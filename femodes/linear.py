@@ -59,7 +59,7 @@ def grazing_energy(model: StructuralModel, mode: int = 1, *, modes: LinearModes 
     With the mass-normalised shape ``phi``, the modal amplitude ``a`` moves contact ``c`` (gap
     ``g_c`` along its DOF) by ``a |phi_c|``; the first contact reached sets
     ``a_g = min_c g_c / |phi_c|``. Backbones of a structure with contacts are naturally given in
-    multiples of it: ``nonlinear_mode(model, energy=(0.5 * E_g, 25 * E_g))``. For a clamped bar
+    multiples of it: ``nonlinear_mode(model, energy=(0.5 * E_g, 25 * E_g), harmonics=H)``. For a clamped bar
     with a stop at the tip (``E = rho = A = L = 1``) it tends to ``pi^2 g^2 / 16``. ``modes``: the
     model's linear modes if already computed (at least ``mode`` of them).
     """
