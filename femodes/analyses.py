@@ -426,7 +426,7 @@ def nonlinear_mode_options(problem: NonlinearModeProblem, x0: np.ndarray,
     if options is None:
         # the step control of issue 16 is not used by default here yet: with it the end orbits of
         # examples/validation_cantilever.py move by ~1e-7 and its time-stepping energy drift
-        # (sensitive to the start orbit) rose from 0.017 to 0.053 (tests/test_validation_more.py)
+        # (sensitive to the start orbit) rose from 0.017 to 0.053 (tests/test_validation_cantilever_and_forced.py)
         return ContinuationOptions(step=0.05, max_step=0.25, x_scale=scale, p_scale=1.0,
                                    newton=NewtonOptions(atol=1e-9, max_iter=20),
                                    target_angle=None, target_contraction=None, corrector_deadline=None)

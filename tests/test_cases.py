@@ -1,4 +1,4 @@
-"""femodes run: TOML case files (femodes/app/cases.py) and the command line."""
+"""femodes run: TOML case files (femodes/app/cases/__init__.py) and the command line."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The continuation's retrace guard (femodes.solvers.continuation, ``_Tracer.retraced``): a corrected
+"""The continuation's retrace guard (femodes.solvers.guard, ``BranchGuard.retraced``): a corrected
 point that lands on the part of the branch already traced, going the same way, is rejected.
 
 Found on the 20-DOF cantilever with a tip stop (benchmarks/bench_peers.py ``cant20``) at H = 20:
@@ -7,7 +7,6 @@ after the second fold of a tongue near w = 3.537 a step turned by 57 degrees (un
 ``max_points`` (2000 points, 89 folds, never reaching w = 4.2).
 """
 
-import importlib
 import math
 
 import numpy as np
@@ -16,8 +15,9 @@ import pytest
 import femodes as fm
 from femodes.solvers.arclength import ArclengthSystem
 from femodes.solvers.bordered import bordered_solver
-
-cont = importlib.import_module("femodes.solvers.continuation")  # the module, not the function of femodes.solvers
+from femodes.solvers.guard import BranchGuard
+from femodes.solvers.step_control import StepControl
+from femodes.solvers.trace_record import BranchRecord, TracePoint
 
 
 class _Line:
@@ -28,14 +28,15 @@ class _Line:
 
 
 def _tracer(points, ds=0.2):
-    """A tracer whose accepted points are ``points`` [(x, p)], unit weights, step ``ds``."""
+    """The guard of a run whose accepted points are ``points`` [(x, p)], unit weights, step ``ds``."""
     sys = ArclengthSystem(_Line(), 1, fm.NewtonOptions(), bordered_solver)
     sys.set_scales(np.ones(1), 1.0)  # unit weights
-    tr = cont._Tracer(sys, fm.ContinuationOptions(), (0.0, 10.0), None)
-    tr.pts = [cont._Pt(y=np.array(y, dtype=float), t=np.array([1.0, 1.0]) / math.sqrt(2.0), nit=1, rnorm=0.0, step=ds)
-              for y in points]
-    tr.ds = ds
-    return tr
+    opts = fm.ContinuationOptions()
+    rec = BranchRecord(pts=[TracePoint(y=np.array(y, dtype=float), t=np.array([1.0, 1.0]) / math.sqrt(2.0), nit=1,
+                                       rnorm=0.0, step=ds) for y in points])
+    steps = StepControl(sys, opts, rec)
+    steps.ds = ds
+    return BranchGuard(sys, opts, rec, steps)
 
 
 def test_a_point_on_the_traced_branch_going_the_same_way_is_a_retrace():

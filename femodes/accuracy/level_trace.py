@@ -18,6 +18,7 @@ import numpy as np
 
 from ..results import Branch
 from ..solvers import ContinuationOptions, continuation
+from ..solvers.protocols import phase_hook
 from .ladder import Ladder
 from .options import AccuracyOptions
 from .points import State, anchor, free_before, without_contact
@@ -277,7 +278,8 @@ def between(prob, y0: np.ndarray, y1: np.ndarray, theta: float) -> np.ndarray:
     harmonics at H = 80-160, cost 56-65 Newton evaluations per hyperplane solve."""
     x0, x1, p0, p1 = y0[:-1], y1[:-1], float(y0[-1]), float(y1[-1])
     p = p0 + theta * (p1 - p0)
-    shift = getattr(prob, "phase_shift", None)
+    hook = phase_hook(prob)  # the optional hook of the continuation's problem protocol
+    shift = None if hook is None else hook.phase_shift
     if shift is None:
         return y0 + theta * (y1 - y0)
     u0, u1 = prob.unpack(x0, p0), prob.unpack(x1, p1)

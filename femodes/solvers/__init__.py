@@ -9,8 +9,11 @@
 * Jacobians may be dense, ``scipy.sparse`` or structured operators that
   factorise themselves (``J.factorize().solve(b)``, duck-typed).
 
-Modules: ``newton`` (semismooth Newton), ``continuation`` (the driver and its
-tracer), ``continuation_types`` (options, points, states, results),
+Modules: ``newton`` (semismooth Newton), ``continuation`` (the driver),
+``tracing`` (one run: the tracer) and its parts ``predictors``, ``step_control``, ``guard``
+(branch jumping), ``folds``, ``span_ends`` and ``trace_record`` (the run's points),
+``protocols`` (what a problem provides, with the optional phase hook),
+``continuation_types`` (options, points, states, results),
 ``arclength`` (the problem's evaluation, scaled geometry, tangent and corrector
 solves), ``bordered`` (bordered matrices and their solver), ``roots`` (a bracketed
 scalar root by Illinois regula falsi: folds, stability changes), ``checks`` (the

@@ -187,7 +187,9 @@ class ContinuationOptions:
         contact case 1 (complementarity law, ``frequency_response``
         defaults but ``max_step=2``): residual evaluations 795 -> 499 at
         H = 20, 1393 -> 764 at H = 40 (``benchmarks/README_steps.md``).
-        Problems without the two methods get the tangent predictor.
+        Problems without the two methods (the optional hook
+        :class:`~femodes.solvers.protocols.SupportsPhaseShift`) get the
+        tangent predictor.
     target_norm_change : float or None, default None
         Step control by the size of the solution (> 0): the nominal relative
         change of the scaled norm of ``x`` per step; the step is divided by
