@@ -10,7 +10,7 @@ STAMP   = $(VENV)/.installed
 JOBS   ?= 2
 DIST    = $(if $(filter 0,$(JOBS)),,--dist loadscope)
 
-.PHONY: demo test test-slow test-kernels bench bench-backends fast clean venv lint docs
+.PHONY: demo test test-slow test-kernels bench bench-backends fast clean venv lint docs typecheck
 
 $(STAMP): pyproject.toml
 	@sh tools/sysdeps.sh
@@ -49,6 +49,10 @@ docs: $(DOCS_STAMP)
 # ruff with the rules of pyproject.toml ([tool.ruff]); `$(BIN)/ruff check --fix .` applies the safe fixes
 lint: $(STAMP)
 	$(BIN)/python -m ruff check --no-cache .
+
+# mypy on the modules of [tool.mypy] in pyproject.toml (the public face first; tests/test_typecheck.py runs it too)
+typecheck: $(STAMP)
+	$(BIN)/python -m mypy
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_models.py

@@ -452,7 +452,7 @@ class _Annotator:
         # of the test function (a smooth crossing's change shrinks with the bracket), or else
         # once it is JUMP_XTOL wide; only a smooth crossing is refined to 1e-7 (a jump took ~27
         # Hill solves to 1e-7, then ~13 to 1e-3, now ~6)
-        opts = dict(ftol=1e-9, margin=1e-3, bisect_if_slow=True)
+        opts: dict[str, Any] = dict(ftol=1e-9, margin=1e-3, bisect_if_slow=True)
         fa, fb = self.tau(ra.multipliers, k), self.tau(rb.multipliers, k)
 
         def small(br):

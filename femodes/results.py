@@ -233,6 +233,7 @@ class ErrorEstimate:
         estimated (NaN where it could not be estimated). :attr:`covers` says which sources."""
         mesh = None if self.mesh is None else np.asarray(self.mesh, float)
         if not self.harmonics_estimated:
+            assert mesh is not None  # __post_init__: at least one source is estimated
             return mesh
         freq = np.asarray(self.omega, float) + (0.0 if mesh is None else mesh)
         return np.fmax(freq, np.asarray(self.amplitude, float))
@@ -710,7 +711,7 @@ class Branch:
         }
         if self.accuracy is not None:
             out.update({f"accuracy_{k}": v for k, v in self.accuracy.arrays().items()})
-        if self.stable is not None:
+        if self.stable is not None and self.multipliers is not None:  # set together (set_stability)
             bifs = self.bifurcations
             out.update({
                 "stable": self.stable.astype(np.int8), "multipliers_re": self.multipliers.real,
@@ -733,9 +734,9 @@ class Branch:
             "accuracy": None if self.accuracy is None else {
                 "method": [str(m) for m in self.accuracy.method], "rtol": self.accuracy.rtol,
                 "mesh_method": self.accuracy.mesh_method, "caveat": self.accuracy.caveat},
-            "stability": None if self.stable is None else {
+            "stability": None if self.stable is None or self.stability_method is None else {
                 "methods": [str(m) for m in self.stability_method], "kinds": [b.kind for b in self.bifurcations],
-                          "located": [bool(b.located) for b in self.bifurcations]},
+                "located": [bool(b.located) for b in self.bifurcations]},
         }
 
     def save(self, path) -> Path:

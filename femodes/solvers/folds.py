@@ -84,10 +84,10 @@ class FoldLocator:
             located = self.locate(a, steps.ds, b)
         if located is None and tried and steps.ds > FOLD_RETRY_STEP * opt.step and 0.5 * steps.ds >= opt.min_step:
             steps.reject(a, "fold not located: a shorter step", failure="fold not located")
-        if located is not None and self.ends.crossed(located.y[n]) is not None:
+        bound = None if located is None else self.ends.crossed(located.y[n])
+        if located is not None and bound is not None:
             # the branch left the span between a and b (excursion through the
             # fold): stop on the boundary before the fold
-            bound = self.ends.crossed(located.y[n])
             logger.info("continuation: branch leaves the span through p=%g before a fold", bound)
             self.ends.try_finish(a, located.y, bound)
             steps.reject(a, f"fold beyond p={bound:g}, but the end point could not be computed",

@@ -569,7 +569,7 @@ class _Iteration:
         self.best = (x.copy(), self.r, self.J, self.rnorm)
         self.best_it = 0  # iteration at which ``best`` last improved by >= 1 %
         self.stall = 0
-        self.watchdog: _Watchdog | None = None
+        self._watchdog: _Watchdog | None = None
         self.tol_seen = (math.inf, 0.0)  # the last tolerance computed (converged) and |x| there
 
     def evaluate(self, x: np.ndarray) -> tuple[np.ndarray, Any]:
@@ -617,7 +617,7 @@ class _Iteration:
             raise _Stop(3, "non-finite Jacobian at x0", 0, False)
         if self.converged(self.rnorm):
             raise _Stop(0, _converged_message(self.rnorm), 0, False)
-        self.watchdog = _Watchdog(self.x, self.r, self.options)
+        self._watchdog = _Watchdog(self.x, self.r, self.options)
 
     def converged(self, rnorm: float) -> bool:
         """``rnorm <= max(atol, rtol_x |x|, rtol |J||x|)`` at the current iterate (the products only
@@ -633,6 +633,13 @@ class _Iteration:
         tol = _tolerance(self.atol, opt.rtol, self.J, self.x, opt.rtol_x)
         self.tol_seen = (tol, xnorm)
         return rnorm <= tol
+
+    @property
+    def watchdog(self) -> _Watchdog:
+        """The watchdog of the run (set up by the start)."""
+        if self._watchdog is None:
+            raise RuntimeError("semismooth_newton: the run has not started")
+        return self._watchdog
 
     def direction(self, it: int) -> np.ndarray:
         """Newton direction ``dx = -J^{-1} r`` at the current iterate."""
@@ -690,14 +697,17 @@ class _Iteration:
     def backtrack_from_watch(self, it: int, phi_w: float, phi_ref: float, alpha0: float) -> _Step:
         """Line search along the watch point's direction; its result is the new watch point."""
         wd = self.watchdog
-        out = _backtrack(self.evaluate, wd.x, wd.dx, phi_w, phi_ref, alpha0, self.options.min_alpha)
+        dx = wd.dx
+        if dx is None:  # a direction is always recorded at the watch point before a step
+            raise RuntimeError("semismooth_newton: line search without a direction at the watch point")
+        out = _backtrack(self.evaluate, wd.x, dx, phi_w, phi_ref, alpha0, self.options.min_alpha)
         if out is None:
             raise _Stop(3, f"non-finite residual at all line-search trials of step {it}", it - 1, True)
         ok, alpha, x_new, r_new, J_new, phi_new = out
         if ok and alpha == 1.0 and self.options.watchdog > 0:
             wd.on = True  # full Newton steps work again: re-enable relaxed steps
         wd.move_to(x_new, phi_new)
-        return _Step(alpha, wd.dx, x_new, r_new, J_new, ok=ok, kind="backtracked" if ok else "line search failed")
+        return _Step(alpha, dx, x_new, r_new, J_new, ok=ok, kind="backtracked" if ok else "line search failed")
 
     def accept(self, it: int, step: _Step) -> float:
         """Move to the step's point, update the best iterate; return the step length (inf-norm)."""

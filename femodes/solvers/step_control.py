@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import NoReturn
 
 import numpy as np
 
@@ -40,7 +41,7 @@ class StepControl:
         self.just_rejected = False  # no step growth right after a rejection
         self.prev_geo: tuple[float, float] | None = None  # (angle, distance) of the last geometric rejection
 
-    def reject(self, a: TracePoint, reason: str, *, failure: str) -> None:
+    def reject(self, a: TracePoint, reason: str, *, failure: str) -> NoReturn:
         """Halve the step and retry from ``a`` (raises :class:`RetryStep`); below ``min_step`` the
         run fails (status 4, ``failure`` in the message)."""
         self.n_rejected += 1

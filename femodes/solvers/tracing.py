@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+from typing import Any
 
 import numpy as np
 
@@ -70,6 +71,8 @@ class Tracer:
         """Run from ``x_init`` (a new run) or from ``start`` until a stop; the result."""
         try:
             if self.start is None:
+                if x_init is None:
+                    raise ValueError("continuation: a new run needs a start point x0")
                 self.begin(x_init)
             else:
                 self.resume(self.start)
@@ -206,6 +209,7 @@ class Tracer:
 
     def state(self, xv: np.ndarray, q: TracePoint, idx: int, next_step: float) -> ContinuationState:
         """What a resumed run needs to continue from point ``idx`` (``q``, unknowns ``xv``)."""
+        assert self.x_scale is not None  # fixed when the run began
         return ContinuationState(
             x=xv, p=float(q.y[self.n]), tangent=q.t, step=next_step, index=idx, folds=tuple(self.record.folds),
             dp_sign=self.folds.last_sign, x_scale=self.x_scale, p_scale=self.p_scale, n_newton=self.sys.n_newton,
@@ -226,7 +230,7 @@ class Tracer:
             X = np.empty((0, n))
             P = np.empty(0)
             T = np.empty((0, n + 1)) if store else None
-        arrays = dict(
+        arrays: dict[str, Any] = dict(
             x=X,
             p=P,
             nit=np.array([q.nit for q in out], dtype=int),
