@@ -227,21 +227,34 @@ def assemble_blocks(mesh: Any, element: Any, owner: str, stiffness: tuple, mass:
     first = checked_basis(mesh, element, owner, intorder=mo, mapping=mapping, elements=np.arange(block))
     dofs, doflocs = first.dofs, np.asarray(first.doflocs)
     del first
-    parts: dict = {"K": [], "M": []}
+    # K over all blocks, then M: one matrix's pieces held at a time (P2 tetrahedra: the two forms
+    # take different rules, so each block needs two bases anyway)
+    K = _assemble_in_blocks(mesh, element, owner, kform, kcoef, ko, mapping, dofs, block)
+    M = _assemble_in_blocks(mesh, element, owner, mform, mcoef, mo, mapping, dofs, block)
+    return K, M, BasisRecipe(elem=element, intorder=mo, dofs=dofs, doflocs=doflocs)
+
+
+#: Triplets (COO entries) of blocks gathered before they are summed into the running CSR matrix of
+#: :func:`assemble_blocks`: a few such sums over a 1e6-DOF mesh, and never all its triplets at once.
+SUM_TRIPLETS = 2**24
+
+
+def _assemble_in_blocks(mesh, element, owner, form, coefficients, intorder, mapping, dofs, block) -> sp.csr_matrix:
+    """``form`` assembled block by block (:func:`assemble_blocks`), summed as CSR."""
+    n_el, n = int(mesh.nelements), int(dofs.N)
+    total, pending, count = None, [], 0
     for e0 in range(0, n_el, block):
         idx = np.arange(e0, min(n_el, e0 + block))
-        kb = checked_basis(mesh, element, owner, intorder=ko, mapping=mapping, elements=idx, dofs=dofs,
-                           disable_doflocs=True)
-        parts["K"].append(kform.assemble(kb, **_coefficients(kb, kcoef, idx)).tocoo())
-        mb = kb if mo == ko else None
-        del kb
-        if mb is None:
-            mb = checked_basis(mesh, element, owner, intorder=mo, mapping=mapping, elements=idx, dofs=dofs,
-                               disable_doflocs=True)
-        parts["M"].append(mform.assemble(mb, **_coefficients(mb, mcoef, idx)).tocoo())
-        del mb
-    K, M = (_sum_blocks(parts.pop(name), dofs.N) for name in ("K", "M"))
-    return K, M, BasisRecipe(elem=element, intorder=mo, dofs=dofs, doflocs=doflocs)
+        b = checked_basis(mesh, element, owner, intorder=intorder, mapping=mapping, elements=idx, dofs=dofs,
+                          disable_doflocs=True)
+        pending.append(form.assemble(b, **_coefficients(b, coefficients, idx)).tocoo())
+        count += pending[-1].nnz
+        del b
+        if count >= SUM_TRIPLETS or e0 + block >= n_el:
+            part = _sum_blocks(pending, n)
+            total = part if total is None else total + part
+            count = 0
+    return total
 
 
 def _coefficients(basis: Any, coefficients: Mapping, idx: np.ndarray | None) -> dict:
@@ -501,7 +514,10 @@ def _free_dofs(owner: str, nodal: np.ndarray, n_full: int, constrained: dict, co
 def _on_free_dofs(A: sp.spmatrix, free: np.ndarray) -> sp.csr_matrix:
     """``A`` restricted to the free DOFs and symmetrized to round-off (assembly sums in different orders)."""
     A = A.tocsr()[free][:, free]
-    return (0.5 * (A + A.T)).tocsr()
+    S = (A + A.T).tocsr()
+    del A  # one copy fewer at a time (each is 1 GB at 1e6 P2 DOFs)
+    S.data *= 0.5
+    return S
 
 
 def _dof_labels(coords: np.ndarray, components: tuple, free: np.ndarray, node_dof: np.ndarray, locations: dict) -> list:
