@@ -1145,7 +1145,7 @@ def report38(doc: dict, before: dict | None = None) -> str:
         names = ("mesh", "assembly", "contact", "cb")
         lines += ["\n#### From mesh to Craig-Bampton in one process: CPU s / wall s / peak RSS MiB per stage\n",
                   "| size | N | contacts | n_reduced | " + " | ".join(names) + " | total CPU / wall [s] | load |",
-                  "|" + "---|" * 9]
+                  "|" + "---|" * 10]
         fits = {k: [] for k in names}
         for size in sorted(pl):
             r = pl[size]
