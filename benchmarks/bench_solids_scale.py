@@ -129,6 +129,8 @@ GEOMETRIES = {
     # size lists: N doubles roughly from step to step, ~1e3 to ~1e6
     "strip2d": [7, 10, 14, 20, 28, 40, 57, 80, 113, 160, 226],
     "box3d": [1, 2, 3, 4, 5, 6, 8, 10, 12, 14, 16],
+    # the pipeline only: a blade-like plate 1 x 0.2 x 0.02 of P2 tetrahedra, nx = 5 n, ny = n, nz = 4
+    "plate3d": [10, 20, 30, 44],
 }
 STAGES = ("assembly", "modes", "cb", "floor:femodes", "floor:band", "floor:colamd", "floor:mmd", "floor:nd",
           "hbm_setup", "hbm_full", "hbm_cb", "cb_floor:cholmod", "cb_floor:mumps", "hbm_iter", "block_floor", "pipeline")
@@ -188,6 +190,8 @@ def expected_dofs(geometry: str, size: int) -> int:
     """Free DOFs of the model (the clamped face removed), for the tables before a run."""
     if geometry == "strip2d":
         return 2 * 10 * size * (size + 1)
+    if geometry == "plate3d":
+        return 3 * 10 * size * (2 * size + 1) * 9
     return 3 * 20 * size * (2 * size + 1) ** 2
 
 
@@ -572,15 +576,21 @@ def _hbm_iter(model, rec: dict, repeat: int) -> None:
 PAD_HALF = 0.02
 
 
-def pad_box(size: int):
+def pad_box(size: int, geometry: str = "box3d"):
     """``fm.box_mesh`` of box3d at ``size`` with one more boundary, ``"pad"``: the facets of the tip
-    face whose midpoints lie in the square of half side :data:`PAD_HALF` centred on it."""
+    face whose midpoints lie in the square of half side :data:`PAD_HALF` centred on it. ``plate3d``:
+    the plate 1 x 0.2 x 0.02 (nx = 5 n, ny = n, nz = 4), its pad the band ``|y - 0.1| <= PAD_HALF``
+    of the tip face through the thickness."""
     import numpy as np
 
     import femodes as fm
 
-    mesh = fm.box_mesh(1.0, 0.1, 0.1, 10 * size, size, size)
     tol = 1e-9
+    if geometry == "plate3d":
+        mesh = fm.box_mesh(1.0, 0.2, 0.02, 5 * size, size, 4)
+        return mesh.with_boundaries({"pad": lambda x: (np.abs(x[0] - 1.0) < tol)
+                                     & (np.abs(x[1] - 0.1) <= PAD_HALF + tol)})
+    mesh = fm.box_mesh(1.0, 0.1, 0.1, 10 * size, size, size)
     return mesh.with_boundaries({"pad": lambda x: (np.abs(x[0] - 1.0) < tol) & (np.abs(x[1] - 0.05) <= PAD_HALF + tol)
                                  & (np.abs(x[2] - 0.05) <= PAD_HALF + tol)})
 
@@ -609,7 +619,7 @@ def _reset_hwm() -> None:
         f.write("5")
 
 
-def pipeline(size: int, rec: dict) -> None:
+def pipeline(size: int, rec: dict, geometry: str = "box3d") -> None:
     """From nothing to a Craig-Bampton model, in one process, each stage timed (wall and CPU) with
     its peak resident memory (VmHWM reset at its start) and the resident memory after it:
 
@@ -637,7 +647,7 @@ def pipeline(size: int, rec: dict) -> None:
         print(f"pipeline {name}: {stages[name]}", file=sys.stderr, flush=True)
 
     def mesh():
-        state["mesh"] = pad_box(size)
+        state["mesh"] = pad_box(size, geometry)
 
     def assembly():
         state["solid"] = fm.solid(state.pop("mesh"), fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left", order=2)
@@ -701,7 +711,7 @@ def child(spec: dict) -> dict:
     budget, repeat = float(spec["budget"]), int(spec["repeat"])
     try:
         if stage == "pipeline":
-            pipeline(size, rec)
+            pipeline(size, rec, geometry)
         elif stage == "assembly":
             times, solid_s, contact_s = [], [], []
             for _ in range(repeat):
@@ -1140,10 +1150,19 @@ def report38(doc: dict, before: dict | None = None) -> str:
                          f"{_fmt(r.get('peak_mib'), '{:.0f}')} | {_fmt((r.get('load_before') or [None])[0], '{:.1f}')} |")
             pts.append((r.get("N"), r["iteration_cpu_median_s"]))
         lines.append("\nfitted CPU exponent of the iteration: N^" + _fmt(_slope(pts), "{:.2f}"))
-    pl = by("pipeline")
+    for geometry in ("box3d", "plate3d"):
+        pl = {r["size"]: r for r in doc.get("runs", []) if r["geometry"] == geometry and r["stage"] == "pipeline"
+              and not r.get("error")}
+        lines += _pipeline_table(geometry, pl)
+    return "\n".join(lines)
+
+
+def _pipeline_table(geometry: str, pl: dict) -> list:
+    """The pipeline's table (:func:`report38`) of one geometry."""
+    lines = []
     if pl:
         names = ("mesh", "assembly", "contact", "cb")
-        lines += ["\n#### From mesh to Craig-Bampton in one process: CPU s / wall s / peak RSS MiB per stage\n",
+        lines += [f"\n#### {geometry}: from mesh to Craig-Bampton in one process: CPU s / wall s / peak RSS MiB per stage\n",
                   "| size | N | contacts | n_reduced | " + " | ".join(names) + " | total CPU / wall [s] | load |",
                   "|" + "---|" * 10]
         fits = {k: [] for k in names}
@@ -1156,7 +1175,7 @@ def report38(doc: dict, before: dict | None = None) -> str:
             for k in names:
                 fits[k].append((r["N"], st[k]["cpu_s"]))
         lines.append("\nfitted CPU exponents: " + ", ".join(f"{k} N^{_fmt(_slope(v), '{:.2f}')}" for k, v in fits.items()))
-    return "\n".join(lines)
+    return lines
 
 
 def _cell(r, fmt) -> str:
