@@ -49,8 +49,14 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = {"hex": "Q2 hexahedral plate 150 x 40 x 4 mm, 15 x 2 x 2", "tet4": "P2 tetrahedra, box 40 x 4 x 4",
-         "tet6": "P2 tetrahedra, box 60 x 6 x 6"}
-DEFAULT_ROUNDS = {"hex": 5, "tet4": 5, "tet6": 3}
+         "tet6": "P2 tetrahedra, box 60 x 6 x 6", "tet10": "P2 tetrahedra, box 100 x 10 x 10",
+         "tet16": "P2 tetrahedra, box 160 x 16 x 16"}
+DEFAULT_ROUNDS = {"hex": 5, "tet4": 5, "tet6": 3, "tet10": 3, "tet16": 2}
+#: cases whose tracemalloc run is skipped (it doubles a minutes-long build): their peak is the RSS
+NO_TRACE = ("tet10", "tet16")
+#: resident memory (all processes of a child) above which a child is killed and recorded as such
+MEM_LIMIT_GIB = 16.0
+TIMEOUT_S = 1800.0
 
 
 def build_mesh(case: str):
@@ -58,7 +64,7 @@ def build_mesh(case: str):
 
     if case == "hex":
         return fm.box_mesh(0.150, 0.040, 0.004, 15, 2, 2, hexahedra=True)
-    n = {"tet4": 4, "tet6": 6}[case]
+    n = {"tet4": 4, "tet6": 6, "tet10": 10, "tet16": 16}[case]
     return fm.box_mesh(1.0, 0.1, 0.1, 10 * n, n, n)
 
 
@@ -114,9 +120,13 @@ def child(case: str, variant: str, trace: bool) -> dict:
         peak = tracemalloc.get_traced_memory()[1] - base
         tracemalloc.stop()
         return {"n": n, "peak_mib": peak / 2**20, "femodes": fm.__file__}
+    import resource
+
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     w0, c0 = time.perf_counter(), time.process_time()
     n = run()
-    return {"n": n, "wall": time.perf_counter() - w0, "cpu": time.process_time() - c0, "femodes": fm.__file__}
+    return {"n": n, "wall": time.perf_counter() - w0, "cpu": time.process_time() - c0, "femodes": fm.__file__,
+            "rss_before_mib": rss0, "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
 
 
 def run_child(case: str, variant: str, before: str | None, trace: bool = False) -> dict:
@@ -126,10 +136,25 @@ def run_child(case: str, variant: str, before: str | None, trace: bool = False) 
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", case, "bare" if variant == "bare" else "femodes"]
     if trace:
         cmd.append("--trace")
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd="/")
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_solids_scale import RssWatchdog
+
+    with RssWatchdog(MEM_LIMIT_GIB * 2**30) as dog:
+        proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd="/")
+        try:
+            stdout, stderr = proc.communicate(timeout=TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            return {"error": f"timed out after {TIMEOUT_S:g} s", "n": None}
+    if dog.fired is not None:
+        return {"error": f"RSS > {MEM_LIMIT_GIB:g} GiB ({dog.fired / 2**30:.1f} GiB; killed)", "n": None,
+                "watchdog_peak_mib": dog.peak / 2**20}
     if proc.returncode:
-        raise RuntimeError(f"{case}/{variant} failed:\n{proc.stderr}")
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
+        tail = [ln for ln in stderr.strip().splitlines() if ln.strip()]
+        return {"error": f"failed (exit {proc.returncode}): {tail[-1] if tail else ''}", "n": None}
+    out = json.loads(stdout.strip().splitlines()[-1])
+    out["watchdog_peak_mib"] = dog.peak / 2**20
     expected = Path(tree).resolve() / "femodes" / "__init__.py"
     if Path(out["femodes"]).resolve() != expected:
         raise RuntimeError(f"{case}/{variant}: the child imported {out['femodes']}, not {expected}")
@@ -156,34 +181,50 @@ def main() -> None:
         for r in range(rounds):
             for v in variants[r % len(variants):] + variants[:r % len(variants)]:  # rotate the order
                 runs[v].append(run_child(case, v, args.before))
-                print(f"{case} round {r + 1}/{rounds} {v}: wall {runs[v][-1]['wall']:.3f} s, "
-                      f"cpu {runs[v][-1]['cpu']:.3f} s", file=sys.stderr, flush=True)
-        peaks = {v: run_child(case, v, args.before, trace=True)["peak_mib"] for v in variants}
-        raw[case] = {"runs": runs, "peak_mib": peaks}
+                x = runs[v][-1]
+                print(f"{case} round {r + 1}/{rounds} {v}: " + (x["error"] if "error" in x else
+                      f"wall {x['wall']:.3f} s, cpu {x['cpu']:.3f} s, peak RSS {x['peak_rss_mib']:.0f} MiB"),
+                      file=sys.stderr, flush=True)
+        peaks = {v: None if case in NO_TRACE else run_child(case, v, args.before, trace=True).get("peak_mib")
+                 for v in variants}
+        raw[case] = {"runs": runs, "peak_mib": peaks, "load": os.getloadavg()}
     try:
         load = os.getloadavg()
     except OSError:  # pragma: no cover
         load = None
     print(f"\nmedians over rounds; load average at the end {load}\n")
     head = "| case | DOFs (free / full) | femodes wall [s] | femodes CPU [s] | bare scikit-fem wall [s] | bare CPU [s] " \
-           "| ratio wall | ratio CPU | peak femodes / bare [MiB] |"
+           "| ratio wall | ratio CPU | peak femodes / bare [MiB] | peak RSS femodes / bare [MiB] |"
     if args.before:
         head += " before wall [s] | before CPU [s] | peak before [MiB] |"
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     for case, rec in raw.items():
-        med = {v: {k: statistics.median(x[k] for x in rec["runs"][v]) for k in ("wall", "cpu")} for v in variants}
-        row = (f"| {case}: {CASES[case]} | {rec['runs']['femodes'][0]['n']} / {rec['runs']['bare'][0]['n']} "
+        nan = float("nan")
+        ok = {v: [x for x in rec["runs"][v] if "error" not in x] for v in variants}
+        med = {v: {k: statistics.median(x[k] for x in ok[v]) if ok[v] else nan
+                   for k in ("wall", "cpu", "peak_rss_mib")} for v in variants}
+        pk = {v: nan if rec["peak_mib"][v] is None else rec["peak_mib"][v] for v in variants}
+        n_of = {v: ok[v][0]["n"] if ok[v] else "-" for v in variants}
+        row = (f"| {case}: {CASES[case]} | {n_of['femodes']} / {n_of['bare']} "
                f"| {med['femodes']['wall']:.3g} | {med['femodes']['cpu']:.3g} | {med['bare']['wall']:.3g} "
                f"| {med['bare']['cpu']:.3g} | {med['femodes']['wall'] / med['bare']['wall']:.2f} "
                f"| {med['femodes']['cpu'] / med['bare']['cpu']:.2f} "
-               f"| {rec['peak_mib']['femodes']:.0f} / {rec['peak_mib']['bare']:.0f} |")
+               f"| {pk['femodes']:.0f} / {pk['bare']:.0f} "
+               f"| {med['femodes']['peak_rss_mib']:.0f} / {med['bare']['peak_rss_mib']:.0f} |")
         if args.before:
-            row += f" {med['before']['wall']:.3g} | {med['before']['cpu']:.3g} | {rec['peak_mib']['before']:.0f} |"
+            row += f" {med['before']['wall']:.3g} | {med['before']['cpu']:.3g} | {pk['before']:.0f} |"
         print(row)
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps({"load_end": load, "cases": raw}, indent=1))
+        git = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout
+        doc = {"load_end": load, "cases": raw, "git": git.strip(), "before": args.before,
+               "machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0]}}
+        old = json.loads(Path(args.json).read_text()) if Path(args.json).is_file() else {}
+        if "cases" in old:  # keep the cases not rerun
+            doc["cases"] = {**old["cases"], **raw}
+            doc["earlier"] = {k: v for k, v in old.items() if k != "cases"}
+        Path(args.json).write_text(json.dumps(doc, indent=1))
 
 
 if __name__ == "__main__":

@@ -79,6 +79,21 @@ hbm_full, hbm_cb
            wall time / points; the start at w = 1.5 is in contact), then Newton iterations
            (residual + ``default_linear_solver``) at the point of largest contact force.
 
+Issue 38 (item 3) added, all timed in CPU time (``time.process_time``) as well as wall time, the
+machine being shared:
+
+cb_floor:V what back-end V (``cholmod``, ``mumps``) itself costs for the work of ``cb`` on the same
+           matrices, called directly: factorisation of ``K_II``, solve with the ``n_b`` columns of
+           ``K_IB``, ARPACK shift-invert for 20 modes with the factor as ``OPinv`` (:func:`_cb_floor`).
+hbm_iter   full HBM (H = 5): setup, then Newton iterations (residual + linear solve) at frequencies
+           shifted by 1 % so that every block is factorised again (:func:`_hbm_iter`).
+block_floor MUMPS alone on one complex harmonic block: factorisation + ``n_b`` solves + Schur
+           complement, and the same Schur complement by MUMPS' Schur option (:func:`_block_floor`).
+pipeline   mesh, assembly, contact declaration and Craig-Bampton in one process, each stage with its
+           own peak RSS (:func:`pipeline`; contacts on a pad of the tip face, :func:`pad_box`).
+
+``--report --issue38`` prints their tables (``README_solids_scale.md``, issue 38 section).
+
 Memory limit. Until the block-ordering change the limit was ``RLIMIT_AS`` (address space, the runs
 in ``results_solids_scale_before.json``). That is unfair to SuperLU: each ``splu`` keeps the
 storage SuperLU reserved for L and U, about 30 x nnz(A) entries (``sp_ienv(6)``) whatever the fill,
@@ -114,9 +129,11 @@ GEOMETRIES = {
     # size lists: N doubles roughly from step to step, ~1e3 to ~1e6
     "strip2d": [7, 10, 14, 20, 28, 40, 57, 80, 113, 160, 226],
     "box3d": [1, 2, 3, 4, 5, 6, 8, 10, 12, 14, 16],
+    # the pipeline only: a blade-like plate 1 x 0.2 x 0.02 of P2 tetrahedra, nx = 5 n, ny = n, nz = 4
+    "plate3d": [10, 20, 30, 44],
 }
 STAGES = ("assembly", "modes", "cb", "floor:femodes", "floor:band", "floor:colamd", "floor:mmd", "floor:nd",
-          "hbm_setup", "hbm_full", "hbm_cb")
+          "hbm_setup", "hbm_full", "hbm_cb", "cb_floor:cholmod", "cb_floor:mumps", "hbm_iter", "block_floor", "pipeline")
 H = 5
 CB_MODES = 20
 OMEGA_BLOCK = 1.5  # k w of the factorised block: near the first axial mode, above the first bending ones
@@ -173,6 +190,8 @@ def expected_dofs(geometry: str, size: int) -> int:
     """Free DOFs of the model (the clamped face removed), for the tables before a run."""
     if geometry == "strip2d":
         return 2 * 10 * size * (size + 1)
+    if geometry == "plate3d":
+        return 3 * 10 * size * (2 * size + 1) * 9
     return 3 * 20 * size * (2 * size + 1) ** 2
 
 
@@ -402,10 +421,264 @@ def _hbm_setup(model, rec: dict, budget: float, repeat: int) -> None:
     rec["onelu_max_rel_diff"] = float(np.max(np.abs(c1 / c_femodes - 1.0)))
 
 
+def _cpu_wall(fn):
+    """``(result, wall s, CPU s of this process)`` of ``fn()``."""
+    w, c = time.perf_counter(), time.process_time()
+    out = fn()
+    return out, time.perf_counter() - w, time.process_time() - c
+
+
+def _cb_floor(model, backend: str, rec: dict, repeat: int) -> None:
+    """What the back-end itself costs for the work of ``fm.craig_bampton(model, CB_MODES)`` on the
+    same matrices: factorisation of ``K_II`` (analysis included), the solve with the ``n_b``
+    columns of ``K_IB``, and ARPACK shift-invert at 0 for the ``CB_MODES`` lowest modes of
+    ``(K_II, M_II)`` with the factor's solve as ``OPinv`` (femodes' settings: ``tol=1e-12``). The
+    library is called directly (scikit-sparse's ``cholesky``, python-mumps' ``Context``), without
+    femodes' checks, copies or projections; extracting ``K_II``, ``K_IB``, ``M_II`` is not timed."""
+    import numpy as np
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from femodes import reduction
+
+    kept = reduction.kept_dofs(model)
+    interior = np.setdiff1d(np.arange(model.n_dofs), kept)
+    K, M = model.K.tocsr(), model.M.tocsr()
+    KII = K[interior][:, interior].tocsc()
+    MII = M[interior][:, interior].tocsc()
+    KIB = np.asfortranarray(K[interior][:, kept].toarray())
+    rec.update(n_interior=int(interior.size), n_b=int(kept.size), backend=backend)
+    if backend == "cholmod":
+        from sksparse.cholmod import cholesky
+
+        def factor():
+            f = cholesky(KII)
+            return lambda b: f(np.asfortranarray(b)), f
+    elif backend == "mumps":
+        import mumps
+
+        def factor():
+            ctx = mumps.Context()
+            ctx.set_matrix(sp.triu(KII, format="coo"), symmetric=True)
+            ctx.factor(ordering="pord")
+            return ctx.solve, ctx
+    else:
+        raise ValueError(f"unknown cb_floor back-end {backend!r}")
+    def once():  # one repeat; its factor is freed on return
+        (solve, _keep), tf, cf = _cpu_wall(factor)
+        _psi, ts, cs = _cpu_wall(lambda: -solve(KIB))
+        op = spla.LinearOperator(KII.shape, matvec=solve, dtype=float)
+        (lam, _), te, ce = _cpu_wall(lambda: spla.eigsh(KII, k=CB_MODES, M=MII, sigma=0.0, which="LM", OPinv=op,
+                                                         tol=1e-12, maxiter=max(500, 50 * CB_MODES)))
+        r = dict(factor_s=tf, factor_cpu_s=cf, solve_nb_s=ts, solve_nb_cpu_s=cs, eigen_s=te, eigen_cpu_s=ce)
+        r["time_s"], r["cpu_s"] = tf + ts + te, cf + cs + ce
+        return r, lam
+
+    best = None
+    for _ in range(repeat):
+        r, lam = once()
+        rec.setdefault("repeats", []).append(r)
+        if best is None or r["cpu_s"] < best["cpu_s"]:
+            best = r
+    for k in best:  # the repeat of least CPU time
+        rec[k] = best[k]
+    rec["interface_omega_1"] = float(np.sqrt(np.sort(lam)[0]))
+
+
+def _block_floor(model, rec: dict, repeat: int) -> None:
+    """What MUMPS itself costs for the harmonic blocks of one full-HBM Newton iteration (CPU time):
+    the complex block ``Z = K - (k w)^2 M + i k w C`` at k w = ``OMEGA_BLOCK`` on the interior
+    (all DOFs but the contact DOFs) factorised (``LDL^T``, PORD, as ``femodes.sparse_direct``) and
+    solved with its ``n_b`` condensation columns plus the Schur complement ``Z_BB - Z_BI W``
+    (``factor_solve``); and the same Schur complement by MUMPS' own Schur option on the whole
+    block (``Context.schur``: no column solves), with its largest difference from the first.
+    The real block of harmonic 0 (``K_II``) is the ``cb_floor`` factorisation and ``n_b`` solve."""
+    import numpy as np
+    import scipy.sparse as sp
+
+    import mumps
+
+    from femodes import reduction
+
+    bd = reduction.kept_dofs(model)
+    interior = np.setdiff1d(np.arange(model.n_dofs), bd)
+    a, b = OMEGA_BLOCK ** 2, OMEGA_BLOCK
+    Zf = (model.K - a * model.M + 1j * b * model.C).tocsr()
+    ZI = Zf[interior]
+    Z, ZIB = ZI[:, interior].tocsc(), ZI[:, bd].toarray()
+    del ZI
+    ZB = Zf[bd]
+    ZBB, ZBI = ZB[:, bd].toarray(), ZB[:, interior].tocsr()
+    Zc = sp.triu(Zf, format="coo")
+    rec.update(n_interior=int(interior.size), n_b=int(bd.size), backend="mumps")
+
+    def factor_solve():
+        ctx = mumps.Context()
+        ctx.set_matrix(sp.triu(Z, format="coo"), symmetric=True)
+        ctx.factor(ordering="pord")
+        return ZBB - ZBI @ ctx.solve(ZIB)
+
+    def schur():
+        ctx = mumps.Context()
+        ctx.set_matrix(Zc, symmetric=True)
+        S = ctx.schur(bd, ordering="pord")
+        return np.tril(S) + np.tril(S, -1).T  # MUMPS fills the lower triangle of a symmetric Schur block
+
+    runs = {"factor_solve": [], "schur": []}
+    for _ in range(repeat):
+        S1, _, c1 = _cpu_wall(factor_solve)
+        runs["factor_solve"].append(c1)
+        S2, _, c2 = _cpu_wall(schur)
+        runs["schur"].append(c2)
+    rec.update(factor_solve_cpu_s=min(runs["factor_solve"]), schur_cpu_s=min(runs["schur"]), runs=runs,
+               schur_rel_diff=float(np.abs(S2 - S1).max() / np.abs(S1).max()))
+    rec["time_s"] = rec["cpu_s"] = rec["factor_solve_cpu_s"]
+
+
+def _hbm_iter(model, rec: dict, repeat: int) -> None:
+    """Full HBM (H = ``H``): ``ForcedResponseProblem`` setup, then ``repeat`` Newton iterations
+    (``residual`` + ``newton.default_linear_solver``, i.e. ``J.factorize().solve(r)``) near the
+    linear guess at w = 1.5 moved by one Newton step (contacts active), each at a frequency
+    shifted by 1 % so that every harmonic block is factorised again, as in a corrector step;
+    wall and CPU time of each iteration."""
+    import numpy as np
+
+    import femodes as fm
+    from femodes.solvers import newton
+
+    (pr, ts, cs) = _cpu_wall(lambda: fm.ForcedResponseProblem(model, fm.Harmonics(H)))
+    rec.update(setup_s=ts, setup_cpu_s=cs, unknowns=int(pr.size), backend=fm.sparse_backend_info().indefinite)
+    p0 = 1.5
+    x = pr.initial_guess(p0)
+    r, J, _ = pr.residual(x, p0)
+    x = x - newton.default_linear_solver(J, r)
+    walls, cpus, res_w, sol_w = [], [], [], []
+    for i in range(repeat):
+        p = p0 * (1.0 + 0.01 * (i + 1))
+        w0, c0 = time.perf_counter(), time.process_time()
+        r, J, _ = pr.residual(x, p)
+        w1 = time.perf_counter()
+        dx = newton.default_linear_solver(J, r)
+        walls.append(time.perf_counter() - w0)
+        cpus.append(time.process_time() - c0)
+        res_w.append(w1 - w0)
+        sol_w.append(walls[-1] - res_w[-1])
+    P = np.asarray(pr.unpack(x, p0).P)
+    rec.update(iteration_s=walls, iteration_cpu_s=cpus, residual_s=res_w, solve_s=sol_w,
+               iteration_median_s=float(np.median(walls)), iteration_cpu_median_s=float(np.median(cpus)),
+               time_s=float(np.median(walls)), cpu_s=float(np.median(cpus)),
+               contact_active=bool(P.size and np.max(np.abs(P)) > 0),
+               step_norm=float(np.linalg.norm(dx)))
+
+
+#: Half side of the square contact pad centred on the tip face of the pipeline's box (section 0.1 x 0.1):
+#: (0.8 n + 1)^2 P2 nodes, 169 at n = 16 (1.05e6 DOFs).
+PAD_HALF = 0.02
+
+
+def pad_box(size: int, geometry: str = "box3d"):
+    """``fm.box_mesh`` of box3d at ``size`` with one more boundary, ``"pad"``: the facets of the tip
+    face whose midpoints lie in the square of half side :data:`PAD_HALF` centred on it. ``plate3d``:
+    the plate 1 x 0.2 x 0.02 (nx = 5 n, ny = n, nz = 4), its pad the band ``|y - 0.1| <= PAD_HALF``
+    of the tip face through the thickness."""
+    import numpy as np
+
+    import femodes as fm
+
+    tol = 1e-9
+    if geometry == "plate3d":
+        mesh = fm.box_mesh(1.0, 0.2, 0.02, 5 * size, size, 4)
+        return mesh.with_boundaries({"pad": lambda x: (np.abs(x[0] - 1.0) < tol)
+                                     & (np.abs(x[1] - 0.1) <= PAD_HALF + tol)})
+    mesh = fm.box_mesh(1.0, 0.1, 0.1, 10 * size, size, size)
+    return mesh.with_boundaries({"pad": lambda x: (np.abs(x[0] - 1.0) < tol) & (np.abs(x[1] - 0.05) <= PAD_HALF + tol)
+                                 & (np.abs(x[2] - 0.05) <= PAD_HALF + tol)})
+
+
+def _vm_hwm_mib() -> float:
+    """Peak resident memory of this process since the last :func:`_reset_hwm` (VmHWM)."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _vm_rss_mib() -> float:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _reset_hwm() -> None:
+    """Set VmHWM to the current RSS (Linux: ``5`` to ``/proc/self/clear_refs``), so that each stage
+    reports its own peak."""
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
+
+
+def pipeline(size: int, rec: dict, geometry: str = "box3d") -> None:
+    """From nothing to a Craig-Bampton model, in one process, each stage timed (wall and CPU) with
+    its peak resident memory (VmHWM reset at its start) and the resident memory after it:
+
+    ``mesh``      :func:`pad_box` (``fm.box_mesh``, P2 tetrahedra once ``fm.solid`` numbers them);
+    ``assembly``  ``fm.solid(mesh, E = rho = 1, nu = 0.3, clamped="left", order=2)``;
+    ``contact``   ``with_damping(beta=0.02)``, one ``UnilateralContact`` per node of "pad"
+                  (gap 0.01, normal +x) and a ``HarmonicForce`` on the same nodes (their u_x);
+    ``cb``        ``fm.craig_bampton(model, CB_MODES)`` (kept: the pad's u_x).
+    """
+    import gc
+
+    import femodes as fm
+
+    stages = rec.setdefault("stages", {})
+    state: dict = {}
+
+    def stage(name, fn):
+        gc.collect()
+        _reset_hwm()
+        rss0 = _vm_rss_mib()
+        w, c = time.perf_counter(), time.process_time()
+        fn()
+        stages[name] = {"wall_s": time.perf_counter() - w, "cpu_s": time.process_time() - c,
+                        "rss_before_mib": rss0, "peak_mib": _vm_hwm_mib(), "rss_after_mib": _vm_rss_mib()}
+        print(f"pipeline {name}: {stages[name]}", file=sys.stderr, flush=True)
+
+    def mesh():
+        state["mesh"] = pad_box(size, geometry)
+
+    def assembly():
+        state["solid"] = fm.solid(state.pop("mesh"), fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left", order=2)
+
+    def contact():
+        state["model"] = (state.pop("solid").with_damping(beta=0.02)
+                          .with_contact(fm.UnilateralContact(at="pad", gap=0.01, direction=(1.0, 0.0, 0.0)))
+                          .with_forcing(fm.HarmonicForce(at=("pad", "u_x"), amplitude=1e-5)))
+
+    def cb():
+        state["rom"] = fm.craig_bampton(state["model"], CB_MODES)
+
+    stage("mesh", mesh)
+    stage("assembly", assembly)
+    stage("contact", contact)
+    model = state["model"]
+    rec.update(N=int(model.n_dofs), nnz_K=int(model.K.nnz), n_contacts=int(model.n_contacts),
+               backend=fm.sparse_backend_info().positive_definite)
+    stage("cb", cb)
+    rom = state["rom"]
+    rec.update(n_reduced=int(rom.n_dofs), interface_omega_1=float(rom.interface_omega[0]))
+    rec["time_s"] = sum(v["wall_s"] for v in stages.values())
+    rec["cpu_s"] = sum(v["cpu_s"] for v in stages.values())
+    rec["peak_mib"] = max(v["peak_mib"] for v in stages.values())
+
+
 #: Sources whose version a measurement depends on (others edit the checkout meanwhile): their
 #: SHA-1 prefixes are stored with every run.
 CODE_FILES = ("femodes/hbm/linsolve/blocks.py", "femodes/hbm/linsolve/factors.py", "femodes/hbm/system.py",
-              "femodes/fe/solid.py", "femodes/eigen.py", "femodes/reduction.py", "femodes/model.py", "femodes/fe/redistribution.py")
+              "femodes/fe/solid.py", "femodes/eigen.py", "femodes/reduction.py", "femodes/model/structural.py",
+              "femodes/fe/redistribution.py", "femodes/sparse_direct.py", "femodes/fe/assembly.py")
 
 
 def code_versions() -> dict:
@@ -437,7 +710,9 @@ def child(spec: dict) -> dict:
     geometry, size, stage = spec["geometry"], spec["size"], spec["stage"]
     budget, repeat = float(spec["budget"]), int(spec["repeat"])
     try:
-        if stage == "assembly":
+        if stage == "pipeline":
+            pipeline(size, rec, geometry)
+        elif stage == "assembly":
             times, solid_s, contact_s = [], [], []
             for _ in range(repeat):
                 r: dict = {}
@@ -462,9 +737,17 @@ def child(spec: dict) -> dict:
                 rec.update(time_s=med, times=times, omega=[float(w) for w in modes.omega])
             elif stage == "cb":
                 del plain
-                med, times, rom = _repeat(lambda: fm.craig_bampton(model, CB_MODES), budget, repeat)
-                rec.update(time_s=med, times=times, n_reduced=int(rom.n_dofs),
-                           interface_omega_1=float(rom.interface_omega[0]))
+                walls, cpus = [], []
+                for _ in range(repeat):
+                    rom = None
+                    rom, w, c = _cpu_wall(lambda: fm.craig_bampton(model, CB_MODES))
+                    walls.append(w)
+                    cpus.append(c)
+                    if sum(walls) + w > budget:
+                        break
+                rec.update(time_s=min(walls), times=walls, cpu_s=min(cpus), cpu_times=cpus, n_reduced=int(rom.n_dofs),
+                           interface_omega_1=float(rom.interface_omega[0]),
+                           backend=fm.sparse_backend_info().positive_definite)
             elif stage == "hbm_setup":
                 del plain
                 _hbm_setup(model, rec, budget, repeat)
@@ -472,6 +755,15 @@ def child(spec: dict) -> dict:
                 del plain
                 _floor(model, stage.split(":", 1)[1], rec, budget, repeat)
                 rec["time_s"] = rec["block_s"]
+            elif stage.startswith("cb_floor:"):
+                del plain
+                _cb_floor(model, stage.split(":", 1)[1], rec, repeat)
+            elif stage == "hbm_iter":
+                del plain
+                _hbm_iter(model, rec, repeat)
+            elif stage == "block_floor":
+                del plain
+                _block_floor(model, rec, repeat)
             else:
                 raise ValueError(f"unknown stage {stage!r}")
     except MemoryError as exc:
@@ -652,6 +944,9 @@ def main(argv=None) -> int:
                     help="folder for the pickled models of one size (removed after its last stage)")
     ap.add_argument("--force", action="store_true", help="rerun runs already in the results")
     ap.add_argument("--report", action="store_true", help="print the tables and fits of the saved results")
+    ap.add_argument("--issue38", action="store_true",
+                    help="with --report: the tables of README_solids_scale.md's issue-38 section (cb against "
+                         "cb_floor, hbm_iter, block_floor, pipeline; --before: the cb runs of the code before)")
     ap.add_argument("--before", type=Path, default=None,
                     help="with --report: also compare floor:femodes and hbm_full with the runs in this file")
     args = ap.parse_args(argv)
@@ -661,6 +956,9 @@ def main(argv=None) -> int:
         return 0
     if args.report:
         doc = load_results(args.json)
+        if args.issue38:
+            print(report38(doc, load_results(args.before) if args.before else None))
+            return 0
         print(report(doc))
         if args.before:
             print(compare(load_results(args.before), doc))
@@ -799,6 +1097,85 @@ def report(doc: dict) -> str:
                              f"{_fmt(r.get('solve_median_s'))} | {_fmt(r.get('setup_s'))} | "
                              f"{_fmt(r.get('peak_mib'), '{:.0f}')} |")
     return "\n".join(lines)
+
+
+def report38(doc: dict, before: dict | None = None) -> str:
+    """The issue-38 tables: Craig-Bampton against its back-end floor, full HBM per Newton iteration
+    with MUMPS' own cost of a block, the pipeline from mesh to Craig-Bampton, and fitted exponents
+    (CPU time)."""
+    runs = [r for r in doc.get("runs", []) if r["geometry"] == "box3d"]
+    old = {r["size"]: r for r in (before or {}).get("runs", []) if r["stage"] == "cb" and not r.get("error")}
+
+    def by(stage):
+        return {r["size"]: r for r in runs if r["stage"] == stage and not r.get("error")}
+    cb, ch, mu = by("cb"), by("cb_floor:cholmod"), by("cb_floor:mumps")
+    lines = ["\n#### Craig-Bampton (20 modes) against the back-end's own cost, CPU s (best of the repeats)\n",
+             "| size | N | n_b | cb before | cb | CHOLMOD: factor + n_b solve + eigsh | MUMPS: same | cb / best floor "
+             "| cb before / best floor | peak cb / floor [MiB] |",
+             "|" + "---|" * 10]
+    fit = {"cb": [], "floor": []}
+    for size in sorted(set(cb) | set(ch)):
+        c, h, m, o = cb.get(size), ch.get(size), mu.get(size), old.get(size)
+        floors = [r for r in (h, m) if r]
+        best = min(floors, key=lambda r: r["cpu_s"]) if floors else None
+
+        def fl(r):
+            return "-" if r is None else (f"{r['cpu_s']:.3g} = {r['factor_cpu_s']:.3g} + {r['solve_nb_cpu_s']:.3g} "
+                                          f"+ {r['eigen_cpu_s']:.3g}")
+        N = (c or h or {}).get("N")
+        ratio = c["cpu_s"] / best["cpu_s"] if c and best else None
+        ratio_old = o["cpu_s"] / best["cpu_s"] if o and best and o.get("cpu_s") else None
+        lines.append(f"| {size} | {N} | {(h or {}).get('n_b', '-')} | {_fmt(o.get('cpu_s') if o else None)} | "
+                     f"{_fmt(c['cpu_s'] if c else None)} | {fl(h)} | {fl(m)} | {_fmt(ratio, '{:.2f}')} | "
+                     f"{_fmt(ratio_old, '{:.2f}')} | {_fmt(c.get('peak_mib') if c else None, '{:.0f}')} / "
+                     f"{_fmt(best.get('peak_mib') if best else None, '{:.0f}')} |")
+        if c and N:
+            fit["cb"].append((N, c["cpu_s"]))
+        if best and N:
+            fit["floor"].append((N, best["cpu_s"]))
+    lines.append("\nfitted CPU exponents: cb N^" + _fmt(_slope(fit["cb"]), "{:.2f}") + ", best floor N^"
+                 + _fmt(_slope(fit["floor"]), "{:.2f}"))
+    hb, bf = by("hbm_iter"), by("block_floor")
+    if hb:
+        lines += ["\n#### Full HBM (H = 5), one Newton iteration (residual + factorisations + solve)\n",
+                  "| size | N | unknowns | back-end | iteration CPU [s] | iteration wall [s] | MUMPS complex block: "
+                  "factor + n_b solves + Schur [CPU s] | same by MUMPS' Schur option [CPU s] | peak [MiB] | load |",
+                  "|" + "---|" * 10]
+        pts = []
+        for size in sorted(hb):
+            r, b = hb[size], bf.get(size)
+            lines.append(f"| {size} | {r.get('N')} | {r.get('unknowns')} | {r.get('backend')} | "
+                         f"{_fmt(r['iteration_cpu_median_s'])} | {_fmt(r['iteration_median_s'])} | "
+                         f"{_fmt(b['factor_solve_cpu_s'] if b else None)} | {_fmt(b['schur_cpu_s'] if b else None)} | "
+                         f"{_fmt(r.get('peak_mib'), '{:.0f}')} | {_fmt((r.get('load_before') or [None])[0], '{:.1f}')} |")
+            pts.append((r.get("N"), r["iteration_cpu_median_s"]))
+        lines.append("\nfitted CPU exponent of the iteration: N^" + _fmt(_slope(pts), "{:.2f}"))
+    for geometry in ("box3d", "plate3d"):
+        pl = {r["size"]: r for r in doc.get("runs", []) if r["geometry"] == geometry and r["stage"] == "pipeline"
+              and not r.get("error")}
+        lines += _pipeline_table(geometry, pl)
+    return "\n".join(lines)
+
+
+def _pipeline_table(geometry: str, pl: dict) -> list:
+    """The pipeline's table (:func:`report38`) of one geometry."""
+    lines = []
+    if pl:
+        names = ("mesh", "assembly", "contact", "cb")
+        lines += [f"\n#### {geometry}: from mesh to Craig-Bampton in one process: CPU s / wall s / peak RSS MiB per stage\n",
+                  "| size | N | contacts | n_reduced | " + " | ".join(names) + " | total CPU / wall [s] | load |",
+                  "|" + "---|" * 10]
+        fits = {k: [] for k in names}
+        for size in sorted(pl):
+            r = pl[size]
+            st = r["stages"]
+            cells = [f"{st[k]['cpu_s']:.3g} / {st[k]['wall_s']:.3g} / {st[k]['peak_mib']:.0f}" for k in names]
+            lines.append(f"| {size} | {r['N']} | {r['n_contacts']} | {r['n_reduced']} | " + " | ".join(cells)
+                         + f" | {r['cpu_s']:.3g} / {r['time_s']:.3g} | {_fmt((r.get('load_before') or [None])[0], '{:.1f}')} |")
+            for k in names:
+                fits[k].append((r["N"], st[k]["cpu_s"]))
+        lines.append("\nfitted CPU exponents: " + ", ".join(f"{k} N^{_fmt(_slope(v), '{:.2f}')}" for k, v in fits.items()))
+    return lines
 
 
 def _cell(r, fmt) -> str:

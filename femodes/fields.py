@@ -122,7 +122,7 @@ def _solid_cells(fe: Any) -> tuple[str, np.ndarray]:
     quadratic VTK cell; its edge/face/centre nodes are found among the cell's nodes as the ones
     nearest to the means of the vertices that define them (exact for straight-sided cells).
     """
-    mesh, basis, nodal = fe.mesh, fe.basis, np.asarray(fe.nodal)
+    mesh, nodal = fe.mesh, np.asarray(fe.nodal)
     for cls, types, perm in _CELL_TYPES:
         if isinstance(mesh, getattr(skfem, cls)):
             break
@@ -137,7 +137,7 @@ def _solid_cells(fe: Any) -> tuple[str, np.ndarray]:
     node_of_full[nodal] = np.arange(nodal.shape[1])[None, :]
     comp_of_full = np.empty(fe.n_full, dtype=np.int64)
     comp_of_full[nodal] = np.arange(nodal.shape[0])[:, None]
-    edofs = np.asarray(basis.element_dofs)
+    edofs = np.asarray(fe.element_dofs)  # without building the basis (fe.basis: large meshes)
     candidates = node_of_full[edofs[comp_of_full[edofs[:, 0]] == 0]].T  # (n_cells, n_local_nodes)
     X = np.asarray(fe.node_coordinates, dtype=float).T  # (n_nodes, dim)
     higher = np.empty((vertices.shape[0], len(VTK_QUADRATIC_NODES[cell_type])), dtype=np.int64)
@@ -248,7 +248,7 @@ def tributary_measure(model: StructuralModel, boundary: str) -> tuple[np.ndarray
         raise ValueError(f"tributary_measure: unknown boundary {boundary!r}; the mesh has {known}")
     facets = np.asarray(fe.mesh.boundaries[boundary], dtype=np.int64)
     nodes = np.asarray(groups[boundary], dtype=np.int64)
-    fb = skfem.FacetBasis(fe.mesh, fe.basis.elem, facets=facets)
+    fb = skfem.FacetBasis(fe.mesh, fe.element, facets=facets)
     diag = _boundary_mass.assemble(fb).diagonal()[np.asarray(fe.nodal)[0, nodes]]
     total = float(_boundary_length.assemble(fb)) * float(fe.thickness)
     return nodes, diag * (total / diag.sum())

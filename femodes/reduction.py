@@ -197,14 +197,28 @@ def _reduction_basis(K, M, kept: np.ndarray, interior: np.ndarray, n_modes: int)
     T[kept, np.arange(nB)] = 1.0
     omega_i = np.zeros(0)
     if nI:
-        KII = K[interior][:, interior].tocsc()
+        KI = K[interior]  # the interior rows once, for K_II and K_IB
+        KII = KI[:, interior].tocsc()
+        KIB = KI[:, kept].tocsc()
+        del KI
         MII = M[interior][:, interior].tocsc()
-        KIB = K[interior][:, kept].toarray()
         lu = _factor_interior(KII)
-        T[interior, :nB] = _constraint_modes(lu, KIB)
+        # the constraint modes in blocks of columns (PSI_BLOCK_BYTES): K_IB and Psi are n_I x n_B
+        # dense, 1.4 GB each at 1e6 DOFs and 169 kept DOFs, held next to the factor
+        step = max(16, int(PSI_BLOCK_BYTES // (8 * nI)))
+        for c0 in range(0, nB, step):
+            cols = slice(c0, min(nB, c0 + step))
+            # Fortran order: the column layout the back-ends solve in, so no copy is made for them
+            T[interior, cols] = _constraint_modes(lu, KIB[:, cols].toarray(order="F"))
+        del KIB
         if n_modes:
             T[interior, nB:], omega_i = _fixed_interface_modes(KII, MII, lu, n_modes)
     return T, omega_i
+
+
+#: Bytes of the block of constraint modes (and of the ``K_IB`` columns it solves for) formed at a
+#: time; the back-ends' block solves read the factor once per block.
+PSI_BLOCK_BYTES = 2**29
 
 
 def _factor_interior(KII) -> Any:
@@ -212,7 +226,9 @@ def _factor_interior(KII) -> Any:
     positive definite: CHOLMOD where installed); ValueError if singular, warning if
     ill-conditioned."""
     try:
-        lu = factorize(KII, positive_definite=True)
+        # symmetric: a StructuralModel's K is (checked at construction), so the exact test of
+        # factorize (a transpose and a difference of K_II) is not needed
+        lu = factorize(KII, positive_definite=True, symmetric=True)
     except RuntimeError as exc:
         raise ValueError(
             "craig_bampton: the interior stiffness K_II is singular: the structure is not restrained when the "
@@ -237,7 +253,8 @@ def _factor_interior(KII) -> Any:
 
 def _constraint_modes(lu: Any, KIB: np.ndarray) -> np.ndarray:
     """Static constraint modes ``Psi = -K_II^-1 K_IB``."""
-    psi = -lu.solve(KIB)
+    psi = lu.solve(KIB)
+    np.negative(psi, out=psi)
     if not np.all(np.isfinite(psi)):
         raise ValueError("craig_bampton: the interior stiffness K_II is singular (non-finite constraint modes)")
     return psi
@@ -310,25 +327,48 @@ def _project(A, T: np.ndarray, n_kept: int, lowrank: Any = None) -> sp.csr_matri
     Entries below :data:`ZERO_ULPS` x eps x that scale are dropped, in the blocks where exact
     zeros are expected (mode-mode and kept-mode; the first ``n_kept`` columns of ``T`` are the
     constraint modes): the kept-kept block is a Schur complement whose genuine entries can be
-    far below the first scale. The round-off measured on reduced beams and bars under OpenBLAS's
-    Haswell, SkylakeX, Sandybridge and Prescott kernels stays below 16 of it, the smallest genuine
-    coupling of those models above 1.8e4 of it (a Rayleigh damping's mass part on a fine beam)."""
-    AT = A @ T
-    B = abs(A) @ np.abs(T)
+    far below the first scale, so the first scale is formed for the mode columns only
+    (``|A| |T_m|``: ``n_modes`` columns instead of all of them; ``|A|`` is symmetric, as the
+    matrices of a :class:`StructuralModel` are, so ``S`` is too). The round-off measured on
+    reduced beams and bars under OpenBLAS's Haswell, SkylakeX, Sandybridge and Prescott kernels stays below 16 of it, the smallest genuine
+    coupling of those models above 1.8e4 of it (a Rayleigh damping's mass part on a fine beam).
+
+    The products are summed over blocks of rows (:data:`PROJECT_BLOCK_BYTES`), so no
+    ``n x width`` array besides ``T`` is held: at 1e6 DOFs and 300 kept DOFs each is 2.4 GB."""
+    A = sp.csr_matrix(A)
+    n, width = T.shape
+    Tm = np.abs(T[:, n_kept:])
+    Bm = abs(A) @ Tm  # |A| |T_m|, n x n_modes
+    UT = None
     if lowrank is not None:
         UT = lowrank.U.T @ T
-        AT = AT + lowrank.U @ (lowrank.d[:, None] * UT)
-        B = B + np.abs(lowrank.U) @ (np.abs(lowrank.d)[:, None] * np.abs(UT))
-    R = T.T @ AT
+        Bm += np.abs(lowrank.U) @ (np.abs(lowrank.d)[:, None] * np.abs(UT[:, n_kept:]))
+    del Tm
+    R = np.zeros((width, width))
+    Sm = np.zeros((width, width - n_kept))
+    step = max(256, int(PROJECT_BLOCK_BYTES // (8 * max(width, 1))))
+    for r0 in range(0, n, step):
+        rows = slice(r0, min(n, r0 + step))
+        Tr = T[rows]
+        R += Tr.T @ (A[rows] @ T)
+        Sm += np.abs(Tr).T @ Bm[rows]
+    del Bm
+    if UT is not None:
+        R += UT.T @ (lowrank.d[:, None] * UT)
     R = 0.5 * (R + R.T)
-    S = np.abs(T).T @ B
+    Sm[n_kept:] = 0.5 * (Sm[n_kept:] + Sm[n_kept:].T)
     d = np.sqrt(np.abs(np.diag(R)))
-    scale = np.maximum(0.5 * (S + S.T), np.outer(d, d))
-    zero = np.abs(R) <= ZERO_ULPS * np.finfo(float).eps * scale
-    zero[:n_kept, :n_kept] = False
-    np.fill_diagonal(zero, False)
-    R[zero] = 0.0
+    scale = np.maximum(Sm, np.outer(d, d[n_kept:]))
+    Rm = R[:, n_kept:]
+    zero = np.abs(Rm) <= ZERO_ULPS * np.finfo(float).eps * scale
+    zero[n_kept + np.arange(width - n_kept), np.arange(width - n_kept)] = False  # the diagonal
+    Rm[zero] = 0.0
+    R[n_kept:, :] = Rm.T  # the same entries of the symmetric half
     return sp.csr_matrix(R)
+
+
+#: Bytes of the ``rows x width`` block of ``A T`` that :func:`_project` forms at a time.
+PROJECT_BLOCK_BYTES = 32 * 2**20
 
 
 #: Multiple of eps times an entry's round-off scale (:func:`_project`) below which an entry of a

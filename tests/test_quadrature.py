@@ -190,3 +190,28 @@ def test_group_weights_from_the_scalar_element_equal_the_vector_elements(kind, o
         b = _first_component.assemble(skfem.FacetBasis(mesh, fe.basis.elem, facets=mesh.boundaries[name]))
         w = b[fe.nodal[0, nodes]]
         np.testing.assert_allclose(model.dofmap.group_weights[name], w / w.sum(), rtol=0, atol=64 * EPS)
+
+
+@pytest.mark.parametrize("hexahedra", [False, True])
+def test_assembly_in_blocks_equals_one_assembly(monkeypatch, hexahedra):
+    # a large mesh is assembled in blocks of elements (femodes.fe.assembly.assemble_blocks); forced
+    # here on a small one: the same K and M to round-off, the same DOFs, and a basis built on demand
+    import pickle
+
+    from femodes.fe import checks
+
+    mesh = fm.box_mesh(1.0, 0.1, 0.1, 12, 2, 2, hexahedra=hexahedra)
+    one = fm.solid(mesh, MAT, clamped="left", order=2)
+    monkeypatch.setattr(checks, "ASSEMBLY_BLOCK_BYTES", 3e6)
+    assert checks.assembly_block(mesh, one.fe.element) < mesh.nelements
+    blocks = fm.solid(mesh, MAT, clamped="left", order=2)
+    for name in ("K", "M"):
+        A, B = getattr(one, name), getattr(blocks, name)
+        assert abs(A - B).max() <= 8 * EPS * abs(A).max()
+    np.testing.assert_array_equal(one.fe.doflocs, blocks.fe.doflocs)
+    np.testing.assert_array_equal(one.fe.element_dofs, blocks.fe.element_dofs)
+    assert blocks.dofmap.labels == one.dofmap.labels
+    contact = blocks.with_contact(fm.UnilateralContact(at="right", gap=0.01, direction=(1.0, 0.0, 0.0)))
+    assert "_basis" not in blocks.fe.__dict__  # nothing above needed the shape functions of all elements
+    assert blocks.fe.basis.X.shape == one.fe.basis.X.shape  # built on first use, with the mass rule
+    assert "_basis" not in pickle.loads(pickle.dumps(contact)).fe.__dict__

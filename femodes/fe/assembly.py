@@ -25,7 +25,35 @@ import skfem
 from ..model import DofMap, StructuralModel
 from .quadrature import orders
 
-__all__ = ["FEInfo", "element_property", "build_fe_model", "checked_basis", "stiffness_basis", "mass_basis"]
+__all__ = ["FEInfo", "BasisRecipe", "element_property", "build_fe_model", "checked_basis", "stiffness_basis", "mass_basis",
+           "assemble_blocks"]
+
+
+@dataclass(frozen=True)
+class BasisRecipe:
+    """How to build a model's scikit-fem basis when it is asked for (:attr:`FEInfo.basis`).
+
+    A mesh assembled in blocks (:func:`assemble_blocks`) never holds the shape functions of all
+    its elements at once: at 1e6 P2 DOFs they take 8 GB. The model keeps what its outputs need
+    without them (the global DOF numbering ``dofs`` and the DOF locations ``doflocs``) and this
+    recipe (the element and the quadrature of the mass form) for the full basis.
+    """
+
+    elem: Any
+    intorder: int | None
+    dofs: Any
+    doflocs: np.ndarray
+
+    @property
+    def N(self) -> int:
+        return int(self.dofs.N)
+
+    @property
+    def nodal_dofs(self) -> np.ndarray:
+        return self.dofs.nodal_dofs
+
+    def build(self, mesh: Any) -> Any:
+        return checked_basis(mesh, self.elem, "FEInfo.basis", intorder=self.intorder, dofs=self.dofs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,7 +66,9 @@ class FEInfo:
         ``"bar"`` (axial displacement along the axis), ``"beam"`` (transverse displacement) or
         ``"solid"`` (displacement vector ``u_x, u_y(, u_z)`` of a 2-D/3-D mesh).
     mesh : skfem.Mesh
-    basis : skfem.Basis
+    basis_source : skfem.Basis or BasisRecipe
+        The basis of the mass form, or (meshes assembled in blocks) how to build it;
+        :attr:`basis` builds it on first use.
     free : ndarray
         Full FE DOF index of each model DOF.
     n_full : int
@@ -57,7 +87,7 @@ class FEInfo:
 
     kind: str
     mesh: Any
-    basis: Any
+    basis_source: Any
     free: np.ndarray
     n_full: int
     nodal: np.ndarray
@@ -69,6 +99,39 @@ class FEInfo:
     def __post_init__(self):
         if self.node_coordinates is None:
             object.__setattr__(self, "node_coordinates", np.asarray(self.mesh.p))
+
+    @property
+    def basis(self) -> Any:
+        """The scikit-fem basis of the mass form (with its quadrature), built on first use for a
+        mesh assembled in blocks (all elements' shape functions: large on large meshes)."""
+        if not isinstance(self.basis_source, BasisRecipe):
+            return self.basis_source
+        built = self.__dict__.get("_basis")
+        if built is None:
+            built = self.basis_source.build(self.mesh)
+            object.__setattr__(self, "_basis", built)
+        return built
+
+    @property
+    def element(self) -> Any:
+        """The scikit-fem element (``basis.elem``), without building the basis."""
+        return self.basis_source.elem
+
+    @property
+    def element_dofs(self) -> np.ndarray:
+        """``(n_local, n_elements)`` full DOF of each local function (``basis.element_dofs``)."""
+        src = self.basis_source
+        return src.dofs.element_dofs if isinstance(src, BasisRecipe) else src.element_dofs
+
+    @property
+    def doflocs(self) -> np.ndarray:
+        """``(dim, n_full)`` location of every full DOF (``basis.doflocs``)."""
+        return self.basis_source.doflocs
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state.pop("_basis", None)  # rebuilt from the recipe where needed (it may be GBs)
+        return state
 
     @property
     def coordinates(self) -> np.ndarray:
@@ -125,6 +188,95 @@ def mass_basis(stiffness: Any, owner: str) -> Any:
         return stiffness
     return checked_basis(stiffness.mesh, stiffness.elem, owner, intorder=o.mass, mapping=stiffness.mapping,
                          dofs=stiffness.dofs)
+
+
+def assemble_blocks(mesh: Any, element: Any, owner: str, stiffness: tuple, mass: tuple) -> tuple:
+    """``K``, ``M`` and the model's basis (or its :class:`BasisRecipe`): each form assembled by
+    scikit-fem with the quadrature of :func:`stiffness_basis` / :func:`mass_basis`.
+
+    ``stiffness`` and ``mass`` are ``(form, coefficients)``: a ``skfem.BilinearForm`` and its
+    keyword arguments, each a number or one value per element (expanded to the quadrature points
+    by :func:`quad_field`).
+
+    A mesh whose scikit-fem work (:func:`femodes.fe.checks.assembly_block`: the shape functions
+    at the quadrature points and the triplets of the element matrices) exceeds
+    :data:`femodes.fe.checks.ASSEMBLY_BLOCK_BYTES` is assembled in blocks of consecutive
+    elements, each one scikit-fem assembly of the same forms on ``Basis(..., elements=block)``,
+    and the blocks' matrices are summed. The peak memory is then that of one block plus the
+    assembled matrices, not the 8 GB of shape functions and 5 GB of triplets of a whole 1e6-DOF P2
+    mesh (and the time the same: the work per element does not change). Only the order in which
+    the contributions of elements of different blocks to one entry are summed differs from one
+    assembly of the whole mesh (round-off). One block: exactly ``form.assemble(Basis(mesh, ...))``.
+    """
+    from .checks import assembly_block
+
+    n_el = int(mesh.nelements)
+    block = assembly_block(mesh, element)
+    (kform, kcoef), (mform, mcoef) = stiffness, mass
+    if block >= n_el:
+        kbasis = stiffness_basis(mesh, element, owner)
+        K = kform.assemble(kbasis, **_coefficients(kbasis, kcoef, None))
+        basis = mass_basis(kbasis, owner)
+        del kbasis  # one basis held at a time
+        M = mform.assemble(basis, **_coefficients(basis, mcoef, None))
+        return K, M, basis
+    o = orders(mesh, element)
+    ko, mo = (None, None) if o is None else (o.stiffness, o.mass)
+    mapping = mesh.mapping()
+    # the global numbering and DOF locations (of every element) from the first block's basis
+    first = checked_basis(mesh, element, owner, intorder=mo, mapping=mapping, elements=np.arange(block))
+    dofs, doflocs = first.dofs, np.asarray(first.doflocs)
+    del first
+    # K over all blocks, then M: one matrix's pieces held at a time (P2 tetrahedra: the two forms
+    # take different rules, so each block needs two bases anyway)
+    K = _assemble_in_blocks(mesh, element, owner, kform, kcoef, ko, mapping, dofs, block)
+    M = _assemble_in_blocks(mesh, element, owner, mform, mcoef, mo, mapping, dofs, block)
+    return K, M, BasisRecipe(elem=element, intorder=mo, dofs=dofs, doflocs=doflocs)
+
+
+#: Triplets (COO entries) of blocks gathered before they are summed into the running CSR matrix of
+#: :func:`assemble_blocks`: a few such sums over a 1e6-DOF mesh, and never all its triplets at once.
+SUM_TRIPLETS = 2**24
+
+
+def _assemble_in_blocks(mesh, element, owner, form, coefficients, intorder, mapping, dofs, block) -> sp.csr_matrix:
+    """``form`` assembled block by block (:func:`assemble_blocks`), summed as CSR."""
+    n_el, n = int(mesh.nelements), int(dofs.N)
+    total, pending, count = None, [], 0
+    for e0 in range(0, n_el, block):
+        idx = np.arange(e0, min(n_el, e0 + block))
+        b = checked_basis(mesh, element, owner, intorder=intorder, mapping=mapping, elements=idx, dofs=dofs,
+                          disable_doflocs=True)
+        pending.append(form.assemble(b, **_coefficients(b, coefficients, idx)).tocoo())
+        count += pending[-1].nnz
+        del b
+        if count >= SUM_TRIPLETS or e0 + block >= n_el:
+            part = _sum_blocks(pending, n)
+            total = part if total is None else total + part
+            count = 0
+    return total
+
+
+def _coefficients(basis: Any, coefficients: Mapping, idx: np.ndarray | None) -> dict:
+    """Keyword arguments of a form on ``basis``: per-element values (of the block ``idx``) at its
+    quadrature points, numbers as they are."""
+    out = {}
+    for name, v in coefficients.items():
+        if np.ndim(v) == 0:
+            out[name] = v
+        else:
+            v = np.asarray(v, dtype=float)
+            out[name] = quad_field(basis, v if idx is None else v[idx])
+    return out
+
+
+def _sum_blocks(blocks: list, n: int) -> sp.csr_matrix:
+    """The sum of the blocks' ``n x n`` COO matrices, as CSR (one conversion; duplicates summed)."""
+    rows = np.concatenate([b.row for b in blocks])
+    cols = np.concatenate([b.col for b in blocks])
+    data = np.concatenate([b.data for b in blocks])
+    blocks.clear()
+    return sp.csr_matrix((data, (rows, cols)), shape=(n, n))
 
 
 def _check_assembled(owner: str, mesh: Any, M: sp.spmatrix, K: sp.spmatrix) -> None:
@@ -258,7 +410,7 @@ def build_fe_model(
         node_coordinates=coords,
         displacement=tuple(displacement),
     )
-    fe = FEInfo(kind=kind, mesh=mesh, basis=basis, free=free, n_full=n_full, nodal=nodal, components=tuple(components),
+    fe = FEInfo(kind=kind, mesh=mesh, basis_source=basis, free=free, n_full=n_full, nodal=nodal, components=tuple(components),
                 node_coordinates=coords, **dict(fe_options or {}))
     return StructuralModel(M=_on_free_dofs(M, free), K=_on_free_dofs(K, free), dofmap=dofmap, fe=fe)
 
@@ -362,7 +514,10 @@ def _free_dofs(owner: str, nodal: np.ndarray, n_full: int, constrained: dict, co
 def _on_free_dofs(A: sp.spmatrix, free: np.ndarray) -> sp.csr_matrix:
     """``A`` restricted to the free DOFs and symmetrized to round-off (assembly sums in different orders)."""
     A = A.tocsr()[free][:, free]
-    return (0.5 * (A + A.T)).tocsr()
+    S = (A + A.T).tocsr()
+    del A  # one copy fewer at a time (each is 1 GB at 1e6 P2 DOFs)
+    S.data *= 0.5
+    return S
 
 
 def _dof_labels(coords: np.ndarray, components: tuple, free: np.ndarray, node_dof: np.ndarray, locations: dict) -> list:

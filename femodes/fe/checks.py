@@ -16,7 +16,7 @@ import skfem
 
 from ..solvers.checks import check_memory
 
-__all__ = ["assembly_memory", "check_assembly", "check_element_measures", "outward_normal"]
+__all__ = ["ASSEMBLY_BLOCK_BYTES", "assembly_block", "assembly_memory", "check_assembly", "check_element_measures", "outward_normal"]
 
 #: Bytes per element and per pair of its local DOFs that assembling M and K takes: scikit-fem's
 #: COO triplets (an 8-byte value and two 8-byte indices) for each of the two matrices, twice for
@@ -24,14 +24,20 @@ __all__ = ["assembly_memory", "check_assembly", "check_element_measures", "outwa
 _ASSEMBLY_BYTES_PER_PAIR = 2 * 24 * 2
 
 
-def assembly_memory(mesh: Any, element: Any) -> float:
-    """Bytes that building the basis and assembling M and K of ``mesh`` with ``element`` allocate,
-    estimated from the counts of elements, local DOFs and quadrature points before anything is
-    built: the COO triplets (:data:`_ASSEMBLY_BYTES_PER_PAIR`) and the basis' values and
-    gradients (and second derivatives, Hermite beams) of every local function at every quadrature
-    point of scikit-fem's default rule: 0.9-1.9 times the tracemalloc peak of ``fm.solid`` measured on
-    P1/P2 triangles and tetrahedra and Q1/Q2 hexahedra (tests/test_safeguards.py)."""
-    n_el = int(np.asarray(mesh.t).shape[1])
+#: scikit-fem's work (:func:`assembly_memory` of one block of elements) above which
+#: :func:`femodes.fe.assembly.assemble_blocks` assembles a mesh in blocks of elements. The estimate
+#: is about twice the measured peak, so a block takes about 0.5 GiB: large enough that scikit-fem's
+#: per-call overhead (a Python loop over the pairs of local functions) stays small.
+ASSEMBLY_BLOCK_BYTES = 2**30
+
+#: Bytes per pair of local DOFs of an element that the blocks of one matrix keep until they are
+#: summed: the COO triplets of each block (an 8-byte value and two 4-byte indices), counted once
+#: per element (a bound: pairs shared between elements of a block are stored once).
+_BLOCK_TRIPLET_BYTES = 16
+
+
+def _per_element(mesh: Any, element: Any) -> tuple[int, float]:
+    """(local DOFs, bytes of scikit-fem's work per element) of assembling M and K."""
     nb = int(np.asarray(element.doflocs).shape[0])
     dim = int(np.asarray(mesh.p).shape[0])
     try:  # scikit-fem's default rule: exact for products of two basis functions
@@ -40,7 +46,30 @@ def assembly_memory(mesh: Any, element: Any) -> float:
         n_qp = 27
     hessians = dim * dim if "Hermite" in type(element).__name__ else 0  # second derivatives: beams only
     per_function = n_qp * 8 * dim * (1 + dim + hessians)  # value and gradient of each component
-    return float(n_el) * (nb * nb * _ASSEMBLY_BYTES_PER_PAIR + nb * per_function)
+    return nb, float(nb * nb * _ASSEMBLY_BYTES_PER_PAIR + nb * per_function)
+
+
+def assembly_block(mesh: Any, element: Any) -> int:
+    """Elements per block of :func:`femodes.fe.assembly.assemble_blocks`: all of them when the
+    whole mesh's work fits in :data:`ASSEMBLY_BLOCK_BYTES`, else as many as fit (at least 1)."""
+    return max(1, int(ASSEMBLY_BLOCK_BYTES // _per_element(mesh, element)[1]))
+
+
+def assembly_memory(mesh: Any, element: Any) -> float:
+    """Bytes that building the basis and assembling M and K of ``mesh`` with ``element`` allocate,
+    estimated from the counts of elements, local DOFs and quadrature points before anything is
+    built: the COO triplets (:data:`_ASSEMBLY_BYTES_PER_PAIR`) and the basis' values and
+    gradients (and second derivatives, Hermite beams) of every local function at every quadrature
+    point of scikit-fem's default rule: 0.9-1.9 times the tracemalloc peak of ``fm.solid`` measured on
+    P1/P2 triangles and tetrahedra and Q1/Q2 hexahedra (tests/test_safeguards.py). A mesh
+    assembled in blocks (:func:`assembly_block`) takes one block's work plus the triplets its
+    blocks keep (:data:`_BLOCK_TRIPLET_BYTES`) for the two matrices."""
+    n_el = int(np.asarray(mesh.t).shape[1])
+    nb, per_element = _per_element(mesh, element)
+    block = assembly_block(mesh, element)
+    if block >= n_el:
+        return float(n_el) * per_element
+    return float(block) * per_element + 2.0 * n_el * nb * nb * _BLOCK_TRIPLET_BYTES
 
 
 def check_assembly(mesh: Any, element: Any, owner: str) -> None:

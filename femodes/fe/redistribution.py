@@ -36,7 +36,7 @@ def redistribute_contact_mass(fe, M: sp.spmatrix, dof: int) -> tuple[sp.csr_matr
     """
     M = M.tocsr()  # the model's mass, after earlier redistributions
     n = M.shape[0]
-    pos = np.asarray(fe.basis.doflocs[0])[fe.free]
+    pos = np.asarray(fe.doflocs[0])[fe.free]
     if fe.kind == "beam":
         trans = np.zeros(n, dtype=bool)
         wdofs = fe.nodal[0]

@@ -16,7 +16,7 @@ import skfem
 from skfem.helpers import ddot, div, dot, grad, transpose
 
 from ..model import StructuralModel
-from .assembly import build_fe_model, element_property, mass_basis, quad_field, stiffness_basis, support_names
+from .assembly import assemble_blocks, build_fe_model, element_property, support_names
 from .material import Material
 from .checks import check_assembly, check_element_measures
 from .mesh import named_points
@@ -69,8 +69,9 @@ def _elements(mesh: Any, order: int) -> tuple[int, Any]:
 
 def _lagrange_nodes(basis: Any, dim: int) -> np.ndarray:
     """``(dim, n_nodes)`` full DOF of each component at every Lagrange node, vertices first."""
-    blocks = [np.asarray(basis.nodal_dofs)]
-    for dofs in (basis.edge_dofs if dim == 3 else None, basis.facet_dofs, basis.interior_dofs):
+    d = basis.dofs  # the global numbering (a basis, or the recipe of one: femodes.fe.assembly.BasisRecipe)
+    blocks = [np.asarray(d.nodal_dofs)]
+    for dofs in (d.edge_dofs if dim == 3 else None, d.facet_dofs, d.interior_dofs):
         if dofs is None:
             continue
         dofs = np.asarray(dofs)
@@ -79,7 +80,7 @@ def _lagrange_nodes(basis: Any, dim: int) -> np.ndarray:
             # entities with several nodes come as consecutive groups of dim rows
             blocks.extend(dofs[k:k + dim] for k in range(0, dofs.shape[0], dim))
     nodal = np.hstack(blocks)
-    if nodal.shape[0] != dim or np.unique(nodal).size != basis.N or nodal.size != basis.N:
+    if nodal.shape[0] != dim or np.unique(nodal).size != d.N or nodal.size != d.N:
         raise RuntimeError(f"solid: unexpected DOF layout of {type(basis.elem).__name__}")  # pragma: no cover
     return nodal
 
@@ -97,7 +98,7 @@ def _groups(mesh: Any, basis: Any, scalar: Any, nodal: np.ndarray, node_of_full:
         facets = np.asarray(facets, dtype=np.int64)
         if facets.size == 0:
             continue
-        nodes = np.unique(node_of_full[np.asarray(basis.get_dofs(facets).all())])
+        nodes = np.unique(node_of_full[np.asarray(basis.dofs.get_facet_dofs(facets).all())])
         # int N_k ds has the degree of N_k: exact on flat facets with that rule (femodes.fe.quadrature)
         fb = skfem.FacetBasis(mesh, scalar, facets=facets, intorder=facet_order(mesh, scalar))
         b = _boundary_measure.assemble(fb)
@@ -254,15 +255,14 @@ def solid(
     if plane == "stress":  # sigma_zz = 0 eliminates eps_zz: lambda* = 2 lambda mu / (lambda + 2 mu) = E nu / (1 - nu^2)
         lam = 2.0 * lam * mu / (lam + 2.0 * mu)
     # quadrature exact for K and M on affine elements (femodes.fe.quadrature: Q2 hexahedra 27 points, not 343);
-    # K first, its basis dropped before the mass basis is built (peak memory: one basis)
-    kbasis = stiffness_basis(mesh, skfem.ElementVector(scalar), "solid")
+    # K first, its basis dropped before the mass basis is built (peak memory: one basis); large meshes in
+    # blocks of elements (assemble_blocks: the model then keeps a recipe of its basis, not the basis)
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
-        K = _stiffness.assemble(kbasis, lam=quad_field(kbasis, lam), mu=quad_field(kbasis, mu), t=t)
-        basis = mass_basis(kbasis, "solid")
-        del kbasis
-        M = _mass.assemble(basis, rho=quad_field(basis, [m.rho for m in mats]), t=t)
+        K, M, basis = assemble_blocks(mesh, skfem.ElementVector(scalar), "solid",
+                                      stiffness=(_stiffness, {"lam": lam, "mu": mu, "t": t}),
+                                      mass=(_mass, {"rho": np.array([m.rho for m in mats], dtype=float), "t": t}))
     nodal = _lagrange_nodes(basis, dim)
-    node_of_full = np.empty(basis.N, dtype=int)
+    node_of_full = np.empty(basis.dofs.N, dtype=int)
     node_of_full[nodal] = np.arange(nodal.shape[1])[None, :]
     coords = np.asarray(basis.doflocs)[:, nodal[0]]
     groups, weights = _groups(mesh, basis, scalar, nodal, node_of_full)
