@@ -251,11 +251,11 @@ def frequency_response(
             run_options = dataclasses.replace(run_options, x_scale=_response_scale(problem, span, xs))
         return xs, run_options
 
-    method = stability_options(stability, "frequency_response")
+    stab = StabilityOptions.parse(stability, "frequency_response")
 
     def wrap(res, meta) -> Branch:
         branch = branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span), **meta})
-        return _with_stability(branch, problem, model, method, opts)
+        return _with_stability(branch, problem, model, stab, opts)
 
     description = {"analysis": "frequency_response", "omega": list(span), "harmonics": _harmonics_key(h),
                    "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
@@ -263,7 +263,7 @@ def frequency_response(
     started = time.perf_counter()
     branch = run_continuation(problem, span, opts, "frequency_response", progress, x0=start, wrap=wrap, model=model,
                               checkpoint=checkpoint, description=description)
-    branch = _with_stability(branch, problem, model, method, opts)  # a finished checkpoint saved without it
+    branch = _with_stability(branch, problem, model, stab, opts)  # a finished checkpoint saved without it
     if rtol is None:
         return branch
 
@@ -520,7 +520,7 @@ def nonlinear_mode(
     x0 = problem.linear_guess(e0)
     user_options = options
     options = nonlinear_mode_options(problem, x0, options)
-    method = stability_options(stability, "nonlinear_mode")
+    stab = StabilityOptions.parse(stability, "nonlinear_mode")
 
     def wrap(res, meta) -> Branch:
         if res.status == 5:  # the start failed: say it in the user's terms, not as p = log10(E)
@@ -530,7 +530,7 @@ def nonlinear_mode(
                 f"or raise the harmonics"))
         branch = branch_from_continuation(problem, res, kind="nonlinear mode", model=model,
                                           meta={"mode": int(mode), "energy_span": [e0, e1], **meta})
-        return _with_stability(branch, problem, model, method, options)
+        return _with_stability(branch, problem, model, stab, options)
 
     description = {"analysis": "nonlinear_mode", "mode": int(mode), "energy": [e0, e1], "harmonics": _harmonics_key(h),
                    "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
@@ -539,7 +539,7 @@ def nonlinear_mode(
     branch = run_continuation(problem, span, options, "nonlinear_mode", progress, x0=lambda o: (x0, o), wrap=wrap,
                               model=model, checkpoint=checkpoint, description=description)
     branch = continue_past_grazing(branch, problem, model, past_grazing, e1, options.newton)
-    branch = _with_stability(branch, problem, model, method, options)
+    branch = _with_stability(branch, problem, model, stab, options)
     if rtol is None:
         return branch
 
@@ -550,12 +550,6 @@ def nonlinear_mode(
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection,
                           time_limit=rtol_time_limit(time.perf_counter() - started, error_options),
                           options=error_options)
-
-
-def stability_options(stability: Any, owner: str) -> StabilityOptions | None:
-    """``stability=`` of the analyses: False (none), True (the defaults), a method name or a
-    :class:`~femodes.StabilityOptions`."""
-    return StabilityOptions.parse(stability, owner)
 
 
 def _with_stability(branch: Branch, problem, model: StructuralModel, stability: StabilityOptions | None,

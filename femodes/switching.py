@@ -71,8 +71,7 @@ import math
 import numpy as np
 import scipy.linalg as sla
 
-from .analyses import (branch_from_continuation, frequency_response, frequency_response_options, nonlinear_mode_options,
-                       stability_options)
+from .analyses import branch_from_continuation, frequency_response, frequency_response_options, nonlinear_mode_options
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .results import Bifurcation, Branch
@@ -448,7 +447,7 @@ def _null_directions(aug: _Augmented, z_bp: np.ndarray, za: np.ndarray, zb: np.n
 
 def _switch_at_branch_point(branch: Branch, bif: Bifurcation, span: tuple[float, float], amplitude, options,
                             stability, window: int) -> Branch:
-    method = stability_options(stability, "switch_branch")  # a bad value is refused before the work
+    stab = StabilityOptions.parse(stability, "switch_branch")  # a bad value is refused before the work
     aug = _Augmented(branch)
     w_lo, w_hi = min(span), max(span)
     if not w_lo < bif.omega < w_hi:
@@ -497,9 +496,9 @@ def _switch_at_branch_point(branch: Branch, bif: Bifurcation, span: tuple[float,
     new = branch_from_continuation(aug.problem, res, kind=branch.kind, model=branch.model, meta=meta)
     if not new.success:
         log.warning("switch_branch: %s", new.message)
-    if method is not None:
-        annotate_branch(new, aug.problem, branch.model, method=method.method, tol=method.tol, newton=newton,
-                        locate=method.locate)
+    if stab is not None:
+        annotate_branch(new, aug.problem, branch.model, method=stab.method, tol=stab.tol, newton=newton,
+                        locate=stab.locate)
         _add_branch_points(new, newton)
     new.meta["switched_from"] = {
         "kind": "branch_point", "reported_kind": bif.kind, "omega_hbm": float(u_bp.omega), "omega_reported": float(bif.omega), "index": int(i),

@@ -74,6 +74,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..sparse_direct import factorize
+from .hill_elimination import dense_array, eliminate
 from .hill_reduction import FreeInterfaceReduction
 from .system import HBMSystem
 
@@ -345,17 +346,17 @@ def _dense(J0, J1, J2, base, algebraic=None, vectors=True):
 
             def block(A, r, c):
                 return A[r][:, c]
-        X = _eliminate(block(J0, a, a), block(J0, a, d)) if d.size else None
+        X = eliminate(block(J0, a, a), block(J0, a, d)) if d.size else None
         if X is not None:
-            S0 = _dense_array(block(J0, d, d)) - block(J0, d, a) @ X
-            s, Vd = _dense_pencil(S0, _dense_array(block(J1, d, d)), _dense_array(block(J2, d, d)), base, vectors)
+            S0 = dense_array(block(J0, d, d)) - block(J0, d, a) @ X
+            s, Vd = _dense_pencil(S0, dense_array(block(J1, d, d)), dense_array(block(J2, d, d)), base, vectors)
             if not vectors:
                 return s, None
             V = np.zeros((J0.shape[0], Vd.shape[1]), dtype=complex)
             V[d] = Vd
             V[a] = -X @ Vd
             return s, V
-    return _dense_pencil(_dense_array(J0), _dense_array(J1), _dense_array(J2), base, vectors)
+    return _dense_pencil(dense_array(J0), dense_array(J1), dense_array(J2), base, vectors)
 
 
 #: Hill problems of at most this many unknowns are eliminated with dense arrays (:func:`_dense`):
@@ -363,71 +364,6 @@ def _dense(J0, J1, J2, base, algebraic=None, vectors=True):
 #: unknowns); above it the algebraic block is sliced sparse (a 27-contact blade: 594 of 660, 3 %
 #: nonzeros, which a dense slice and its conversion back to sparse cost 2x the factorisation).
 SMALL = 300
-
-
-def _dense_array(A) -> np.ndarray:
-    return A.toarray() if sp.issparse(A) else np.asarray(A)
-
-
-#: An algebraic block with at most this fraction of nonzeros is factorised sparse (:func:`_eliminate`).
-SPARSE_ELIMINATION_DENSITY = 0.1
-
-
-def _eliminate(Aaa, Aad) -> np.ndarray | None:
-    """``X = Aaa^-1 Aad`` (dense), or None when ``Aaa`` is singular to working precision.
-
-    ``Aaa`` is equilibrated first (rows, then columns, by their largest entry): the kept DOFs'
-    residual stiffness and the contact rows differ by many orders of magnitude, which is scaling,
-    not singularity. Its reciprocal condition number (1-norm, LAPACK's ``dgecon`` on a dense LU,
-    Hager's estimate ``onenormest`` on a sparse one) must exceed ``1e3 eps``. A sparse block (the
-    harmonics of the kept DOFs and contacts couple only through the laws: 3 % nonzeros on a blade
-    with 27 contacts at H = 5) takes SuperLU, 8x faster than the dense LU there."""
-    n = Aaa.shape[0]
-    floor = 1e3 * np.finfo(float).eps
-    if not sp.issparse(Aaa) and n and np.count_nonzero(Aaa) > SPARSE_ELIMINATION_DENSITY * n * n:
-        As = np.asarray(Aaa)  # dense and full enough: no sparse detour
-        with np.errstate(divide="ignore"):
-            r = 1.0 / np.abs(As).max(axis=1)
-            r[~np.isfinite(r)] = 1.0
-            c = 1.0 / np.abs(r[:, None] * As).max(axis=0)
-            c[~np.isfinite(c)] = 1.0
-        As = r[:, None] * As * c[None, :]
-        return _dense_solve(As, r[:, None] * _dense_array(Aad), c, floor)
-    Aaa = sp.csr_matrix(Aaa)
-    absA = abs(Aaa)
-    with np.errstate(divide="ignore"):
-        r = 1.0 / absA.max(axis=1).toarray().ravel()
-        r[~np.isfinite(r)] = 1.0
-        c = 1.0 / (sp.diags(r) @ absA).max(axis=0).toarray().ravel()
-        c[~np.isfinite(c)] = 1.0
-    As = (sp.diags(r) @ Aaa @ sp.diags(c)).tocsc()
-    B = r[:, None] * _dense_array(Aad)
-    norm1 = float(abs(As).sum(axis=0).max()) if n else 0.0
-    if n and As.nnz <= SPARSE_ELIMINATION_DENSITY * n * n:
-        try:
-            # structurally symmetric (kept DOFs and contacts): minimum degree on A + A^T, threshold
-            # pivoting (2.4x faster than COLAMD with partial pivoting on a 27-contact blade, half the fill)
-            lu = spla.splu(As, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options=dict(SymmetricMode=True))
-        except RuntimeError:  # exactly singular
-            return None
-        inv = spla.LinearOperator((n, n), matvec=lu.solve, rmatvec=lambda y: lu.solve(y, trans="T"), dtype=float)
-        rcond = 1.0 / (norm1 * spla.onenormest(inv)) if norm1 else 0.0
-        if not rcond > floor:
-            return None
-        return c[:, None] * lu.solve(B)
-    return _dense_solve(As.toarray(), B, c, floor)
-
-
-def _dense_solve(As: np.ndarray, B: np.ndarray, c: np.ndarray, floor: float) -> np.ndarray | None:
-    """``c * As^-1 B`` by LAPACK, None when ``rcond(As) <= floor``."""
-    try:
-        lu = sla.lu_factor(As, check_finite=False)
-        rcond = sla.lapack.dgecon(lu[0], float(np.abs(As).sum(axis=0).max()), norm="1")[0]
-    except (sla.LinAlgError, ValueError):
-        return None
-    if not rcond > floor:
-        return None
-    return c[:, None] * sla.lu_solve(lu, B, check_finite=False)
 
 
 def _dense_pencil(A0, A1, A2, base, vectors=True):
