@@ -7,6 +7,7 @@ medians of 2-3 repeats. Writes benchmarks/results_stability_cost.json.
 """
 import json
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -16,6 +17,7 @@ sys.path.insert(0, str(HERE.parent / "examples"))
 from threadpoolctl import threadpool_limits  # noqa: E402
 
 import femodes as fm  # noqa: E402
+from _machine import cpu_model  # noqa: E402
 import user_blade_3d as ub  # noqa: E402
 
 def cpu(fn):
@@ -57,5 +59,6 @@ with threadpool_limits(1):
             {"located": True}, reps=3)
     measure("casing backbone H7", lambda st: fm.nonlinear_mode(bc.rom, 1, energy=bc.ENERGY, harmonics=bc.H, options=bc.NNM_OPTIONS, stability=st),
             {"located": True}, reps=3)
-meta = {"machine": open("/proc/loadavg").read().split()[:3]}
+head = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=HERE, capture_output=True, text=True).stdout.strip()
+meta = {"cpu": cpu_model(), "load_average": open("/proc/loadavg").read().split()[:3], "commit": head}
 (HERE / "results_stability_cost.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
