@@ -173,7 +173,7 @@ def child(spec: dict) -> dict:
     if not br.folds:
         return rec
     f = max(br.folds, key=lambda i: amp[i])
-    rec.update(fold_index=int(f), fold_plain=float(br.omega[f]))
+    rec.update(fold_index=int(f), fold_plain=float(br.omega_truncated[f]))
     acc = br.accuracy
     if acc is not None:
         lim = acc.omega_limit

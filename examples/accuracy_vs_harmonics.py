@@ -125,8 +125,8 @@ class _Clock:
 
 def _row(branch, i: int, exact: float, plain: _Clock, estimate: _Clock | None) -> dict:
     """True error of point ``i``, its estimate and extrapolation (NaN if not estimated)."""
-    row = dict(H=branch.harmonics.n_harmonics, omega=float(branch.omega[i]), exact=exact,
-               true=abs(float(branch.omega[i]) / exact - 1.0), points=len(branch),
+    w = float(branch.omega_truncated[i])  # the truncated series' own frequency (branch.omega: the answer)
+    row = dict(H=branch.harmonics.n_harmonics, omega=w, exact=exact, true=abs(w / exact - 1.0), points=len(branch),
                wall_plain=plain.wall, cpu_plain=plain.cpu,
                wall_estimate=np.nan if estimate is None else estimate.wall,
                cpu_estimate=np.nan if estimate is None else estimate.cpu,

@@ -327,7 +327,7 @@ def stability(solution: PeriodicSolution, method: str = "auto", *, tol: float = 
     forced = solution.kind == "forced"
     system = HBMSystem(model if forced else model.without_forcing(), solution.harmonics)
     y = system.join(solution.Q, solution.P)
-    return _point_stability(model, system, y, solution.Q, solution.omega, solution.xi, method, tol, forced)
+    return _point_stability(model, system, y, solution.Q, solution.omega_truncated, solution.xi, method, tol, forced)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -365,7 +365,7 @@ class _Annotator:
 
     def point(self, i: int) -> np.ndarray:
         b = self.branch
-        return self.problem.pack(b.Q[i], b.P[i], b.omega[i], b.xi[i])
+        return self.problem.pack(b.Q[i], b.P[i], b.omega_truncated[i], b.xi[i])
 
     def run(self):
         b = self.branch
@@ -409,7 +409,7 @@ class _Annotator:
 
     def _fold(self, f: int) -> Bifurcation:
         b = self.branch
-        return Bifurcation(kind="fold", index=int(f), omega=float(b.omega[f]), energy=float(b.energy[f]),
+        return Bifurcation(kind="fold", index=int(f), omega=float(b.omega_truncated[f]), energy=float(b.energy[f]),
                            parameter=float(b.parameter[f]), multiplier=complex(1.0), Q=b.Q[f], P=b.P[f], xi=float(b.xi[f]))
 
     def _bracketed(self, i: int, k: int, ra: StabilityResult, rb: StabilityResult, rising: bool) -> Bifurcation:
@@ -418,7 +418,7 @@ class _Annotator:
         j, r = (i + 1, rb) if rising else (i, ra)
         b = self.branch
         crossing = self.crossing(r.multipliers, k)
-        return Bifurcation(kind=_kind(crossing, r.multipliers, not self.forced), index=int(i), omega=float(b.omega[j]),
+        return Bifurcation(kind=_kind(crossing, r.multipliers, not self.forced), index=int(i), omega=float(b.omega_truncated[j]),
                            energy=float(b.energy[j]), parameter=float(b.parameter[j]), multiplier=complex(crossing),
                            Q=np.array(b.Q[j]), P=np.array(b.P[j]), xi=float(b.xi[j]), located=False)
 

@@ -321,11 +321,11 @@ def captured_past_grazing(branch, problem: NonlinearModeProblem, model: Structur
     if energy_max <= 2.0 * eg or branch.energy.max() < 2.0 * eg:
         return None
     above = np.flatnonzero(branch.energy >= 1.5 * eg)
-    shift = np.abs(branch.omega[above] / problem.omega0 - 1.0)
+    shift = np.abs(branch.omega_truncated[above] / problem.omega0 - 1.0)
     if np.max(shift) >= strategy.grazing_shift:
         return None
     i = int(above[-1])
-    x = problem.pack(branch.Q[i], branch.P[i], branch.omega[i], branch.xi[i])
+    x = problem.pack(branch.Q[i], branch.P[i], branch.omega_truncated[i], branch.xi[i])
     f = modal_energy_fractions(problem, x, lm.omega, lm.shapes)
     k = int(np.argmax(f))
     return (f"the energy continuation grazed past grazing: from 1.5 to {branch.energy[i] / eg:.3g} E_g its frequency "

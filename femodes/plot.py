@@ -256,6 +256,7 @@ def frequency_amplitude(branch: Branch, dof: Any, *, ax: Any = None, label: str 
     if mark_folds and branch.folds:
         f = list(branch.folds)
         ax.plot(w[f], amp[f], "x", color="k", ms=8, mew=2, label="fold")
+    _error_bars(ax, branch, w, amp)
     _mark_bifurcations(ax, branch, lambda b: float(amplitude(b.Q[None])[0]), hz)
     ax.set_xlabel(_freq_label(hz))
     ax.set_ylabel(f"amplitude ({dof_label})")
@@ -282,12 +283,28 @@ def _split_by_stability(y: np.ndarray, stable: np.ndarray) -> tuple[np.ndarray, 
     return solid, dashed
 
 
+def _error_bars(ax, branch: Branch, w: np.ndarray, y: np.ndarray) -> None:
+    """With an error estimate: the error bars of the points' frequency (``branch.omega_error``)
+    and of their amplitude (``branch.amplitude_error``), grey, no line of their own in
+    ``ax.lines``; nothing where the errors are unknown."""
+    if branch.omega_error is None or branch.amplitude_error is None:
+        return
+    xerr, yerr = np.abs(w) * branch.omega_error, np.abs(y) * branch.amplitude_error
+    ok = np.isfinite(xerr) & np.isfinite(yerr)
+    if ok.any():
+        ax.errorbar(w[ok], y[ok], xerr=xerr[ok], yerr=yerr[ok], fmt="none", ecolor="0.5", elinewidth=0.8,
+                    label="error bars (frequency, amplitude)")
+
+
 def _mark_bifurcations(ax, branch: Branch, value, hz: bool) -> None:
-    """One marker line per bifurcation kind (folds aside), black, labelled by kind."""
+    """One marker line per bifurcation kind (folds aside), black, labelled by kind. A bifurcation is
+    an orbit of the truncated series; on an error-controlled branch it is moved by its point's
+    correction (``omega - omega_truncated``), so that it sits on the curve drawn."""
+    shift = branch.omega - branch.omega_truncated
     for kind, (marker, text) in _BIFURCATION_STYLE.items():
         bifs = [b for b in branch.bifurcations if b.kind == kind]
         if bifs:
-            ax.plot(_freq(np.array([b.omega for b in bifs]), hz), [value(b) for b in bifs], marker, color="k",
+            ax.plot(_freq(np.array([b.omega + shift[b.index] for b in bifs]), hz), [value(b) for b in bifs], marker, color="k",
                     mfc="none", ms=9, mew=1.5, ls="none", label=text)
 
 

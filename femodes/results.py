@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -228,15 +228,15 @@ class ErrorEstimate:
 
     @property
     def value(self) -> np.ndarray:
-        """The estimated relative error per point: the larger of frequency and amplitude from the
-        harmonic truncation, the mesh's frequency error added to the frequency's when it was
-        estimated (NaN where it could not be estimated). :attr:`covers` says which sources."""
+        """The estimated relative error per point of what a branch shows: the larger of the error
+        of its frequency (:attr:`frequency_error`, the best frequency, every source) and of its
+        displacement (:attr:`amplitude`, the truncated series), NaN where it could not be
+        estimated. :attr:`covers` says which sources."""
         mesh = None if self.mesh is None else np.asarray(self.mesh, float)
         if not self.harmonics_estimated:
             assert mesh is not None  # __post_init__: at least one source is estimated
             return mesh
-        freq = np.asarray(self.omega, float) + (0.0 if mesh is None else mesh)
-        return np.fmax(freq, np.asarray(self.amplitude, float))
+        return np.fmax(self.frequency_error, np.asarray(self.amplitude, float))
 
     @property
     def met(self) -> np.ndarray:
@@ -265,6 +265,9 @@ class ErrorEstimate:
         parts = [f"largest {largest(self.value) if n else 'unknown'}"]
         if len(self.sources) > 1:
             parts[0] += " (" + ", ".join(f"{ERROR_SOURCES[k]} {largest(v)}" for k, v in self.sources.items()) + ")"
+        if self.harmonics_estimated and n:
+            parts[0] += (f": frequency {largest(self.frequency_error)}, amplitude {largest(self.amplitude)} "
+                         "(rtol controls the frequency)")
         if self.rtol:
             parts.append(f"rtol = {self.rtol:g} met at {int(np.sum(self.met))} of {n} points")
         parts.append(f"covers {self.covers}")
@@ -392,7 +395,13 @@ class PeriodicSolution:
     Attributes
     ----------
     omega : float
-        Frequency in rad/s (forcing frequency, or the nonlinear mode's frequency).
+        Frequency in rad/s (forcing frequency, or the nonlinear mode's frequency): the answer
+        that meets ``rtol`` when the branch was error-controlled (the converged frequency of its
+        error estimate, :attr:`Branch.omega`), else the harmonic balance's own.
+    omega_truncated : float
+        The frequency of the truncated Fourier series ``Q, P`` (the harmonic balance's solution;
+        :attr:`period`, :meth:`displacement` and the other syntheses use it); equal to
+        :attr:`omega` without an error estimate.
     Q : ndarray (n_coef, n_dofs)
         Displacement coefficients on the model it was solved on.
     P : ndarray (n_coef, n_complementarity_contacts)
@@ -413,12 +422,16 @@ class PeriodicSolution:
         Floquet multipliers (largest modulus first) and stability, when the branch has them
         (``stability=True``); ``None`` otherwise.
     error_estimate : float or None
-        Estimated relative error of frequency and amplitude with respect to the converged
-        answer of the sources the branch's estimate covers (``H -> inf``; and ``h -> 0`` if the
-        mesh was estimated: :attr:`ErrorEstimate.covers`), when the branch has one (``rtol=`` of
-        the analyses, :func:`femodes.estimate_error`, :func:`femodes.estimate_mesh_error`);
-        ``None`` otherwise. ``harmonics`` is the point's own
+        Estimated relative error of frequency and amplitude (the larger) with respect to the
+        converged answer of the sources the branch's estimate covers (``H -> inf``; and ``h -> 0``
+        if the mesh was estimated: :attr:`ErrorEstimate.covers`), when the branch has one
+        (``rtol=`` of the analyses, :func:`femodes.estimate_error`,
+        :func:`femodes.estimate_mesh_error`); ``None`` otherwise. ``harmonics`` is the point's own
         (error control may use more harmonics at some points than at others).
+    omega_error, amplitude_error : float or None
+        The two parts of :attr:`error_estimate`: the relative error of :attr:`omega` (what
+        ``rtol`` controls) and of the displacement of the truncated series ``Q`` (amplitudes,
+        shapes; not controlled by ``rtol``).
     """
 
     omega: float
@@ -435,10 +448,27 @@ class PeriodicSolution:
     multipliers: np.ndarray | None = None
     stable: bool | None = None
     error_estimate: float | None = None
+    # set by Branch.__getitem__ on an error-controlled branch; not constructor arguments, so that
+    # dataclasses.replace(sol, omega=w, Q=...) gives a plain series at w, never a stale correction
+    omega_truncated: float = field(init=False)
+    omega_error: float | None = field(init=False, default=None)
+    amplitude_error: float | None = field(init=False, default=None)
+
+    def __post_init__(self):
+        object.__setattr__(self, "omega_truncated", float(self.omega))
+
+    def _error_controlled(self, omega_truncated: float, omega_error: float, amplitude_error: float) -> PeriodicSolution:
+        """This solution as the point of an error-controlled branch: ``omega`` is the converged
+        frequency, the series ``Q, P`` is at ``omega_truncated`` (used by :meth:`Branch.__getitem__`)."""
+        object.__setattr__(self, "omega_truncated", float(omega_truncated))
+        object.__setattr__(self, "omega_error", float(omega_error))
+        object.__setattr__(self, "amplitude_error", float(amplitude_error))
+        return self
 
     @property
     def period(self) -> float:
-        return self.harmonics.period(self.omega)
+        """The period of the truncated series (``2 pi nu / omega_truncated``)."""
+        return self.harmonics.period(self.omega_truncated)
 
     @property
     def n_dofs(self) -> int:
@@ -449,12 +479,12 @@ class PeriodicSolution:
 
     def displacement(self, t) -> np.ndarray:
         """``q(t)``, shape ``(len(t), n_dofs)`` (DOFs of the model it was solved on)."""
-        return self.harmonics.evaluate(self.Q, self.omega, self._t(t))
+        return self.harmonics.evaluate(self.Q, self.omega_truncated, self._t(t))
 
     def velocity(self, t) -> np.ndarray:
         """``q'(t)``, shape ``(len(t), n_dofs)``."""
-        D = self.harmonics.derivative(self.omega)
-        return self.harmonics.evaluate(D @ self.Q, self.omega, self._t(t))
+        D = self.harmonics.derivative(self.omega_truncated)
+        return self.harmonics.evaluate(D @ self.Q, self.omega_truncated, self._t(t))
 
     def contact_force(self, t) -> np.ndarray:
         """Contact forces ``p(t) >= 0`` (compression positive), shape ``(len(t), n_contacts)``."""
@@ -466,7 +496,7 @@ class PeriodicSolution:
         u = None
         for j, kind in enumerate(ci.kinds):
             if kind == "complementarity":
-                out[:, j] = self.harmonics.evaluate(self.P[:, ci.slots[j]], self.omega, t)
+                out[:, j] = self.harmonics.evaluate(self.P[:, ci.slots[j]], self.omega_truncated, t)
             else:
                 if u is None:
                     u = self.displacement(t)
@@ -513,6 +543,10 @@ class Branch:
     -----------------------------------
     omega, energy, converged, nit, residual_norm, parameter, xi, penetration, tension;
     ``folds`` (indices), ``kind`` ("forced" or "nonlinear mode"), ``success``, ``message``.
+    ``omega`` is the answer: with an error estimate (``rtol=``), the converged frequency, with
+    its error bar ``omega_error``; ``omega_truncated`` is the frequency of the truncated series
+    ``Q, P`` (the same array without an estimate); ``amplitude_error`` is the error of the
+    series' displacement (docs/guide/accuracy.md, "What the branch shows").
     ``branch[i]`` is a :class:`PeriodicSolution`; ``len(branch)`` the number of points.
 
     With stability computed (``stability=True`` of the analyses, :mod:`femodes.floquet`):
@@ -534,7 +568,9 @@ class Branch:
         self.kind = kind
         self.harmonics = harmonics
         self.contacts = contacts
-        self.omega = np.asarray(omega, dtype=float)
+        #: the frequencies of the truncated series ``Q, P`` (the harmonic balance's own solutions);
+        #: :attr:`omega` is the answer, which differs from these where an error estimate converged it
+        self.omega_truncated = np.asarray(omega, dtype=float)
         self.Q = np.asarray(Q, dtype=float)
         self.P = np.asarray(P, dtype=float)
         self.energy = np.asarray(energy, dtype=float)
@@ -569,12 +605,41 @@ class Branch:
         return self
 
     @property
+    def omega(self) -> np.ndarray:
+        """The frequency of every point: the answer. With an error estimate whose harmonic
+        extrapolation or exact orbit gives a converged frequency (``rtol=`` of the analyses,
+        :func:`femodes.estimate_error` on branches with complementarity contacts), that frequency
+        (``accuracy.omega_limit``), with the relative error bar :attr:`omega_error`; elsewhere the
+        harmonic balance's own, :attr:`omega_truncated`. The coefficients ``Q, P`` are the
+        truncated series at :attr:`omega_truncated`."""
+        acc = self.accuracy
+        if acc is None or acc.omega_limit is None:
+            return self.omega_truncated
+        limit = np.asarray(acc.omega_limit, float)
+        return np.where(np.isfinite(limit), limit, self.omega_truncated)
+
+    @property
+    def omega_error(self) -> np.ndarray | None:
+        """Relative error bar of :attr:`omega` per point, every source estimated
+        (:attr:`ErrorEstimate.frequency_error`; what ``rtol`` controls and
+        :attr:`ErrorEstimate.met` judges); NaN: unknown; ``None`` without an error estimate."""
+        return None if self.accuracy is None else self.accuracy.frequency_error
+
+    @property
+    def amplitude_error(self) -> np.ndarray | None:
+        """Relative error of the displacement of the truncated series per point (amplitudes and
+        shapes, :attr:`ErrorEstimate.amplitude`; ``rtol`` does not control it); ``None`` without
+        an error estimate."""
+        return None if self.accuracy is None else np.asarray(self.accuracy.amplitude, float)
+
+    @property
     def error_estimate(self) -> np.ndarray | None:
-        """Estimated relative error (frequency and amplitude, the larger) of every point with
-        respect to the converged answer of the sources estimated: the harmonic truncation
-        (``H -> inf``; ``rtol=`` of the analyses, or :func:`femodes.estimate_error`) and the mesh
-        if :func:`femodes.estimate_mesh_error` was run; ``None`` unless computed. Which sources
-        the numbers cover: ``branch.accuracy.covers``; details: :attr:`accuracy`."""
+        """Estimated relative error of every point with respect to the converged answer of the
+        sources estimated: the harmonic truncation (``H -> inf``; ``rtol=`` of the analyses, or
+        :func:`femodes.estimate_error`) and the mesh if :func:`femodes.estimate_mesh_error` was
+        run; the larger of :attr:`omega_error` (of :attr:`omega`) and :attr:`amplitude_error`;
+        ``None`` unless computed. Which sources the numbers cover: ``branch.accuracy.covers``;
+        details: :attr:`accuracy`."""
         return None if self.accuracy is None else self.accuracy.value
 
     def point_harmonics(self, i: int) -> Harmonics:
@@ -609,7 +674,7 @@ class Branch:
         return np.isfinite(self.residual_norm)
 
     def __len__(self) -> int:
-        return self.omega.size
+        return self.omega_truncated.size
 
     def __getitem__(self, i: int) -> PeriodicSolution:
         if isinstance(i, slice) or not isinstance(i, (int, np.integer)):
@@ -622,14 +687,18 @@ class Branch:
         h = self.point_harmonics(i)
         Q, P = (self.Q[i], self.P[i]) if h is self.harmonics else (
             self.harmonics.convert(self.Q[i], h), self.harmonics.convert(self.P[i], h))
-        return PeriodicSolution(
+        acc = self.accuracy
+        sol = PeriodicSolution(
             omega=float(self.omega[i]), Q=Q, P=P, harmonics=h, contacts=self.contacts,
             energy=float(self.energy[i]), xi=float(self.xi[i]), residual_norm=float(self.residual_norm[i]),
             nit=int(self.nit[i]), model=self.model, kind=self.kind,
             multipliers=None if self.multipliers is None else self.multipliers[i][np.isfinite(self.multipliers[i])],
             stable=None if self.stable is None else bool(self.stable[i]),
-            error_estimate=None if self.accuracy is None else float(self.accuracy.value[i]),
+            error_estimate=None if acc is None else float(acc.value[i]),
         )
+        if acc is None:
+            return sol
+        return sol._error_controlled(float(self.omega_truncated[i]), float(acc.frequency_error[i]), float(acc.amplitude[i]))
 
     def __iter__(self):
         return (self[i] for i in range(len(self)))
@@ -705,7 +774,10 @@ class Branch:
     # -- persistence -------------------------------------------------------------------------
     def _arrays(self) -> dict:
         out = {
-            "omega": self.omega, "Q": self.Q, "P": self.P, "energy": self.energy, "xi": self.xi,
+            # "omega": the answer (converged where an error estimate gives it), "omega_truncated": the
+            # frequencies of the series Q, P (older files have only "omega", which was those)
+            "omega": self.omega, "omega_truncated": self.omega_truncated, "Q": self.Q, "P": self.P,
+            "energy": self.energy, "xi": self.xi,
             "residual_norm": self.residual_norm, "nit": self.nit, "parameter": self.parameter,
             "folds": np.asarray(self.folds, dtype=int),
         }
@@ -789,7 +861,7 @@ def _check_schema(header: dict, arrays: dict, path: Path) -> None:
         if np.ndim(arrays[key]) != ndim:
             bad(f"array {key!r} has {np.ndim(arrays[key])} dimensions, not {ndim}")
     n = arrays["omega"].shape[0]
-    for key in _POINT_ARRAYS:
+    for key in list(_POINT_ARRAYS) + (["omega_truncated"] if "omega_truncated" in arrays else []):
         if arrays[key].shape[0] != n:
             bad(f"array {key!r} has {arrays[key].shape[0]} points, 'omega' {n}")
     try:
@@ -844,7 +916,7 @@ def load_branch(path, model=None) -> Branch:
     H, N, nu = header["harmonics"]
     br = Branch(
         kind=header["kind"], harmonics=Harmonics(H, N, nu), contacts=ContactInfo.from_json(header["contacts"]),
-        omega=arrays["omega"], Q=arrays["Q"], P=arrays["P"], energy=arrays["energy"], xi=arrays["xi"],
+        omega=arrays.get("omega_truncated", arrays["omega"]), Q=arrays["Q"], P=arrays["P"], energy=arrays["energy"], xi=arrays["xi"],
         residual_norm=arrays["residual_norm"], nit=arrays["nit"], parameter=arrays["parameter"],
         folds=arrays["folds"].tolist(), success=header["success"], status=header["status"], message=header["message"],
         meta=header.get("meta"),

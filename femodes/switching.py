@@ -151,16 +151,16 @@ def _locate_hbm_doubling(branch: Branch, bif: Bifurcation, dbl: _Doubled, newton
     """The HBM orbit's own period doubling nearest to ``bif``: ``(x1, omega)`` on the branch."""
     p1 = ForcedResponseProblem(branch.model, branch.harmonics)
     lo, hi = max(0, bif.index - window), min(len(branch) - 1, bif.index + 1 + window)
-    vals = {i: dbl.test(dbl.point(branch.Q[i], branch.P[i]), branch.omega[i]) for i in range(lo, hi + 1)}
+    vals = {i: dbl.test(dbl.point(branch.Q[i], branch.P[i]), branch.omega_truncated[i]) for i in range(lo, hi + 1)}
     changes = [i for i in range(lo, hi) if vals[i] == 0.0 or (vals[i] > 0) != (vals[i + 1] > 0)]
     if not changes:
         raise RuntimeError(
-            f"switch_branch: the HBM orbit shows no period doubling between w = {branch.omega[lo]:.6g} and "
-            f"{branch.omega[hi]:.6g} (H = {branch.harmonics.n_harmonics}) near the reported one at w = {bif.omega:.6g}; "
+            f"switch_branch: the HBM orbit shows no period doubling between w = {branch.omega_truncated[lo]:.6g} and "
+            f"{branch.omega_truncated[hi]:.6g} (H = {branch.harmonics.n_harmonics}) near the reported one at w = {bif.omega:.6g}; "
             "raise the harmonics (contact orbits converge slowly) or widen the search")
     i = min(changes, key=lambda j: abs(j + 0.5 - (bif.index + 0.5)))
-    za = np.append(p1.pack(branch.Q[i], branch.P[i], branch.omega[i]), branch.omega[i])
-    zb = np.append(p1.pack(branch.Q[i + 1], branch.P[i + 1], branch.omega[i + 1]), branch.omega[i + 1])
+    za = np.append(p1.pack(branch.Q[i], branch.P[i], branch.omega_truncated[i]), branch.omega_truncated[i])
+    zb = np.append(p1.pack(branch.Q[i + 1], branch.P[i + 1], branch.omega_truncated[i + 1]), branch.omega_truncated[i + 1])
 
     def test(z: np.ndarray) -> float:
         u = p1.unpack(z[:-1], z[-1])
@@ -334,7 +334,7 @@ class _Augmented:
 
     def z(self, i: int) -> np.ndarray:
         b = self.branch
-        return np.append(self.problem.pack(b.Q[i], b.P[i], b.omega[i], b.xi[i]), b.parameter[i])
+        return np.append(self.problem.pack(b.Q[i], b.P[i], b.omega_truncated[i], b.xi[i]), b.parameter[i])
 
     def unpack(self, z: np.ndarray):
         return self.problem.unpack(z[:-1], z[-1])
@@ -420,8 +420,8 @@ def _locate_branch_point(aug: _Augmented, bif: Bifurcation, newton: NewtonOption
         return z_rep, i, Z[i], Z[i + 1]
     what = "backbone" if not aug.forced else "branch"
     raise RuntimeError(
-        f"switch_branch: the HBM {what} has no branch point between w = {branch.omega[lo]:.6g} and "
-        f"{branch.omega[hi]:.6g} (H = {branch.harmonics.n_harmonics}) near the reported one at "
+        f"switch_branch: the HBM {what} has no branch point between w = {branch.omega_truncated[lo]:.6g} and "
+        f"{branch.omega_truncated[hi]:.6g} (H = {branch.harmonics.n_harmonics}) near the reported one at "
         f"w = {bif.omega:.6g}: det [r_x, r_p; t^T] keeps its sign there, so the multiplier +1 is not a crossing of "
         "two branches but an imperfect (smooth) connection in the truncated HBM; the branch itself continues "
         "onto the other family: follow it with the continuation instead")

@@ -236,12 +236,12 @@ def test_missed_folds_taken_from_the_exact_branch():
     assert len(b.folds) == 2
     acc = estimate_error(b, options=NO_FOLD_SEARCH).accuracy
     ref = upper_fold(0.2, 1.0, 2.5).w
-    up = max(b.folds, key=lambda i: b.omega[i])
+    up = max(b.folds, key=lambda i: b.omega_truncated[i])
     assert acc.method[up] == "shooting" and acc.finest[up] == 0
     assert abs(acc.omega_limit[up] / ref - 1.0) <= acc.omega_limit_error[up] == 1e-6
-    true = abs(b.omega[up] - ref) / b.omega[up]  # relative to the point's frequency, as the estimate
+    true = abs(b.omega_truncated[up] - ref) / b.omega_truncated[up]  # relative to the point's frequency, as the estimate
     assert true <= acc.omega[up] <= true + 2e-6
-    low = min(b.folds, key=lambda i: b.omega[i])
+    low = min(b.folds, key=lambda i: b.omega_truncated[i])
     assert acc.method[low] == "shooting"
     assert abs(acc.omega_limit[low] / _grazing(0.2, 1.0, 2.5) - 1.0) <= acc.omega_limit_error[low] == 1e-6
 
@@ -377,11 +377,11 @@ def test_points_just_above_grazing_get_the_exact_orbit_at_their_frequency(case, 
     b = fm.frequency_response(model, (0.5, 2.0), 20)
     acc = estimate_error(b).accuracy
     assert not np.any(acc.method == "failed")
-    at_w = [i for i in range(len(b)) if acc.omega_limit[i] == b.omega[i] and acc.amplitude[i] > 1e-6]
+    at_w = [i for i in range(len(b)) if acc.omega_limit[i] == b.omega_truncated[i] and acc.amplitude[i] > 1e-6]
     assert len(at_w) >= count
     hk = fm.Harmonics(160)
     for i in at_w:
-        w = float(b.omega[i])
+        w = float(b.omega_truncated[i])
         flow = eb.flow.at(w)
         x = eb.states[int(np.argmin(np.abs(eb.omega - w)))].copy()
         run = flow.run(x, 0.0, variational=True)

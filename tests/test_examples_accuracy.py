@@ -56,7 +56,7 @@ def test_duffing_estimate_follows_exponential_convergence():
         A = np.sqrt(np.sqrt(1.0 + 4.0 * E) - 1.0)
         mm = A**2 / (2.0 * (1.0 + A**2))
         exact = np.pi * np.sqrt(1.0 + A**2) / (2.0 * ellipk(mm))
-        true.append(abs(b.omega[-1] / exact - 1.0))
+        true.append(abs(b.omega_truncated[-1] / exact - 1.0))
         est.append(b.accuracy.omega[-1])
     true, est = np.array(true), np.array(est)
     assert 2e-3 < true[0] < 3e-3 and true[-1] < 1e-11
@@ -75,7 +75,7 @@ def test_free_backbone_even_H_estimate_safe_and_bracket_contains_exact():
     for H in (4, 8):
         b, i, exact = _free_backbone(H)
         acc = b.accuracy
-        true = abs(b.omega[i] / exact - 1.0)
+        true = abs(b.omega_truncated[i] / exact - 1.0)
         assert true <= acc.omega[i] <= 3.0 * true
         assert abs(acc.omega_limit[i] / exact - 1.0) <= acc.omega_limit_error[i]
         assert abs(acc.omega_limit[i] / exact - 1.0) < 0.5 * true  # the extrapolation helps
@@ -91,7 +91,7 @@ def test_forced_fold_even_H_estimate_safe_and_bracket_contains_exact():
     f = b.folds[0]
     ref = upper_fold(0.1, 0.2, 1.0).w
     acc = b.accuracy
-    true = abs(b.omega[f] / ref - 1.0)
+    true = abs(b.omega_truncated[f] / ref - 1.0)
     assert 0.04 < true < 0.07
     assert true <= acc.omega[f] <= 3.0 * true
     assert abs(acc.omega_limit[f] / ref - 1.0) <= acc.omega_limit_error[f] < 0.2 * true
@@ -105,7 +105,7 @@ def test_odd_H_estimate_safe_and_bracket_contains_exact():
     assert fm.accuracy.estimate_levels(6) == ([3, 6, 12], 1)
     b, i, exact = _free_backbone(5)
     acc = b.accuracy
-    true = abs(b.omega[i] / exact - 1.0)
+    true = abs(b.omega_truncated[i] / exact - 1.0)
     assert acc.omega[i] >= true
     assert abs(acc.omega_limit[i] / exact - 1.0) <= acc.omega_limit_error[i]
 
@@ -151,7 +151,7 @@ def test_fe_bar_fold_bracket_contains_finer_limit(bar10_h8):
     ref, ref_half = BAR10_LIMIT
     b, f = bar10_h8
     acc = b.accuracy
-    true = abs(b.omega[f] / ref - 1.0)
+    true = abs(b.omega_truncated[f] / ref - 1.0)
     assert 0.025 < true < 0.029
     assert abs(acc.omega_limit[f] / ref - 1.0) <= acc.omega_limit_error[f] + ref_half
     assert acc.omega[f] >= true  # see the next test
@@ -164,7 +164,7 @@ def test_fe_bar_estimate_not_optimistic(bar10_h8):
     the bracket (``_bounded_by_bracket``): measured 9.0 %, safe and 3.5x the true error."""
     ref, ref_half = BAR10_LIMIT
     b, f = bar10_h8
-    assert b.accuracy.omega[f] >= abs(b.omega[f] / ref - 1.0) - ref_half
+    assert b.accuracy.omega[f] >= abs(b.omega_truncated[f] / ref - 1.0) - ref_half
 
 
 def test_fe_bar_mesh_error_is_separate_from_harmonic_error(bar10_h8):
@@ -172,11 +172,11 @@ def test_fe_bar_mesh_error_is_separate_from_harmonic_error(bar10_h8):
     H = 8: -1.7e-3, -4.0e-4, ratio 4.2), 15x smaller than the harmonic error of H = 8 (2.7 %). (At
     larger H the fixed-H mesh change grows: -2.0e-3, -2.4e-3, -2.9e-3 at H = 20, 40, 80 from 10 to
     20 elements, and the extrapolated limits differ by -4e-3: README_accuracy.md.)"""
-    b, f = bar10_h8  # the estimate does not change the branch
-    w = [b.omega[f]]
+    b, f = bar10_h8  # the estimate does not change the truncated series
+    w = [b.omega_truncated[f]]
     for ne in (20, 40):
         b, f = _bar_fold(ne, 8)
-        w.append(b.omega[f])
+        w.append(b.omega_truncated[f])
     w = np.array(w)
     d = np.diff(w) / w[:-1]
     assert np.all(np.abs(d) < 3e-3)

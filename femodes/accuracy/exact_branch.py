@@ -42,7 +42,7 @@ class ExactBranchCache:
         if not self.traced:
             self.traced = True
             b = self.lad.branch
-            span = (float(b.omega[0]), float(b.omega[-1]))
+            span = (float(b.omega_truncated[0]), float(b.omega_truncated[-1]))
             if span[0] != span[1] and undamped(self.lad.model):
                 log.info("accuracy: no exact branch of an undamped model (its orbits are unbounded at resonances)")
             elif span[0] != span[1]:
@@ -66,7 +66,7 @@ class ExactBranchCache:
         g = np.array([plane.at(Q, w) for Q, w in zip(self._Q, eb.omega)])
         piece = self._piece
         cross = [j for j in range(len(eb) - 1) if g[j] * g[j + 1] <= 0.0 and piece[j] == piece[j + 1]]
-        w_i = float(self.lad.branch.omega[i])
+        w_i = float(self.lad.branch.omega_truncated[i])
         return [j if abs(g[j]) <= abs(g[j + 1]) else j + 1 for j in sorted(cross, key=lambda j: abs(eb.omega[j] - w_i))]
 
 
@@ -102,8 +102,8 @@ class ExactFolds:
                            for w in resolved)]
         # the same amplitude of the exact folds' orbits (max |q| over a fine grid)
         amp_e = dict(zip(free, eb.amplitude(dofs, samples=800, points=[eb.folds[k] for k in free])))
-        pairs = sorted((abs(branch.omega[i] - eb.fold_omega[k]) / eb.fold_omega[k] + abs(amp_h[i] - amp_e[k]) / scale,
-                        i, k) for i in unresolved for k in free if fold_is_upper(branch.omega, i) == eb.fold_upper[k])
+        pairs = sorted((abs(branch.omega_truncated[i] - eb.fold_omega[k]) / eb.fold_omega[k] + abs(amp_h[i] - amp_e[k]) / scale,
+                        i, k) for i in unresolved for k in free if fold_is_upper(branch.omega_truncated, i) == eb.fold_upper[k])
         hk = Harmonics(8 * branch.harmonics.n_harmonics)  # the exact orbit to 8 H harmonics: the error has the tail
         taken_i, taken_j = set(), set()
         for _, i, j in pairs:  # j: a position in eb.folds
@@ -114,12 +114,12 @@ class ExactFolds:
             w, half = float(eb.fold_omega[j]), max(float(eb.fold_error[j]), self.options.shooting_floor)
             errors.record_exact(lad, i, w, half, eb.coefficients(eb.folds[j], hk.n_harmonics)[0], hk)
             todo[i] = False
-            log.info("accuracy: fold %d (w = %.7g) paired with the exact fold at w = %.7g", i, branch.omega[i], w)
+            log.info("accuracy: fold %d (w = %.7g) paired with the exact fold at w = %.7g", i, branch.omega_truncated[i], w)
         for i in unresolved:
             if i not in taken_i:
                 todo[i] = False
                 errors.finest[i] = 0
                 errors.method[i] = "truncation"
                 log.info("accuracy: fold %d (w = %.7g) has no counterpart on the exact branch (folds at %s): a fold of "
-                         "the truncation, no estimate", i, branch.omega[i], np.round(eb.fold_omega, 6).tolist())
+                         "the truncation, no estimate", i, branch.omega_truncated[i], np.round(eb.fold_omega, 6).tolist())
         return todo

@@ -39,11 +39,11 @@ def exact_fold(sh: Shooter, f: int, at_f, options: AccuracyOptions) -> tuple[flo
     b = sh.branch
     n = len(b)
     nb = [j for j in (f - 1, f + 1) if 0 <= j < n]
-    upper = all(b.omega[j] <= b.omega[f] for j in nb)
+    upper = all(b.omega_truncated[j] <= b.omega_truncated[f] for j in nb)
     sign = -1.0 if upper else 1.0
     # the offset of the neighbours in the plane's units: the scale of the search
     plane = Plane(sh.lad, sh.H, f)
-    d = max(abs(plane.at(b.Q[j], float(b.omega[j]))) for j in nb)
+    d = max(abs(plane.at(b.Q[j], float(b.omega_truncated[j]))) for j in nb)
     if not d > 0.0:
         return None
     solved = {0.0: at_f}
@@ -119,7 +119,7 @@ def exact_fold(sh: Shooter, f: int, at_f, options: AccuracyOptions) -> tuple[flo
         ends_contact = bool(free[max(f - options.grazing_points, 0): f + options.grazing_points + 1].any())
         # (impacts only: a massless contact's orbits leave the linear one smoothly, its folds are ordinary)
         impacts = not sh.flow.massless.any()
-        graze = grazing(sh.flow, float(b.omega[f])) if not upper and ends_contact and impacts else None
+        graze = grazing(sh.flow, float(b.omega_truncated[f])) if not upper and ends_contact and impacts else None
         if graze is None:
             log.info("accuracy: the exact fold next to point %d was not located (%s)", f, exc)
             return None

@@ -58,7 +58,7 @@ class Ladder:
         self.sQ = float(np.sqrt(np.mean(Q ** 2))) or 1.0
         self.sP = float(np.sqrt(np.mean(P ** 2))) if P.size else 1.0
         self.sP = self.sP or 1.0
-        w = branch.omega
+        w = branch.omega_truncated
         if self.forced:  # the parameter is w: scaled by the width of the branch, as the continuation does
             self.sp = self.sw = float(np.ptp(w)) or 0.1 * float(np.mean(np.abs(w))) or 1.0
         else:  # p = log10(E) by 1; w (and xi) by a tenth of the mean frequency
@@ -162,7 +162,7 @@ class Ladder:
         return float(np.linalg.norm(self.branch.Q[i])) or 1.0
 
     def omega_ref(self, i: int) -> float:
-        return abs(float(self.branch.omega[i])) or 1.0
+        return abs(float(self.branch.omega_truncated[i])) or 1.0
 
     def moved(self, H: int, state: State, a_from: State, a_to: State) -> State:
         """The level-``H`` ``state`` moved by the branch's step from ``a_from`` to ``a_to``."""

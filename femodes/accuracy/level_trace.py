@@ -216,7 +216,7 @@ def trace_segment(lad: Ladder, H: int, idx: np.ndarray, forward: bool, out: list
         out[i] = lad.solve(H, point, t, lad.state(H, best))
     for f in branch.folds:
         if f in idx and res.folds:
-            a = lad.vector(H, branch.Q[f], branch.P[f], float(branch.omega[f]), float(branch.xi[f]),
+            a = lad.vector(H, branch.Q[f], branch.P[f], float(branch.omega_truncated[f]), float(branch.xi[f]),
                            float(branch.parameter[f]))
             k = min(res.folds, key=lambda j: float(((Y[j] - a) ** 2) @ near))
             out[f] = lad.state(H, Y[k])

@@ -39,7 +39,7 @@ def blend(a: State, b: State, theta: float) -> State:
 
 def anchor(branch: Branch, i: int) -> State:
     """Point ``i`` of the branch, on its own harmonics."""
-    return State(branch.harmonics.n_harmonics, branch.Q[i], branch.P[i], float(branch.omega[i]), float(branch.xi[i]),
+    return State(branch.harmonics.n_harmonics, branch.Q[i], branch.P[i], float(branch.omega_truncated[i]), float(branch.xi[i]),
                  float(branch.parameter[i]), int(branch.nit[i]), float(branch.residual_norm[i]))
 
 
@@ -53,7 +53,7 @@ def branch_tangents(branch: Branch) -> list[State]:
         if a == b:
             raise ValueError("estimate_error: a branch of one point has no direction; it needs >= 2 points")
         out.append(State(branch.harmonics.n_harmonics, branch.Q[b] - branch.Q[a], branch.P[b] - branch.P[a],
-                         float(branch.omega[b] - branch.omega[a]), float(branch.xi[b] - branch.xi[a]),
+                         float(branch.omega_truncated[b] - branch.omega_truncated[a]), float(branch.xi[b] - branch.xi[a]),
                          float(branch.parameter[b] - branch.parameter[a])))
     return out
 

@@ -59,7 +59,7 @@ class PointErrors:
         branch = lad.branch
         dQ = Q - lad.harmonics(branch.harmonics.n_harmonics).convert(branch.Q[i], hk)
         self.omega_limit[i], self.omega_limit_error[i] = w, half
-        self.omega[i] = abs(branch.omega[i] - w) / lad.omega_ref(i) + half
+        self.omega[i] = abs(branch.omega_truncated[i] - w) / lad.omega_ref(i) + half
         self.amplitude[i] = float(np.linalg.norm(dQ)) / lad.Q_norm(i)
         self.rate[i] = math.nan
         self.finest[i] = 0

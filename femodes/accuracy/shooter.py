@@ -33,7 +33,7 @@ class Shooter:
         self.lad, self.options = lad, options
         self.branch = lad.branch
         self.H = lad.h0.n_harmonics
-        self.flow = flow or LinearImpactFlow(lad.model, float(np.mean(self.branch.omega)))
+        self.flow = flow or LinearImpactFlow(lad.model, float(np.mean(self.branch.omega_truncated)))
         self.n = self.flow.n
         self.runs = 0
 
@@ -43,7 +43,7 @@ class Shooter:
         Q = b.Q[i]
         theta = h.most_open_phase(Q, self.flow.dofs, self.flow.gaps)
         e = h.synthesis(np.array([theta]))[0]
-        return np.concatenate([e @ Q, e @ (h.derivative(float(b.omega[i])) @ Q)]), theta
+        return np.concatenate([e @ Q, e @ (h.derivative(float(b.omega_truncated[i])) @ Q)]), theta
 
     def evaluate(self, x0: np.ndarray, omega: float, theta0: float, plane, jac: bool):
         """Periodicity residual, hyperplane value and (with ``jac``) their Jacobian in ``(x0, w)``,
@@ -88,8 +88,8 @@ class Shooter:
             return math.inf
         plane = self.plane(i)
         j0, j1 = max(i - 1, 0), min(i + 1, len(b) - 1)
-        ds = plane.at(b.Q[j1], float(b.omega[j1])) - plane.at(b.Q[j0], float(b.omega[j0]))
-        dw = float(b.omega[j1] - b.omega[j0])
+        ds = plane.at(b.Q[j1], float(b.omega_truncated[j1])) - plane.at(b.Q[j0], float(b.omega_truncated[j0]))
+        dw = float(b.omega_truncated[j1] - b.omega_truncated[j0])
         if dw == 0.0 or ds == 0.0:
             return math.inf
         return dws / (dw / ds)
@@ -129,8 +129,8 @@ class Shooter:
         b, h = self.branch, self.lad.h0
         e = h.synthesis(np.array([theta0]))[0]
         dQ = b.Q[i] - b.Q[j]
-        dv = e @ (h.derivative(float(b.omega[i])) @ b.Q[i]) - e @ (h.derivative(float(b.omega[j])) @ b.Q[j])
-        return x0 + np.concatenate([e @ dQ, dv]), omega + float(b.omega[i] - b.omega[j]), theta0
+        dv = e @ (h.derivative(float(b.omega_truncated[i])) @ b.Q[i]) - e @ (h.derivative(float(b.omega_truncated[j])) @ b.Q[j])
+        return x0 + np.concatenate([e @ dQ, dv]), omega + float(b.omega_truncated[i] - b.omega_truncated[j]), theta0
 
     def linear(self, i: int, offset: float = 0.0):
         """The orbit without impacts on the hyperplane of point ``i``, if that orbit stays off the
@@ -147,7 +147,7 @@ class Shooter:
             run = flow.run(flow.particular(t0), t0)
             return plane.value(run, omega), run
 
-        w0 = float(self.branch.omega[i])
+        w0 = float(self.branch.omega_truncated[i])
         w1 = w0 * (1.0 + 1e-3)
         try:
             h0, _ = value(w0)
@@ -174,7 +174,7 @@ class Shooter:
         stall (seed case 1 at H = 20, w = 0.906552, 6.3e-5 above the grazing: three steps cut below
         2^-8 from the point; 15 Newton iterations from the linear orbit). Same return as :meth:`solve`, or
         None."""
-        omega = float(self.branch.omega[i])
+        omega = float(self.branch.omega_truncated[i])
         plane = FrequencyPlane(omega)
         r = self.solve(i, plane=plane)
         if r is None:
@@ -205,7 +205,7 @@ class Shooter:
         appears, and full steps cycle between orbits with and without it)."""
         x_hbm, theta0 = self.start(i)
         if guess is None:
-            x0, omega = x_hbm, float(self.branch.omega[i])
+            x0, omega = x_hbm, float(self.branch.omega_truncated[i])
         else:
             x0, omega, theta0 = guess[0].copy(), guess[1], guess[2]
         plane = plane or self.plane(i, offset)

@@ -49,7 +49,7 @@ class Shooting:
 
     def estimate(self, lad: Ladder, errors: PointErrors, todo: np.ndarray) -> np.ndarray:
         branch, opts = lad.branch, self.options
-        probe = LinearImpactFlow(lad.model, float(np.min(branch.omega)))
+        probe = LinearImpactFlow(lad.model, float(np.min(branch.omega_truncated)))
         if self.auto:
             self.check_auto(lad, probe)
         n = len(branch)
@@ -58,7 +58,7 @@ class Shooting:
         todo = np.zeros(n, dtype=bool)
         # points without contact force: the linear response, which H harmonics solve exactly
         errors.omega[free] = errors.amplitude[free] = errors.omega_limit_error[free] = opts.shooting_floor
-        errors.omega_limit[free] = branch.omega[free]
+        errors.omega_limit[free] = branch.omega_truncated[free]
         errors.rate[free] = math.inf
         errors.finest[free] = H
         errors.method[free] = "shooting"
@@ -125,7 +125,7 @@ def probe_run(lad: Ladder, flow: LinearImpactFlow, options: AccuracyOptions):
     branch = lad.branch
     i = int(np.argmax(contact_force_peak(branch)))
     x0, theta0 = Shooter(lad, options, flow).start(i)
-    omega = float(branch.omega[i])
+    omega = float(branch.omega_truncated[i])
     return flow.at(omega).run(x0, theta0 / omega)
 
 
@@ -166,7 +166,7 @@ def shoot_branch(sh: Shooter, exact: ExactBranchCache, options: AccuracyOptions)
                 at_w = sh.at_frequency(i)
                 if at_w is not None:
                     log.info("accuracy: point %d: the exact orbit at its frequency w = %.6g instead", i,
-                             branch.omega[i])
+                             branch.omega_truncated[i])
                     out[i] = at_w
     return out
 

@@ -115,7 +115,7 @@ def internal_resonances(branch, dof: int, omega_lin, *, share: float = IR_SHARE,
             ratio = a[k] / a[nu]
             if ratio <= share:
                 continue
-            wk = k / nu * sol.omega
+            wk = k / nu * sol.omega_truncated
             for j, wj in enumerate(omega_lin):
                 if abs(wk / wj - 1.0) < tol:
                     found.setdefault((k // nu, j + 1), []).append((i, ratio))

@@ -25,7 +25,15 @@ def summary_lines(case: Case, model, branch) -> list[str]:
     if branch.kind == "nonlinear mode":
         lines.append(f"max |xi| (artificial damping) = {abs(branch.xi).max():.2e}")
     if len(branch.folds):
-        lines.append(f"folds at w = {', '.join(f'{w:.6g}' for w in branch.omega[list(branch.folds)])}")
+        f = list(branch.folds)
+        err = branch.omega_error
+        bars = "" if err is None else " (" + ", ".join(
+            f"+-{e:.1e}" if np.isfinite(e) else "error unknown" for e in err[f]) + " relative)"
+        lines.append(f"folds at w = {', '.join(f'{w:.6g}' for w in branch.omega[f])}{bars}")
+        if err is not None and np.any(branch.omega[f] != branch.omega_truncated[f]):
+            lines.append("  (converged by the error estimate; the truncated series (H = "
+                         f"{branch.harmonics.n_harmonics}) has them at w = "
+                         f"{', '.join(f'{w:.6g}' for w in branch.omega_truncated[f])}: branch.omega_truncated)")
     if len(branch) and len(branch.contacts.dofs):
         pen, ten = branch.penetration, branch.tension
         lines.append(f"contact quality (truncated Fourier series, relative): max penetration {np.max(pen):.3g}, "
@@ -34,7 +42,8 @@ def summary_lines(case: Case, model, branch) -> list[str]:
         acc = branch.accuracy
         met = f", rtol = {acc.rtol:g} met at {int(np.sum(acc.met))} of {len(branch)} points" if acc.rtol else ""
         names = " and ".join(ERROR_SOURCES[k] for k in acc.sources)
-        lines.append(f"error estimate ({names}): largest {np.nanmax(branch.error_estimate):.3g}{met}; "
+        lines.append(f"error estimate ({names}): frequency largest {_largest(branch.omega_error)}{met}; "
+                     f"amplitude largest {_largest(branch.amplitude_error)} (not controlled by rtol); "
                      f"covers {acc.covers}")
     caveat = family_caveat(branch)
     if caveat:
@@ -44,6 +53,11 @@ def summary_lines(case: Case, model, branch) -> list[str]:
         lines.append(f"internal-resonance tongues stepped over at w = {ws} (branch.internal_resonances)")
     lines.extend(stability_lines(branch))
     return lines
+
+
+def _largest(v) -> str:
+    v = np.asarray(v, float)
+    return f"{np.nanmax(v):.3g}" if np.any(np.isfinite(v)) else "unknown"
 
 
 def _fmt_multiplier(mu: complex) -> str:
