@@ -1,0 +1,306 @@
+"""Results layer: :class:`Branch`, a continued family of periodic solutions, with its stability
+and error estimate, and its file (:meth:`Branch.save`; :func:`~femodes.results.load_branch`)."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..hbm.harmonics import Harmonics
+from ..store import RECORD_SUFFIXES, model_signature, signature_differences, write_record
+from .bifurcation import Bifurcation
+from .contacts import ContactInfo, contact_differences, contact_quality
+from .error_estimate import ErrorEstimate
+from .solution import PeriodicSolution
+
+__all__ = ["Branch", "FORMAT_VERSION"]
+
+FORMAT_VERSION = 1
+
+
+class Branch:
+    """A branch of periodic solutions from continuation.
+
+    Attributes (arrays over the points)
+    -----------------------------------
+    omega, energy, converged, nit, residual_norm, parameter, xi, penetration, tension;
+    ``folds`` (indices), ``kind`` ("forced" or "nonlinear mode"), ``success``, ``message``.
+    ``omega`` is the answer: with an error estimate (``rtol=``), the converged frequency, with
+    its error bar ``omega_error``; ``omega_truncated`` is the frequency of the truncated series
+    ``Q, P`` (the same array without an estimate); ``amplitude_error`` is the error of the
+    series' displacement (docs/guide/accuracy.md, "What the branch shows").
+    ``branch[i]`` is a :class:`PeriodicSolution`; ``len(branch)`` the number of points.
+
+    With stability computed (``stability=True`` of the analyses, :mod:`femodes.floquet`):
+    ``stable`` (bool per point), ``multipliers`` (complex, ``(n_points, m)``, largest modulus
+    first, NaN-padded), ``stability_method`` (``"hill"`` or ``"shooting"`` per point) and
+    ``bifurcations`` (:class:`Bifurcation` objects in branch order). Without it ``stable``,
+    ``multipliers`` and ``stability_method`` are ``None`` and ``bifurcations`` is empty.
+    """
+
+    @property
+    def internal_resonances(self) -> list[dict]:
+        """Tongues of internal resonance that a period-driven nonlinear mode stepped over (frequencies,
+        energies, the modes that took the energy and ``w_k / w``); empty otherwise."""
+        return list(self.meta.get("internal_resonances", []))
+
+    def __init__(self, *, kind: str, harmonics: Harmonics, contacts: ContactInfo, omega, Q, P, energy, xi,
+                 residual_norm, nit, parameter, folds=(), success=True, status=0, message="", model=None,
+                 meta: dict | None = None):
+        self.kind = kind
+        self.harmonics = harmonics
+        self.contacts = contacts
+        #: the frequencies of the truncated series ``Q, P`` (the harmonic balance's own solutions);
+        #: :attr:`omega` is the answer, which differs from these where an error estimate converged it
+        self.omega_truncated = np.asarray(omega, dtype=float)
+        self.Q = np.asarray(Q, dtype=float)
+        self.P = np.asarray(P, dtype=float)
+        self.energy = np.asarray(energy, dtype=float)
+        self.xi = np.asarray(xi, dtype=float)
+        self.residual_norm = np.asarray(residual_norm, dtype=float)
+        self.nit = np.asarray(nit, dtype=int)
+        self.parameter = np.asarray(parameter, dtype=float)
+        self.folds = tuple(int(i) for i in folds)
+        self.success = bool(success)
+        self.status = int(status)
+        self.message = str(message)
+        self.model = model
+        self.meta = dict(meta or {})
+        self.stable: np.ndarray | None = None
+        self.multipliers: np.ndarray | None = None
+        self.stability_method: np.ndarray | None = None
+        self.bifurcations: tuple = ()
+        self.accuracy: ErrorEstimate | None = None
+        #: :func:`~femodes.store.model_signature` of the model the branch was solved on, as read
+        #: from its file (None: not stored, a file of an older femodes; or computed from ``model``)
+        self.model_signature: dict | None = None
+
+    def set_accuracy(self, accuracy: ErrorEstimate) -> Branch:
+        """Attach the error estimate of every point (used by :mod:`femodes.accuracy`)."""
+        if not isinstance(accuracy, ErrorEstimate):
+            raise TypeError(f"set_accuracy: expected an ErrorEstimate, got {type(accuracy).__name__}")
+        if np.asarray(accuracy.omega).shape != (len(self),):
+            raise ValueError(f"set_accuracy: one value per point ({len(self)}) expected")
+        if np.any(np.asarray(accuracy.harmonics) > self.harmonics.n_harmonics):
+            raise ValueError("set_accuracy: a point uses more harmonics than the branch stores")
+        self.accuracy = accuracy
+        return self
+
+    @property
+    def omega(self) -> np.ndarray:
+        """The frequency of every point: the answer. With an error estimate whose harmonic
+        extrapolation or exact orbit gives a converged frequency (``rtol=`` of the analyses,
+        :func:`femodes.estimate_error` on branches with complementarity contacts), that frequency
+        (``accuracy.omega_limit``), with the relative error bar :attr:`omega_error`; elsewhere the
+        harmonic balance's own, :attr:`omega_truncated`. The coefficients ``Q, P`` are the
+        truncated series at :attr:`omega_truncated`."""
+        acc = self.accuracy
+        if acc is None or acc.omega_limit is None:
+            return self.omega_truncated
+        limit = np.asarray(acc.omega_limit, float)
+        return np.where(np.isfinite(limit), limit, self.omega_truncated)
+
+    @property
+    def omega_error(self) -> np.ndarray | None:
+        """Relative error bar of :attr:`omega` per point, every source estimated
+        (:attr:`ErrorEstimate.frequency_error`; what ``rtol`` controls and
+        :attr:`ErrorEstimate.met` judges); NaN: unknown; ``None`` without an error estimate."""
+        return None if self.accuracy is None else self.accuracy.frequency_error
+
+    @property
+    def amplitude_error(self) -> np.ndarray | None:
+        """Relative error of the displacement of the truncated series per point (amplitudes and
+        shapes, :attr:`ErrorEstimate.amplitude`; ``rtol`` does not control it); ``None`` without
+        an error estimate."""
+        return None if self.accuracy is None else np.asarray(self.accuracy.amplitude, float)
+
+    @property
+    def error_estimate(self) -> np.ndarray | None:
+        """Estimated relative error of every point with respect to the converged answer of the
+        sources estimated: the harmonic truncation (``H -> inf``; ``rtol=`` of the analyses, or
+        :func:`femodes.estimate_error`) and the mesh if :func:`femodes.estimate_mesh_error` was
+        run; the larger of :attr:`omega_error` (of :attr:`omega`) and :attr:`amplitude_error`;
+        ``None`` unless computed. Which sources the numbers cover: ``branch.accuracy.covers``;
+        details: :attr:`accuracy`."""
+        return None if self.accuracy is None else self.accuracy.value
+
+    def point_harmonics(self, i: int) -> Harmonics:
+        """The harmonics of point ``i`` (error control may refine some points more than others;
+        the branch stores every point on its largest ``harmonics``, zero-padded)."""
+        if self.accuracy is None:
+            return self.harmonics
+        H = int(self.accuracy.harmonics[i])
+        if H == self.harmonics.n_harmonics:
+            return self.harmonics
+        return Harmonics(H, subharmonic=self.harmonics.subharmonic)
+
+    def set_stability(self, *, stable, multipliers, bifurcations, methods, tol: float) -> Branch:
+        """Attach the stability of every point (used by :mod:`femodes.floquet`)."""
+        n = len(self)
+        stable = np.asarray(stable, dtype=bool)
+        multipliers = np.asarray(multipliers, dtype=complex).reshape(n, -1)
+        methods = np.asarray(methods, dtype=str)
+        if stable.shape != (n,) or methods.shape != (n,):
+            raise ValueError(f"set_stability: one value per point ({n}) expected")
+        for b in bifurcations:
+            if not isinstance(b, Bifurcation):
+                raise TypeError(f"set_stability: bifurcations must be Bifurcation objects, got {type(b).__name__}")
+        self.stable, self.multipliers, self.stability_method = stable, multipliers, methods
+        self.bifurcations = tuple(bifurcations)
+        self.meta["stability_tol"] = float(tol)
+        return self
+
+    @property
+    def converged(self) -> np.ndarray:
+        """True for every stored point (only converged points are stored)."""
+        return np.isfinite(self.residual_norm)
+
+    def __len__(self) -> int:
+        return self.omega_truncated.size
+
+    def __getitem__(self, i: int) -> PeriodicSolution:
+        if isinstance(i, slice) or not isinstance(i, (int, np.integer)):
+            raise TypeError("Branch indices must be integers; use the array attributes for slices")
+        try:
+            i = range(len(self))[i]
+        except IndexError:
+            raise IndexError(f"branch index {i} is out of range for a branch of {len(self)} points "
+                             f"(valid: 0 .. {len(self) - 1}, or negative from the end)") from None
+        h = self.point_harmonics(i)
+        Q, P = (self.Q[i], self.P[i]) if h is self.harmonics else (
+            self.harmonics.convert(self.Q[i], h), self.harmonics.convert(self.P[i], h))
+        acc = self.accuracy
+        sol = PeriodicSolution(
+            omega=float(self.omega[i]), Q=Q, P=P, harmonics=h, contacts=self.contacts,
+            energy=float(self.energy[i]), xi=float(self.xi[i]), residual_norm=float(self.residual_norm[i]),
+            nit=int(self.nit[i]), model=self.model, kind=self.kind,
+            multipliers=None if self.multipliers is None else self.multipliers[i][np.isfinite(self.multipliers[i])],
+            stable=None if self.stable is None else bool(self.stable[i]),
+            error_estimate=None if acc is None else float(acc.value[i]),
+        )
+        if acc is None:
+            return sol
+        return sol._error_controlled(float(self.omega_truncated[i]), float(acc.frequency_error[i]), float(acc.amplitude[i]))
+
+    def __iter__(self):
+        return (self[i] for i in range(len(self)))
+
+    def amplitude(self, dof: int, Q: np.ndarray | None = None) -> np.ndarray:
+        """``max_t |q_dof(t)|`` at every point (or of the coefficient stack ``Q`` of shape
+        ``(m, n_coef, n_dofs)`` on this branch's harmonics, e.g. of its bifurcations)."""
+        Q = self.Q if Q is None else np.asarray(Q, dtype=float)
+        n = max(512, 16 * self.harmonics.n_coef)
+        E = self.harmonics.synthesis(2 * np.pi * np.arange(n) / n)
+        return np.max(np.abs(E @ Q[:, :, dof].T), axis=0)
+
+    @property
+    def penetration(self) -> np.ndarray:
+        """:attr:`PeriodicSolution.penetration` at every point (one synthesis for the branch)."""
+        if not len(self):
+            return np.zeros(0)
+        return contact_quality(self.harmonics, self.contacts, self.Q, self.P)[0]
+
+    @property
+    def tension(self) -> np.ndarray:
+        """:attr:`PeriodicSolution.tension` at every point (one synthesis for the branch)."""
+        return contact_quality(self.harmonics, self.contacts, self.Q, self.P)[1]
+
+    def contact_quality(self) -> tuple[np.ndarray, np.ndarray]:
+        """Relative contact quality at every point: penetration over the largest displacement of a
+        contact DOF, tension over the largest contact force; zeros without contacts. A point
+        whose largest contact force is at round-off level of the branch's (``1e-12`` of it: the
+        complementarity forces of a point without contact) counts as without contact force (its
+        tension over that force would be a ratio of round-offs, about 1). The measures of
+        :attr:`ErrorEstimate.penetration` and :attr:`ErrorEstimate.tension`."""
+        pen, ten, amp, fmax = contact_quality(self.harmonics, self.contacts, self.Q, self.P)
+        touching = (fmax > 0) & (fmax > 1e-12 * float(np.max(fmax, initial=0.0)))
+        return pen / np.where(amp > 0, amp, 1.0), np.where(touching, ten / np.where(touching, fmax, 1.0), 0.0)
+
+    def attach(self, model) -> Branch:
+        """Attach the model (after :func:`load_branch`) so solutions can expand to the full field.
+
+        The model must be the one the branch was solved on: its contacts (DOF, law, gap,
+        stiffness) are compared with those the branch stores, and its matrices, damping, forcing
+        and laws with the hashes the branch file stores (:func:`~femodes.store.model_signature`);
+        a difference is a ValueError naming it. A file of an older femodes stores no hashes:
+        only its contacts are checked, with a warning.
+        """
+        from ..model import StructuralModel
+
+        if not isinstance(model, StructuralModel):
+            raise TypeError(f"attach: model must be the StructuralModel the branch was solved on, got {type(model).__name__}")
+        if model.n_dofs != self.Q.shape[2]:
+            raise ValueError(f"attach: model has {model.n_dofs} DOFs but the branch was solved on {self.Q.shape[2]}")
+        if model is not self.model:
+            diff = contact_differences(self.contacts, model)
+            saved = self.model_signature if self.model_signature is not None else (
+                model_signature(self.model) if self.model is not None else None)
+            if saved is not None:
+                diff += [d for d in signature_differences(saved, model_signature(model))
+                         if not (d == "contact laws" and diff)]
+            if diff:
+                raise ValueError(f"attach: this model differs from the one the branch was solved on "
+                                 f"({'; '.join(diff)}); attach the model the branch was solved on, or compute the "
+                                 "branch again on this model")
+            if saved is None:
+                warnings.warn("attach: the branch file stores no fingerprint of its model (saved by an older "
+                              "femodes), so the model's matrices, damping and forcing cannot be checked; only its "
+                              "contacts were compared; save the branch again to store one", UserWarning, stacklevel=3)
+        self.model = model
+        return self
+
+    def __repr__(self) -> str:
+        return (f"Branch({self.kind}, {len(self)} points, omega in [{self.omega.min() if len(self) else np.nan:.6g}, "
+                f"{self.omega.max() if len(self) else np.nan:.6g}], folds={list(self.folds)}, success={self.success})")
+
+    # -- persistence -------------------------------------------------------------------------
+    def _arrays(self) -> dict:
+        out = {
+            # "omega": the answer (converged where an error estimate gives it), "omega_truncated": the
+            # frequencies of the series Q, P (older files have only "omega", which was those)
+            "omega": self.omega, "omega_truncated": self.omega_truncated, "Q": self.Q, "P": self.P,
+            "energy": self.energy, "xi": self.xi,
+            "residual_norm": self.residual_norm, "nit": self.nit, "parameter": self.parameter,
+            "folds": np.asarray(self.folds, dtype=int),
+        }
+        if self.accuracy is not None:
+            out.update({f"accuracy_{k}": v for k, v in self.accuracy.arrays().items()})
+        if self.stable is not None and self.multipliers is not None:  # set together (set_stability)
+            bifs = self.bifurcations
+            out.update({
+                "stable": self.stable.astype(np.int8), "multipliers_re": self.multipliers.real,
+                "multipliers_im": self.multipliers.imag,
+                "bif_index": np.asarray([b.index for b in bifs], dtype=int),
+                "bif_real": np.asarray([[b.omega, b.energy, b.parameter, b.multiplier.real, b.multiplier.imag, b.xi]
+                                        for b in bifs], dtype=float).reshape(len(bifs), 6),
+                "bif_Q": np.asarray([b.Q for b in bifs], dtype=float).reshape((len(bifs),) + self.Q.shape[1:]),
+                "bif_P": np.asarray([b.P for b in bifs], dtype=float).reshape((len(bifs),) + self.P.shape[1:]),
+            })
+        return out
+
+    def _header(self) -> dict:
+        return {
+            "format": "femodes.Branch", "version": FORMAT_VERSION, "kind": self.kind,
+            "harmonics": [self.harmonics.n_harmonics, self.harmonics.n_time, self.harmonics.subharmonic],
+            "contacts": self.contacts.to_json(), "success": self.success, "status": self.status,
+            "message": self.message, "meta": self.meta,
+            "model": model_signature(self.model) if self.model is not None else self.model_signature,
+            "accuracy": None if self.accuracy is None else {
+                "method": [str(m) for m in self.accuracy.method], "rtol": self.accuracy.rtol,
+                "mesh_method": self.accuracy.mesh_method, "caveat": self.accuracy.caveat},
+            "stability": None if self.stable is None or self.stability_method is None else {
+                "methods": [str(m) for m in self.stability_method], "kinds": [b.kind for b in self.bifurcations],
+                "located": [bool(b.located) for b in self.bifurcations]},
+        }
+
+    def save(self, path) -> Path:
+        """Write the branch atomically to ``.npz`` or ``.h5``/``.hdf5`` (needs h5py)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        suffix = path.suffix.lower()
+        if suffix not in RECORD_SUFFIXES:
+            raise ValueError(f"Branch.save: use a .npz or .h5 file name, got {str(path)!r}")
+        write_record(path, self._header(), self._arrays())  # atomic: never a half-written file under `path`
+        return path
