@@ -297,14 +297,12 @@ def _error_bars(ax, branch: Branch, w: np.ndarray, y: np.ndarray) -> None:
 
 
 def _mark_bifurcations(ax, branch: Branch, value, hz: bool) -> None:
-    """One marker line per bifurcation kind (folds aside), black, labelled by kind. A bifurcation is
-    an orbit of the truncated series; on an error-controlled branch it is moved by its point's
-    correction (``omega - omega_truncated``), so that it sits on the curve drawn."""
-    shift = branch.omega - branch.omega_truncated
+    """One marker line per bifurcation kind (folds aside), black, labelled by kind (at the
+    frequency the branch reports: :attr:`~femodes.Branch.bifurcations`)."""
     for kind, (marker, text) in _BIFURCATION_STYLE.items():
         bifs = [b for b in branch.bifurcations if b.kind == kind]
         if bifs:
-            ax.plot(_freq(np.array([b.omega + shift[b.index] for b in bifs]), hz), [value(b) for b in bifs], marker, color="k",
+            ax.plot(_freq(np.array([b.omega for b in bifs]), hz), [value(b) for b in bifs], marker, color="k",
                     mfc="none", ms=9, mew=1.5, ls="none", label=text)
 
 

@@ -175,7 +175,8 @@ def _same_bifurcation(a: Bifurcation, b: Bifurcation) -> bool:
     """``b`` is ``a``, or a copy of it (the same bifurcation of a branch loaded again from its file)."""
     if a is b:
         return True
-    return (a.kind == b.kind and a.index == b.index and a.omega == b.omega and np.shape(a.Q) == np.shape(b.Q)
+    return (a.kind == b.kind and a.index == b.index and a.omega_truncated == b.omega_truncated
+            and np.shape(a.Q) == np.shape(b.Q)
             and np.array_equal(a.Q, b.Q) and np.shape(a.P) == np.shape(b.P) and np.array_equal(a.P, b.P))
 
 
@@ -413,7 +414,7 @@ def _locate_branch_point(aug: _Augmented, bif: Bifurcation, newton: NewtonOption
         if sub:
             k = sub[0]
             return _refine(aug, S[k], S[k + 1], newton), i, S[k], S[k + 1]
-    z_rep = np.append(aug.problem.pack(bif.Q, bif.P, bif.omega, bif.xi), bif.parameter)
+    z_rep = np.append(aug.problem.pack(bif.Q, bif.P, bif.omega_truncated, bif.xi), bif.parameter)
     r = aug.problem.residual(z_rep[:-1], z_rep[-1])[0]
     if (float(np.max(np.abs(r))) <= 1e3 * newton.atol
             and _smallest_sv(aug, z_rep, D) <= GENUINE * max(_smallest_sv(aug, Z[i], D), _smallest_sv(aug, Z[i + 1], D))):
@@ -450,9 +451,9 @@ def _switch_at_branch_point(branch: Branch, bif: Bifurcation, span: tuple[float,
     stab = StabilityOptions.parse(stability, "switch_branch")  # a bad value is refused before the work
     aug = _Augmented(branch)
     w_lo, w_hi = min(span), max(span)
-    if not w_lo < bif.omega < w_hi:
-        raise ValueError(f"switch_branch: omega = {span!r} must contain the branch point at w = {bif.omega:.6g}")
-    z_rep = np.append(aug.problem.pack(bif.Q, bif.P, bif.omega, bif.xi), bif.parameter)
+    if not w_lo < bif.omega_truncated < w_hi:
+        raise ValueError(f"switch_branch: omega = {span!r} must contain the branch point of the truncated series at w = {bif.omega_truncated:.6g}")
+    z_rep = np.append(aug.problem.pack(bif.Q, bif.P, bif.omega_truncated, bif.xi), bif.parameter)
     if aug.forced:
         options = options or frequency_response_options()
     else:

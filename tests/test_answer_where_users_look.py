@@ -126,3 +126,32 @@ def test_plot_and_summary_show_the_answer(controlled):
     assert f"{controlled.omega[_upper(controlled)]:.6g}" in folds and "+-" in folds
     assert any("truncated series" in line and f"{H20_FOLD:.6g}" in line for line in lines)
     assert any("amplitude largest" in line and "not controlled by rtol" in line for line in lines)
+
+
+def test_bifurcations_are_reported_at_the_converged_frequency(tmp_path):
+    """With stability and rtol: the folds' Bifurcation objects read the converged frequency, as
+    branch.omega does (their series, and omega_truncated, stay the truncated ones); one between
+    two points is moved by the correction interpolated between them; the file keeps the series'
+    frequency and the loaded branch reports the same converged one."""
+    b = fm.frequency_response(_oscillator(), (0.5, 2.0), 10, rtol=1e-3, stability=True)  # H = 10: cheaper, as exact
+    folds = [x for x in b.bifurcations if x.kind == "fold"]
+    assert sorted(x.index for x in folds) == sorted(b.folds)
+    for x in folds:
+        assert x.omega == b.omega[x.index] and x.omega_truncated == b.omega_truncated[x.index]
+        np.testing.assert_array_equal(x.Q, b.Q[x.index])
+    up = _upper(b)
+    assert abs(next(x for x in folds if x.index == up).omega / REF - 1.0) <= 1e-6
+    # a bifurcation between two points (put in by hand: this branch has none), halfway in the series
+    i = up - 3
+    mid = 0.5 * (b.omega_truncated[i] + b.omega_truncated[i + 1])
+    pd = fm.Bifurcation(kind="period_doubling", index=i, omega=mid, energy=1.0, parameter=mid, multiplier=-1.0,
+                        Q=b.Q[i], P=b.P[i])
+    b.set_stability(stable=b.stable, multipliers=b.multipliers, bifurcations=list(b.bifurcations) + [pd],
+                    methods=b.stability_method, tol=b.meta["stability_tol"])
+    moved = next(x for x in b.bifurcations if x.kind == "period_doubling" and x.omega_truncated == mid)
+    c = b.omega - b.omega_truncated
+    assert moved.omega == pytest.approx(mid + 0.5 * (c[i] + c[i + 1]), rel=4 * np.finfo(float).eps)
+    assert moved.omega_truncated == mid and moved.series().omega == mid
+    back = fm.load_branch(b.save(tmp_path / "b.npz"))
+    assert [x.omega for x in back.bifurcations] == [x.omega for x in b.bifurcations]
+    assert [x.omega_truncated for x in back.bifurcations] == [x.omega_truncated for x in b.bifurcations]

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,6 +42,10 @@ class Bifurcation:
         True when it was located between its two branch points (``omega``, ``Q``, ``P`` are
         there); False for a bracketed one (``StabilityOptions(locate=False)``), reported at the
         point of the bracket on its unstable side.
+    omega_truncated : float
+        The frequency of the truncated series ``Q``, ``P``; :attr:`omega` differs from it on an
+        error-controlled branch, which reports its bifurcations at the converged frequency
+        (:attr:`Branch.bifurcations <femodes.Branch.bifurcations>`).
     """
 
     kind: str
@@ -53,10 +58,24 @@ class Bifurcation:
     P: np.ndarray
     xi: float = 0.0
     located: bool = True
+    # not a constructor argument: dataclasses.replace(b, omega=w) is a plain bifurcation at w
+    omega_truncated: float = field(init=False)
 
     def __post_init__(self):
         if self.kind not in BIFURCATION_KINDS:
             raise ValueError(f"Bifurcation: kind must be one of {BIFURCATION_KINDS}, got {self.kind!r}")
+        object.__setattr__(self, "omega_truncated", float(self.omega))
+
+    def at_frequency(self, omega: float) -> Bifurcation:
+        """The same bifurcation reported at the (converged) frequency ``omega``; its series, and
+        :attr:`omega_truncated`, unchanged."""
+        out = dataclasses.replace(self, omega=float(omega))
+        object.__setattr__(out, "omega_truncated", self.omega_truncated)
+        return out
+
+    def series(self) -> Bifurcation:
+        """The bifurcation at the frequency of its series (itself when they are the same)."""
+        return self if self.omega == self.omega_truncated else dataclasses.replace(self, omega=self.omega_truncated)
 
     def __repr__(self) -> str:
         return (f"Bifurcation({self.kind!r}, index={self.index}, omega={self.omega:.8g}, "

@@ -71,7 +71,7 @@ class Branch:
         self.stable: np.ndarray | None = None
         self.multipliers: np.ndarray | None = None
         self.stability_method: np.ndarray | None = None
-        self.bifurcations: tuple = ()
+        self._bifurcations: tuple = ()  # at the frequencies of their series (see bifurcations)
         self.accuracy: ErrorEstimate | None = None
         #: :func:`~femodes.store.model_signature` of the model the branch was solved on, as read
         #: from its file (None: not stored, a file of an older femodes; or computed from ``model``)
@@ -148,9 +148,34 @@ class Branch:
             if not isinstance(b, Bifurcation):
                 raise TypeError(f"set_stability: bifurcations must be Bifurcation objects, got {type(b).__name__}")
         self.stable, self.multipliers, self.stability_method = stable, multipliers, methods
-        self.bifurcations = tuple(bifurcations)
+        self._bifurcations = tuple(b.series() for b in bifurcations)
         self.meta["stability_tol"] = float(tol)
         return self
+
+    @property
+    def bifurcations(self) -> tuple:
+        """The :class:`Bifurcation` objects in branch order, at the frequency the branch reports
+        (:attr:`omega`): on an error-controlled branch each is moved by its points' correction
+        ``omega - omega_truncated`` (a fold by its own point's; one between two points by the
+        correction interpolated in the truncated frequency), so that it sits on the converged
+        curve; ``b.omega_truncated``, ``b.Q`` and ``b.P`` stay the truncated series'."""
+        bifs = self._bifurcations
+        if not bifs or self.accuracy is None or self.accuracy.omega_limit is None:
+            return bifs
+        wt, c = self.omega_truncated, self.omega - self.omega_truncated
+        out = []
+        for b in bifs:
+            i = min(int(b.index), len(self) - 1)
+            shift = c[i]
+            if b.kind != "fold" and i + 1 < len(self) and wt[i + 1] != wt[i]:
+                theta = min(max((b.omega_truncated - wt[i]) / (wt[i + 1] - wt[i]), 0.0), 1.0)
+                shift = (1.0 - theta) * c[i] + theta * c[i + 1]
+            out.append(b.at_frequency(b.omega_truncated + shift) if shift else b)
+        return tuple(out)
+
+    @bifurcations.setter
+    def bifurcations(self, value) -> None:
+        self._bifurcations = tuple(b.series() for b in value)
 
     @property
     def converged(self) -> np.ndarray:
@@ -268,7 +293,7 @@ class Branch:
         if self.accuracy is not None:
             out.update({f"accuracy_{k}": v for k, v in self.accuracy.arrays().items()})
         if self.stable is not None and self.multipliers is not None:  # set together (set_stability)
-            bifs = self.bifurcations
+            bifs = self._bifurcations  # at their series' frequencies (load applies the correction again)
             out.update({
                 "stable": self.stable.astype(np.int8), "multipliers_re": self.multipliers.real,
                 "multipliers_im": self.multipliers.imag,
