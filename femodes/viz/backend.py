@@ -13,8 +13,6 @@ from __future__ import annotations
 import ctypes
 import os
 
-
-
 __all__ = ["render_backend", "import_pyvista", "INSTALL_HINT"]
 
 INSTALL_HINT = (
