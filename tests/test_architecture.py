@@ -43,6 +43,7 @@ LAYERS = {
     "femodes.mesh_error": 5,
     "femodes.switching": 5,
     "femodes.fields": 6,
+    "femodes.solid_cells": 6,
     "femodes.plot": 6,
     "femodes.io": 6,
     "femodes.viz": 6,

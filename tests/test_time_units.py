@@ -13,7 +13,7 @@ import pytest
 
 import femodes as fm
 from femodes.solvers import NewtonOptions, semismooth_newton
-from femodes.solvers.newton import _finite, _inf
+from femodes.solvers.newton_linalg import all_finite as _finite, max_abs as _inf
 from femodes.time import moreau
 from femodes.time.impact import fischer_burmeister, solve_lcp
 from femodes.time.stepper import LOCAL_NEWTON

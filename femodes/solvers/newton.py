@@ -16,6 +16,10 @@ semismooth ``r`` with nonsingular generalized Jacobians, the full step is
 accepted and convergence is superlinear (quadratic for strongly semismooth /
 piecewise smooth ``r``; finite for piecewise linear ``r``) [QS93]_.
 
+This module holds :func:`semismooth_newton`, its iteration and line search; the options and
+result are in :mod:`femodes.solvers.newton_types`, the default linear solver and the norms in
+:mod:`femodes.solvers.newton_linalg` (both re-exported here).
+
 References
 ----------
 .. [QS93] L. Qi and J. Sun, "A nonsmooth version of Newton's method",
@@ -37,25 +41,16 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from .checks import (
-    LINSOLVE_ERRORS,
-    check_bool,
-    check_callable,
-    check_int,
-    check_nonnegative,
-    check_positive,
-    is_operator,
-    show,
-    start_vector,
-)
+from .checks import LINSOLVE_ERRORS, is_operator, start_vector
+from .newton_linalg import F64, all_finite, default_linear_solver, jacobian_finite, max_abs, prepare_jacobian
+from .newton_types import NewtonOptions, NewtonResult
 
 __all__ = [
     "NewtonOptions",
@@ -73,295 +68,6 @@ _ARMIJO_SIGMA = 1e-4
 _NO_PROGRESS_FACTOR = 0.99
 
 
-# --------------------------------------------------------------------------- #
-# options / result
-# --------------------------------------------------------------------------- #
-@dataclass(frozen=True, kw_only=True)
-class NewtonOptions:
-    """Options of :func:`semismooth_newton`.
-
-    Parameters
-    ----------
-    atol : float, default 1e-10
-        Convergence when ``norm(r, inf) <= atol``.  The test is absolute: the
-        residual is assumed to be scaled by the caller (e.g. nondimensional or
-        divided by a reference force) so that ``atol`` is meaningful.
-    rtol : float, default 1e-14
-        Relative (backward-error) convergence: also converged when
-        ``norm(r, inf) <= rtol * norm(|J| |x|, inf)``, i.e. the residual is
-        round-off compared with the terms that make it up. Large, badly
-        conditioned FE systems (a 1e4-DOF Hermite beam has stiffness entries
-        ~1e11) cannot reach an absolute ``atol``; this test (Oettli-Prager style
-        componentwise backward error, bounded by its max norm) lets them
-        converge at the precision the data allow. 0 disables it. The product
-        ``|J| |x|`` costs about a residual's linear part; within one solve it
-        is formed again only when ``norm(r, inf)`` is within
-        :data:`TOLERANCE_RECHECK` times the last tolerance computed or
-        ``norm(x, inf)`` has more than doubled since.
-    rtol_x : float, default 0.0
-        Relative-to-the-iterate convergence: also converged when
-        ``norm(r, inf) <= rtol_x * norm(x, inf)``, for residuals in the units
-        of ``x`` (e.g. the impulse balance of a time step, whose unknowns are
-        the impulses: :mod:`femodes.time` uses 1e-13).  Cheaper than the
-        ``rtol`` backward-error test (no ``|J| |x|`` product), which matters
-        for thousands of tiny systems.  0 disables it.
-    xtol : float, default 1e-12
-        Secondary, round-off-floor convergence test: the iteration also stops
-        with success when a *full* step (``alpha == 1``) was accepted with
-        ``norm(dx, inf) <= xtol * (1 + norm(x, inf))`` **and** the new residual
-        satisfies ``norm(r, inf) <= sqrt(atol)``.  This catches problems whose
-        attainable residual is limited by round-off (large, badly conditioned
-        systems) while still requiring a reasonably small residual.  A
-        negligible step with a residual above ``sqrt(atol)`` counts as "no
-        progress" (see ``max_stall``).
-    max_iter : int, default 30
-        Maximum number of iterations; each iteration performs one linear
-        solve (a relaxed watchdog step that is later discarded counts).
-    line_search : bool, default True
-        Globalisation by non-monotone backtracking (Armijo) on the merit
-        ``phi = 0.5 * ||r||_2^2`` [GLL86]_ with watchdog stabilisation
-        (see ``watchdog``): a trial step ``alpha`` is accepted if
-        ``phi(x + alpha dx) <= max(phi of the last nonmonotone_memory watch
-        points) - 1e-4 * alpha * ||r(x)||_2^2`` (Armijo constant from
-        [DS96]_).  The reference value is a maximum over recent iterates, so steps
-        that cross a kink of a semismooth residual (where the merit may
-        increase temporarily) are not rejected needlessly.  Trial steps are
-        ``1, 1/2, 1/4, ...`` down to ``min_alpha`` (the last trial is exactly
-        ``min_alpha``; a non-finite trial residual cuts the step by 10).
-        Quadratic interpolation [DS96]_ is deliberately not used: the kinks
-        of a semismooth merit mislead it (measured: up to 3x more iterations
-        on a contact law).
-        If no trial down to ``min_alpha`` satisfies the test, the trial with
-        the *smallest merit* among those tried is accepted anyway and the
-        iteration continues (at kinks, the generalized Newton direction need
-        not be a descent direction, and a small step to the next smooth piece
-        usually restores progress); this is counted as a stall.  With
-        ``line_search=False`` the full step is always taken.
-    min_alpha : float, default 1e-4
-        Smallest trial step length, ``0 < min_alpha <= 1``.
-    nonmonotone_memory : int, default 1 (monotone Armijo: with memory 5 the forced Duffing start at w = 0.5, H = 9, cycled; tests/test_hbm.py::test_monotone_line_search_default_starts_forced_duffing)
-        Number of previous merit values over which the non-monotone reference
-        is taken (1 gives the classical monotone Armijo rule).
-    watchdog : int, default 3
-        Non-monotone stabilisation by the watchdog technique (Chamberlain et
-        al. 1982, combined with the non-monotone line search as in Grippo,
-        Lampariello & Lucidi 1991): from a "watch point" (an iterate that
-        passed the sufficient-decrease test) up to ``watchdog`` full Newton
-        steps are taken without testing; the first iterate that satisfies the
-        non-monotone Armijo test relative to the watch point becomes the new
-        watch point.  If none does, the iteration returns to the watch point
-        and backtracks along its Newton direction (from ``alpha = 1/2``);
-        relaxed steps are then suspended until a full step passes the
-        ordinary line search again.  Rationale: for contact laws the
-        undamped semismooth Newton iteration is an active-set method that
-        usually converges in a few steps, while the merit function
-        ``0.5 ||r||^2`` (dominated by ``c * gap`` terms when the penalty-like
-        constant ``c`` is large) can force tiny steps; measured on a spring
-        chain with obstacles and ``c`` up to 1e3: 21/300 failures and up to
-        30 iterations with ``watchdog=0``, 0/300 and at most 5 with
-        ``watchdog=3``.  ``0`` gives the plain non-monotone line search.
-    max_stall : int, default 3
-        Number of *consecutive* stalled iterations (failed line search, or a
-        negligible step without convergence) after which the iteration stops
-        with status 2.
-    stagnation_window : int, default 10
-        The iteration also stops with status 2 when the smallest residual norm
-        seen has not decreased by at least 1 % during this many iterations
-        (e.g. convergence to a non-zero local minimum of ``||r||``, or
-        cycling).  ``0`` disables the test (globalisation from far away on a
-        very flat merit, e.g. ``arctan`` from ``x0 = 100``, may need it off).
-    accept_factor : float, default 0.0
-        Tolerance of last resort: when the iteration stops without convergence
-        (status 1, ``max_iter`` reached, or 2, no progress), the returned
-        iterate still counts as converged (status 0; the message says so and
-        why the iteration stopped) if ``norm(r, inf) <= accept_factor * tol``
-        with the convergence tolerance ``tol = max(atol, rtol_x * norm(x,
-        inf), rtol * norm(|J| |x|, inf))``.  For callers whose tight
-        tolerance sits near the round-off floor of some of their problems and
-        who accept a looser residual there rather than a failure (the local
-        problems of :mod:`femodes.time`, 1e4: converged to 1e-13, accepted at
-        1e-9).  ``0`` disables it.
-    linear_solver : callable or None
-        Strategy ``linear_solver(A, b) -> y`` returning the solution of
-        ``A y = b`` for a dense ``ndarray`` or ``scipy.sparse`` ``A``.  Newton
-        calls it as ``dx = -linear_solver(J, r)``.  It may raise
-        ``numpy.linalg.LinAlgError``, ``RuntimeError`` or ``ArithmeticError``
-        (or return non-finite values) to signal a singular matrix; this is
-        reported as status 3.  ``None`` selects :func:`default_linear_solver`.
-    callback : callable or None
-        ``callback(iteration, x, residual_norm)`` called after the initial
-        evaluation (``iteration == 0``) and after every Newton step; its
-        return value is ignored.  ``x`` is a copy.
-    """
-
-    atol: float = 1e-10
-    rtol: float = 1e-14
-    rtol_x: float = 0.0
-    xtol: float = 1e-12
-    max_iter: int = 30
-    line_search: bool = True
-    min_alpha: float = 1e-4
-    nonmonotone_memory: int = 1
-    watchdog: int = 3
-    max_stall: int = 3
-    stagnation_window: int = 10
-    accept_factor: float = 0.0
-    linear_solver: Callable[[Any, np.ndarray], np.ndarray] | None = None
-    callback: Callable[[int, np.ndarray, float], Any] | None = None
-
-    def __post_init__(self) -> None:
-        check_positive("atol", self.atol)
-        check_nonnegative("rtol", self.rtol)
-        check_nonnegative("rtol_x", self.rtol_x)
-        check_positive("xtol", self.xtol)
-        check_int("max_iter", self.max_iter, 1)
-        check_bool("line_search", self.line_search)
-        check_positive("min_alpha", self.min_alpha)
-        if self.min_alpha > 1:
-            raise ValueError(f"min_alpha must be in (0, 1], got {show(self.min_alpha)}")
-        check_int("nonmonotone_memory", self.nonmonotone_memory, 1)
-        check_int("watchdog", self.watchdog, 0)
-        check_int("max_stall", self.max_stall, 1)
-        check_int("stagnation_window", self.stagnation_window, 0)
-        check_nonnegative("accept_factor", self.accept_factor)
-        check_callable("linear_solver", self.linear_solver)
-        check_callable("callback", self.callback)
-
-
-@dataclass(frozen=True, kw_only=True, eq=False)
-class NewtonResult:
-    """Outcome of :func:`semismooth_newton` (field names follow ``scipy.optimize.OptimizeResult``).
-
-    Attributes
-    ----------
-    x : ndarray, shape (n,)
-        Final iterate.  On success, the converged point; on failure, the
-        iterate with the smallest residual norm encountered.
-    success : bool
-        ``status == 0``.
-    status : int
-        0 converged (or accepted by ``NewtonOptions.accept_factor``); 1
-        ``max_iter`` reached; 2 line search stalled / no progress; 3 singular
-        or non-finite linear solve, or non-finite residual / Jacobian.
-    message : str
-        Human-readable reason.
-    nit : int
-        Number of Newton steps taken (linear solves that led to a step).
-    fun : ndarray, shape (n,)
-        Residual ``r(x)``.
-    residual_norm : float
-        ``norm(fun, inf)``.
-    nfev : int
-        Number of calls of ``fun`` (including line-search trials).
-    history : tuple of float
-        Residual inf-norms of the accepted iterates, ``history[0]`` at ``x0``;
-        ``len(history) == nit + 1``.
-    jac : ndarray or sparse matrix or None
-        The generalized Jacobian returned by ``fun`` at ``x`` (not part of the
-        ``OptimizeResult`` convention; lets callers reuse it, e.g. for
-        tangents in continuation).  ``None`` only if unavailable.
-    """
-
-    x: np.ndarray
-    success: bool
-    status: int
-    message: str
-    nit: int
-    fun: np.ndarray
-    residual_norm: float
-    nfev: int
-    history: tuple[float, ...]
-    jac: Any = field(default=None, repr=False)
-
-
-# --------------------------------------------------------------------------- #
-# linear algebra
-# --------------------------------------------------------------------------- #
-def default_linear_solver(A: Any, b: np.ndarray) -> np.ndarray:
-    """Solve ``A y = b`` with a direct method.
-
-    Sparse ``A`` (any ``scipy.sparse`` format) is converted to CSC and factorised
-    with :func:`scipy.sparse.linalg.splu` (SuperLU, COLAMD ordering); dense
-    ``A`` uses :func:`numpy.linalg.solve` (LAPACK ``gesv``).  A structured
-    operator (an object with ``shape``, ``matvec`` and ``factorize()``, such as
-    the harmonic-block Jacobian of the HBM problems) solves itself with
-    ``A.factorize().solve(b)``.  Exactly singular matrices raise
-    ``RuntimeError`` (SuperLU) or ``numpy.linalg.LinAlgError``.
-    """
-    if is_operator(A):
-        return A.factorize().solve(b)
-    if sp.issparse(A):
-        A = sp.csc_matrix(A)
-        if not np.issubdtype(A.dtype, np.inexact):
-            A = A.astype(np.float64)
-        return spla.splu(A).solve(np.asarray(b, dtype=np.result_type(A.dtype, b.dtype)))
-    return np.linalg.solve(A, b)
-
-
-#: The dtype of float arrays: a float64 ndarray passes where ``np.asarray(a, dtype=float)`` would
-#: return ``a`` itself, without the call.
-_F64 = np.dtype(np.float64)
-
-#: Arrays up to this size are reduced in Python floats: a numpy reduction costs ~2 us whatever the
-#: size, several per iteration, and the local problems of a time step have 1 to a few unknowns.
-_SMALL = 16
-
-
-def _inf(v: np.ndarray) -> float:
-    """``max |v_i|`` of a float vector (0 if empty), the value of :func:`inf_norm`: the maximum is
-    exact, so the Python reduction of a small vector gives the same float (nan if an entry is)."""
-    n = v.size
-    if n == 1:
-        return abs(v.item())  # nan stays nan, like np.abs(v).max()
-    if n > _SMALL:
-        return float(np.abs(v).max())
-    if not n:
-        return 0.0
-    a = v.tolist()
-    if math.isnan(sum(a)):  # a nan entry (or inf - inf): numpy's nan propagation
-        return float(np.abs(v).max())
-    return max(map(abs, a))
-
-
-def _finite(v: np.ndarray) -> bool:
-    """All entries finite, ``np.all(np.isfinite(v))`` (in Python floats for small arrays)."""
-    n = v.size
-    if n == 1:
-        return math.isfinite(v.item())
-    if n <= _SMALL:
-        return all(map(math.isfinite, v.ravel().tolist()))
-    return bool(np.isfinite(v).all())
-
-
-def _prepare_jacobian(J: Any, n: int) -> Any:
-    """Validate shape; return dense ndarray or sparse matrix unchanged otherwise."""
-    if type(J) is np.ndarray and J.dtype is _F64 and J.shape == (n, n):
-        return J  # what np.asarray(J, dtype=float) would return, checked
-    if sp.issparse(J) or is_operator(J):
-        if J.shape != (n, n):
-            raise ValueError(
-                f"fun returned a Jacobian of shape {J.shape}, expected ({n}, {n}) for x of shape ({n},)"
-            )
-        return J
-    Jd = np.asarray(J, dtype=float)
-    if Jd.shape != (n, n):
-        raise ValueError(
-            f"fun returned a Jacobian of shape {Jd.shape}, expected ({n}, {n}) for x of shape ({n},)"
-        )
-    return Jd
-
-
-def _jacobian_finite(J: Any) -> bool:
-    if type(J) is np.ndarray:
-        return _finite(J)
-    if is_operator(J):
-        return bool(J.all_finite()) if callable(getattr(J, "all_finite", None)) else True
-    if sp.issparse(J):
-        data = J.data if J.format in ("csr", "csc", "coo", "bsr", "dia") else J.tocoo().data
-        return bool(np.all(np.isfinite(data)))
-    return bool(np.all(np.isfinite(J)))
-
-
 #: Within one solve, the tolerance ``max(atol, rtol_x |x|, rtol |J| |x|)`` is computed again only
 #: when the residual norm is at most this factor times the last one computed or ``norm(x, inf)``
 #: has more than doubled since: otherwise the product cannot have grown enough for the residual to
@@ -372,10 +78,10 @@ TOLERANCE_RECHECK = 16.0
 
 
 def _tolerance(atol: float, rtol: float, J, x, rtol_x: float = 0.0) -> float:
-    """``max(atol, rtol_x ||x||_inf, rtol || |J| |x| ||_inf)``: absolute, relative to the iterate or
+    """``max(atol, rtol_x ||x||max_abs, rtol || |J| |x| ||max_abs)``: absolute, relative to the iterate or
     backward-error tolerance."""
     if rtol_x:
-        atol = max(atol, rtol_x * _inf(x))
+        atol = max(atol, rtol_x * max_abs(x))
     if not rtol:
         return atol
     try:
@@ -441,7 +147,7 @@ def semismooth_newton(
         options = NewtonOptions()
     elif not isinstance(options, NewtonOptions):
         raise TypeError(f"options must be a NewtonOptions instance or None, got {type(options).__name__}")
-    if type(x0) is np.ndarray and x0.dtype is _F64 and x0.ndim == 1 and x0.size and _finite(x0):
+    if type(x0) is np.ndarray and x0.dtype is F64 and x0.ndim == 1 and x0.size and all_finite(x0):
         x = x0.copy()  # what start_vector returns, without its generic conversion
     else:
         x = start_vector(x0)
@@ -525,7 +231,7 @@ def _backtrack(evaluate: Callable, x0: np.ndarray, dx: np.ndarray, phi0: float, 
     while True:
         x_try = x0 + alpha * dx
         r_try, J_try = evaluate(x_try)
-        phi_try = 0.5 * float(r_try @ r_try) if _finite(r_try) else math.inf
+        phi_try = 0.5 * float(r_try @ r_try) if all_finite(r_try) else math.inf
         if math.isfinite(phi_try):  # a Python float
             if phi_try <= phi_ref + _ARMIJO_SIGMA * alpha * slope:
                 return True, alpha, x_try, r_try, J_try, phi_try
@@ -562,7 +268,7 @@ class _Iteration:
         self.nfev = 0
         self.x = x
         self.r, self.J = self.evaluate(x)
-        self.rnorm = _inf(self.r)
+        self.rnorm = max_abs(self.r)
         self.history = [self.rnorm]
         self.debug = logger.isEnabledFor(logging.DEBUG)
         # best (smallest residual) finite iterate, returned on failure
@@ -581,12 +287,12 @@ class _Iteration:
             r_raw, J_raw = out
         except (TypeError, ValueError):
             raise ValueError("fun must return a pair (r, J)") from None
-        r = r_raw if type(r_raw) is np.ndarray and r_raw.dtype is _F64 else np.asarray(r_raw, dtype=float)
+        r = r_raw if type(r_raw) is np.ndarray and r_raw.dtype is F64 else np.asarray(r_raw, dtype=float)
         if r.shape != (n,):
             raise ValueError(
                 f"fun returned a residual of shape {r.shape}, expected ({n},) matching x of shape ({n},)"
             )
-        return r, _prepare_jacobian(J_raw, n)
+        return r, prepare_jacobian(J_raw, n)
 
     def run(self) -> NewtonResult:
         try:
@@ -613,7 +319,7 @@ class _Iteration:
             logger.debug("newton it=0 |r|=%.3e", self.rnorm)
         if not math.isfinite(self.rnorm):
             raise _Stop(3, "non-finite residual at x0", 0, False)
-        if self.rnorm > self.atol and not _jacobian_finite(self.J):
+        if self.rnorm > self.atol and not jacobian_finite(self.J):
             raise _Stop(3, "non-finite Jacobian at x0", 0, False)
         if self.converged(self.rnorm):
             raise _Stop(0, _converged_message(self.rnorm), 0, False)
@@ -627,7 +333,7 @@ class _Iteration:
             return True
         if not (opt.rtol or opt.rtol_x):
             return False
-        xnorm = _inf(self.x)
+        xnorm = max_abs(self.x)
         if rnorm > TOLERANCE_RECHECK * self.tol_seen[0] and xnorm <= 2.0 * self.tol_seen[1]:
             return False
         tol = _tolerance(self.atol, opt.rtol, self.J, self.x, opt.rtol_x)
@@ -647,13 +353,13 @@ class _Iteration:
             sol = self.solve(self.J, self.r)
         except LINSOLVE_ERRORS as exc:
             raise _Stop(3, f"singular or failed linear solve at iteration {it}: {exc}", it - 1, True) from exc
-        if type(sol) is np.ndarray and sol.dtype is _F64 and sol.ndim == 1:
+        if type(sol) is np.ndarray and sol.dtype is F64 and sol.ndim == 1:
             dx = -sol
         else:
             dx = -np.asarray(sol, dtype=float).reshape(-1)
         if dx.shape != (self.n,):
             raise ValueError(f"linear_solver returned shape {np.shape(sol)}, expected ({self.n},)")
-        if not _finite(dx):
+        if not all_finite(dx):
             raise _Stop(3, f"non-finite Newton step at iteration {it} (singular Jacobian?)", it - 1, True)
         self.watchdog.new_direction(dx)
         return dx
@@ -664,7 +370,7 @@ class _Iteration:
         if not self.options.line_search:
             x_new = self.x + dx
             r_new, J_new = self.evaluate(x_new)
-            if not _finite(r_new):
+            if not all_finite(r_new):
                 raise _Stop(3, f"non-finite residual after step {it}", it - 1, True)
             return _Step(1.0, dx, x_new, r_new, J_new, ok=True, kind="full")
         phi_w, phi_ref = self.watchdog.references()
@@ -681,7 +387,7 @@ class _Iteration:
         wd = self.watchdog
         x_new = self.x + dx
         r_new, J_new = self.evaluate(x_new)
-        if _finite(r_new):
+        if all_finite(r_new):
             wd.relaxed += 1
             phi_new = 0.5 * float(r_new @ r_new)
             if phi_new <= phi_ref - _ARMIJO_SIGMA * 2.0 * phi_w:
@@ -711,9 +417,9 @@ class _Iteration:
 
     def accept(self, it: int, step: _Step) -> float:
         """Move to the step's point, update the best iterate; return the step length (inf-norm)."""
-        step_norm = step.alpha * _inf(step.dx)
+        step_norm = step.alpha * max_abs(step.dx)
         self.x, self.r, self.J = step.x, step.r, step.J
-        self.rnorm = _inf(self.r)
+        self.rnorm = max_abs(self.r)
         self.history.append(self.rnorm)
         if self.rnorm < self.best[3]:
             if self.rnorm <= _NO_PROGRESS_FACTOR * self.best[3]:
@@ -730,11 +436,11 @@ class _Iteration:
         """Convergence (residual, or negligible full step on the round-off floor) and failure
         (non-finite Jacobian, stalls, stagnation) tests after step ``it``."""
         opt, rnorm = self.options, self.rnorm
-        if rnorm > self.atol and not _jacobian_finite(self.J):
+        if rnorm > self.atol and not jacobian_finite(self.J):
             raise _Stop(3, f"non-finite Jacobian after step {it}", it, True)
         if self.converged(rnorm):
             raise _Stop(0, _converged_message(rnorm), it, False)
-        small_step = step_norm <= opt.xtol * (1.0 + _inf(self.x))
+        small_step = step_norm <= opt.xtol * (1.0 + max_abs(self.x))
         if small_step and step.alpha == 1.0 and rnorm <= math.sqrt(self.atol):
             raise _Stop(0, f"converged: full step {step_norm:.3e} below xtol*(1+|x|) with residual "
                            f"{rnorm:.3e} <= sqrt(atol)", it, False)
