@@ -74,6 +74,11 @@ class PeriodDriven:
     always : bool
         Trace past grazing by frequency even when the energy continuation reached the end of its
         span without grazing (by default its branch is kept then).
+    start_harmonics : int
+        When Newton from the linear mode fails at the sweep's first frequency, the orbit with this
+        many harmonics starts it instead, refined by doubling the harmonics (the new ones zero) up
+        to all of them (with H = 80 on a 160-element bar the linear mode is too far from the
+        contact-phase orbit).
     off_curve : float
         Relative departure of an orbit's energy from the smooth curve through its neighbours
         beyond which it is taken for a tongue's orbit (the family's own curvature between
@@ -91,6 +96,7 @@ class PeriodDriven:
     off_curve: float = 0.1
     grazing_shift: float = 0.03
     always: bool = False
+    start_harmonics: int = 10
 
     def __post_init__(self):
         for name in ("start", "step", "max_step"):
@@ -101,7 +107,7 @@ class PeriodDriven:
         if not (0 < self.min_fraction < 1 and 0 < self.off_curve < 1 and 0 < self.grazing_shift < 1):
             raise ValueError(f"PeriodDriven: min_fraction, off_curve and grazing_shift must be in (0, 1), got "
                              f"{self.min_fraction!r}, {self.off_curve!r} and {self.grazing_shift!r}")
-        for name in ("max_points", "max_skips", "n_modes"):
+        for name in ("max_points", "max_skips", "n_modes", "start_harmonics"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"PeriodDriven: {name} must be a positive integer, got {v!r}")
@@ -206,6 +212,8 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
             guess = (orbits[-1].x if orbits else seed).copy()
         guess[n] = w
         res = semismooth_newton(lambda z, w=w: pd.residual(z, w)[:2], guess, options=newton)
+        if not orbits and not res.success and problem.system.h.n_harmonics > strategy.start_harmonics:
+            res = _start_coarse(model, problem, w, seed, strategy, newton, res)
         E = _energy(problem, res.x) if res.success else math.nan
         fractions = modal_energy_fractions(problem, res.x, lm.omega, lm.shapes) if res.success else None
         log.debug("w = %.6g: success %s, E = %.4g, share of mode %d %.3f", w, res.success, E, mode,
@@ -254,6 +262,39 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
         tongues = [t for t in tongues if t.omega[0] < orbits[-1].omega]
     log.info("period-driven sweep of mode %d: %d orbits, %d tongues; %s", mode, len(orbits), len(tongues), message)
     return orbits, tongues, message
+
+
+def _start_coarse(model: StructuralModel, problem: NonlinearModeProblem, w: float, seed: np.ndarray,
+                  strategy: PeriodDriven, newton: NewtonOptions, failed):
+    """The sweep's first orbit when Newton from the linear mode failed with all the harmonics: the
+    orbit with ``strategy.start_harmonics`` harmonics at the same frequency, then with twice as many
+    (started from the linear mode, or else from the last stage's orbit, its new harmonics zero), and so on
+    up to all of them (on a 160-element bar the linear mode is a good enough start with up to 40
+    harmonics, not with 80; the orbit with 40 is). Returns ``failed`` if a stage fails."""
+    s = problem.system
+    H = s.h.n_harmonics
+    stages = [strategy.start_harmonics]
+    while 2 * stages[-1] < H:
+        stages.append(2 * stages[-1])
+    linear = s.split(seed[: s.size])
+    previous = None
+    for k in stages + [H]:
+        h = s.h if k == H else type(s.h)(n_harmonics=k, subharmonic=s.h.subharmonic)
+        pd = PeriodDrivenModeProblem(model, h, problem.mode, reference_energy=problem.reference_energy,
+                                     projection=s.projection)
+        # the linear mode (with all harmonics it just failed), else the last stage's orbit
+        for Q, P in ([linear] if k < H else []) + ([previous] if previous is not None else []):
+            Qk, Pk = np.zeros((h.n_coef, Q.shape[1])), np.zeros((h.n_coef, P.shape[1]))
+            m = min(h.n_coef, Q.shape[0])
+            Qk[:m], Pk[:m] = Q[:m], P[:m]
+            res = semismooth_newton(lambda z, pd=pd: pd.residual(z, w)[:2], pd.pack(Qk, Pk, w), options=newton)
+            if res.success:
+                break
+        else:
+            return failed
+        u = pd.unpack(res.x, 0.0)
+        previous = (u.Q, u.P)
+    return res
 
 
 def _drop_off_curve(problem, orbits: list[_Orbit], tongues, lm, strategy):

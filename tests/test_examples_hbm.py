@@ -32,18 +32,37 @@ def test_contact_forced_cases_trace_both_folds(contact):
         assert br.nit.mean() <= 4.0 and br.nit.max() <= 8
 
 
-@pytest.mark.slow
-def test_bar_refinement_against_the_continuum():
-    """The bar's backbone (contact-phase family, mass redistributed) at 2 E_g within 0.5 % of the
-    continuum's first nonsmooth mode on 20, 40 and 80 elements (0.38, 0.07, 0.03 % measured: the
-    error falls with the mesh there); at 5 and 20 E_g, where reached, within 1 % (the harmonic
-    truncation and the gaps the tongues leave dominate: no rate is claimed there)."""
+def test_bar_refinement_against_the_continuum(tmp_path):
+    """The bar's first nonsmooth mode against the continuum's (d'Alembert), with the rates the example
+    measures (benchmarks/README_bar_convergence.md has the full study).
+
+    Measured (160 elements, mass redistributed): mean errors over 2-8 E_g of -0.37, -0.17, -0.10 %
+    for H = 10, 20, 40 (+- 0.13, 0.03, 0.04 %), q = 0.92 +- 0.36; every orbit there within 0.76 %.
+    Mesh at H = 10 (fixed frequencies): median changes 0.39, 0.055, 0.029 % (redistributed) and
+    0.40, 0.15, 0.049 % (consistent) for 20->40, 40->80, 80->160; p = 1.87 +- 0.56 and 1.51 +- 0.07.
+    """
     ex = load("bar_contact_refinement")
-    err = ex.errors[True]
-    assert np.all(np.abs(err[:, 0]) < 5e-3) and np.all(np.diff(np.abs(err[:, 0])) < 0)
-    assert np.isfinite(err[:, 1]).sum() >= 2  # 5 E_g reached on at least two meshes
-    finite = np.isfinite(err)
-    assert np.all(np.abs(err[finite]) < 1e-2)
+    # every orbit between 2 and 8 E_g within 1 %: the tongues pull single orbits by up to ~1 %
+    for H in ex.HARMONICS:
+        r, e = ex.orbit_errors(ex.branches[H])
+        assert np.all(np.abs(e[(r >= 2) & (r <= 8)]) < 1e-2), H
+        assert r.max() > 8.0  # the family's mean is taken over 2-8 E_g
+    # the harmonic truncation: the family's frequency too low, less so with more harmonics
+    assert np.all(ex.mean_error < 0)
+    assert abs(ex.mean_error[-1]) < 0.5 * abs(ex.mean_error[0])
+    # its rate: 0.92 +- 0.36 measured; the band (0.3, 1.6) holds a first-order-or-slower rate (the
+    # contact force is a rectangular pulse, its harmonics fall as 1/j) and fails on no convergence
+    assert 0.3 < ex.q < 1.6 and ex.q_sigma < 0.6
+    # the mesh at H = 10: second-order-like convergence at fixed frequencies, both contact masses
+    for redistribute in (True, False):
+        p, dp = ex.mesh_rate[redistribute]
+        assert 1.0 < p < 2.5, (redistribute, p)
+        # on 160 elements the mesh error is below the harmonic one (0.03-0.05 % against 0.1-0.4 %)
+        assert ex.mesh_change[redistribute][-1] < abs(ex.mean_error[-1])
+    # mass redistribution: the same limit, reached sooner (40->80: 0.055 % against 0.15 %)
+    assert ex.mesh_change[True][1] < 0.6 * ex.mesh_change[False][1]
+    png = ex.figure(tmp_path / "bar.png")
+    assert png.stat().st_size > 20_000
 
 
 def test_cantilever_reduced_and_full_backbones_agree(tmp_path):

@@ -148,6 +148,35 @@ def test_period_driven_options_are_checked():
         fm.nonlinear_mode(m, 1, (0.5 * eg, 4 * eg), 5, past_grazing="period")
 
 
+def test_period_sweep_start_from_fewer_harmonics(model):
+    """The sweep's start when Newton from the linear mode fails (H = 80 on 160 elements, 67 s: in
+    benchmarks/README_bar_convergence.md): the orbit with ``start_harmonics`` harmonics, doubled up
+    to H. Here with 5 -> 10 -> 20 harmonics on 20 elements, where the direct start works too: both
+    reach the same orbit (to Newton's tolerance), and a start that cannot succeed is reported."""
+    from femodes.hbm import NonlinearModeProblem, PeriodDrivenModeProblem
+    from femodes.nonsmooth_modes import _start_coarse
+    from femodes.solvers import NewtonOptions, semismooth_newton
+
+    with pytest.raises(ValueError, match="start_harmonics must be a positive integer"):
+        fm.PeriodDriven(start_harmonics=0)
+    eg = fm.grazing_energy(model)
+    problem = NonlinearModeProblem(model, fm.Harmonics(n_harmonics=20), 1, reference_energy=eg)
+    pd = PeriodDrivenModeProblem(model, fm.Harmonics(n_harmonics=20), 1, reference_energy=eg)
+    w = 1.02 * problem.omega0
+    seed = problem.linear_guess(1.02 * eg)
+    newton = NewtonOptions(atol=1e-9, max_iter=30)
+    x0 = seed.copy()
+    x0[pd.system.size] = w
+    direct = semismooth_newton(lambda z: pd.residual(z, w)[:2], x0, options=newton)
+    staged = _start_coarse(model, problem, w, seed, fm.PeriodDriven(start_harmonics=5), newton, None)
+    assert direct.success and staged.success
+    np.testing.assert_allclose(staged.x, direct.x, atol=1e-8 * np.max(np.abs(direct.x)))
+    # no stage can succeed without iterations: the failed result handed in comes back
+    failed = object()
+    assert _start_coarse(model, problem, w, seed, fm.PeriodDriven(start_harmonics=5),
+                         NewtonOptions(atol=1e-9, max_iter=1), failed) is failed
+
+
 def test_saved_backbone_keeps_its_family_and_tongues(backbone, tmp_path):
     path = tmp_path / "bb.npz"
     backbone.save(path)
