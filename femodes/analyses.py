@@ -13,18 +13,14 @@ import time
 import math
 import os
 import warnings
-from typing import Any
 from collections.abc import Callable
 
 import numpy as np
-import scipy.sparse as sp
 
+from .analysis_inputs import (check_continuation_options, check_harmonics, check_model, check_span, largest_unknown,
+                              start_vector, warn_rigid_body, warn_undamped)
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
-from .hbm.system import default_contact_parameters
-from .eigen import normal_modes
-from .laws import PenaltyContact, UnilateralContact
-from .linear import rigid_body_message, rigid_body_modes
 from .model import StructuralModel
 from .results import Branch, ContactInfo
 from .runs import checkpoint_spec, model_fingerprint, run_continuation
@@ -35,70 +31,12 @@ from .accuracy import (AccuracyOptions, check_estimate_method, check_options, rt
                        refinement_options, shooting_unsupported_for)
 from .floquet import StabilityOptions, annotate_branch
 from .nonsmooth_modes import PeriodDriven, continue_past_grazing
+from .static_contact import StaticContactResult, static_contact  # its own module; importable from here too
 
 __all__ = ["frequency_response", "frequency_response_options", "nonlinear_mode", "nonlinear_mode_options", "static_contact", "StaticContactResult",
            "branch_from_continuation", "model_fingerprint"]
 
 log = logging.getLogger(__name__)
-
-
-def _harmonics(h: Any, owner: str) -> Harmonics:
-    if isinstance(h, Harmonics):
-        return h
-    if isinstance(h, (int, np.integer)) and not isinstance(h, bool):
-        if h < 1:
-            raise ValueError(f"{owner}: harmonics must be >= 1 (the number of harmonics), got {int(h)}")
-        return Harmonics(int(h))
-    raise TypeError(f"{owner}: harmonics must be a femodes.Harmonics (or an int number of harmonics), got {h!r}")
-
-
-def _span(value: Any, name: str, owner: str, *, positive: bool) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{owner}: {name} must be a pair (start, end) of numbers, got {value!r}") from None
-    if not (math.isfinite(a) and math.isfinite(b)) or a == b or (positive and (a <= 0 or b <= 0)):
-        raise ValueError(f"{owner}: {name} must be two distinct finite{' positive' if positive else ''} numbers, got {value!r}")
-    # (b - a) * (b - a): a Python float's ** raises OverflowError where * gives inf
-    if not math.isfinite((b - a) * (b - a)) or (b - a) * (b - a) == 0.0 or (positive and not 1e-150 < min(a, b) <= max(a, b) < 1e150):
-        raise ValueError(f"{owner}: {name} = {value!r} is out of the representable range (its width squared under- or "
-                         "overflows); rescale the units")
-    return a, b
-
-
-def _options(options: Any, owner: str) -> ContinuationOptions | None:
-    if options is not None and not isinstance(options, ContinuationOptions):
-        raise TypeError(f"{owner}: options must be a femodes.ContinuationOptions or None, got {type(options).__name__}")
-    return options
-
-
-def _warn_rigid_body(model: StructuralModel) -> None:
-    """A forced model free to move as a whole (no supports, or a floating mesh part): its static
-    harmonic has no stiffness, so the mean position is whatever the contacts and the start make it.
-    One eigen-solve of the lowest mode (about one Newton iteration of the branch)."""
-    try:
-        omega, _ = normal_modes(model.K, model.M, 1, "frequency_response", check=False)
-    except (RuntimeError, ValueError, np.linalg.LinAlgError):
-        return
-    rigid = rigid_body_modes(model, omega)
-    if rigid.any():
-        warnings.warn(rigid_body_message(1, "frequency_response") + " (the mean position of the response is then "
-                      "not determined by the structure)", UserWarning, stacklevel=3)
-
-
-def _warn_undamped(model: StructuralModel) -> None:
-    """A forced model without damping has no finite resonance peak: each resonance is a pole the
-    curve runs to infinity on, with no folds (a user's blade: 9 points, no fold)."""
-    if model.forces and not model.has_damping:
-        warnings.warn("frequency_response: the model has no damping, so its forced response has no finite resonance "
-                      "peak (the curve runs to infinity at each resonance); add damping, e.g. "
-                      "model.with_damping(modal=0.01) or model.with_damping(beta=...)", UserWarning, stacklevel=2)
-
-
-def _check_model(model: Any, owner: str) -> StructuralModel:
-    if not isinstance(model, StructuralModel):
-        raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
-    return model
 
 
 def branch_from_continuation(problem, result, *, kind: str, model: StructuralModel, meta: dict | None = None) -> Branch:
@@ -216,14 +154,14 @@ def frequency_response(
         at the smallest step); ``status == 2`` if it stopped at ``options.max_points`` before the
         end of the span (valid points, ``success`` True, a warning in the log).
     """
-    model = _check_model(model, "frequency_response")
+    model = check_model(model, "frequency_response")
     checkpoint = checkpoint_spec(checkpoint, "frequency_response")
-    h = _harmonics(harmonics, "frequency_response")
-    _options(options, "frequency_response")
+    h = check_harmonics(harmonics, "frequency_response")
+    check_continuation_options(options, "frequency_response")
     refinement_options(rtol, max_harmonics, h.n_harmonics, "frequency_response")
     check_estimate_method(error_method, "frequency_response", "error_method")
     error_options = check_options(error_options, "frequency_response", "error_options")
-    span = _span(omega, "omega", "frequency_response", positive=True)
+    span = check_span(omega, "omega", "frequency_response", positive=True)
     if error_method != "auto" and rtol is None:
         raise ValueError(f"frequency_response: error_method={error_method!r} chooses how rtol= is met, but rtol is not "
                          "given; pass rtol=..., or leave error_method at 'auto'")
@@ -234,7 +172,7 @@ def frequency_response(
     problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
     if x0 is not None:
-        x0 = _start_vector(x0, problem.size, f"{model.n_dofs} DOFs x {h.n_coef} coefficients"
+        x0 = start_vector(x0, problem.size, f"{model.n_dofs} DOFs x {h.n_coef} coefficients"
                            + (f" + {problem.size - model.n_dofs * h.n_coef} contact-force coefficients"
                               if problem.size > model.n_dofs * h.n_coef else ""), "frequency_response")
 
@@ -245,8 +183,8 @@ def frequency_response(
             with np.errstate(all="ignore"):
                 xs = _starting_point(problem, span[0], run_options.newton)
             _check_response_scale(problem, xs, span[0])
-        _warn_undamped(model)  # once the input is known to be valid: bad input is an error first
-        _warn_rigid_body(model)
+        warn_undamped(model)  # once the input is known to be valid: bad input is an error first
+        warn_rigid_body(model)
         if run_options.x_scale is None:
             run_options = dataclasses.replace(run_options, x_scale=_response_scale(problem, span, xs))
         return xs, run_options
@@ -274,25 +212,6 @@ def frequency_response(
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method,
                           time_limit=rtol_time_limit(time.perf_counter() - started, error_options),
                           options=error_options)
-
-
-def _start_vector(x0, size: int, layout: str, label: str) -> np.ndarray:
-    """``x0`` as a finite float vector of ``size`` unknowns, else a ValueError naming ``x0`` (not a
-    derived quantity such as the scales computed from it)."""
-    try:
-        x = np.asarray(x0, dtype=float)
-    except (TypeError, ValueError):
-        raise TypeError(f"{label}: x0 must be a real vector of {size} unknowns ({layout}), got {x0!r}") from None
-    if x.shape != (size,):
-        raise ValueError(f"{label}: x0 has shape {x.shape}, this problem has {size} unknowns ({layout}); pass an x0 "
-                         "of that size (e.g. a point's unknowns from a branch on the same model and harmonics)")
-    if not np.all(np.isfinite(x)):
-        raise ValueError(f"{label}: x0 contains non-finite values (nan or inf)")
-    if np.max(np.abs(x), initial=0.0) > _largest_unknown(size):
-        raise ValueError(f"{label}: x0 has entries up to {np.max(np.abs(x)):.3g}, whose squares overflow floating point "
-                         f"(above {_largest_unknown(size):.3g} for {size} unknowns); pass an x0 of the solution's size, "
-                         "or rescale the units")
-    return x
 
 
 def frequency_response_options(**changes) -> ContinuationOptions:
@@ -337,7 +256,7 @@ def _check_law_scales(problem, sq: float, label: str) -> None:
     """ValueError naming the law parameter (complementarity ``c``, penalty ``stiffness``) whose
     product with the response scale ``sq`` makes forces whose squares overflow floating point:
     every step would otherwise fail as a "non-finite residual" that names nothing."""
-    s, big = problem.system, _largest_unknown(problem.size)
+    s, big = problem.system, largest_unknown(problem.size)
     for ct in s.unilateral:
         if ct.c * sq > big:
             raise ValueError(f"{label}: the contact parameter c = {ct.c:.3g} (UnilateralContact c, DOF {ct.dof}) times "
@@ -352,19 +271,12 @@ def _check_law_scales(problem, sq: float, label: str) -> None:
 
 def _check_response_scale(problem, x: np.ndarray, omega: float) -> None:
     """ValueError naming the forcing amplitude when the (linear or converged) response at ``omega``
-    is not finite, or so large that its square overflows (:func:`_largest_unknown`)."""
+    is not finite, or so large that its square overflows (:func:`largest_unknown`)."""
     big = float(np.max(np.abs(x), initial=0.0)) if np.all(np.isfinite(x)) else math.inf
-    if big > _largest_unknown(problem.size):
+    if big > largest_unknown(problem.size):
         raise ValueError(f"frequency_response: the response at omega = {omega:g} is {big:.3g}, too large for floating "
                          "point (its square overflows the norms of Newton and the arclength): the forcing amplitude "
                          "(HarmonicForce amplitude) is too large for these units; rescale them")
-
-
-def _largest_unknown(size: int) -> float:
-    """Largest magnitude of an unknown whose square, summed over ``size`` unknowns, stays finite:
-    the Newton merit ``|r|^2 / 2`` and the arclength norm square the unknowns (above it they
-    overflow to inf and every step fails as a "non-finite residual")."""
-    return math.sqrt(np.finfo(float).max / max(int(size), 1)) / 10.0
 
 
 def _harmonics_key(h: Harmonics) -> list:
@@ -496,20 +408,20 @@ def nonlinear_mode(
     Branch
         ``omega`` (rad/s) against ``energy``.
     """
-    model = _check_model(model, "nonlinear_mode")
+    model = check_model(model, "nonlinear_mode")
     checkpoint = checkpoint_spec(checkpoint, "nonlinear_mode")
     if harmonics is _REQUIRED:  # not None: an explicit None stays the TypeError it was
         warnings.warn("nonlinear_mode without harmonics= is deprecated (it uses 10); pass harmonics=10 (or a "
                       "femodes.Harmonics), as frequency_response requires", DeprecationWarning,
                       stacklevel=3)  # 3: the caller's line, past limit_blas_threads' wrapper
         harmonics = 10
-    h = _harmonics(harmonics, "nonlinear_mode")
-    _options(options, "nonlinear_mode")
+    h = check_harmonics(harmonics, "nonlinear_mode")
+    check_continuation_options(options, "nonlinear_mode")
     refinement_options(rtol, max_harmonics, h.n_harmonics, "nonlinear_mode")
     error_options = check_options(error_options, "nonlinear_mode", "error_options")
     if past_grazing is not None and not isinstance(past_grazing, PeriodDriven):
         raise TypeError(f"nonlinear_mode: past_grazing must be a femodes.PeriodDriven or None, got {past_grazing!r}")
-    e0, e1 = _span(energy, "energy", "nonlinear_mode", positive=True)
+    e0, e1 = check_span(energy, "energy", "nonlinear_mode", positive=True)
     if e1 < e0:
         raise ValueError(f"nonlinear_mode: energy must increase, got energy={tuple(energy)!r}: the backbone starts "
                          f"from the linear mode at energy[0], where the motion is nearly linear; pass "
@@ -560,88 +472,3 @@ def _with_stability(branch: Branch, problem, model: StructuralModel, stability: 
     return annotate_branch(branch, problem, model, method=stability.method, tol=stability.tol, newton=options.newton,
                            locate=stability.locate)
 
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class StaticContactResult:
-    """Static contact solution: ``x`` displacements, ``contact_force`` and ``gap`` per contact (in
-    ``model.contacts`` order), scipy-style fields."""
-
-    x: np.ndarray
-    contact_force: np.ndarray
-    gap: np.ndarray
-    success: bool
-    status: int
-    message: str
-    nit: int
-    residual_norm: float
-
-    @property
-    def penetration(self) -> float:
-        """``max(-gap)`` over the contacts (0 if none penetrates)."""
-        return float(max(0.0, np.max(-self.gap))) if self.gap.size else 0.0
-
-
-@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
-def static_contact(model: StructuralModel, force: np.ndarray | None = None, *, x0: np.ndarray | None = None,
-                   options: NewtonOptions | None = None) -> StaticContactResult:
-    """Static equilibrium with contact: ``K q + f_nl(q) = f - W p``, ``p - max(0, p - c g_N) = 0``.
-
-    Solved with the same semismooth Newton as the dynamic problems (no harmonics). ``force``
-    defaults to the static part of the declared forcing plus the amplitudes of harmonic-1 forces
-    (a quasi-static load).
-    """
-    model = _check_model(model, "static_contact")
-    n = model.n_dofs
-    if force is None:
-        fv = model.force_vectors()
-        f = sum((v.real for v in fv.values()), np.zeros(n))
-    else:
-        f = np.asarray(force, dtype=float)
-        if f.shape != (n,) or not np.all(np.isfinite(f)):
-            raise ValueError(f"static_contact: force must be a finite vector of length {n}, got shape {f.shape}")
-    uc = [(a.item, a.dof) for a in model.contacts if isinstance(a.item, UnilateralContact)]
-    defaults = default_contact_parameters(model, [dof for law, dof in uc if law.c is None])
-    it = iter(defaults)
-    cs = [law.c if law.c is not None else float(next(it)) for law, dof in uc]
-    m = len(uc)
-    K = model.K.tocsr()
-
-    def fun(x):
-        q, p = x[:n], x[n:]
-        r = np.empty(n + m)
-        r[:n] = K @ q - f
-        rows, cols, vals = [], [], []
-        for a in model.contacts:
-            if isinstance(a.item, PenaltyContact):
-                pf, dp = a.item.force(q[a.dof])
-                r[a.dof] += pf
-                rows.append(a.dof); cols.append(a.dof); vals.append(float(dp))
-        for a in model.nonlinearities:
-            ff, df = a.item.force(q[a.dof])
-            r[a.dof] += ff
-            rows.append(a.dof); cols.append(a.dof); vals.append(float(df))
-        for j, ((law, dof), c) in enumerate(zip(uc, cs)):
-            r[dof] += p[j]
-            rows.append(dof); cols.append(n + j); vals.append(1.0)
-            rr, drp, dru = law.residual(p[j], q[dof], c)
-            r[n + j] = rr
-            rows += [n + j, n + j]; cols += [n + j, dof]; vals += [float(drp), float(dru)]
-        J = sp.block_diag([K, sp.csr_matrix((m, m))], format="csr") + sp.csr_matrix((vals, (rows, cols)), shape=(n + m, n + m))
-        return r, J
-
-    x_init = np.zeros(n + m) if x0 is None else _start_vector(x0, n + m, f"{n} DOFs + {m} contact forces",
-                                                             "static_contact")
-    res = semismooth_newton(fun, x_init, options=options or NewtonOptions(atol=1e-10, max_iter=50))
-    q = res.x[:n]
-    forces = np.zeros(len(model.contacts))
-    gaps = np.zeros(len(model.contacts))
-    j = 0
-    for i, a in enumerate(model.contacts):
-        gaps[i] = a.item.gap_function(q[a.dof])
-        if isinstance(a.item, UnilateralContact):
-            forces[i] = res.x[n + j]
-            j += 1
-        else:
-            forces[i] = a.item.force(q[a.dof])[0]
-    return StaticContactResult(x=q, contact_force=forces, gap=gaps, success=res.success, status=res.status,
-                               message=res.message, nit=res.nit, residual_norm=res.residual_norm)

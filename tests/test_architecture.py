@@ -34,6 +34,8 @@ LAYERS = {
     "femodes.results": 4,
     "femodes.exact_branch": 4,
     "femodes.analyses": 5,
+    "femodes.analysis_inputs": 5,
+    "femodes.static_contact": 5,
     "femodes.exact_response": 5,
     "femodes.nonsmooth_modes": 5,
     "femodes.resonance": 5,
