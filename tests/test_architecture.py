@@ -44,6 +44,7 @@ LAYERS = {
     "femodes.accuracy": 5,
     "femodes.mesh_error": 5,
     "femodes.switching": 5,
+    "femodes.branch_points": 5,
     "femodes.fields": 6,
     "femodes.solid_cells": 6,
     "femodes.plot": 6,

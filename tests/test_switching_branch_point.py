@@ -32,7 +32,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 import femodes as fm
-from femodes import switching
+from femodes import branch_points
 from femodes.hbm.problems import ForcedResponseProblem
 
 KC_F, K3, C, F = 0.05, 1.0, 0.02, 0.05
@@ -249,7 +249,7 @@ def test_errors_say_what_is_wrong(forced, backbone, monkeypatch):
     orphan.model = None
     with pytest.raises(ValueError, match="attach"):
         fm.switch_branch(orphan, bp, omega=(0.9, 1.7))
-    monkeypatch.setattr(switching, "DENSE_LIMIT", 10)
+    monkeypatch.setattr(branch_points, "DENSE_LIMIT", 10)  # the branch-point path reads it there
     with pytest.raises(NotImplementedError, match="craig_bampton"):
         fm.switch_branch(b, bp, omega=(0.9, 1.7))
     monkeypatch.undo()
