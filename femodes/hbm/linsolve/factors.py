@@ -8,7 +8,10 @@ threads (``HBMSystem(threads=...)``; LAPACK and SuperLU release the GIL). Defaul
 the 2-core test machine two threads were slower (1e5-DOF bar, H = 20: 1283 ms vs 1118 ms per
 Newton iteration, ``benchmarks/README.md``), the band solves being memory-bound. They depend only
 on ``(w, xi)`` and are cached on the system: Newton at a fixed frequency reuses them at every
-iteration; inside a continuation ``w`` changes at every iteration and they are rebuilt. The
+iteration; inside a continuation ``w`` changes at every iteration and they are rebuilt, all but
+harmonic 0, whose block ``Z(0) = K`` does not depend on ``w`` (kept on the pattern); the sparse
+factorisations of the other harmonics share one symbolic analysis
+(:class:`~femodes.sparse_direct.PatternFactorizer`). The
 columns ``W = Z_II^-1 Z_Ib`` of the condensation are kept (``keep_w_max_bytes``): the back
 substitution is then a product instead of a band solve.
 """
@@ -85,6 +88,21 @@ class LinearFactors:
 
         def one(job):
             row_c, row_s, f = job
+            if f == 0.0:
+                # harmonic 0: Z(0) = K whatever w (and xi), so its factors are kept on the pattern and
+                # shared by every frequency (one factorisation of K_II and its n_b solves saved per
+                # Newton iteration of a continuation)
+                key = (self.xi, self.keep_w)
+                if pat.static is None:
+                    pat.static = {}
+                hit = pat.static.get(key)
+                if hit is None:
+                    hit = pat.static[key] = build(job)
+                return hit
+            return build(job)
+
+        def build(job):
+            row_c, row_s, f = job
             lu = BlockLU(pat, f, self.xi, superlu_options=superlu) if pat.perm.size else None
             Zbb, Zib, Zbi = (Z.harmonic(f, self.xi) for Z in (pat.bb, pat.Ib, pat.bI))
             W = Xm = None
@@ -93,9 +111,7 @@ class LinearFactors:
                 if isinstance(Zc, tuple):
                     Zc, W, Xm = Zc
             elif lu is not None and nb:
-                full = np.zeros((pat.perm.size, nb), dtype=complex, order="F")  # gbtrs takes it as is
-                full[pat.R] = Zib
-                W = lu.solve(full)
+                W = lu.solve_rows(pat.R, Zib)  # Z_II^-1 Z_Ib: Z_Ib is nonzero on the rows R only
                 Zc = Zbb - Zbi @ W[pat.R]
             else:
                 Zc, W = Zbb, None
