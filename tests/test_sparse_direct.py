@@ -286,3 +286,45 @@ def test_hbm_steps_with_shared_analysis_and_harmonic_zero(box, backend, name):
         static = blk0
     if name == "mumps":
         assert pat.factorizer.reused > 0
+
+
+@pytest.mark.parametrize("name", ["superlu"] + OPTIONAL)
+def test_reuse_by_gmres_on_sparse_blocks(box, backend, name):
+    """BlockSolver(reuse=True) on sparse-direct blocks solves by GMRES preconditioned with the
+    factors of w0 (hbm.linsolve.krylov): the step equals the exact path's at w to the fixture's
+    cond eps tolerance (GMRES stops at a hundredth of the exact path's backward-error test, below
+    one eps); past its pass budget it refactorises and solves exactly."""
+    from femodes.hbm.linsolve import BlockSolver
+    from femodes.hbm.linsolve.krylov import KrylovReusedFactorization
+
+    if name not in INSTALLED:
+        pytest.skip(f"{name} not installed")
+    model, K, Z, tol = box
+    model = model.with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=1e-3))
+    backend(name)
+    H = fm.Harmonics(3)
+    solver = BlockSolver(reuse=True, max_passes=60)
+    pr = fm.ForcedResponseProblem(model, H, solver=solver)
+    x = pr.initial_guess(1.5)
+    r, J, _ = pr.residual(x, 1.5)
+    x = x - J.factorize().solve(r)                   # the base factors at w0 = 1.5, contacts closed
+    for w in (1.5 * (1 + 1e-3), 1.5 * (1 + 1e-2)):
+        r, J, _ = pr.residual(x, w)
+        fac = J.factorize()
+        assert isinstance(fac, KrylovReusedFactorization) and fac.F.omega == 1.5
+        dx = fac.solve(r)
+        r0, J0, _ = fm.ForcedResponseProblem(model, H).residual(x, w)
+        dx0 = J0.factorize().solve(r0)
+        assert np.abs(dx - dx0).max() <= tol * np.abs(dx0).max()
+    assert solver.stats["refactorized"] == 0 and solver.stats["passes"] >= 4
+    # a budget of 2 passes at a 10 % offset: refactorised at w, the exact solution
+    solver2 = BlockSolver(reuse=True, max_passes=2, reuse_window=0.2)
+    pr2 = fm.ForcedResponseProblem(model, H, solver=solver2)
+    pr2.residual(x, 1.5)[1].factorize()
+    r, J, _ = pr2.residual(x, 1.65)
+    fac = J.factorize()
+    dx = fac.solve(r)
+    assert solver2.stats["refactorized"] == 1 and fac.refactored is not None and fac.refactored.exact
+    r0, J0, _ = fm.ForcedResponseProblem(model, H).residual(x, 1.65)
+    dx0 = J0.factorize().solve(r0)
+    assert np.abs(dx - dx0).max() <= tol * np.abs(dx0).max()

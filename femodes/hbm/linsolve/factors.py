@@ -19,6 +19,7 @@ substitution is then a product instead of a band solve.
 from __future__ import annotations
 
 import os
+import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -64,6 +65,7 @@ class LinearFactors:
     """
 
     def __init__(self, structure, omega: float, xi: float, threads: int | None = None):
+        t0 = time.process_time()
         self.omega, self.xi = float(omega), float(xi)
         h, opts = structure.h, structure.solver_options
         pat = structure.block_pattern()
@@ -128,6 +130,8 @@ class LinearFactors:
         else:
             self.blocks = [one(j) for j in jobs]
         self.threads = nt
+        #: CPU time of building these factors (the budget of a reused solve, .krylov)
+        self.cpu_s = time.process_time() - t0
 
     def map(self, fun):
         """Apply ``fun(block)`` to all harmonics (threaded like the factorisation)."""

@@ -20,6 +20,7 @@ from .blocks import StructureFailure
 from .factorization import StructuredFactorization
 from .jacobian import HarmonicBlockJacobian
 from .options import DEFAULT_OPTIONS, BlockSolverOptions
+from .krylov import KrylovReusedFactorization
 from .reuse import ReusedFactorization, ReuseState, budget_from_factors
 
 __all__ = ["BlockSolver", "STAT_KEYS"]
@@ -108,8 +109,11 @@ class BlockSolver:
             F = self._reusable(J, state)
             if F is not None:
                 try:
+                    # sparse-direct blocks (2-D/3-D meshes): GMRES, where a factorisation costs
+                    # tens to hundreds of solves (.krylov); band LU: the stationary iteration
+                    reused = ReusedFactorization if F.pat.banded else KrylovReusedFactorization
                     fac = (StructuredFactorization(J, threads, F) if F.omega == J.omega
-                           else ReusedFactorization(J, threads, F, self, state))
+                           else reused(J, threads, F, self, state))
                 except (StructureFailure, RuntimeError) as exc:  # P singular where J need not be
                     log.debug("reused factors not applicable (%s); factorising at w", exc)
                 else:
