@@ -138,7 +138,12 @@ class BlockSolver:
     def fresh_factorization(self, J: HarmonicBlockJacobian, threads: int | None,
                             state: ReuseState | None) -> StructuredFactorization:
         """The exact factorisation at ``(J.omega, J.xi)`` (the system's cached factors if they are
-        at that frequency); they become the base of later reuse."""
+        at that frequency); they become the base of later reuse. Without reuse the last factors are
+        let go first: a Newton iteration at a new frequency then holds one set of factors, not two
+        (and their MUMPS instances are refactorised, ``sparse_direct.PatternFactorizer``)."""
+        if (not self.reuse and state is not None and state.F is not None
+                and (state.F.omega, state.F.xi) != (float(J.omega), float(J.xi))):
+            state.F = None
         F = J.system.linear_factors(J.omega, J.xi, threads)
         if state is not None and F is not state.F:
             self.stats["factorizations"] += 1
