@@ -328,3 +328,23 @@ def test_reuse_by_gmres_on_sparse_blocks(box, backend, name):
     r0, J0, _ = fm.ForcedResponseProblem(model, H).residual(x, 1.65)
     dx0 = J0.factorize().solve(r0)
     assert np.abs(dx - dx0).max() <= tol * np.abs(dx0).max()
+
+
+def test_block_pattern_pickles_without_its_factorisations(box):
+    """A pattern that has factorised (its PatternFactorizer and harmonic 0's factors attached)
+    pickles without them; the copy factorises anew and solves alike."""
+    import pickle
+
+    from femodes.hbm.linsolve import BlockLU, build_pattern
+
+    model, K, Z, tol = box
+    bd = np.array(sorted({c.dof for c in model.contacts}))
+    pat = build_pattern(model.M, model.K, model.C, bd)
+    lu = BlockLU(pat, 1.5)
+    pat.static = {(0.0, True): object()}
+    assert pat.factorizer is not None
+    copy = pickle.loads(pickle.dumps(pat))
+    assert copy.factorizer is None and copy.static is None and pat.factorizer is not None
+    R = np.random.default_rng(6).standard_normal((pat.perm.size, 2)) + 0j
+    ref = lu.solve(R)
+    assert np.abs(BlockLU(copy, 1.5).solve(R) - ref).max() <= tol * np.abs(ref).max()

@@ -69,6 +69,10 @@ class BlockPattern:
     def n_interior(self) -> int:
         return self.perm.size
 
+    def __getstate__(self):
+        # factorisations (MUMPS instances, SuperLU objects) do not pickle: rebuilt on first use
+        return dict(self.__dict__, factorizer=None, static=None)
+
 
 def build_pattern(M: sp.spmatrix, K: sp.spmatrix, C: sp.spmatrix, bdofs: np.ndarray, *,
                   band_max_fill: float = DEFAULT_OPTIONS.band_max_fill) -> BlockPattern:

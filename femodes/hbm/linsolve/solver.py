@@ -47,9 +47,14 @@ class BlockSolver:
         factors this solver used last for the same system (and at the same ``xi``) is solved
         with them as a preconditioner, refined against the true Jacobian to the backward-error
         test of a fresh factorisation (and a forward one), and factorised at ``w`` when the
-        refinement would need more passes than a factorisation costs. Off by default: on the
-        bars of ``benchmarks/README_corrector.md`` (1e4-1e5 DOFs, H = 10) it saved 2-33 % of the
-        factorisations but no time (+2 % to +11 % per point against ``False``).
+        refinement would need more passes than a factorisation costs. Band-LU blocks (line
+        meshes) iterate ``x <- x + P^-1 (b - J x)`` (:mod:`~femodes.hbm.linsolve.reuse`);
+        sparse-direct blocks (2-D/3-D meshes) run GMRES with ``P^-1`` as preconditioner, its
+        budget the measured cost of the factors (:mod:`~femodes.hbm.linsolve.krylov`). Off by
+        default: on the bars of ``benchmarks/README_corrector.md`` (1e4-1e5 DOFs, H = 10) it
+        saved 2-33 % of the factorisations but no time (+2 % to +11 % per point against
+        ``False``); on 3-D P2 boxes it saves 20-40 % of a Newton iteration at 1 % frequency
+        steps (``benchmarks/README_solids_scale.md``), results within the refinement tolerance.
     reuse_window : float, default 0.05
         Largest ``|w - w0| / |w0|`` tried.
     max_passes : int, optional
