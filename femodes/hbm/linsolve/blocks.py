@@ -63,7 +63,7 @@ class BlockPattern:
     abs_row_sums: tuple | None = None              # the system's abs_row_sums() (refinement test)
     factorizer: PatternFactorizer | None = None    # sparse factorisations on (rows, cols): CSC structure
                                                    # and MUMPS's analysis shared by all harmonics (BlockLU)
-    static: dict | None = None                     # harmonic 0's factors by xi (LinearFactors): Z(0) = K
+    static: dict | None = None                     # harmonic 0's factors by keep_w (LinearFactors): Z(0) = K
 
     @property
     def n_interior(self) -> int:

@@ -91,10 +91,12 @@ class LinearFactors:
         def one(job):
             row_c, row_s, f = job
             if f == 0.0:
-                # harmonic 0: Z(0) = K whatever w (and xi), so its factors are kept on the pattern and
-                # shared by every frequency (one factorisation of K_II and its n_b solves saved per
-                # Newton iteration of a continuation)
-                key = (self.xi, self.keep_w)
+                # harmonic 0: Z(0) = K whatever w and xi (f multiplies every term in them, modal
+                # damping's gain i f d too), so its factors are kept on the pattern and shared by
+                # every frequency (one factorisation of K_II and its n_b solves saved per Newton
+                # iteration of a continuation); one entry per keep_w, not per xi (xi is an unknown
+                # of the nonlinear-mode continuation)
+                key = self.keep_w
                 if pat.static is None:
                     pat.static = {}
                 hit = pat.static.get(key)

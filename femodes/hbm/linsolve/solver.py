@@ -53,8 +53,9 @@ class BlockSolver:
         budget the measured cost of the factors (:mod:`~femodes.hbm.linsolve.krylov`). Off by
         default: on the bars of ``benchmarks/README_corrector.md`` (1e4-1e5 DOFs, H = 10) it
         saved 2-33 % of the factorisations but no time (+2 % to +11 % per point against
-        ``False``); on 3-D P2 boxes it saves 20-40 % of a Newton iteration at 1 % frequency
-        steps (``benchmarks/README_solids_scale.md``), results within the refinement tolerance.
+        ``False``); on 3-D P2 boxes it saved 11-27 % of a Newton iteration at 1 % frequency
+        steps (1.9e4-6.1e4 DOFs, ``benchmarks/README_solids_scale.md``), results within the
+        refinement tolerance.
     reuse_window : float, default 0.05
         Largest ``|w - w0| / |w0|`` tried.
     max_passes : int, optional
