@@ -535,18 +535,24 @@ def _block_floor(model, rec: dict, repeat: int) -> None:
     rec["time_s"] = rec["cpu_s"] = rec["factor_solve_cpu_s"]
 
 
-def _hbm_iter(model, rec: dict, repeat: int) -> None:
+def _hbm_iter(model, rec: dict, repeat: int, reuse: bool = False) -> None:
     """Full HBM (H = ``H``): ``ForcedResponseProblem`` setup, then ``repeat`` Newton iterations
     (``residual`` + ``newton.default_linear_solver``, i.e. ``J.factorize().solve(r)``) near the
     linear guess at w = 1.5 moved by one Newton step (contacts active), each at a frequency
     shifted by 1 % so that every harmonic block is factorised again, as in a corrector step;
-    wall and CPU time of each iteration."""
+    wall and CPU time of each iteration. ``reuse``: the problem's solver is ``BlockSolver(reuse=True)``
+    (the factors of the last frequency precondition GMRES, ``femodes/hbm/linsolve/krylov.py``),
+    its counters in ``solver_stats``."""
     import numpy as np
 
     import femodes as fm
     from femodes.solvers import newton
 
-    (pr, ts, cs) = _cpu_wall(lambda: fm.ForcedResponseProblem(model, fm.Harmonics(H)))
+    solver = None
+    if reuse:
+        from femodes.hbm.linsolve import BlockSolver
+        solver = BlockSolver(reuse=True)
+    (pr, ts, cs) = _cpu_wall(lambda: fm.ForcedResponseProblem(model, fm.Harmonics(H), solver=solver))
     rec.update(setup_s=ts, setup_cpu_s=cs, unknowns=int(pr.size), backend=fm.sparse_backend_info().indefinite)
     p0 = 1.5
     x = pr.initial_guess(p0)
@@ -568,7 +574,8 @@ def _hbm_iter(model, rec: dict, repeat: int) -> None:
                iteration_median_s=float(np.median(walls)), iteration_cpu_median_s=float(np.median(cpus)),
                time_s=float(np.median(walls)), cpu_s=float(np.median(cpus)),
                contact_active=bool(P.size and np.max(np.abs(P)) > 0),
-               step_norm=float(np.linalg.norm(dx)))
+               step_norm=float(np.linalg.norm(dx)), reuse=bool(reuse),
+               solver_stats=dict(solver.stats) if solver is not None else None)
 
 
 #: Half side of the square contact pad centred on the tip face of the pipeline's box (section 0.1 x 0.1):

@@ -206,3 +206,147 @@ def test_backend_blas_follows_femodes_thread_limit():
     env = {k: v for k, v in __import__("os").environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     assert out.returncode == 0, out.stderr
+
+
+@pytest.mark.parametrize("name", ["superlu"] + OPTIONAL)
+def test_pattern_factorizer_matches_factorize(box, backend, name):
+    """Matrices of one pattern through a PatternFactorizer (CSC structure built once; MUMPS's
+    analysis reused by the instances whose factors were released) solve as factorize() does, with
+    dense and sparse right-hand sides; MUMPS reuses its analysis once a factor is released.
+    Tolerance: a backward-stable solve's forward error, cond eps (the fixture's ``tol``); MUMPS
+    with a reused analysis is its own threshold-pivoting LDL^T, bounded the same way."""
+    if name not in INSTALLED:
+        pytest.skip(f"{name} not installed")
+    model, K, Z, tol = box
+    Kc, Mc, Cc = (A.tocoo() for A in (model.K, model.M, model.C))
+    U = (abs(model.K) + abs(model.M) + abs(model.C)).tocoo()
+    r, c = U.row, U.col
+    parts = [np.asarray(A.tocsr()[r, c]).ravel() for A in (model.K, model.M, model.C)]
+    backend(name)
+    pf = sd.PatternFactorizer(r, c, K.shape[0])
+    assert pf.symmetric
+    rng = np.random.default_rng(5)
+    B = rng.standard_normal((K.shape[0], 3)) + 1j * rng.standard_normal((K.shape[0], 3))
+    rows = np.sort(rng.choice(K.shape[0], 20, replace=False))
+    Bs = sp.csc_matrix((rng.standard_normal((20, 2)).ravel(order="F") + 0j,
+                        (np.tile(rows, 2), np.repeat(np.arange(2), 20))), shape=(K.shape[0], 2))
+    alive = []
+    for w in (1.5, 3.0, 1.515, 0.0):
+        vals = parts[0] - w * w * parts[1] + 1j * w * parts[2] if w else parts[0]
+        A = pf.matrix(vals)
+        assert np.array_equal(A.toarray(), (model.K - w * w * model.M + 1j * w * model.C).toarray() if w else K.toarray())
+        f = pf.factorize(vals, positive_definite=not w, superlu_options=dict(permc_spec="MMD_AT_PLUS_A"))
+        ref = sd.factorize(A, positive_definite=not w, symmetric=True)
+        assert f.backend == ref.backend
+        for b in (B, B[:, 0]):
+            x0 = ref.solve(b)
+            assert np.abs(f.solve(b) - x0).max() <= tol * np.abs(x0).max()
+        x0 = ref.solve(Bs.toarray())
+        assert np.abs(f.solve(Bs) - x0).max() <= tol * np.abs(x0).max()
+        if w == 1.5:
+            alive.append(f)  # held: the next matrix needs an instance of its own
+        del f, ref
+    if name == "mumps":
+        # 1.5 (held), 3.0 fresh; 1.515 reuses 3.0's instance; the real K another kind (CHOLMOD
+        # is not installed as the named back-end here: MUMPS LDL^T of K, a fresh real analysis)
+        assert (pf.analyses, pf.reused) == (3, 1)
+        pf.release()
+        assert not any(pf._idle.values())
+    with pytest.raises(ValueError, match="values expected"):
+        pf.factorize(parts[0][:-1])
+
+
+@pytest.mark.parametrize("name", ["superlu"] + OPTIONAL)
+def test_hbm_steps_with_shared_analysis_and_harmonic_zero(box, backend, name):
+    """Newton steps of one HBM system at several frequencies (harmonic 0's factors kept across
+    frequencies, the other harmonics' analysis shared, the condensation columns solved as sparse
+    right-hand sides) equal those of a fresh system at each frequency (none of it shared), to the
+    block solver's refinement tolerance (a backward error of a few eps ||J||: cond(J) eps forward;
+    the multiple 100 of the fixture's tol covers cond(J) / cond(K) of this small box)."""
+    if name not in INSTALLED:
+        pytest.skip(f"{name} not installed")
+    model, K, Z, tol = box
+    model = model.with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=1e-3))
+    backend(name)
+    H = fm.Harmonics(3)
+    pr = fm.ForcedResponseProblem(model, H)
+    x = pr.initial_guess(1.5)
+    static = None
+    for w in (1.5, 1.52, 1.54):
+        r, J, _ = pr.residual(x, w)
+        dx = J.factorize().solve(r)
+        fresh = fm.ForcedResponseProblem(model, H)
+        r0, J0, _ = fresh.residual(x, w)
+        dx0 = J0.factorize().solve(r0)
+        assert np.abs(dx - dx0).max() <= tol * np.abs(dx0).max()
+        pat = pr.system.block_pattern()
+        assert not pat.banded
+        blk0 = pr.system.linear_factors(w).blocks[0]
+        assert static is None or blk0 is static  # harmonic 0 (Z = K) shared by the frequencies
+        static = blk0
+    # Z(0) = K at any xi too (the nonlinear-mode continuation's unknown): one entry, shared
+    assert pr.system.linear_factors(1.54, 0.3).blocks[0] is static and len(pat.static) == 1
+    if name == "mumps":
+        assert pat.factorizer.reused > 0
+
+
+@pytest.mark.parametrize("name", ["superlu"] + OPTIONAL)
+def test_reuse_by_gmres_on_sparse_blocks(box, backend, name):
+    """BlockSolver(reuse=True) on sparse-direct blocks solves by GMRES preconditioned with the
+    factors of w0 (hbm.linsolve.krylov): the step equals the exact path's at w to the fixture's
+    cond eps tolerance (GMRES stops at a hundredth of the exact path's backward-error test, below
+    one eps); past its pass budget it refactorises and solves exactly."""
+    from femodes.hbm.linsolve import BlockSolver
+    from femodes.hbm.linsolve.krylov import KrylovReusedFactorization
+
+    if name not in INSTALLED:
+        pytest.skip(f"{name} not installed")
+    model, K, Z, tol = box
+    model = model.with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=1e-3))
+    backend(name)
+    H = fm.Harmonics(3)
+    solver = BlockSolver(reuse=True, max_passes=60)
+    pr = fm.ForcedResponseProblem(model, H, solver=solver)
+    x = pr.initial_guess(1.5)
+    r, J, _ = pr.residual(x, 1.5)
+    x = x - J.factorize().solve(r)                   # the base factors at w0 = 1.5, contacts closed
+    for w in (1.5 * (1 + 1e-3), 1.5 * (1 + 1e-2)):
+        r, J, _ = pr.residual(x, w)
+        fac = J.factorize()
+        assert isinstance(fac, KrylovReusedFactorization) and fac.F.omega == 1.5
+        dx = fac.solve(r)
+        r0, J0, _ = fm.ForcedResponseProblem(model, H).residual(x, w)
+        dx0 = J0.factorize().solve(r0)
+        assert np.abs(dx - dx0).max() <= tol * np.abs(dx0).max()
+    assert solver.stats["refactorized"] == 0 and solver.stats["passes"] >= 4
+    # a budget of 2 passes at a 10 % offset: refactorised at w, the exact solution
+    solver2 = BlockSolver(reuse=True, max_passes=2, reuse_window=0.2)
+    pr2 = fm.ForcedResponseProblem(model, H, solver=solver2)
+    pr2.residual(x, 1.5)[1].factorize()
+    r, J, _ = pr2.residual(x, 1.65)
+    fac = J.factorize()
+    dx = fac.solve(r)
+    assert solver2.stats["refactorized"] == 1 and fac.refactored is not None and fac.refactored.exact
+    r0, J0, _ = fm.ForcedResponseProblem(model, H).residual(x, 1.65)
+    dx0 = J0.factorize().solve(r0)
+    assert np.abs(dx - dx0).max() <= tol * np.abs(dx0).max()
+
+
+def test_block_pattern_pickles_without_its_factorisations(box):
+    """A pattern that has factorised (its PatternFactorizer and harmonic 0's factors attached)
+    pickles without them; the copy factorises anew and solves alike."""
+    import pickle
+
+    from femodes.hbm.linsolve import BlockLU, build_pattern
+
+    model, K, Z, tol = box
+    bd = np.array(sorted({c.dof for c in model.contacts}))
+    pat = build_pattern(model.M, model.K, model.C, bd)
+    lu = BlockLU(pat, 1.5)
+    pat.static = {True: object()}
+    assert pat.factorizer is not None
+    copy = pickle.loads(pickle.dumps(pat))
+    assert copy.factorizer is None and copy.static is None and pat.factorizer is not None
+    R = np.random.default_rng(6).standard_normal((pat.perm.size, 2)) + 0j
+    ref = lu.solve(R)
+    assert np.abs(BlockLU(copy, 1.5).solve(R) - ref).max() <= tol * np.abs(ref).max()

@@ -298,6 +298,10 @@ class HBMSystem:
         hit = self._cache.get("factors")
         if hit is not None and hit[0] == key:
             return hit[1]
+        # the last factors go before the new ones are built (unless a caller holds them): one set
+        # of per-harmonic factors alive at a time, not two (3-D blocks: ~1 GiB each at 6e4 DOFs)
+        self._cache.pop("factors", None)
+        hit = None
         F = LinearFactors(self, omega, xi, self.threads if threads is None else threads)
         self._cache["factors"] = (key, F)
         return F

@@ -11,7 +11,8 @@ harmonics, a nonlinear part on the nonlinear DOFs, dense borders. :class:`BlockS
    pivoting (:mod:`.schur`; modal damping's low-rank part in :mod:`.lowrank`);
 3. back substitution (:mod:`.elimination`), then iterative refinement against the true ``J``
    with SuperLU on the assembled matrix as the fallback (:mod:`.factorization`, :mod:`.assembled`);
-4. optionally reusing the factors of a nearby frequency (:mod:`.reuse`).
+4. optionally reusing the factors of a nearby frequency (:mod:`.reuse`; GMRES on sparse-direct
+   blocks, :mod:`.krylov`).
 
 Small and half-full systems go to LAPACK on the dense matrix, mid-size ones to SuperLU
 (:mod:`.assembled`). The tuning is one frozen :class:`BlockSolverOptions` (:mod:`.options`),

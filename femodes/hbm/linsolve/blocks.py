@@ -22,7 +22,7 @@ from scipy.linalg import lapack
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from ...dynamic_stiffness import DynamicStiffness
-from ...sparse_direct import factorize, is_symmetric
+from ...sparse_direct import PatternFactorizer, is_symmetric
 from .options import DEFAULT_OPTIONS
 
 __all__ = ["StructureFailure", "BlockPattern", "build_pattern", "BlockLU", "real_times_complex"]
@@ -61,10 +61,17 @@ class BlockPattern:
     lowrank: object = None                         # modal damping's split of U, Phi (lowrank.LowRankSplit)
     band_flat: np.ndarray | None = None            # rows/cols in the band storage (BlockLU)
     abs_row_sums: tuple | None = None              # the system's abs_row_sums() (refinement test)
+    factorizer: PatternFactorizer | None = None    # sparse factorisations on (rows, cols): CSC structure
+                                                   # and MUMPS's analysis shared by all harmonics (BlockLU)
+    static: dict | None = None                     # harmonic 0's factors by keep_w (LinearFactors): Z(0) = K
 
     @property
     def n_interior(self) -> int:
         return self.perm.size
+
+    def __getstate__(self):
+        # factorisations (MUMPS instances, SuperLU objects) do not pickle: rebuilt on first use
+        return dict(self.__dict__, factorizer=None, static=None)
 
 
 def build_pattern(M: sp.spmatrix, K: sp.spmatrix, C: sp.spmatrix, bdofs: np.ndarray, *,
@@ -150,13 +157,15 @@ class BlockLU:
             self._gbtrs = lapack.zgbtrs if self.complex else lapack.dgbtrs
             self._lu_complex = None  # a real band LU cast to complex, for complex right-hand sides
         else:
-            A = sp.csc_matrix((vals, (pat.rows, pat.cols)), shape=(n, n))
+            if pat.factorizer is None:
+                pat.factorizer = PatternFactorizer(pat.rows, pat.cols, n, symmetric=pat.symmetric)
             try:
                 # the back-end in use (femodes.sparse_direct): MUMPS on the large complex symmetric
-                # blocks of 2-D/3-D meshes where installed, SuperLU with superlu_options otherwise
-                self.factor = factorize(A, symmetric=pat.symmetric, positive_definite=not self.complex and f * f <= 0.0,
-                                        superlu_options=(DEFAULT_OPTIONS.superlu_options if superlu_options is None
-                                                         else superlu_options))
+                # blocks of 2-D/3-D meshes where installed (its analysis done once for all harmonics
+                # and frequencies, PatternFactorizer), SuperLU with superlu_options otherwise
+                self.factor = pat.factorizer.factorize(
+                    vals, positive_definite=not self.complex and f * f <= 0.0,
+                    superlu_options=DEFAULT_OPTIONS.superlu_options if superlu_options is None else superlu_options)
             except RuntimeError as exc:
                 raise StructureFailure(f"interior block singular ({exc})") from None
 
@@ -182,6 +191,33 @@ class BlockLU:
         for j in range(R.shape[1]):
             out[:, j] = self.solve(R[:, j:j + 1])[:, 0]
         return out
+
+    def solve_rows(self, rows: np.ndarray, V: np.ndarray) -> np.ndarray:
+        """:meth:`solve` of the right-hand sides that are ``V`` (complex ``(len(rows), k)``) on the
+        interior positions ``rows`` and zero elsewhere (the condensation columns ``Z_II^-1 Z_Ib``,
+        nonzero on the rows ``R`` coupled to the boundary): a complex sparse factor takes them as a
+        sparse matrix and prunes its forward substitution (:class:`~femodes.sparse_direct.Factor`)."""
+        V = np.asarray(V)
+        n, k = self.n, V.shape[1]
+        if self.pat.banded or not self.complex:
+            full = np.zeros((n, k), dtype=np.result_type(V, complex if self.complex else float), order="F")
+            full[rows] = V
+            return self.solve(full)
+        perm = self.pat.perm
+        if self.pat.identity:
+            pos = np.asarray(rows)
+        else:
+            inv = np.empty(n, dtype=int)
+            inv[perm] = np.arange(n)
+            pos = inv[rows]
+        B = sp.csc_matrix((V.ravel(order="F"), (np.tile(pos, k), np.repeat(np.arange(k), len(pos)))),
+                          shape=(n, k), dtype=complex)
+        Xp = self.factor.solve(B)
+        if self.pat.identity:
+            return Xp
+        X = np.empty_like(Xp)
+        X[perm] = Xp
+        return X
 
     def solve(self, R: np.ndarray, trans: bool = False) -> np.ndarray:
         R = np.asarray(R)

@@ -8,7 +8,10 @@ threads (``HBMSystem(threads=...)``; LAPACK and SuperLU release the GIL). Defaul
 the 2-core test machine two threads were slower (1e5-DOF bar, H = 20: 1283 ms vs 1118 ms per
 Newton iteration, ``benchmarks/README.md``), the band solves being memory-bound. They depend only
 on ``(w, xi)`` and are cached on the system: Newton at a fixed frequency reuses them at every
-iteration; inside a continuation ``w`` changes at every iteration and they are rebuilt. The
+iteration; inside a continuation ``w`` changes at every iteration and they are rebuilt, all but
+harmonic 0, whose block ``Z(0) = K`` does not depend on ``w`` (kept on the pattern); the sparse
+factorisations of the other harmonics share one symbolic analysis
+(:class:`~femodes.sparse_direct.PatternFactorizer`). The
 columns ``W = Z_II^-1 Z_Ib`` of the condensation are kept (``keep_w_max_bytes``): the back
 substitution is then a product instead of a band solve.
 """
@@ -16,6 +19,7 @@ substitution is then a product instead of a band solve.
 from __future__ import annotations
 
 import os
+import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -61,6 +65,7 @@ class LinearFactors:
     """
 
     def __init__(self, structure, omega: float, xi: float, threads: int | None = None):
+        t0 = time.process_time()
         self.omega, self.xi = float(omega), float(xi)
         h, opts = structure.h, structure.solver_options
         pat = structure.block_pattern()
@@ -85,6 +90,23 @@ class LinearFactors:
 
         def one(job):
             row_c, row_s, f = job
+            if f == 0.0:
+                # harmonic 0: Z(0) = K whatever w and xi (f multiplies every term in them, modal
+                # damping's gain i f d too), so its factors are kept on the pattern and shared by
+                # every frequency (one factorisation of K_II and its n_b solves saved per Newton
+                # iteration of a continuation); one entry per keep_w, not per xi (xi is an unknown
+                # of the nonlinear-mode continuation)
+                key = self.keep_w
+                if pat.static is None:
+                    pat.static = {}
+                hit = pat.static.get(key)
+                if hit is None:
+                    hit = pat.static[key] = build(job)
+                return hit
+            return build(job)
+
+        def build(job):
+            row_c, row_s, f = job
             lu = BlockLU(pat, f, self.xi, superlu_options=superlu) if pat.perm.size else None
             Zbb, Zib, Zbi = (Z.harmonic(f, self.xi) for Z in (pat.bb, pat.Ib, pat.bI))
             W = Xm = None
@@ -93,9 +115,7 @@ class LinearFactors:
                 if isinstance(Zc, tuple):
                     Zc, W, Xm = Zc
             elif lu is not None and nb:
-                full = np.zeros((pat.perm.size, nb), dtype=complex, order="F")  # gbtrs takes it as is
-                full[pat.R] = Zib
-                W = lu.solve(full)
+                W = lu.solve_rows(pat.R, Zib)  # Z_II^-1 Z_Ib: Z_Ib is nonzero on the rows R only
                 Zc = Zbb - Zbi @ W[pat.R]
             else:
                 Zc, W = Zbb, None
@@ -112,6 +132,8 @@ class LinearFactors:
         else:
             self.blocks = [one(j) for j in jobs]
         self.threads = nt
+        #: CPU time of building these factors (the budget of a reused solve, .krylov)
+        self.cpu_s = time.process_time() - t0
 
     def map(self, fun):
         """Apply ``fun(block)`` to all harmonics (threaded like the factorisation)."""

@@ -20,6 +20,7 @@ from .blocks import StructureFailure
 from .factorization import StructuredFactorization
 from .jacobian import HarmonicBlockJacobian
 from .options import DEFAULT_OPTIONS, BlockSolverOptions
+from .krylov import KrylovReusedFactorization
 from .reuse import ReusedFactorization, ReuseState, budget_from_factors
 
 __all__ = ["BlockSolver", "STAT_KEYS"]
@@ -46,9 +47,15 @@ class BlockSolver:
         factors this solver used last for the same system (and at the same ``xi``) is solved
         with them as a preconditioner, refined against the true Jacobian to the backward-error
         test of a fresh factorisation (and a forward one), and factorised at ``w`` when the
-        refinement would need more passes than a factorisation costs. Off by default: on the
-        bars of ``benchmarks/README_corrector.md`` (1e4-1e5 DOFs, H = 10) it saved 2-33 % of the
-        factorisations but no time (+2 % to +11 % per point against ``False``).
+        refinement would need more passes than a factorisation costs. Band-LU blocks (line
+        meshes) iterate ``x <- x + P^-1 (b - J x)`` (:mod:`~femodes.hbm.linsolve.reuse`);
+        sparse-direct blocks (2-D/3-D meshes) run GMRES with ``P^-1`` as preconditioner, its
+        budget the measured cost of the factors (:mod:`~femodes.hbm.linsolve.krylov`). Off by
+        default: on the bars of ``benchmarks/README_corrector.md`` (1e4-1e5 DOFs, H = 10) it
+        saved 2-33 % of the factorisations but no time (+2 % to +11 % per point against
+        ``False``); on 3-D P2 boxes it saved 11-27 % of a Newton iteration at 1 % frequency
+        steps (1.9e4-6.1e4 DOFs, ``benchmarks/README_solids_scale.md``), results within the
+        refinement tolerance.
     reuse_window : float, default 0.05
         Largest ``|w - w0| / |w0|`` tried.
     max_passes : int, optional
@@ -108,8 +115,11 @@ class BlockSolver:
             F = self._reusable(J, state)
             if F is not None:
                 try:
+                    # sparse-direct blocks (2-D/3-D meshes): GMRES, where a factorisation costs
+                    # tens to hundreds of solves (.krylov); band LU: the stationary iteration
+                    reused = ReusedFactorization if F.pat.banded else KrylovReusedFactorization
                     fac = (StructuredFactorization(J, threads, F) if F.omega == J.omega
-                           else ReusedFactorization(J, threads, F, self, state))
+                           else reused(J, threads, F, self, state))
                 except (StructureFailure, RuntimeError) as exc:  # P singular where J need not be
                     log.debug("reused factors not applicable (%s); factorising at w", exc)
                 else:
@@ -134,7 +144,12 @@ class BlockSolver:
     def fresh_factorization(self, J: HarmonicBlockJacobian, threads: int | None,
                             state: ReuseState | None) -> StructuredFactorization:
         """The exact factorisation at ``(J.omega, J.xi)`` (the system's cached factors if they are
-        at that frequency); they become the base of later reuse."""
+        at that frequency); they become the base of later reuse. Without reuse the last factors are
+        let go first: a Newton iteration at a new frequency then holds one set of factors, not two
+        (and their MUMPS instances are refactorised, ``sparse_direct.PatternFactorizer``)."""
+        if (not self.reuse and state is not None and state.F is not None
+                and (state.F.omega, state.F.xi) != (float(J.omega), float(J.xi))):
+            state.F = None
         F = J.system.linear_factors(J.omega, J.xi, threads)
         if state is not None and F is not state.F:
             self.stats["factorizations"] += 1
