@@ -59,6 +59,11 @@ class Bifurcation:
         True when it was located between its two branch points (``omega``, ``Q``, ``P`` are
         there); False for a bracketed one (``StabilityOptions(locate=False)``), reported at the
         point of the bracket on its unstable side.
+    bracket : (float, float)
+        How well it is located: the frequencies (rad/s) of the two solutions between which the
+        test function of :mod:`femodes.floquet` changes sign (the two branch points for a
+        bracketed one; equal where the reported solution is the crossing itself, to the test's
+        tolerance); NaN where not stated (folds, files written before it).
     """
 
     kind: str
@@ -71,10 +76,12 @@ class Bifurcation:
     P: np.ndarray
     xi: float = 0.0
     located: bool = True
+    bracket: tuple[float, float] = (math.nan, math.nan)
 
     def __post_init__(self):
         if self.kind not in BIFURCATION_KINDS:
             raise ValueError(f"Bifurcation: kind must be one of {BIFURCATION_KINDS}, got {self.kind!r}")
+        object.__setattr__(self, "bracket", (float(self.bracket[0]), float(self.bracket[1])))
 
     def __repr__(self) -> str:
         return (f"Bifurcation({self.kind!r}, index={self.index}, omega={self.omega:.8g}, "
@@ -721,6 +728,7 @@ class Branch:
                                         for b in bifs], dtype=float).reshape(len(bifs), 6),
                 "bif_Q": np.asarray([b.Q for b in bifs], dtype=float).reshape((len(bifs),) + self.Q.shape[1:]),
                 "bif_P": np.asarray([b.P for b in bifs], dtype=float).reshape((len(bifs),) + self.P.shape[1:]),
+                "bif_bracket": np.asarray([b.bracket for b in bifs], dtype=float).reshape(len(bifs), 2),
             })
         return out
 
@@ -865,10 +873,12 @@ def load_branch(path, model=None) -> Branch:
     stab = header.get("stability")
     if stab is not None:
         located = stab.get("located", [True] * len(stab["kinds"]))  # older files: every bifurcation located
+        brackets = arrays.get("bif_bracket", np.full((len(stab["kinds"]), 2), np.nan))  # older files: not stated
         bifs = [Bifurcation(kind=k, index=int(i), omega=float(r[0]), energy=float(r[1]), parameter=float(r[2]),
-                            multiplier=complex(r[3], r[4]), xi=float(r[5]), Q=q, P=p, located=bool(loc))
-                for k, i, r, q, p, loc in zip(stab["kinds"], arrays["bif_index"], arrays["bif_real"], arrays["bif_Q"],
-                                              arrays["bif_P"], located)]
+                            multiplier=complex(r[3], r[4]), xi=float(r[5]), Q=q, P=p, located=bool(loc),
+                            bracket=(float(w[0]), float(w[1])))
+                for k, i, r, q, p, loc, w in zip(stab["kinds"], arrays["bif_index"], arrays["bif_real"],
+                                                 arrays["bif_Q"], arrays["bif_P"], located, brackets)]
         br.set_stability(stable=arrays["stable"].astype(bool),
                          multipliers=arrays["multipliers_re"] + 1j * arrays["multipliers_im"], bifurcations=bifs,
                          methods=stab["methods"], tol=float(br.meta.get("stability_tol", 1e-4)))

@@ -113,6 +113,9 @@ def test_period_doubling_of_the_seed_contact_case_by_shooting():
     assert len(pd) == 1
     assert pd[0].omega == pytest.approx(0.996204, abs=2e-6)
     assert pd[0].multiplier == pytest.approx(-1.0, abs=1e-6)
+    # a problem this small is located precisely (to 1e-7 of the segment, where |mu| + 1 vanishes to
+    # 1e-9): the reported solution is the crossing itself
+    assert pd[0].located and pd[0].bracket == (pd[0].omega, pd[0].omega)
     assert set(b.stability_method) == {"shooting"}
     below = b.omega < pd[0].omega
     assert np.all(~b.stable[below]) and np.all(b.stable[~below])
