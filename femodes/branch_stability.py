@@ -9,24 +9,29 @@ point, ``-1`` period doubling, a complex pair a Neimark-Sacker bifurcation; mult
 across the circle instead of crossing it are ``"nonsmooth"`` (a change of the contact pattern).
 
 Location, by bracketing (``StabilityOptions(locate=True)``, the default). Each evaluation of
-``tau`` between the points costs a corrector solve and a Hill (or shooting) solve, about as much
-as a point of the branch, so at most :data:`LOCATE_SOLVES` = 2 are spent:
+``tau`` between the points costs a corrector solve (started from the polynomial through the
+known solutions nearest to it) and a Hill (or shooting) solve, about as much as a point of the
+branch, so at most :data:`LOCATE_SOLVES` = 2 are spent on a smooth crossing:
 
 1. the first at the root of the polynomial that interpolates ``tau`` through the two points and
    their neighbours (the points before and after, projected on the secant; already computed);
 2. the second at the inverse quadratic interpolation of ``tau`` through the two points and the
    first, moved past it by :data:`STRADDLE` of its distance from the first, so that the two solves
-   fall on either side of the crossing and close the bracket around it; when the first solve
-   looked like a jump (``|tau|`` more than :data:`SMOOTH_SHARE` of the change over the segment),
-   at the middle of the remaining bracket instead.
+   fall on either side of the crossing and close the bracket around it (at the middle of the
+   bracket when the first solve's ``|tau|`` exceeds :data:`SMOOTH_SHARE` of the change).
 
-The reported solution is the end of the final bracket with the smaller ``|tau|`` (its crossing
-multiplier gives the kind) and ``Bifurcation.bracket`` holds the frequencies of the two solutions
-the sign change lies between: the location's accuracy, stated, not estimated. A bracket at most
-:data:`CHEAP_JUMP_BRACKET` of the segment wide whose ends both have ``|tau| >`` :data:`JUMP` and
-still hold :data:`JUMP_SHARE` of the change over the segment is a jump (a smooth crossing's change
-shrinks with its bracket): then the unstable end is reported. A jump that the two solves cannot
-tell apart is classified by its crossing multiplier, as a bracketed one is.
+The bifurcation is reported at the end of the final bracket on its unstable side (the
+multiplier outside the circle there is the one that crossed, and gives the kind), and
+``Bifurcation.bracket`` holds the frequencies of the two solutions the sign change lies between:
+the location's accuracy, stated, not estimated (an end where ``|tau| <=`` :data:`FTOL` is the
+crossing itself, and the bracket is that point). A first solve whose ``tau`` is still within
+:data:`FLAT` of the change from its side's end value looks like a jump: it is bisected while the
+profile stays flat, up to :data:`JUMP_SOLVES` solves, and a bracket of at most
+:data:`CHEAP_JUMP_BRACKET` of the segment, flat on both sides with ``|tau| >`` :data:`JUMP`, is a
+jump (``"nonsmooth"``; so is a flat profile across which the corrector finds no solution). A jump
+that cannot be told apart so is classified by its crossing multiplier, as a bracketed one is.
+Problems of at most :data:`PRECISE_MAX_UNKNOWNS` unknowns are refined to :data:`PRECISE_XTOL`
+instead (below).
 
 ``StabilityOptions(locate=xtol)`` (a number) refines instead until the bracket is ``xtol`` of the
 segment (regula falsi, bisecting when the bracket does not halve; a jump is told apart once the
