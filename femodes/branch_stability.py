@@ -198,7 +198,7 @@ class _Finder:
         b, results = self.branch, self.results
         counts = [self.count(r.multipliers) for r in results]
         bifs = [self._fold(f) for f in b.folds]
-        near_fold = set()
+        near_fold: set[int] = set()
         for f in b.folds:
             near_fold.update((f - 1, f))
         for i in range(len(b) - 1):
