@@ -25,7 +25,7 @@ exactly 1, and round-off stay stable). Two independent methods give the multipli
 Along a branch (``frequency_response(..., stability=True)``, :func:`annotate_branch`), the
 multipliers of every point are computed here, and a change in their number outside the circle
 between two points is a bifurcation, bracketed, located and classified by
-:mod:`femodes.branch_stability` (by default with at most two corrector and Hill solves, its
+:mod:`femodes.branch_stability` (by default with two to four corrector and Hill solves, its
 accuracy stated in ``Bifurcation.bracket``).
 """
 
@@ -120,17 +120,20 @@ class StabilityOptions:
     tol : float
         A point is unstable when ``max |mu| > 1 + tol``.
     locate : bool or float
-        True (default): each change of stability between two points is located between them with
-        at most two corrector and Hill solves (:mod:`femodes.branch_stability`: at the crossing
-        interpolated from the test function at the points and their neighbours, then straddling
-        it), classified there, and ``Bifurcation.bracket`` says between which two solutions it
-        lies. A number ``xtol`` in (0, 1): refined by regula falsi until that bracket is ``xtol``
-        of the segment between the points (about 6 solves for a jump of the multipliers, told
-        apart as ``"nonsmooth"``, and 5-15 for a smooth crossing at 1e-7). False: bracketing
-        only, at no cost beyond the points' multipliers: the bifurcation is reported at the point
-        of the bracket on its unstable side (``Bifurcation.located`` False), classified by that
-        point's crossing multiplier (a jump cannot be told from a crossing there).
-        :func:`~femodes.switch_branch` locates the bifurcation itself in every case.
+        True (default): each change of stability between two points is located between them by
+        bracketing (:mod:`femodes.branch_stability`): at most two corrector and Hill solves for a
+        smooth crossing (at the crossing interpolated from the test function at the points and
+        their neighbours, then straddling it), up to four for a jump of the multipliers
+        (``"nonsmooth"``); the bifurcation is reported at the unstable end of the final bracket
+        and ``Bifurcation.bracket`` says between which two solutions it lies. Problems of at most
+        ``branch_stability.PRECISE_MAX_UNKNOWNS`` (100) unknowns are refined to 1e-7 of the
+        segment instead. A number ``xtol`` in (0, 1): every problem refined by regula falsi until
+        the bracket is ``xtol`` of the segment (about 6 solves for a jump, 5-15 for a smooth
+        crossing at 1e-7). False: bracketing only, at no cost beyond the points' multipliers:
+        the bifurcation is reported at the point of the bracket on its unstable side
+        (``Bifurcation.located`` False), classified by that point's crossing multiplier (a jump
+        cannot be told from a crossing there). :func:`~femodes.switch_branch` locates the
+        bifurcation itself in every case.
     """
 
     method: str = "auto"
