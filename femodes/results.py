@@ -61,7 +61,7 @@ class Bifurcation:
         point of the bracket on its unstable side.
     bracket : (float, float)
         How well it is located: the frequencies (rad/s) of the two solutions between which the
-        test function of :mod:`femodes.floquet` changes sign (the two branch points for a
+        test function of :mod:`femodes.branch_stability` changes sign (the two branch points for a
         bracketed one; equal where the reported solution is the crossing itself, to the test's
         tolerance); NaN where not stated (folds, files written before it).
     """
