@@ -1,4 +1,4 @@
-r"""Analyses layer: stability of periodic solutions (Floquet multipliers) and bifurcations along branches.
+r"""Analyses layer: stability of periodic solutions (Floquet multipliers), at one point and along branches.
 
 A periodic orbit is asymptotically stable when all its Floquet multipliers ``mu`` lie inside the
 unit circle; here *stable* means ``max |mu| <= 1 + tol`` (the trivial multipliers of free orbits,
@@ -22,17 +22,11 @@ exactly 1, and round-off stay stable). Two independent methods give the multipli
     natural frequency is at most :data:`AUTO_MAX_STIFFNESS` times the orbit's (falling back to
     Hill at a point where shooting does not converge), Hill otherwise.
 
-Along a branch (``frequency_response(..., stability=True)``), a change in the number of
-multipliers outside the circle between two points is a bifurcation; unless a located fold sits
-there, it is located by regula falsi on the test function ``|mu_(k)| - 1`` (the ``k``-th largest
-modulus, ``k`` the larger count) over solutions corrected on the secant between the points, and
-classified by the crossing multiplier: ``+1`` a branch point, ``-1`` period doubling, a complex
-pair a Neimark-Sacker bifurcation. On a free (conservative) orbit a pair that collides at
-``+-1`` and leaves the circle as a real pair is a branch point (period doubling at ``-1``) even
-when it is found on its still-complex side (:data:`COLLISION`); ``|mu| - 1`` is flat there, so a
-branch point of a backbone is then located by the sign change of ``det [r_x, r_p; c^T]``
-(:func:`branch_point_test`, shared with :func:`femodes.switch_branch`), where the augmented
-Jacobian drops rank.
+Along a branch (``frequency_response(..., stability=True)``, :func:`annotate_branch`), the
+multipliers of every point are computed here, and a change in their number outside the circle
+between two points is a bifurcation, bracketed, located and classified by
+:mod:`femodes.branch_stability` (by default with two to four corrector and Hill solves, its
+accuracy stated in ``Bifurcation.bracket``).
 """
 
 from __future__ import annotations
@@ -45,19 +39,24 @@ from typing import Any
 
 import numpy as np
 
+from .branch_stability import (BRANCH_POINT_DENSE_LIMIT, COLLISION, augmented_jacobian, branch_point_test,
+                               find_bifurcations, refine_branch_point, root_on_secant, significant,
+                               solve_on_secant)
 from .hbm.hill import hill_exponents
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .hbm.system import HBMSystem
 from .laws import UnilateralContact
 from .model import StructuralModel
-from .results import Bifurcation, Branch, PeriodicSolution
-from .solvers import NewtonOptions, semismooth_newton
-from .solvers.roots import illinois
+from .results import Branch, PeriodicSolution
+from .solvers import NewtonOptions
 from .solvers.threads import limit_blas_threads
 from .time.shooting import shoot, unsupported
 
+# the location helpers live in femodes.branch_stability; they are re-exported here, where
+# switch_branch and scripts import them from
 __all__ = ["stability", "StabilityResult", "StabilityOptions", "ShootingError", "annotate_branch", "solve_on_secant",
-           "METHODS"]
+           "root_on_secant", "refine_branch_point", "branch_point_test", "augmented_jacobian", "COLLISION",
+           "BRANCH_POINT_DENSE_LIMIT", "METHODS"]
 
 log = logging.getLogger(__name__)
 
@@ -78,22 +77,8 @@ AUTO_MAX_STIFFNESS = 50.0
 #: another orbit (``"auto"`` then uses Hill's method at that point).
 MAX_CORRECTION = 0.2
 
-#: A located crossing whose test function ``|mu| - 1`` stays above this on both sides of a
-#: narrow bracket (:data:`JUMP_BRACKET`, :data:`JUMP_XTOL`) is a jump (kind ``"nonsmooth"``), not a
-#: smooth crossing (which is then refined to a bracket of 1e-7).
-JUMP = 1e-3
-
 #: Seconds between progress lines of a stability run along a branch.
 PROGRESS_EVERY = 5.0
-
-#: Bracket width (fraction of the segment between two branch points) at which a jump is declared.
-JUMP_XTOL = 1e-3
-
-#: A bracket of this fraction of the segment whose ends still differ by :data:`JUMP_SHARE` of the
-#: test function's change over the whole segment (and both above :data:`JUMP`) is a jump: a
-#: smooth crossing's change shrinks with its bracket.
-JUMP_BRACKET = 1.0 / 32.0
-JUMP_SHARE = 0.5
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -134,26 +119,38 @@ class StabilityOptions:
         How the multipliers of each point are computed (module docstring).
     tol : float
         A point is unstable when ``max |mu| > 1 + tol``.
-    locate : bool
+    locate : bool or float
         True (default): each change of stability between two points is located between them by
-        regula falsi over solutions corrected on the secant, about 6 corrector and Hill solves
-        for a jump of the multipliers and 5-15 for a smooth crossing, and classified there
-        (``"nonsmooth"`` for a jump). False: bracketing only, at no cost beyond the points'
-        multipliers: the bifurcation is reported at the point of the bracket on its unstable
-        side (``Bifurcation.located`` False), classified by that point's crossing multiplier
-        (a jump cannot be told from a crossing there). :func:`~femodes.switch_branch` locates
-        the bifurcation itself in either case.
+        bracketing (:mod:`femodes.branch_stability`): at most two corrector and Hill solves for a
+        smooth crossing (at the crossing interpolated from the test function at the points and
+        their neighbours, then straddling it), up to four for a jump of the multipliers
+        (``"nonsmooth"``); the bifurcation is reported at the unstable end of the final bracket
+        and ``Bifurcation.bracket`` says between which two solutions it lies. Problems of at most
+        ``branch_stability.PRECISE_MAX_UNKNOWNS`` (100) unknowns are refined to 1e-7 of the
+        segment instead. A number ``xtol`` in (0, 1): every problem refined by regula falsi until
+        the bracket is ``xtol`` of the segment (about 6 solves for a jump, 5-15 for a smooth
+        crossing at 1e-7). False: bracketing only, at no cost beyond the points' multipliers:
+        the bifurcation is reported at the point of the bracket on its unstable side
+        (``Bifurcation.located`` False), classified by that point's crossing multiplier (a jump
+        cannot be told from a crossing there). :func:`~femodes.switch_branch` locates the
+        bifurcation itself in every case.
     """
 
     method: str = "auto"
     tol: float = TOL
-    locate: bool = True
+    locate: bool | float = True
 
     def __post_init__(self):
         _check_method(self.method, "StabilityOptions")
         object.__setattr__(self, "tol", _check_tol(self.tol, "StabilityOptions"))
-        if not isinstance(self.locate, (bool, np.bool_)):
-            raise TypeError(f"StabilityOptions: locate must be True or False, got {self.locate!r}")
+        loc = self.locate
+        if isinstance(loc, (bool, np.bool_)):
+            object.__setattr__(self, "locate", bool(loc))
+        elif isinstance(loc, (int, float, np.integer, np.floating)) and 0.0 < float(loc) < 1.0:
+            object.__setattr__(self, "locate", float(loc))
+        else:
+            raise TypeError(f"StabilityOptions: locate must be True, False or a bracket width xtol in (0, 1) "
+                            f"(a fraction of the segment between two points), got {loc!r}")
 
     @classmethod
     def parse(cls, stability: Any, owner: str) -> StabilityOptions | None:
@@ -261,18 +258,8 @@ class ShootingError(RuntimeError):
     Hill's method instead)."""
 
 
-def _significant(mu: np.ndarray, free: bool) -> np.ndarray:
-    """The multipliers that decide stability, largest modulus first: all of a forced orbit's; a
-    free orbit's without its two trivial ones (the double +1 of phase and energy, a Jordan block
-    whose computed pair splits by the square root of the solver tolerance, ~1e-5)."""
-    mu = mu[np.isfinite(mu)]
-    if free and mu.size >= 2:
-        mu = mu[np.argsort(np.abs(mu - 1.0), kind="stable")[2:]]
-    return mu[np.argsort(-np.abs(mu), kind="stable")]
-
-
 def _is_stable(mu: np.ndarray, tol: float, free: bool) -> bool:
-    m = _significant(mu, free)
+    m = significant(mu, free)
     return bool(m.size == 0 or np.abs(m[0]) <= 1.0 + tol)
 
 
@@ -330,263 +317,11 @@ def stability(solution: PeriodicSolution, method: str = "auto", *, tol: float = 
     return _point_stability(model, system, y, solution.Q, solution.omega_truncated, solution.xi, method, tol, forced)
 
 
-# ------------------------------------------------------------------------------------------------
-# Along a branch
-# ------------------------------------------------------------------------------------------------
-class _Annotator:
-    """Multipliers at every point of a branch, and its bifurcations located between points."""
-
-    def __init__(self, branch: Branch, problem, model: StructuralModel, method: str, tol: float,
-                 newton: NewtonOptions, locate: bool = True):
-        self.branch, self.problem, self.model = branch, problem, model
-        self.method, self.tol, self.newton, self.locate = method, tol, newton, locate
-        self.forced = isinstance(problem, ForcedResponseProblem)
-        self.system = problem.system
-
-    def at(self, x: np.ndarray, p: float, method: str | None = None) -> StabilityResult:
-        u = self.problem.unpack(x, p)
-        return _point_stability(self.model, self.system, u.y, u.Q, u.omega, u.xi, method or self.method, self.tol,
-                                self.forced)
-
-    def _outside(self, mu: np.ndarray) -> np.ndarray:
-        return _significant(mu, not self.forced)
-
-    def count(self, mu: np.ndarray) -> int:
-        return int(np.count_nonzero(np.abs(self._outside(mu)) > 1.0 + self.tol))
-
-    def tau(self, mu: np.ndarray, k: int) -> float:
-        """Test function ``|mu_(k)| - 1`` (``k``-th largest modulus)."""
-        a = np.abs(self._outside(mu))
-        return float(a[k - 1] - 1.0) if a.size >= k else -1.0
-
-    def crossing(self, mu: np.ndarray, k: int) -> complex:
-        m = self._outside(mu)
-        return complex(m[k - 1]) if m.size >= k else complex(1.0)
-
-    def point(self, i: int) -> np.ndarray:
-        b = self.branch
-        return self.problem.pack(b.Q[i], b.P[i], b.omega_truncated[i], b.xi[i])
-
-    def run(self):
-        b = self.branch
-        results = []
-        start = time.perf_counter()
-        last = start
-        for i in range(len(b)):
-            results.append(self.at(self.point(i), b.parameter[i]))
-            now = time.perf_counter()
-            if i == 0 and len(b) > 1:
-                # the first point carries the set-up (reduction modes, factorisations): an upper bound
-                log.info("stability: %d points, about %.3g s (first point %.3g s)", len(b), (now - start) * len(b),
-                         now - start)
-            elif now - last > PROGRESS_EVERY or i == len(b) - 1:
-                log.info("stability: %d of %d points, %.3g s", i + 1, len(b), now - start)
-                last = now
-        counts = [self.count(r.multipliers) for r in results]
-        bifs = [self._fold(f) for f in b.folds]
-        near_fold = set()
-        for f in b.folds:
-            near_fold.update((f - 1, f))
-        for i in range(len(b) - 1):
-            if counts[i] == counts[i + 1] or i in near_fold:
-                continue
-            if results[i].method != results[i + 1].method:
-                # "auto" fell back to Hill at one end: the two methods' multipliers differ by the
-                # HBM's contact error, which is not a bifurcation
-                log.info("stability: no bifurcation test between points %d and %d (%s vs %s)", i, i + 1,
-                         results[i].method, results[i + 1].method)
-                continue
-            k = max(counts[i], counts[i + 1])
-            if not self.locate:
-                bifs.append(self._bracketed(i, k, results[i], results[i + 1], counts[i + 1] > counts[i]))
-                continue
-            log.info("stability: locating the change between points %d and %d", i, i + 1)
-            bif = self._locate(i, k, results[i], results[i + 1])
-            if bif is not None:
-                bifs.append(bif)
-        bifs.sort(key=lambda z: (z.index, z.parameter))
-        return results, bifs
-
-    def _fold(self, f: int) -> Bifurcation:
-        b = self.branch
-        return Bifurcation(kind="fold", index=int(f), omega=float(b.omega_truncated[f]), energy=float(b.energy[f]),
-                           parameter=float(b.parameter[f]), multiplier=complex(1.0), Q=b.Q[f], P=b.P[f], xi=float(b.xi[f]))
-
-    def _bracketed(self, i: int, k: int, ra: StabilityResult, rb: StabilityResult, rising: bool) -> Bifurcation:
-        """The change between points ``i`` and ``i + 1`` reported at the point on its unstable side
-        (``StabilityOptions(locate=False)``)."""
-        j, r = (i + 1, rb) if rising else (i, ra)
-        b = self.branch
-        crossing = self.crossing(r.multipliers, k)
-        return Bifurcation(kind=_kind(crossing, r.multipliers, not self.forced), index=int(i), omega=float(b.omega_truncated[j]),
-                           energy=float(b.energy[j]), parameter=float(b.parameter[j]), multiplier=complex(crossing),
-                           Q=np.array(b.Q[j]), P=np.array(b.P[j]), xi=float(b.xi[j]), located=False)
-
-    def _locate(self, i: int, k: int, ra: StabilityResult, rb: StabilityResult) -> Bifurcation | None:
-        """Regula falsi (Illinois, bisecting whenever the bracket does not halve) on
-        ``tau(theta) = |mu_(k)| - 1`` along the secant from point ``i`` to ``i + 1``.
-
-        A bracket that shrinks to :data:`JUMP_BRACKET` of the segment with ``|tau|`` above
-        :data:`JUMP` on both sides and its ends still :data:`JUMP_SHARE` of the change over the
-        segment apart, or to :data:`JUMP_XTOL` with ``|tau|`` above :data:`JUMP`, is a jump of the
-        multipliers across the circle, not a smooth crossing: kind ``"nonsmooth"`` (a change of
-        the contact pattern, e.g. grazing)."""
-        b = self.branch
-        za = np.append(self.point(i), b.parameter[i])
-        zb = np.append(self.point(i + 1), b.parameter[i + 1])
-        ends = {0.0: (za, ra), 1.0: (zb, rb)}
-
-        def tau(theta: float) -> float | None:
-            z = solve_on_secant(self.problem, za, zb, theta, self.newton)
-            if z is None:
-                return None
-            try:
-                r = self.at(z[:-1], z[-1], ra.method)
-            except (RuntimeError, ValueError):  # shooting lost the orbit between the points
-                return None
-            ends[theta] = (z, r)
-            return self.tau(r.multipliers, k)
-
-        # in passes: a jump (the test function stays above JUMP on both sides) is told apart
-        # once the bracket is JUMP_BRACKET of the segment wide and still holds most of the change
-        # of the test function (a smooth crossing's change shrinks with the bracket), or else
-        # once it is JUMP_XTOL wide; only a smooth crossing is refined to 1e-7 (a jump took ~27
-        # Hill solves to 1e-7, then ~13 to 1e-3, now ~6)
-        opts: dict[str, Any] = dict(ftol=1e-9, margin=1e-3, bisect_if_slow=True)
-        fa, fb = self.tau(ra.multipliers, k), self.tau(rb.multipliers, k)
-
-        def small(br):
-            return min(abs(br.f_lo), abs(br.f_hi)) <= JUMP
-
-        br = illinois(tau, 0.0, 1.0, fa, fb, max_iter=40, xtol=JUMP_BRACKET, **opts)
-        jump = not small(br) and abs(br.f_hi - br.f_lo) >= JUMP_SHARE * abs(fb - fa)
-        if not jump and not small(br):
-            br = illinois(tau, br.lo, br.hi, br.f_lo, br.f_hi, max_iter=max(1, 40 - br.nfev), xtol=JUMP_XTOL, **opts)
-        if small(br) and abs(br.f_lo) > 1e-9 and abs(br.f_hi) > 1e-9:
-            br = illinois(tau, br.lo, br.hi, br.f_lo, br.f_hi, max_iter=max(1, 40 - br.nfev), xtol=1e-7, **opts)
-        smooth = small(br)
-        th = br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi
-        if not smooth:
-            th = br.hi if br.f_hi > 0 else br.lo  # the unstable side: its crossing multiplier is reported
-        z, r = ends[th]
-        u = self.problem.unpack(z[:-1], z[-1])
-        crossing = self.crossing(r.multipliers, k)
-        kind = _kind(crossing, r.multipliers, not self.forced) if smooth else "nonsmooth"
-        if kind == "branch_point" and not self.forced and za.size <= BRANCH_POINT_DENSE_LIMIT:
-            # a conservative pair colliding at +1: |mu| - 1 is flat on the side where it is still
-            # complex, so its crossing is anywhere there; the branch point itself is where the
-            # augmented Jacobian drops rank
-            zbp = refine_branch_point(self.problem, za, zb, self.newton)
-            if zbp is not None:
-                z = zbp
-                u = self.problem.unpack(z[:-1], z[-1])
-        energy = float(self.system.energy(u.y, u.omega)[0])
-        return Bifurcation(kind=kind, index=int(i), omega=float(u.omega), energy=energy, parameter=float(z[-1]),
-                           multiplier=complex(crossing), Q=np.array(u.Q), P=np.array(u.P), xi=float(u.xi))
-
-
-def solve_on_secant(problem, za: np.ndarray, zb: np.ndarray, theta: float, newton: NewtonOptions) -> np.ndarray | None:
-    """The solution ``z = [x; p]`` of ``problem`` on the hyperplane through ``(1 - theta) za +
-    theta zb`` normal to the secant ``zb - za`` (None if Newton fails): a point between two
-    points of a branch, for locating what happens between them."""
-    d = zb - za
-    t = d / float(d @ d)
-    zp = za + theta * d
-    n = za.size - 1
-
-    def fun(z):
-        r, J, dr_dp = problem.residual(z[:n], z[n])
-        return np.append(r, t @ (z - zp)), J.bordered(dr_dp[:, None], t[None, :n], np.array([[t[n]]]))
-
-    res = semismooth_newton(fun, zp, options=newton)
-    return res.x if res.success else None
-
-
-#: On a free (conservative) orbit, a crossing multiplier within this distance of +1 or -1 is a
-#: pair colliding there and leaving the circle as a real pair (a branch point, e.g. where an
-#: internal-resonance tongue leaves a backbone, or a period doubling); the test function
-#: ``|mu| - 1`` is flat on the circle, so the crossing is found on the side where the pair is
-#: still complex (measured 0.999 +- 0.045j at a 2:1 tongue).
-COLLISION = 0.1
-
-
-
-#: Largest augmented Jacobian ``[r_x, r_p]`` (unknowns) whose determinant test locates a branch
-#: point (dense; beyond it the crossing of the multipliers' test function is kept).
-BRANCH_POINT_DENSE_LIMIT = 4000
-
-
-def augmented_jacobian(problem, z: np.ndarray) -> np.ndarray:
-    """``A = [r_x, r_p]`` of ``problem`` at ``z = [x; p]`` (dense, ``n x (n + 1)``)."""
-    _, J, dr_dp = problem.residual(z[:-1], z[-1])
-    return np.hstack([J.toarray(), np.asarray(dr_dp, dtype=float)[:, None]])
-
-
-def branch_point_test(problem, z: np.ndarray, c: np.ndarray) -> tuple[float, float]:
-    """``(sign, log|det|)`` of ``[A(z); c^T]``: ``c . a(z)``, with ``a`` the signed maximal minors of
-    ``A = [r_x, r_p]``, which span its null space on a regular branch. It vanishes at a simple
-    branch point and changes sign there; at a fold ``A`` keeps full rank and the test its sign
-    (Keller 1977; Allgower and Georg 2003, sec. 8.1)."""
-    return np.linalg.slogdet(np.vstack([augmented_jacobian(problem, z), c[None, :]]))
-
-
-def refine_branch_point(problem, za: np.ndarray, zb: np.ndarray, newton: NewtonOptions) -> np.ndarray | None:
-    """The branch point between the branch points ``za`` and ``zb``: regula falsi on
-    ``det [A(z); c^T] / |det [A(za); c^T]|`` (``c`` the secant) over solutions on the secant; None
-    when the test has the same sign at both ends."""
-    c = zb - za
-    c = c / (np.linalg.norm(c) or 1.0)
-    s0, l0 = branch_point_test(problem, za, c)
-    s1, l1 = branch_point_test(problem, zb, c)
-    if s0 != 0 and s1 != 0 and s0 == s1:
-        return None
-
-    def test(z: np.ndarray) -> float:
-        sg, ld = branch_point_test(problem, z, c)
-        return float(sg * math.exp(ld - l0))  # linear in theta near a simple branch point
-
-    return root_on_secant(problem, za, zb, test, float(s0), float(s1 * math.exp(l1 - l0)), newton,
-                          max_iter=60, ftol=1e-12, xtol=1e-13)
-
-
-def root_on_secant(problem, za: np.ndarray, zb: np.ndarray, test, fa: float, fb: float, newton: NewtonOptions,
-                   **illinois_options) -> np.ndarray:
-    """The solution between the branch points ``za`` and ``zb`` where ``test(z)`` changes sign:
-    Illinois regula falsi (:func:`~femodes.solvers.roots.illinois`, ``illinois_options``) on
-    ``theta`` over the solutions on the secant (:func:`solve_on_secant`), ``fa``, ``fb`` the
-    values at the ends; the end of the final bracket with the smaller ``|test|``."""
-    points = {0.0: za, 1.0: zb}
-
-    def f(theta: float) -> float | None:
-        z = solve_on_secant(problem, za, zb, theta, newton)
-        if z is None:
-            return None
-        points[theta] = z
-        return test(z)
-
-    br = illinois(f, 0.0, 1.0, fa, fb, **illinois_options)
-    return points[br.lo if abs(br.f_lo) <= abs(br.f_hi) else br.hi]
-
-
-def _kind(mu: complex, all_mu: np.ndarray, free: bool = False) -> str:
-    """Bifurcation kind from the crossing multiplier: a complex one whose conjugate is also a
-    multiplier crosses as a pair (Neimark-Sacker) unless, on a free orbit, it is within
-    :data:`COLLISION` of +-1; otherwise it is real (Hill's multipliers of a contact orbit carry an
-    imaginary error that breaks the conjugate symmetry) and its sign tells period doubling (-1)
-    from a branch point (+1)."""
-    scale = max(abs(mu), 1.0)
-    if free and min(abs(mu - 1.0), abs(mu + 1.0)) <= COLLISION:
-        return "period_doubling" if mu.real < 0 else "branch_point"
-    if abs(mu.imag) > 1e-8 * scale:
-        partner = np.min(np.abs(all_mu[np.isfinite(all_mu)] - np.conj(mu)))
-        if partner <= 1e-6 * scale:
-            return "neimark_sacker"
-    return "period_doubling" if mu.real < 0 else "branch_point"
-
-
 def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: str = "auto", tol: float = TOL,
-                    newton: NewtonOptions | None = None, locate: bool = True) -> Branch:
-    """Fill ``branch.stable``, ``branch.multipliers``, ``branch.bifurcations`` (module docstring).
+                    newton: NewtonOptions | None = None, locate: bool | float = True) -> Branch:
+    """Fill ``branch.stable``, ``branch.multipliers``, ``branch.bifurcations``: the multipliers of
+    every point (module docstring), then the bifurcations between them
+    (:func:`femodes.branch_stability.find_bifurcations`).
 
     ``problem`` is the :class:`ForcedResponseProblem` or :class:`NonlinearModeProblem` the
     branch was traced with; ``newton`` the corrector options of the located points; ``locate``
@@ -596,14 +331,34 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
     if not isinstance(problem, (ForcedResponseProblem, NonlinearModeProblem)):
         raise TypeError(f"annotate_branch: problem must be an HBM problem, got {type(problem).__name__}")
     method, tol = opts.method, opts.tol
-    ann = _Annotator(branch, problem, model, method, tol, newton or NewtonOptions(atol=1e-9, max_iter=20),
-                     opts.locate)
-    results, bifs = ann.run()
+    forced = isinstance(problem, ForcedResponseProblem)
+    system = problem.system
+
+    def point(x: np.ndarray, p: float, how: str | None = None) -> StabilityResult:
+        u = problem.unpack(x, p)
+        return _point_stability(model, system, u.y, u.Q, u.omega, u.xi, how or method, tol, forced)
+
+    results = []
+    start = time.perf_counter()
+    last = start
+    b = branch
+    for i in range(len(b)):
+        results.append(point(problem.pack(b.Q[i], b.P[i], b.omega_truncated[i], b.xi[i]), b.parameter[i]))
+        now = time.perf_counter()
+        if i == 0 and len(b) > 1:
+            # the first point carries the set-up (reduction modes, factorisations): an upper bound
+            log.info("stability: %d points, about %.3g s (first point %.3g s)", len(b), (now - start) * len(b),
+                     now - start)
+        elif now - last > PROGRESS_EVERY or i == len(b) - 1:
+            log.info("stability: %d of %d points, %.3g s", i + 1, len(b), now - start)
+            last = now
+    bifs = find_bifurcations(branch, problem, results, point, tol=tol, newton=newton or NewtonOptions(atol=1e-9, max_iter=20),
+                             locate=opts.locate)
     m = max((r.multipliers.size for r in results), default=0)
     mult = np.full((len(branch), m), np.nan + 0j)
     for i, r in enumerate(results):
         mult[i, : r.multipliers.size] = r.multipliers
-    branch.set_stability(stable=[ann.count(r.multipliers) == 0 for r in results], multipliers=mult,
+    branch.set_stability(stable=[_is_stable(r.multipliers, tol, not forced) for r in results], multipliers=mult,
                          bifurcations=bifs, methods=[r.method for r in results], tol=tol)
     n_fb = sum(r.message != "" for r in results)
     if n_fb:

@@ -145,13 +145,19 @@ def test_bifurcations_are_reported_at_the_converged_frequency(tmp_path):
     i = up - 3
     mid = 0.5 * (b.omega_truncated[i] + b.omega_truncated[i + 1])
     pd = fm.Bifurcation(kind="period_doubling", index=i, omega=mid, energy=1.0, parameter=mid, multiplier=-1.0,
-                        Q=b.Q[i], P=b.P[i])
+                        Q=b.Q[i], P=b.P[i], bracket=(b.omega_truncated[i], b.omega_truncated[i + 1]))
     b.set_stability(stable=b.stable, multipliers=b.multipliers, bifurcations=list(b.bifurcations) + [pd],
                     methods=b.stability_method, tol=b.meta["stability_tol"])
     moved = next(x for x in b.bifurcations if x.kind == "period_doubling" and x.omega_truncated == mid)
     c = b.omega - b.omega_truncated
     assert moved.omega == pytest.approx(mid + 0.5 * (c[i] + c[i + 1]), rel=4 * np.finfo(float).eps)
     assert moved.omega_truncated == mid and moved.series().omega == mid
+    shift = moved.omega - mid  # the bracket moves with it, and back
+    np.testing.assert_allclose(moved.bracket, np.array([b.omega_truncated[i], b.omega_truncated[i + 1]]) + shift,
+                               rtol=4 * np.finfo(float).eps)
+    np.testing.assert_allclose(moved.series().bracket, [b.omega_truncated[i], b.omega_truncated[i + 1]],
+                               rtol=4 * np.finfo(float).eps)
     back = fm.load_branch(b.save(tmp_path / "b.npz"))
     assert [x.omega for x in back.bifurcations] == [x.omega for x in b.bifurcations]
     assert [x.omega_truncated for x in back.bifurcations] == [x.omega_truncated for x in b.bifurcations]
+    np.testing.assert_array_equal([x.bracket for x in back.bifurcations], [x.bracket for x in b.bifurcations])

@@ -41,6 +41,7 @@ LAYERS = {
     "femodes.resonance": 5,
     "femodes.runs": 5,
     "femodes.floquet": 5,
+    "femodes.branch_stability": 5,
     "femodes.accuracy": 5,
     "femodes.mesh_error": 5,
     "femodes.switching": 5,

@@ -113,9 +113,44 @@ def test_period_doubling_of_the_seed_contact_case_by_shooting():
     assert len(pd) == 1
     assert pd[0].omega == pytest.approx(0.996204, abs=2e-6)
     assert pd[0].multiplier == pytest.approx(-1.0, abs=1e-6)
+    # a problem this small is located precisely (to 1e-7 of the segment, where |mu| + 1 vanishes to
+    # 1e-9): the reported solution is the crossing itself
+    assert pd[0].located and pd[0].bracket == (pd[0].omega, pd[0].omega)
     assert set(b.stability_method) == {"shooting"}
     below = b.omega < pd[0].omega
     assert np.all(~b.stable[below]) and np.all(b.stable[~below])
+
+
+def test_seed_contact_case_bracketed_by_few_solves(monkeypatch):
+    """Seed case 1 at H = 20 with ``locate=True`` on a problem counted as large
+    (PRECISE_MAX_UNKNOWNS lowered to 0): the grazing jump and the period doubling of the precise
+    location, the jump told apart by bisecting its flat profile (at most JUMP_SOLVES solves), the
+    period doubling with at most LOCATE_SOLVES, its bracket holding the precise location
+    (0.996204, the true orbit's by shooting) and narrower than the segment."""
+    from femodes import branch_stability as bs
+
+    model = oscillator(c=0.1, force=0.2, gap=1.0)
+    precise = fm.frequency_response(model, (0.9, 1.05), 20, stability=True)
+    solves = []
+    orig = bs.solve_on_secant
+
+    def counted(*args, **kwargs):
+        solves.append(args[3])
+        return orig(*args, **kwargs)
+
+    with monkeypatch.context() as m:
+        m.setattr(bs, "PRECISE_MAX_UNKNOWNS", 0)
+        m.setattr(bs, "solve_on_secant", counted)
+        cheap = fm.frequency_response(model, (0.9, 1.05), 20, stability=True)
+    np.testing.assert_array_equal(cheap.stable, precise.stable)
+    assert [(z.kind, z.index) for z in cheap.bifurcations] == [(z.kind, z.index) for z in precise.bifurcations]
+    assert [z.kind for z in cheap.bifurcations] == ["nonsmooth", "period_doubling"]
+    assert len(solves) <= bs.JUMP_SOLVES + bs.LOCATE_SOLVES
+    pd, pd_precise = cheap.bifurcations[1], precise.bifurcations[1]
+    assert pd_precise.omega == pytest.approx(0.996204, abs=2e-6)
+    lo, hi = pd.bracket
+    assert pd.located and pd.omega in (lo, hi) and lo < pd_precise.omega < hi
+    assert hi - lo < cheap.omega[pd.index + 1] - cheap.omega[pd.index]
 
 
 def test_stability_survives_save_and_load(duffing, tmp_path):

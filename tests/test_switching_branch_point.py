@@ -101,9 +101,10 @@ def test_forced_pitchfork_located_and_switched_onto_the_localised_branch(forced)
     new = fm.switch_branch(b, bp, omega=(0.9, 1.7))
     info = new.meta["switched_from"]
     # the HBM's own branch point (test function det[r_x, r_p; c^T]) and the Floquet crossing
-    # (|mu| - 1, regula falsi to 1e-7 of the segment) are the same singularity: measured
-    # 1.0889484324434 both, 1e-15 apart
+    # (|mu| - 1, regula falsi to 1e-7 of the segment: a problem of 30 unknowns is located
+    # precisely) are the same singularity: measured 1.0889484324434 both, 1e-15 apart
     assert info["omega_hbm"] == pytest.approx(bp.omega, rel=1e-7)
+    assert bp.bracket[0] <= bp.omega <= bp.bracket[1] and np.diff(bp.bracket)[0] < 1e-7 * bp.omega
     # [r_x, r_p] drops rank by one (measured 1.7e-14), not two (1.8e-3): a simple branch point
     assert info["smallest_singular_value"] < 1e-10 < 1e-4 < info["second_singular_value"]
     # independent reference: the in-phase Hill equation's multiplier reaches +1 there. Its root
@@ -277,7 +278,7 @@ def test_bracketed_branch_point_costs_no_solve_and_switches_the_same(forced, mon
     bracketed between the branch's points (reported at the unstable side, ``located`` False)
     without a single corrector solve; switch_branch locates the HBM's own branch point from it,
     the same one as from the located report."""
-    from femodes import floquet
+    from femodes import branch_stability
 
     model, b = forced
     located = [z for z in b.bifurcations if z.kind != "fold"]
@@ -286,7 +287,7 @@ def test_bracketed_branch_point_costs_no_solve_and_switches_the_same(forced, mon
         raise AssertionError("locate=False must not correct any point between the branch's points")
 
     with monkeypatch.context() as m:
-        m.setattr(floquet, "solve_on_secant", no_solve)
+        m.setattr(branch_stability, "solve_on_secant", no_solve)
         bb = fm.frequency_response(model, (0.9, 1.7), 7, stability=fm.StabilityOptions(method="hill", locate=False))
     np.testing.assert_array_equal(bb.stable, b.stable)
     bracketed = [z for z in bb.bifurcations if z.kind != "fold"]
@@ -296,12 +297,55 @@ def test_bracketed_branch_point_costs_no_solve_and_switches_the_same(forced, mon
     for z in bracketed:  # at a point of the branch, on the side with more multipliers outside
         j = z.index + 1 if outside[z.index + 1] > outside[z.index] else z.index
         assert z.omega == bb.omega[j] and not bb.stable[j]
-    bb.save(tmp_path / "b.npz")  # the flag survives a save
-    assert [z.located for z in fm.load_branch(tmp_path / "b.npz").bifurcations] == [z.located for z in bb.bifurcations]
+        # the bracket is the segment between the two points
+        assert z.bracket == (bb.omega[z.index], bb.omega[z.index + 1])
+    bb.save(tmp_path / "b.npz")  # the flag and the bracket survive a save
+    back = fm.load_branch(tmp_path / "b.npz").bifurcations
+    assert [z.located for z in back] == [z.located for z in bb.bifurcations]
+    np.testing.assert_array_equal([z.bracket for z in back], [z.bracket for z in bb.bifurcations])  # NaN: folds
     bp = next(z for z in bracketed if z.kind == "branch_point")
     bp_located = next(z for z in b.bifurcations if z.kind == "branch_point")
-    new = fm.switch_branch(bb, bp, omega=(0.9, 1.7), options=fm.ContinuationOptions(max_points=3))
-    assert new.meta["switched_from"]["omega_hbm"] == pytest.approx(bp_located.omega, rel=1e-7)
+    opts = fm.ContinuationOptions(max_points=3)
+    new = fm.switch_branch(bb, bp, omega=(0.9, 1.7), options=opts)
+    from_located = fm.switch_branch(b, bp_located, omega=(0.9, 1.7), options=opts)
+    w_hbm = new.meta["switched_from"]["omega_hbm"]
+    assert w_hbm == pytest.approx(from_located.meta["switched_from"]["omega_hbm"], rel=1e-12)
+    assert w_hbm == pytest.approx(bp_located.omega, rel=1e-7)
+
+
+def test_located_by_two_solves_within_the_stated_bracket(forced, monkeypatch):
+    """``locate=True`` on a problem above PRECISE_MAX_UNKNOWNS (lowered here to take the 30
+    unknowns of the pair): at most LOCATE_SOLVES corrector solves per smooth crossing, the
+    verdicts and the kinds of the precise location, each bifurcation reported at one end of its
+    bracket, and the precisely located crossing inside that bracket, which is narrower than the
+    segment. switch_branch finds the same HBM branch point from it."""
+    from femodes import branch_stability
+
+    model, b = forced
+    solves = []
+    orig = branch_stability.solve_on_secant
+
+    def counted(*args, **kwargs):
+        solves.append(args[3])
+        return orig(*args, **kwargs)
+
+    with monkeypatch.context() as m:
+        m.setattr(branch_stability, "PRECISE_MAX_UNKNOWNS", 0)
+        m.setattr(branch_stability, "solve_on_secant", counted)
+        cheap = fm.frequency_response(model, (0.9, 1.7), 7, stability="hill")
+    np.testing.assert_array_equal(cheap.stable, b.stable)
+    precise = [z for z in b.bifurcations if z.kind != "fold"]
+    located = [z for z in cheap.bifurcations if z.kind != "fold"]
+    assert [(z.kind, z.index) for z in located] == [(z.kind, z.index) for z in precise]
+    assert len(solves) <= branch_stability.LOCATE_SOLVES * len(located)
+    for z, p in zip(located, precise):
+        lo, hi = z.bracket
+        assert z.located and z.omega in (lo, hi) and lo < p.omega < hi
+        assert hi - lo < abs(b.omega[z.index + 1] - b.omega[z.index])
+    bp = next(z for z in located if z.kind == "branch_point")
+    new = fm.switch_branch(cheap, bp, omega=(0.9, 1.7), options=fm.ContinuationOptions(max_points=3))
+    bp_precise = next(z for z in precise if z.kind == "branch_point")
+    assert new.meta["switched_from"]["omega_hbm"] == pytest.approx(bp_precise.omega, rel=1e-7)
 
 
 def test_stability_options_are_checked():
@@ -309,7 +353,10 @@ def test_stability_options_are_checked():
         fm.StabilityOptions(method="floquet")
     with pytest.raises(ValueError, match="tol must be in"):
         fm.StabilityOptions(tol=2.0)
-    with pytest.raises(TypeError, match="locate must be True or False"):
+    with pytest.raises(TypeError, match="locate must be True, False or a bracket width"):
         fm.StabilityOptions(locate="no")
+    with pytest.raises(TypeError, match=r"xtol in \(0, 1\).*got 1\.5"):
+        fm.StabilityOptions(locate=1.5)
+    assert fm.StabilityOptions(locate=np.float64(1e-7)).locate == 1e-7
     with pytest.raises(ValueError, match="StabilityOptions"):
         fm.frequency_response(pair(KC_F, C, F), (0.9, 1.0), 3, stability="yes")

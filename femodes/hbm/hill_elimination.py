@@ -15,10 +15,16 @@ import scipy.sparse.linalg as spla
 
 from .linsolve.options import DEFAULT_OPTIONS
 
-__all__ = ["eliminate", "dense_array", "SPARSE_ELIMINATION_DENSITY"]
+__all__ = ["eliminate", "dense_array", "SPARSE_ELIMINATION_DENSITY", "SPARSE_ELIMINATION_MIN"]
 
 #: An algebraic block with at most this fraction of nonzeros is factorised sparse (:func:`eliminate`).
 SPARSE_ELIMINATION_DENSITY = 0.1
+
+#: ... when it has more than this many rows: below, a dense LU is cheaper than SuperLU and its
+#: condition estimate (measured, one BLAS thread: 150 rows at 4 % nonzeros, the 11-DOF blade of
+#: examples/blade_casing.py at H = 7, 0.7 ms dense against 1.7 ms sparse; 594 rows at 3 %, 8.9
+#: against 3.8 ms; X the same to 1e-12).
+SPARSE_ELIMINATION_MIN = 300
 
 
 def dense_array(A) -> np.ndarray:
@@ -53,8 +59,8 @@ def eliminate(Aaa, Aad) -> np.ndarray | None:
     against 8 ms dense."""
     n = Aaa.shape[0]
     floor = 1e3 * np.finfo(float).eps
-    sparse = n and (np.count_nonzero(Aaa) if not sp.issparse(Aaa) else sp.csr_matrix(Aaa).nnz) \
-        <= SPARSE_ELIMINATION_DENSITY * n * n
+    sparse = n > SPARSE_ELIMINATION_MIN and (np.count_nonzero(Aaa) if not sp.issparse(Aaa)
+                                             else sp.csr_matrix(Aaa).nnz) <= SPARSE_ELIMINATION_DENSITY * n * n
     As, r, c = _equilibrate(sp.csr_matrix(Aaa) if sparse else dense_array(Aaa))
     B = r[:, None] * dense_array(Aad)
     if not sparse:

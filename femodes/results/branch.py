@@ -302,6 +302,7 @@ class Branch:
                                         for b in bifs], dtype=float).reshape(len(bifs), 6),
                 "bif_Q": np.asarray([b.Q for b in bifs], dtype=float).reshape((len(bifs),) + self.Q.shape[1:]),
                 "bif_P": np.asarray([b.P for b in bifs], dtype=float).reshape((len(bifs),) + self.P.shape[1:]),
+                "bif_bracket": np.asarray([b.bracket for b in bifs], dtype=float).reshape(len(bifs), 2),
             })
         return out
 

@@ -133,10 +133,12 @@ def load_branch(path, model=None) -> Branch:
     stab = header.get("stability")
     if stab is not None:
         located = stab.get("located", [True] * len(stab["kinds"]))  # older files: every bifurcation located
+        brackets = arrays.get("bif_bracket", np.full((len(stab["kinds"]), 2), np.nan))  # older files: not stated
         bifs = [Bifurcation(kind=k, index=int(i), omega=float(r[0]), energy=float(r[1]), parameter=float(r[2]),
-                            multiplier=complex(r[3], r[4]), xi=float(r[5]), Q=q, P=p, located=bool(loc))
-                for k, i, r, q, p, loc in zip(stab["kinds"], arrays["bif_index"], arrays["bif_real"], arrays["bif_Q"],
-                                              arrays["bif_P"], located)]
+                            multiplier=complex(r[3], r[4]), xi=float(r[5]), Q=q, P=p, located=bool(loc),
+                            bracket=(float(w[0]), float(w[1])))
+                for k, i, r, q, p, loc, w in zip(stab["kinds"], arrays["bif_index"], arrays["bif_real"],
+                                                 arrays["bif_Q"], arrays["bif_P"], located, brackets)]
         br.set_stability(stable=arrays["stable"].astype(bool),
                          multipliers=arrays["multipliers_re"] + 1j * arrays["multipliers_im"], bifurcations=bifs,
                          methods=stab["methods"], tol=float(br.meta.get("stability_tol", 1e-4)))
