@@ -73,6 +73,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..eigen import krylov_start
 from ..sparse_direct import factorize
 from .hill_elimination import dense_array, eliminate
 from .hill_reduction import FreeInterfaceReduction
@@ -426,7 +427,7 @@ class _ShiftInvert:
         # tol 1e-8 on the Ritz values of the shifted-inverted operator: the exponents to ~1e-8 of
         # their distance from the shift, far below what decides stability (measured: multipliers
         # unchanged to 1e-9 against tol 1e-12, at a tenth of the Arnoldi steps)
-        theta, Z = spla.eigs(L, k=min(k, 2 * N - 2), which="LM", tol=1e-8)
+        theta, Z = spla.eigs(L, k=min(k, 2 * N - 2), which="LM", tol=1e-8, v0=krylov_start(2 * N, complex_=True))
         good = np.abs(theta) > 0
         return sigma + 1.0 / theta[good], Z[:N, good]
 
