@@ -59,10 +59,18 @@ def test_branch_omega_is_the_converged_answer_with_its_error_bar(controlled, pla
     np.testing.assert_array_equal(b.omega_truncated, plain.omega)
     assert plain.omega_error is None and plain.amplitude_error is None
     np.testing.assert_array_equal(plain.omega, plain.omega_truncated)
-    # error_estimate: the larger of the two bars (the amplitude's is not controlled by rtol: 6 % here)
+    # the amplitude too: shooting found the exact fold orbit, whose max |u| is the event-driven
+    # reference's to its error bar (measured 5.5e-8 against a bar of 1.9e-5, the sampling bound);
+    # the truncated series' amplitude is 4 % high (b.amplitude(0, Q=b.Q))
+    ref = upper_fold(0.1, 0.2, 1.0).max_abs_u
+    assert abs(b.amplitude(0)[up] / ref - 1.0) <= b.amplitude_error[up] <= 1e-4
+    assert b.amplitude(0, b.Q)[up] / ref - 1.0 > 0.03
+    np.testing.assert_array_equal(b.amplitude(0, b.Q), plain.amplitude(0))
+    # error_estimate: the larger of the two bars, both within rtol where shooting answered
     np.testing.assert_array_equal(b.error_estimate, np.fmax(b.omega_error, b.amplitude_error))
-    assert b.amplitude_error[up] > 10 * b.omega_error[up]
+    assert b.accuracy.converged_amplitude[up]
     assert np.all(b.omega_error[b.accuracy.met] <= 1e-3)
+    assert np.all(b.error_estimate[b.accuracy.converged_amplitude] <= 1e-3)
 
 
 def test_a_point_reads_the_answer_and_synthesises_the_series(controlled, plain):
@@ -71,6 +79,8 @@ def test_a_point_reads_the_answer_and_synthesises_the_series(controlled, plain):
     sol, ref = b[up], plain[up]
     assert sol.omega == b.omega[up] and sol.omega_truncated == b.omega_truncated[up]
     assert sol.omega_error == b.omega_error[up] and sol.amplitude_error == b.amplitude_error[up]
+    # (the series on its own grid against the branch's: both sample the same maximum, 1e-6 apart at most)
+    assert sol.amplitude(0) == b.amplitude(0)[up] and ref.amplitude(0) == pytest.approx(plain.amplitude(0)[up], rel=1e-6)
     # the Fourier series is the truncated one, at its own frequency and period
     assert sol.period == pytest.approx(2 * math.pi / b.omega_truncated[up], rel=4 * np.finfo(float).eps)
     t = np.linspace(0.0, sol.period, 7)
@@ -102,6 +112,8 @@ def test_saved_file_holds_the_answer_and_the_series(controlled, tmp_path):
     np.testing.assert_array_equal(back.omega, controlled.omega)
     np.testing.assert_array_equal(back.omega_truncated, controlled.omega_truncated)
     np.testing.assert_array_equal(back.omega_error, controlled.omega_error)
+    np.testing.assert_array_equal(back.amplitude(0), controlled.amplitude(0))
+    np.testing.assert_array_equal(back.amplitude_error, controlled.amplitude_error)
     # a file of an older femodes has no omega_truncated: its "omega" was the series' frequency
     del arrays["omega_truncated"]
     old = write_record(tmp_path / "old.npz", header, {**arrays, "omega": controlled.omega_truncated})
@@ -118,6 +130,7 @@ def test_plot_and_summary_show_the_answer(controlled):
 
     ax = fm.plot.frequency_amplitude(controlled, 0)
     np.testing.assert_array_equal(ax.lines[0].get_xdata(), controlled.omega)
+    np.testing.assert_array_equal(ax.lines[0].get_ydata(), controlled.amplitude(0))
     assert any(isinstance(c, ErrorbarContainer) for c in ax.containers)
     plt.close(ax.figure)
     case = type("Case", (), {"name": "seed1"})()
@@ -125,7 +138,7 @@ def test_plot_and_summary_show_the_answer(controlled):
     folds = next(line for line in lines if line.startswith("folds at w = "))
     assert f"{controlled.omega[_upper(controlled)]:.6g}" in folds and "+-" in folds
     assert any("truncated series" in line and f"{H20_FOLD:.6g}" in line for line in lines)
-    assert any("amplitude largest" in line and "not controlled by rtol" in line for line in lines)
+    assert any("amplitude largest" in line and "exact orbits at" in line for line in lines)
 
 
 def test_bifurcations_are_reported_at_the_converged_frequency(tmp_path):

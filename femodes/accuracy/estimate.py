@@ -130,7 +130,9 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     branch.set_accuracy(ErrorEstimate(omega=errors.omega, amplitude=errors.amplitude, penetration=pen, tension=ten,
                                       harmonics=np.full(n, H), rate=errors.rate, method=kind.astype(str), rtol=rtol,
                                       omega_limit=errors.omega_limit, omega_limit_error=errors.omega_limit_error,
-                                      finest=errors.finest, caveat=family_caveat(branch), **mesh))
+                                      finest=errors.finest, caveat=family_caveat(branch),
+                                      amplitude_limit=errors.amplitude_limit,
+                                      amplitude_limit_error=errors.amplitude_limit_error, **mesh))
     return branch
 
 

@@ -112,7 +112,8 @@ class ExactFolds:
             taken_i.add(i)
             taken_j.add(j)
             w, half = float(eb.fold_omega[j]), max(float(eb.fold_error[j]), self.options.shooting_floor)
-            errors.record_exact(lad, i, w, half, eb.coefficients(eb.folds[j], hk.n_harmonics)[0], hk)
+            errors.record_exact(lad, i, w, half, eb.coefficients(eb.folds[j], hk.n_harmonics)[0], hk,
+                                run=eb.orbit(eb.folds[j]))
             todo[i] = False
             log.info("accuracy: fold %d (w = %.7g) paired with the exact fold at w = %.7g", i, branch.omega_truncated[i], w)
         for i in unresolved:

@@ -17,6 +17,7 @@ import numpy as np
 from .options import AccuracyOptions
 from .planes import Plane
 from .points import without_contact
+from .protocol import orbit_amplitudes
 from .shooter import Shooter
 
 __all__ = ["ShootingFailed", "exact_fold", "grazing"]
@@ -28,12 +29,15 @@ class ShootingFailed(RuntimeError):
     """No exact orbit where the fold search needs one."""
 
 
-def exact_fold(sh: Shooter, f: int, at_f, options: AccuracyOptions) -> tuple[float, float] | None:
+def exact_fold(sh: Shooter, f: int, at_f, options: AccuracyOptions) -> tuple[float, float, object, float] | None:
     """The fold of the exact curve next to the branch's fold ``f``: the extreme frequency of
     the exact orbits on the hyperplanes parallel to ``f``'s (offset ``s``), found by Brent's
-    method in ``s`` from ``at_f`` (the orbit at ``s = 0``). Returns the frequency and the
-    relative half-width of its uncertainty (the change of the frequency over the final
-    tolerance in ``s``, at least ``options.shooting_floor``), or None."""
+    method in ``s`` from ``at_f`` (the orbit at ``s = 0``). Returns the frequency, the relative
+    half-width of its uncertainty (the change of the frequency over the final tolerance in
+    ``s``, at least ``options.shooting_floor``), the fold orbit's run and the relative change of
+    its amplitudes over that tolerance (at a fold they move at first order where the frequency
+    moves at second: their own error bar); or None. A fold that is the grazing of the linear
+    response has no run (None) and no amplitude bar (NaN)."""
     from scipy.optimize import minimize_scalar
 
     b = sh.branch
@@ -112,6 +116,9 @@ def exact_fold(sh: Shooter, f: int, at_f, options: AccuracyOptions) -> tuple[flo
             s, w = extreme(0.25 * d)
         tol = 1e-4 * max(abs(s), d)
         spread = max(abs(sign * omega_at(s + tol) - w), abs(sign * omega_at(s - tol) - w))
+        amp = orbit_amplitudes(solved[s][3])
+        ref = float(np.max(amp)) or 1.0
+        amp_spread = max(float(np.max(np.abs(orbit_amplitudes(solved[s + e][3]) - amp))) for e in (tol, -tol)) / ref
     except (ShootingFailed, ValueError, RuntimeError) as exc:
         # a lower fold that ends the contact within a few points: the impacting orbits end at a
         # grazing there (past it the exact curve has no impacting orbit on these planes)
@@ -125,8 +132,8 @@ def exact_fold(sh: Shooter, f: int, at_f, options: AccuracyOptions) -> tuple[flo
             return None
         log.info("accuracy: the fold next to point %d is the grazing of the linear response at w = %.9g", f,
                  graze)
-        return graze, options.shooting_floor
-    return w, max(spread / abs(w), options.shooting_floor)
+        return graze, options.shooting_floor, None, math.nan
+    return w, max(spread / abs(w), options.shooting_floor), solved[s][3], amp_spread
 
 
 def grazing(flow, omega: float) -> float | None:

@@ -19,9 +19,10 @@ from typing import Protocol
 import numpy as np
 
 from ..hbm.harmonics import Harmonics
+from ..results.error_estimate import AMPLITUDE_SAMPLING
 from .ladder import Ladder
 
-__all__ = ["Estimator", "PointErrors"]
+__all__ = ["orbit_amplitudes", "AMPLITUDE_SAMPLES", "Estimator", "PointErrors"]
 
 
 @dataclass
@@ -37,6 +38,11 @@ class PointErrors:
     omega_limit_error: np.ndarray | None
     finest: np.ndarray
     method: np.ndarray
+    #: ``max_t |q_d(t)|`` of each point's exact orbit per DOF (``(n_points, n_dofs)``, NaN rows
+    #: where no exact orbit answered); created by the first :meth:`record_exact`
+    amplitude_limit: np.ndarray | None = None
+    #: relative error bar of those amplitudes per point (NaN where there are none)
+    amplitude_limit_error: np.ndarray | None = None
 
     @classmethod
     def empty(cls, n: int, impacts: bool, finest: int) -> PointErrors:
@@ -51,12 +57,25 @@ class PointErrors:
         if self.omega_limit is not None:
             self.omega_limit[:] = self.omega_limit_error[:] = np.nan
         self.method[:] = "doubling"
+        self.amplitude_limit = self.amplitude_limit_error = None
 
-    def record_exact(self, lad: Ladder, i: int, w: float, half: float, Q: np.ndarray, hk: Harmonics) -> None:
+    def record_exact(self, lad: Ladder, i: int, w: float, half: float, Q: np.ndarray, hk: Harmonics,
+                     run=None, amplitude_error: float | None = None) -> None:
         """Point ``i``'s estimate from an exact orbit: its frequency ``w`` (relative half-width
         ``half``) and displacement coefficients ``Q`` on the harmonics ``hk`` (8 H: the error
-        includes the tail)."""
+        includes the tail); with the orbit's ``run`` (:class:`~femodes.time.exact_run.FlowRun`) at
+        ``w``, its amplitude per DOF (:func:`orbit_amplitudes`) with the relative error bar
+        ``amplitude_error`` (default: ``half``; at a fold, where the amplitude moves like the
+        square root of the frequency, ``sqrt(half)``), at least the sampling's."""
         branch = lad.branch
+        if run is not None:
+            if self.amplitude_limit is None:
+                self.amplitude_limit = np.full((len(branch), branch.Q.shape[2]), np.nan)
+                self.amplitude_limit_error = np.full(len(branch), np.nan)
+            self.amplitude_limit[i] = orbit_amplitudes(run)
+            if amplitude_error is None or not math.isfinite(amplitude_error):
+                amplitude_error = math.sqrt(half) if i in branch.folds else half
+            self.amplitude_limit_error[i] = max(amplitude_error, AMPLITUDE_SAMPLING)
         dQ = Q - lad.harmonics(branch.harmonics.n_harmonics).convert(branch.Q[i], hk)
         self.omega_limit[i], self.omega_limit_error[i] = w, half
         self.omega[i] = abs(branch.omega_truncated[i] - w) / lad.omega_ref(i) + half
@@ -64,6 +83,23 @@ class PointErrors:
         self.rate[i] = math.nan
         self.finest[i] = 0
         self.method[i] = "shooting"
+
+
+#: Samples per period on which :func:`orbit_amplitudes` takes the maximum (with the event times).
+AMPLITUDE_SAMPLES = 4096
+
+
+def orbit_amplitudes(run) -> np.ndarray:
+    """``max_t |q_d(t)|`` per DOF of an exact orbit (a run of one period of the exact flow), from
+    its closed form at :data:`AMPLITUDE_SAMPLES` equidistant times and at its contact events
+    (where the maximum of a contact DOF sits, at the stop): a smooth maximum between samples
+    ``dt`` apart is missed by at most ``(w_max dt)^2 / 8`` of it, 1.9e-5 for the harmonics up to
+    the 8th (:data:`~femodes.results.error_estimate.AMPLITUDE_SAMPLING`). Evaluated in blocks of
+    times (the memory of a few columns of the model, not of the whole period)."""
+    t = np.linspace(run.t0, run.t1, AMPLITUDE_SAMPLES + 1)
+    events = [tb for (_, tb, _, _) in run.segments]
+    t = np.unique(np.clip(np.concatenate([t, events]), run.t0, run.t1))
+    return np.max([np.max(np.abs(run.displacement(t[k:k + 512])), axis=0) for k in range(0, t.size, 512)], axis=0)
 
 
 class Estimator(Protocol):

@@ -80,15 +80,17 @@ class Shooting:
                                       or not opts.shooting_fold_search):
                 todo[i] = True  # the exact branch is there: its folds, without the fold search (ExactFolds)
                 continue
+            run, amplitude_error = r[3], None
             if i in branch.folds:
                 fold = exact_fold(sh, i, r, opts)
                 if fold is None:
                     todo[i] = True
                     continue
-                w, half = fold
+                w, half, run, amplitude_error = fold  # the fold orbit's amplitudes (none at a grazing)
             else:
                 half = max(r[4] / abs(w), opts.shooting_floor)
-            errors.record_exact(lad, i, w, half, r[3].coefficients(hk.n_harmonics)[0], hk)
+            errors.record_exact(lad, i, w, half, r[3].coefficients(hk.n_harmonics)[0], hk, run=run,
+                                amplitude_error=amplitude_error)
         log.info("accuracy: shooting: %d runs of the exact flow for %d points", sh.runs, len(solved))
         return todo
 

@@ -121,11 +121,14 @@ def frequency_amplitude(branch: Branch, dof: Any, *, ax: Any = None, label: str 
     W, dof_label = reader(branch, dof, owner, branch.Q.shape[2], how)
     ax = axes(ax, owner)
 
-    def amplitude(Q):  # max over the rows of W of max_t |W q(t)|
+    def amplitude(Q):  # max over the rows of W of max_t |W q(t)| of the series Q
         QW = np.asarray(Q) @ W.T
         return np.max([branch.amplitude(j, QW) for j in range(W.shape[0])], axis=0)
 
-    amp = amplitude(branch.Q)
+    single = W.shape[0] == 1 and np.count_nonzero(W[0]) == 1 and W[0][np.flatnonzero(W[0])[0]] == 1.0
+    series = amplitude(branch.Q)
+    # one DOF: the branch's answer (the exact orbits' amplitudes where its error estimate has them)
+    amp = branch.amplitude(int(np.flatnonzero(W[0])[0])) if single else series
     w = freq(branch.omega, hz)
     if branch.stable is None:
         ax.plot(w, amp, "-", label=label or branch.kind)
@@ -137,7 +140,8 @@ def frequency_amplitude(branch: Branch, dof: Any, *, ax: Any = None, label: str 
         f = list(branch.folds)
         ax.plot(w[f], amp[f], "x", color="k", ms=8, mew=2, label="fold")
     _error_bars(ax, branch, w, amp)
-    _mark_bifurcations(ax, branch, lambda b: float(amplitude(b.Q[None])[0]), hz)
+    # a bifurcation is a point of the series: moved by its point's amplitude correction, as its frequency
+    _mark_bifurcations(ax, branch, lambda b: float(amplitude(b.Q[None])[0]) + float(amp[b.index] - series[b.index]), hz)
     ax.set_xlabel(freq_label(hz))
     ax.set_ylabel(f"amplitude ({dof_label})")
     ax.grid(True, alpha=0.3)

@@ -111,10 +111,11 @@ class Branch:
 
     @property
     def amplitude_error(self) -> np.ndarray | None:
-        """Relative error of the displacement of the truncated series per point (amplitudes and
-        shapes, :attr:`ErrorEstimate.amplitude`; ``rtol`` does not control it); ``None`` without
-        an error estimate."""
-        return None if self.accuracy is None else np.asarray(self.accuracy.amplitude, float)
+        """Relative error bar of the amplitudes :meth:`amplitude` gives per point
+        (:attr:`ErrorEstimate.amplitude_error`): the exact orbit's where shooting answered (its
+        amplitudes are then those of the exact orbit), else the truncated series' (which ``rtol``
+        does not control); ``None`` without an error estimate."""
+        return None if self.accuracy is None else self.accuracy.amplitude_error
 
     @property
     def error_estimate(self) -> np.ndarray | None:
@@ -207,18 +208,27 @@ class Branch:
         )
         if acc is None:
             return sol
-        return sol._error_controlled(float(self.omega_truncated[i]), float(acc.frequency_error[i]), float(acc.amplitude[i]))
+        limit = acc.amplitude_limit[i] if acc.amplitude_limit is not None and acc.converged_amplitude[i] else None
+        return sol._error_controlled(float(self.omega_truncated[i]), float(acc.frequency_error[i]),
+                                     float(acc.amplitude_error[i]), limit)
 
     def __iter__(self):
         return (self[i] for i in range(len(self)))
 
     def amplitude(self, dof: int, Q: np.ndarray | None = None) -> np.ndarray:
-        """``max_t |q_dof(t)|`` at every point (or of the coefficient stack ``Q`` of shape
-        ``(m, n_coef, n_dofs)`` on this branch's harmonics, e.g. of its bifurcations)."""
-        Q = self.Q if Q is None else np.asarray(Q, dtype=float)
+        """``max_t |q_dof(t)|`` at every point: the answer, as :attr:`omega`. Where an error
+        estimate found the exact orbit (shooting: ``accuracy.amplitude_limit``), its amplitude,
+        with the error bar :attr:`amplitude_error`; elsewhere that of the truncated series.
+        With ``Q`` (a coefficient stack of shape ``(m, n_coef, n_dofs)`` on this branch's
+        harmonics, e.g. ``branch.Q`` itself or its bifurcations'), that series' amplitude."""
+        series = self.Q if Q is None else np.asarray(Q, dtype=float)
         n = max(512, 16 * self.harmonics.n_coef)
         E = self.harmonics.synthesis(2 * np.pi * np.arange(n) / n)
-        return np.max(np.abs(E @ Q[:, :, dof].T), axis=0)
+        amp = np.max(np.abs(E @ series[:, :, dof].T), axis=0)
+        acc = self.accuracy
+        if Q is not None or acc is None or acc.amplitude_limit is None:
+            return amp
+        return np.where(acc.converged_amplitude, np.asarray(acc.amplitude_limit, float)[:, dof], amp)
 
     @property
     def penetration(self) -> np.ndarray:

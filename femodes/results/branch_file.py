@@ -129,7 +129,9 @@ def load_branch(path, model=None) -> Branch:
                                       method=np.asarray(acc["method"], dtype=str), rtol=acc["rtol"],
                                       mesh_method=acc.get("mesh_method"), caveat=acc.get("caveat"),
                                       **{k: arrays[f"accuracy_{k}"] for k in ("omega_limit", "omega_limit_error",
-                                                                              "finest", "mesh") if f"accuracy_{k}" in arrays}))
+                                                                              "finest", "mesh", "amplitude_limit",
+                                                                              "amplitude_limit_error")
+                                         if f"accuracy_{k}" in arrays}))
     stab = header.get("stability")
     if stab is not None:
         located = stab.get("located", [True] * len(stab["kinds"]))  # older files: every bifurcation located

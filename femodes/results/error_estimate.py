@@ -8,7 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ErrorEstimate", "ERROR_METHODS", "ERROR_SOURCES"]
+__all__ = ["ErrorEstimate", "ERROR_METHODS", "ERROR_SOURCES", "AMPLITUDE_SAMPLING"]
+
+#: Relative error bound of the maximum of an exact orbit sampled at 4096 points per period and at
+#: its events (:func:`femodes.accuracy.protocol.orbit_amplitudes`): ``(w_max dt)^2 / 8`` for the
+#: harmonics up to the 8th.
+AMPLITUDE_SAMPLING = (8 * 2 * 3.141592653589793 / 4096) ** 2 / 8
 
 #: levels of harmonics (``"doubling"``), from the exact orbit of the flow with rigid stops
 #: (``"shooting"``, :func:`femodes.estimate_error` with ``method="shooting"``), or not at all
@@ -69,6 +74,14 @@ class ErrorEstimate:
         Why the branch is not the converged answer of the problem whatever its error numbers say
         (e.g. ``"grazing family: ... does not predict the forced resonance"``): with a caveat no
         point is :attr:`met`.
+    amplitude_limit : ndarray or None
+        ``max_t |q_d(t)|`` of the exact orbit of each point per DOF, shape ``(n_points, n_dofs)``
+        (NaN rows: no exact orbit; ``None``: shooting did not answer anywhere). Where it is given,
+        :meth:`femodes.Branch.amplitude` reads it, with the error bar :attr:`amplitude_error`.
+    amplitude_limit_error : ndarray or None
+        Relative error bar of those amplitudes per point: the exact orbit's frequency half-width
+        (its square root at a fold, where the amplitude moves like the square root of the
+        frequency), at least :data:`AMPLITUDE_SAMPLING`; NaN where there are none.
     """
 
     omega: np.ndarray
@@ -85,10 +98,18 @@ class ErrorEstimate:
     mesh: np.ndarray | None = None
     mesh_method: str | None = None
     caveat: str | None = None
+    amplitude_limit: np.ndarray | None = None
+    amplitude_limit_error: np.ndarray | None = None
 
     def __post_init__(self):
         n = np.asarray(self.omega).shape
-        for name in ("omega_limit", "omega_limit_error", "finest", "mesh"):
+        if self.amplitude_limit is not None and (np.ndim(self.amplitude_limit) != 2
+                                                 or np.shape(self.amplitude_limit)[0] != n[0]):
+            raise ValueError(f"ErrorEstimate: amplitude_limit must have one row per point ({n[0]}) and one column per "
+                             f"DOF, got shape {np.shape(self.amplitude_limit)}")
+        if (self.amplitude_limit is None) != (self.amplitude_limit_error is None):
+            raise ValueError("ErrorEstimate: amplitude_limit and amplitude_limit_error go together")
+        for name in ("omega_limit", "omega_limit_error", "finest", "mesh", "amplitude_limit_error"):
             v = getattr(self, name)
             if v is not None and np.asarray(v).shape != n:
                 raise ValueError(f"ErrorEstimate: {name} must have one value per point ({n}), "
@@ -155,16 +176,35 @@ class ErrorEstimate:
         return vals[0] if len(vals) == 1 else np.sum(vals, axis=0)
 
     @property
+    def converged_amplitude(self) -> np.ndarray:
+        """Per point: does :attr:`amplitude_limit` give the amplitudes of its exact orbit?"""
+        n = np.asarray(self.omega).shape[0]
+        if self.amplitude_limit is None:
+            return np.zeros(n, dtype=bool)
+        return np.all(np.isfinite(np.asarray(self.amplitude_limit, float)), axis=1)
+
+    @property
+    def amplitude_error(self) -> np.ndarray:
+        """The relative error of the amplitudes a branch shows per point: those of the exact orbit
+        (:attr:`amplitude_limit`) where there is one, with :attr:`amplitude_limit_error`; elsewhere
+        the truncated series' own error, :attr:`amplitude`."""
+        own = np.asarray(self.amplitude, float)
+        if self.amplitude_limit is None or self.amplitude_limit_error is None:
+            return own
+        return np.where(self.converged_amplitude, np.asarray(self.amplitude_limit_error, float), own)
+
+    @property
     def value(self) -> np.ndarray:
         """The estimated relative error per point of what a branch shows: the larger of the error
         of its frequency (:attr:`frequency_error`, the best frequency, every source) and of its
-        displacement (:attr:`amplitude`, the truncated series), NaN where it could not be
-        estimated. :attr:`covers` says which sources."""
+        amplitudes (:attr:`amplitude_error`: the exact orbit's where shooting gave one, else the
+        truncated series'), NaN where it could not be estimated. :attr:`covers` says which
+        sources."""
         mesh = None if self.mesh is None else np.asarray(self.mesh, float)
         if not self.harmonics_estimated:
             assert mesh is not None  # __post_init__: at least one source is estimated
             return mesh
-        return np.fmax(self.frequency_error, np.asarray(self.amplitude, float))
+        return np.fmax(self.frequency_error, self.amplitude_error)
 
     @property
     def met(self) -> np.ndarray:
@@ -194,7 +234,7 @@ class ErrorEstimate:
         if len(self.sources) > 1:
             parts[0] += " (" + ", ".join(f"{ERROR_SOURCES[k]} {largest(v)}" for k, v in self.sources.items()) + ")"
         if self.harmonics_estimated and n:
-            parts[0] += (f": frequency {largest(self.frequency_error)}, amplitude {largest(self.amplitude)} "
+            parts[0] += (f": frequency {largest(self.frequency_error)}, amplitude {largest(self.amplitude_error)} "
                          "(rtol controls the frequency)")
         if self.rtol:
             parts.append(f"rtol = {self.rtol:g} met at {int(np.sum(self.met))} of {n} points")
@@ -210,6 +250,8 @@ class ErrorEstimate:
         return {"omega": np.asarray(self.omega, float), "amplitude": np.asarray(self.amplitude, float),
                 "penetration": np.asarray(self.penetration, float), "tension": np.asarray(self.tension, float),
                 "harmonics": np.asarray(self.harmonics, int), "rate": np.asarray(self.rate, float),
-                **{k: np.asarray(getattr(self, k), float) for k in ("omega_limit", "omega_limit_error", "mesh")
+                **{k: np.asarray(getattr(self, k), float) for k in ("omega_limit", "omega_limit_error", "mesh",
+                                                                     "amplitude_limit_error")
                    if getattr(self, k) is not None},
-                **({"finest": np.asarray(self.finest, int)} if self.finest is not None else {})}
+                **({"finest": np.asarray(self.finest, int)} if self.finest is not None else {}),
+                **({"amplitude_limit": np.asarray(self.amplitude_limit, float)} if self.amplitude_limit is not None else {})}

@@ -57,8 +57,11 @@ class PeriodicSolution:
         (error control may use more harmonics at some points than at others).
     omega_error, amplitude_error : float or None
         The two parts of :attr:`error_estimate`: the relative error of :attr:`omega` (what
-        ``rtol`` controls) and of the displacement of the truncated series ``Q`` (amplitudes,
-        shapes; not controlled by ``rtol``).
+        ``rtol`` controls) and of :meth:`amplitude` (the exact orbit's where the estimate found
+        it, else the truncated series', which ``rtol`` does not control).
+    amplitude_limit : ndarray or None
+        ``max_t |q_d(t)|`` per DOF of the point's exact orbit, where the branch's error estimate
+        found it by shooting (``accuracy.amplitude_limit``); :meth:`amplitude` reads it.
     """
 
     omega: float
@@ -80,16 +83,19 @@ class PeriodicSolution:
     omega_truncated: float = field(init=False)
     omega_error: float | None = field(init=False, default=None)
     amplitude_error: float | None = field(init=False, default=None)
+    amplitude_limit: np.ndarray | None = field(init=False, default=None)
 
     def __post_init__(self):
         object.__setattr__(self, "omega_truncated", float(self.omega))
 
-    def _error_controlled(self, omega_truncated: float, omega_error: float, amplitude_error: float) -> PeriodicSolution:
+    def _error_controlled(self, omega_truncated: float, omega_error: float, amplitude_error: float,
+                          amplitude_limit: np.ndarray | None = None) -> PeriodicSolution:
         """This solution as the point of an error-controlled branch: ``omega`` is the converged
         frequency, the series ``Q, P`` is at ``omega_truncated`` (used by :meth:`Branch.__getitem__`)."""
         object.__setattr__(self, "omega_truncated", float(omega_truncated))
         object.__setattr__(self, "omega_error", float(omega_error))
         object.__setattr__(self, "amplitude_error", float(amplitude_error))
+        object.__setattr__(self, "amplitude_limit", None if amplitude_limit is None else np.asarray(amplitude_limit, float))
         return self
 
     @property
@@ -153,7 +159,11 @@ class PeriodicSolution:
         return float(contact_quality(self.harmonics, self.contacts, self.Q[None], self.P[None])[1, 0])
 
     def amplitude(self, dof: int) -> float:
-        """``max_t |q_dof(t)|`` over a fine grid."""
+        """``max_t |q_dof(t)|``: that of the exact orbit where the branch's error estimate found
+        it (:attr:`amplitude_limit`, as :meth:`Branch.amplitude`), else of the series on a fine
+        grid."""
+        if self.amplitude_limit is not None:
+            return float(self.amplitude_limit[dof])
         return float(np.max(np.abs(self.displacement(self._fine_t())[:, dof])))
 
     def full_displacement(self, t) -> np.ndarray:

@@ -43,7 +43,7 @@ def summary_lines(case: Case, model, branch) -> list[str]:
         met = f", rtol = {acc.rtol:g} met at {int(np.sum(acc.met))} of {len(branch)} points" if acc.rtol else ""
         names = " and ".join(ERROR_SOURCES[k] for k in acc.sources)
         lines.append(f"error estimate ({names}): frequency largest {_largest(branch.omega_error)}{met}; "
-                     f"amplitude largest {_largest(branch.amplitude_error)} (not controlled by rtol); "
+                     f"amplitude largest {_largest(branch.amplitude_error)} ({_amplitude_source(acc)}); "
                      f"covers {acc.covers}")
     caveat = family_caveat(branch)
     if caveat:
@@ -53,6 +53,17 @@ def summary_lines(case: Case, model, branch) -> list[str]:
         lines.append(f"internal-resonance tongues stepped over at w = {ws} (branch.internal_resonances)")
     lines.extend(stability_lines(branch))
     return lines
+
+
+def _amplitude_source(acc) -> str:
+    """Where the amplitudes come from: exact orbits (shooting) and/or the truncated series."""
+    n = len(acc.amplitude)
+    k = int(acc.converged_amplitude.sum())
+    if k == n:
+        return "exact orbits at every point"
+    if k == 0:
+        return "truncated series, not controlled by rtol"
+    return f"exact orbits at {k} of {n} points, elsewhere the truncated series, not controlled by rtol"
 
 
 def _largest(v) -> str:
