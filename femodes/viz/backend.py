@@ -13,7 +13,7 @@ from __future__ import annotations
 import ctypes
 import os
 
-__all__ = ["render_backend", "import_pyvista", "INSTALL_HINT"]
+__all__ = ["render_backend", "import_pyvista", "INSTALL_HINT", "snapshot"]
 
 INSTALL_HINT = (
     "Debian/Ubuntu: apt-get install libegl1 libgl1-mesa-dri (EGL + Mesa software rendering), "
@@ -66,3 +66,15 @@ def import_pyvista():
     except ImportError as exc:
         raise ImportError(f"femodes.viz needs pyvista and imageio: pip install 'femodes[render]' ({exc})") from exc
     return pyvista
+
+
+def snapshot(plotter, owner: str):
+    """The rendered frame of ``plotter`` as an RGB array (a RuntimeError with the install hint if
+    the renderer returns none)."""
+    import numpy as np
+
+    plotter.render()
+    img = plotter.screenshot(return_img=True)
+    if img is None or img.size == 0:
+        raise RuntimeError(f"{owner}: the renderer returned no image. {INSTALL_HINT}")
+    return np.asarray(img)[..., :3].copy()

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .backend import INSTALL_HINT
-from .style import AnimationStyle, ContactQuality
+from .backend import INSTALL_HINT, snapshot
+from .style import AnimationStyle, ContactQuality, frame_label
 
 __all__ = ["line_geometry", "render_line_frames", "make_caption", "fix_camera"]
 
@@ -151,19 +151,11 @@ def _render_frame(pv, plotter, geom: _Geometry, quality: ContactQuality | None, 
     if j:
         plotter.add_mesh(geom.structure(pv, j), scalars="|u|", cmap=cmap, clim=geom.clim, name="structure",
                          smooth_shading=True, show_scalar_bar=False, reset_camera=False)
-    # the time label also keeps frames distinct (GIF writers merge identical frames)
-    now = f"t/T = {j / n_frames:.3f}"
-    color = "black"
+    now, color = frame_label(quality, j, n_frames)
     if quality is not None:
-        now += "   " + quality.frame_text(j)
-        color = "red" if quality.penetrating(j).any() else "black"
         _draw_contacts(pv, plotter, geom, quality, j)
     plotter.add_text(now, font_size=9, color=color, position="lower_left", name="time")
-    plotter.render()
-    img = plotter.screenshot(return_img=True)
-    if img is None or img.size == 0:
-        raise RuntimeError(f"{owner}: the renderer returned no image. {INSTALL_HINT}")
-    return np.asarray(img)[..., :3].copy()
+    return snapshot(plotter, owner)
 
 
 def render_line_frames(pv, geom: _Geometry, quality: ContactQuality | None, style: AnimationStyle, caption: str,

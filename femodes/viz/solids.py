@@ -18,9 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..fields import VTK_QUADRATIC_NODES
-from .backend import INSTALL_HINT
+from .backend import INSTALL_HINT, snapshot
 from .lines import fix_camera
-from .style import AnimationStyle, ContactQuality
+from .style import AnimationStyle, ContactQuality, frame_label
 
 __all__ = ["solid_scene", "render_solid"]
 
@@ -268,17 +268,11 @@ def render_solid(pv, f, scene: _SolidScene, quality: ContactQuality | None, styl
         plotter.add_text(caption, font_size=9, color="black", position="upper_left", name="title")
         for j in range(n_frames):
             _draw_solid(pv, plotter, scene, style, j, first=j == 0)
-            now, color = f"t/T = {j / n_frames:.3f}", "black"
+            now, color = frame_label(quality, j, n_frames)
             if quality is not None:
-                now += "   " + quality.frame_text(j)
-                color = "red" if quality.penetrating(j).any() else "black"
                 _draw_solid_contacts(pv, plotter, scene, quality, j)
             plotter.add_text(now, font_size=9, color=color, position="lower_left", name="time")
-            plotter.render()
-            img = plotter.screenshot(return_img=True)
-            if img is None or img.size == 0:
-                raise RuntimeError(f"{owner}: the renderer returned no image. {INSTALL_HINT}")
-            images.append(np.asarray(img)[..., :3].copy())
+            images.append(snapshot(plotter, owner))
     finally:
         plotter.close()
     if np.all(images[0] == images[0].reshape(-1, 3)[0]):

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 
-__all__ = ["AnimationStyle", "ContactQuality", "check_style", "contact_quality"]
+__all__ = ["AnimationStyle", "ContactQuality", "check_style", "contact_quality", "frame_label"]
 
 def _check_window(window_size: Any, owner: str) -> tuple[int, int]:
     if (not isinstance(window_size, (tuple, list)) or len(window_size) != 2
@@ -165,3 +165,13 @@ def check_style(style: Any, owner: str) -> AnimationStyle:
     if not isinstance(style, AnimationStyle):
         raise TypeError(f"{owner}: style must be a femodes.viz.AnimationStyle, got {type(style).__name__}")
     return style
+
+
+def frame_label(quality: ContactQuality | None, j: int, n_frames: int) -> tuple[str, str]:
+    """The time label of frame ``j`` (``t/T``, with the contact quality when shown; the label
+    also keeps frames distinct, as GIF writers merge identical ones) and its colour (red while a
+    contact penetrates)."""
+    now = f"t/T = {j / n_frames:.3f}"
+    if quality is None:
+        return now, "black"
+    return now + "   " + quality.frame_text(j), "red" if quality.penetrating(j).any() else "black"
