@@ -106,6 +106,13 @@ def frequency_amplitude(branch: Branch, dof: Any, *, ax: Any = None, label: str 
     how : {"mean", "max"}
         On a boundary: the amplitude of its mean displacement, or the largest of its nodes'.
 
+    Notes
+    -----
+    The frequencies are the branch's answer (:attr:`femodes.Branch.omega`, converged where an
+    error estimate gives it), with error bars when it has one. A single DOF reads
+    :meth:`femodes.Branch.amplitude` (the exact orbits' amplitudes where shooting answered); a
+    boundary's mean or max reads the truncated series'.
+
     Returns
     -------
     matplotlib Axes
