@@ -21,7 +21,7 @@ from ..exact_response import exact_frequency_response
 from ..time.exact import undamped
 from .ladder import Ladder
 from .options import AccuracyOptions
-from .protocol import PointErrors
+from .protocol import PointErrors, orbit_amplitudes
 
 __all__ = ["ExactBranchCache", "ExactFolds"]
 
@@ -113,7 +113,7 @@ class ExactFolds:
             taken_j.add(j)
             w, half = float(eb.fold_omega[j]), max(float(eb.fold_error[j]), self.options.shooting_floor)
             errors.record_exact(lad, i, w, half, eb.coefficients(eb.folds[j], hk.n_harmonics)[0], hk,
-                                run=eb.orbit(eb.folds[j]))
+                                amplitudes=orbit_amplitudes(eb.orbit(eb.folds[j])))
             todo[i] = False
             log.info("accuracy: fold %d (w = %.7g) paired with the exact fold at w = %.7g", i, branch.omega_truncated[i], w)
         for i in unresolved:

@@ -29,15 +29,16 @@ class ShootingFailed(RuntimeError):
     """No exact orbit where the fold search needs one."""
 
 
-def exact_fold(sh: Shooter, f: int, at_f, options: AccuracyOptions) -> tuple[float, float, object, float] | None:
+def exact_fold(sh: Shooter, f: int, at_f, options: AccuracyOptions
+               ) -> tuple[float, float, np.ndarray | None, float] | None:
     """The fold of the exact curve next to the branch's fold ``f``: the extreme frequency of
     the exact orbits on the hyperplanes parallel to ``f``'s (offset ``s``), found by Brent's
     method in ``s`` from ``at_f`` (the orbit at ``s = 0``). Returns the frequency, the relative
     half-width of its uncertainty (the change of the frequency over the final tolerance in
-    ``s``, at least ``options.shooting_floor``), the fold orbit's run and the relative change of
-    its amplitudes over that tolerance (at a fold they move at first order where the frequency
-    moves at second: their own error bar); or None. A fold that is the grazing of the linear
-    response has no run (None) and no amplitude bar (NaN)."""
+    ``s``, at least ``options.shooting_floor``), the fold orbit's amplitudes per DOF
+    (:func:`~.protocol.orbit_amplitudes`) and their relative change over that tolerance (at a fold
+    they move at first order where the frequency moves at second: their own error bar); or None.
+    A fold that is the grazing of the linear response has no amplitudes (None) and no bar (NaN)."""
     from scipy.optimize import minimize_scalar
 
     b = sh.branch
@@ -133,7 +134,7 @@ def exact_fold(sh: Shooter, f: int, at_f, options: AccuracyOptions) -> tuple[flo
         log.info("accuracy: the fold next to point %d is the grazing of the linear response at w = %.9g", f,
                  graze)
         return graze, options.shooting_floor, None, math.nan
-    return w, max(spread / abs(w), options.shooting_floor), solved[s][3], amp_spread
+    return w, max(spread / abs(w), options.shooting_floor), amp, amp_spread
 
 
 def grazing(flow, omega: float) -> float | None:

@@ -19,10 +19,10 @@ from typing import Protocol
 import numpy as np
 
 from ..hbm.harmonics import Harmonics
-from ..results.error_estimate import AMPLITUDE_SAMPLING
+from ..results.error_estimate import AMPLITUDE_SAMPLES, AMPLITUDE_SAMPLING
 from .ladder import Ladder
 
-__all__ = ["orbit_amplitudes", "AMPLITUDE_SAMPLES", "Estimator", "PointErrors"]
+__all__ = ["orbit_amplitudes", "Estimator", "PointErrors"]
 
 
 @dataclass
@@ -60,19 +60,19 @@ class PointErrors:
         self.amplitude_limit = self.amplitude_limit_error = None
 
     def record_exact(self, lad: Ladder, i: int, w: float, half: float, Q: np.ndarray, hk: Harmonics,
-                     run=None, amplitude_error: float | None = None) -> None:
+                     amplitudes: np.ndarray | None = None, amplitude_error: float | None = None) -> None:
         """Point ``i``'s estimate from an exact orbit: its frequency ``w`` (relative half-width
         ``half``) and displacement coefficients ``Q`` on the harmonics ``hk`` (8 H: the error
-        includes the tail); with the orbit's ``run`` (:class:`~femodes.time.exact_run.FlowRun`) at
-        ``w``, its amplitude per DOF (:func:`orbit_amplitudes`) with the relative error bar
+        includes the tail); with the orbit's ``amplitudes`` per DOF at ``w``
+        (:func:`orbit_amplitudes` of its run), their relative error bar
         ``amplitude_error`` (default: ``half``; at a fold, where the amplitude moves like the
         square root of the frequency, ``sqrt(half)``), at least the sampling's."""
         branch = lad.branch
-        if run is not None:
+        if amplitudes is not None:
             if self.amplitude_limit is None:
                 self.amplitude_limit = np.full((len(branch), branch.Q.shape[2]), np.nan)
                 self.amplitude_limit_error = np.full(len(branch), np.nan)
-            self.amplitude_limit[i] = orbit_amplitudes(run)
+            self.amplitude_limit[i] = amplitudes
             if amplitude_error is None or not math.isfinite(amplitude_error):
                 amplitude_error = math.sqrt(half) if i in branch.folds else half
             self.amplitude_limit_error[i] = max(amplitude_error, AMPLITUDE_SAMPLING)
@@ -85,13 +85,9 @@ class PointErrors:
         self.method[i] = "shooting"
 
 
-#: Samples per period on which :func:`orbit_amplitudes` takes the maximum (with the event times).
-AMPLITUDE_SAMPLES = 4096
-
-
 def orbit_amplitudes(run) -> np.ndarray:
     """``max_t |q_d(t)|`` per DOF of an exact orbit (a run of one period of the exact flow), from
-    its closed form at :data:`AMPLITUDE_SAMPLES` equidistant times and at its contact events
+    its closed form at :data:`~femodes.results.error_estimate.AMPLITUDE_SAMPLES` equidistant times and at its contact events
     (where the maximum of a contact DOF sits, at the stop): a smooth maximum between samples
     ``dt`` apart is missed by at most ``(w_max dt)^2 / 8`` of it, 1.9e-5 for the harmonics up to
     the 8th (:data:`~femodes.results.error_estimate.AMPLITUDE_SAMPLING`). Evaluated in blocks of

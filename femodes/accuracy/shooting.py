@@ -26,7 +26,7 @@ from .exact_fold import exact_fold
 from .ladder import Ladder
 from .options import AccuracyOptions
 from .points import contact_force_peak, near_fold, without_contact
-from .protocol import PointErrors
+from .protocol import PointErrors, orbit_amplitudes
 from .shooter import Shooter
 
 __all__ = ["GLANCING", "Shooting", "shoot_branch", "shooting_unsupported", "shooting_unsupported_for"]
@@ -80,16 +80,16 @@ class Shooting:
                                       or not opts.shooting_fold_search):
                 todo[i] = True  # the exact branch is there: its folds, without the fold search (ExactFolds)
                 continue
-            run, amplitude_error = r[3], None
             if i in branch.folds:
                 fold = exact_fold(sh, i, r, opts)
                 if fold is None:
                     todo[i] = True
                     continue
-                w, half, run, amplitude_error = fold  # the fold orbit's amplitudes (none at a grazing)
+                w, half, amplitudes, amplitude_error = fold  # the fold orbit's (none at a grazing)
             else:
                 half = max(r[4] / abs(w), opts.shooting_floor)
-            errors.record_exact(lad, i, w, half, r[3].coefficients(hk.n_harmonics)[0], hk, run=run,
+                amplitudes, amplitude_error = orbit_amplitudes(r[3]), None
+            errors.record_exact(lad, i, w, half, r[3].coefficients(hk.n_harmonics)[0], hk, amplitudes=amplitudes,
                                 amplitude_error=amplitude_error)
         log.info("accuracy: shooting: %d runs of the exact flow for %d points", sh.runs, len(solved))
         return todo

@@ -4,16 +4,24 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ErrorEstimate", "ERROR_METHODS", "ERROR_SOURCES", "AMPLITUDE_SAMPLING"]
+__all__ = ["ErrorEstimate", "ERROR_METHODS", "ERROR_SOURCES", "AMPLITUDE_SAMPLES", "AMPLITUDE_SAMPLING", "largest_text"]
 
-#: Relative error bound of the maximum of an exact orbit sampled at 4096 points per period and at
-#: its events (:func:`femodes.accuracy.protocol.orbit_amplitudes`): ``(w_max dt)^2 / 8`` for the
-#: harmonics up to the 8th.
-AMPLITUDE_SAMPLING = (8 * 2 * 3.141592653589793 / 4096) ** 2 / 8
+#: Samples per period on which the maximum of an exact orbit is taken, with its events
+#: (:func:`femodes.accuracy.protocol.orbit_amplitudes`).
+AMPLITUDE_SAMPLES = 4096
+#: Relative error bound of that maximum: ``(w_max dt)^2 / 8`` for the harmonics up to the 8th.
+AMPLITUDE_SAMPLING = (8 * 2 * math.pi / AMPLITUDE_SAMPLES) ** 2 / 8
+
+
+def largest_text(v) -> str:
+    """The largest finite value of ``v`` in three digits, or ``"unknown"`` (error summaries)."""
+    v = np.asarray(v, float)
+    return f"{np.nanmax(v):.3g}" if np.any(np.isfinite(v)) else "unknown"
 
 #: levels of harmonics (``"doubling"``), from the exact orbit of the flow with rigid stops
 #: (``"shooting"``, :func:`femodes.estimate_error` with ``method="shooting"``), or not at all
@@ -226,15 +234,11 @@ class ErrorEstimate:
         cover, and the caveat if there is one."""
         n = np.asarray(self.omega).size
 
-        def largest(v):
-            v = np.asarray(v, float)
-            return f"{np.nanmax(v):.3g}" if np.any(np.isfinite(v)) else "unknown"
-
-        parts = [f"largest {largest(self.value) if n else 'unknown'}"]
+        parts = [f"largest {largest_text(self.value) if n else 'unknown'}"]
         if len(self.sources) > 1:
-            parts[0] += " (" + ", ".join(f"{ERROR_SOURCES[k]} {largest(v)}" for k, v in self.sources.items()) + ")"
+            parts[0] += " (" + ", ".join(f"{ERROR_SOURCES[k]} {largest_text(v)}" for k, v in self.sources.items()) + ")"
         if self.harmonics_estimated and n:
-            parts[0] += (f": frequency {largest(self.frequency_error)}, amplitude {largest(self.amplitude_error)} "
+            parts[0] += (f": frequency {largest_text(self.frequency_error)}, amplitude {largest_text(self.amplitude_error)} "
                          "(rtol controls the frequency)")
         if self.rtol:
             parts.append(f"rtol = {self.rtol:g} met at {int(np.sum(self.met))} of {n} points")

@@ -17,6 +17,7 @@ def summary_lines(case: Case, model, branch) -> list[str]:
     estimate: which sources it covers; a grazing family: that it does not predict the resonance)."""
     from ...nonsmooth_modes import family_caveat
     from ...results import ERROR_SOURCES
+    from ...results.error_estimate import largest_text
 
     lines = [f"case: {case.name}", f"model: {model!r}"]
     lines.append(f"{branch.kind}: {len(branch)} points, success={branch.success} ({branch.message}), "
@@ -42,8 +43,8 @@ def summary_lines(case: Case, model, branch) -> list[str]:
         acc = branch.accuracy
         met = f", rtol = {acc.rtol:g} met at {int(np.sum(acc.met))} of {len(branch)} points" if acc.rtol else ""
         names = " and ".join(ERROR_SOURCES[k] for k in acc.sources)
-        lines.append(f"error estimate ({names}): frequency largest {_largest(branch.omega_error)}{met}; "
-                     f"amplitude largest {_largest(branch.amplitude_error)} ({_amplitude_source(acc)}); "
+        lines.append(f"error estimate ({names}): frequency largest {largest_text(branch.omega_error)}{met}; "
+                     f"amplitude largest {largest_text(branch.amplitude_error)} ({_amplitude_source(acc)}); "
                      f"covers {acc.covers}")
     caveat = family_caveat(branch)
     if caveat:
@@ -65,10 +66,6 @@ def _amplitude_source(acc) -> str:
         return "truncated series, not controlled by rtol"
     return f"exact orbits at {k} of {n} points, elsewhere the truncated series, not controlled by rtol"
 
-
-def _largest(v) -> str:
-    v = np.asarray(v, float)
-    return f"{np.nanmax(v):.3g}" if np.any(np.isfinite(v)) else "unknown"
 
 
 def _fmt_multiplier(mu: complex) -> str:
