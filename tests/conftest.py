@@ -1,5 +1,6 @@
 """Shared fixtures: small meshes and models used across the test modules."""
 
+import contextlib
 import os
 
 import numpy as np
@@ -29,6 +30,30 @@ def fixed_free_bar(n_elements=10, order=1, **kw):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture
+def cheap_location(monkeypatch):
+    """A context in which bifurcations are located by bracketing as on a large problem
+    (``branch_stability.PRECISE_MAX_UNKNOWNS`` lowered to 0) and every corrector solve of the
+    location is counted: it yields the list of the solves' secant parameters, filled inside."""
+    from femodes import branch_stability
+
+    @contextlib.contextmanager
+    def cheap():
+        solves = []
+        orig = branch_stability.solve_on_secant
+
+        def counted(*args, **kwargs):
+            solves.append(args[3])
+            return orig(*args, **kwargs)
+
+        with monkeypatch.context() as m:
+            m.setattr(branch_stability, "PRECISE_MAX_UNKNOWNS", 0)
+            m.setattr(branch_stability, "solve_on_secant", counted)
+            yield solves
+
+    return cheap
 
 
 def roundoff_rtol(K, M=None, multiple: float = 1.0) -> float:

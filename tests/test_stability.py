@@ -121,7 +121,7 @@ def test_period_doubling_of_the_seed_contact_case_by_shooting():
     assert np.all(~b.stable[below]) and np.all(b.stable[~below])
 
 
-def test_seed_contact_case_bracketed_by_few_solves(monkeypatch):
+def test_seed_contact_case_bracketed_by_few_solves(cheap_location):
     """Seed case 1 at H = 20 with ``locate=True`` on a problem counted as large
     (PRECISE_MAX_UNKNOWNS lowered to 0): the grazing jump and the period doubling of the precise
     location, the jump told apart by bisecting its flat profile (at most JUMP_SOLVES solves), the
@@ -131,16 +131,7 @@ def test_seed_contact_case_bracketed_by_few_solves(monkeypatch):
 
     model = oscillator(c=0.1, force=0.2, gap=1.0)
     precise = fm.frequency_response(model, (0.9, 1.05), 20, stability=True)
-    solves = []
-    orig = bs.solve_on_secant
-
-    def counted(*args, **kwargs):
-        solves.append(args[3])
-        return orig(*args, **kwargs)
-
-    with monkeypatch.context() as m:
-        m.setattr(bs, "PRECISE_MAX_UNKNOWNS", 0)
-        m.setattr(bs, "solve_on_secant", counted)
+    with cheap_location() as solves:
         cheap = fm.frequency_response(model, (0.9, 1.05), 20, stability=True)
     np.testing.assert_array_equal(cheap.stable, precise.stable)
     assert [(z.kind, z.index) for z in cheap.bifurcations] == [(z.kind, z.index) for z in precise.bifurcations]

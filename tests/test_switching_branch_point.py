@@ -313,7 +313,7 @@ def test_bracketed_branch_point_costs_no_solve_and_switches_the_same(forced, mon
     assert w_hbm == pytest.approx(bp_located.omega, rel=1e-7)
 
 
-def test_located_by_two_solves_within_the_stated_bracket(forced, monkeypatch):
+def test_located_by_two_solves_within_the_stated_bracket(forced, cheap_location):
     """``locate=True`` on a problem above PRECISE_MAX_UNKNOWNS (lowered here to take the 30
     unknowns of the pair): at most LOCATE_SOLVES corrector solves per smooth crossing, the
     verdicts and the kinds of the precise location, each bifurcation reported at one end of its
@@ -322,16 +322,7 @@ def test_located_by_two_solves_within_the_stated_bracket(forced, monkeypatch):
     from femodes import branch_stability
 
     model, b = forced
-    solves = []
-    orig = branch_stability.solve_on_secant
-
-    def counted(*args, **kwargs):
-        solves.append(args[3])
-        return orig(*args, **kwargs)
-
-    with monkeypatch.context() as m:
-        m.setattr(branch_stability, "PRECISE_MAX_UNKNOWNS", 0)
-        m.setattr(branch_stability, "solve_on_secant", counted)
+    with cheap_location() as solves:
         cheap = fm.frequency_response(model, (0.9, 1.7), 7, stability="hill")
     np.testing.assert_array_equal(cheap.stable, b.stable)
     precise = [z for z in b.bifurcations if z.kind != "fold"]
