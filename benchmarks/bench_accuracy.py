@@ -18,9 +18,9 @@ Cases (complementarity law ``fm.UnilateralContact`` throughout; w in rad/s):
   exact branch's upper fold, which a time-domain sweep confirms to 3e-4.
 
 Runs (``--runs``): ``plain20``, ``plain40``, ``plain80`` (``fm.frequency_response`` with that H),
-``rtol1e-3`` and ``rtol1e-4`` (from H = 20, ``max_harmonics=160``, ``error_method="auto"``, the
+``rtol1e-3`` and ``rtol1e-4`` (from H = 20, ``max_harmonics=160``, the default ``error_method``, the
 default: exact orbits by shooting where the model is linear with rigid stops on DOFs with mass,
-levels elsewhere), ``levels1e-3``, ``levels1e-4`` (``error_method="levels"``: levels 10, 20, 40 of
+levels elsewhere), ``levels1e-3``, ``levels1e-4`` (``error_method=fm.error_methods.Levels()``: levels 10, 20, 40 of
 the estimate, then 80 and 160 where the bracket is wider than rtol), ``rtol1e-3cap80``,
 ``levels1e-3cap80`` (not by default: ``max_harmonics=80``); not by default, for the
 cantilever whose plain H = 20 curve does not finish: ``plain10``, ``est10`` (``fm.estimate_error``
@@ -75,7 +75,7 @@ RUNS = {"plain20": dict(H=20), "plain40": dict(H=40), "plain80": dict(H=80),
         "rtol1e-3cap80": dict(H=20, rtol=1e-3, max_harmonics=80),
         # the cantilever's plain H = 20 curve does not finish (below): runs from H = 10 as well
         "plain10": dict(H=10), "est10": dict(H=10, estimate=True), "rtol1e-3@10": dict(H=10, rtol=1e-3, max_harmonics=160),
-        # the rtol runs above use error_method="auto" (the default: exact orbits by shooting where the
+        # the rtol runs above use the default error_method (fm.error_methods.Auto(): exact orbits by shooting where the
         # model is linear with rigid stops); these the levels of harmonics alone, as before
         "levels1e-3": dict(H=20, rtol=1e-3, max_harmonics=160, method="levels"),
         "levels1e-4": dict(H=20, rtol=1e-4, max_harmonics=160, method="levels"),
@@ -161,10 +161,11 @@ def child(spec: dict) -> dict:
 
         model, dof = femodes_model(case, "signorini")
         span = PEER_CASES[case]["span"]
+    method = fm.accuracy.methods.by_name(run["method"]) if "method" in run else None  # specs travel as JSON
     br = fm.frequency_response(model, span, fm.Harmonics(run["H"]), rtol=run.get("rtol"),
-                               max_harmonics=run.get("max_harmonics"), error_method=run.get("method", "auto"))
+                               max_harmonics=run.get("max_harmonics"), error_method=method)
     if run.get("estimate"):
-        fm.estimate_error(br, method=run.get("method", "auto"))
+        fm.estimate_error(br, method=method)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     amp = br.amplitude(dof)
     rec = dict(wall=wall, cpu=cpu, points=len(br), success=bool(br.success), status=int(br.status),

@@ -40,10 +40,10 @@ Measured for every (contact, N, H), medians of R repeats (``--repeat``, default 
      25-point run, took 8-11 iterations, and did not converge for the 1e3-DOF unilateral case.)
 (a2) ``point (cont.)``: continuation wall time / number of points of the 25-point run (includes the
      tangent and the bordered corrector solves, rejected steps, the start).
-(b)  ``fm.stability(sol, method="hill")``: Hill's method; dense up to ``hill.DENSE_LIMIT`` (1500)
+(b)  ``fm.stability(sol, method=fm.stability_methods.Hill())``: Hill's method; dense up to ``hill.DENSE_LIMIT`` (1500)
      unknowns, ARPACK shift-invert with SuperLU above. Reported: the path, how many multipliers it
      returns, ``max |mu|``.
-(c)  ``fm.stability(sol, method="shooting")`` (N <= ``shooting.MAX_DOFS`` = 500, H in ``--shoot-H``,
+(c)  ``fm.stability(sol, method=fm.stability_methods.Shooting())`` (N <= ``shooting.MAX_DOFS`` = 500, H in ``--shoot-H``,
      default 5: shooting uses H only for its start state), in its own child killed after
      ``--shoot-timeout`` seconds (default 300). A failure is not repeated. Above 500 DOFs the call is
      made once to record the refusal.
@@ -207,7 +207,7 @@ def child_case(ne: int, H: int, contact: str, repeat: int) -> dict:
     t_hill, r = [], None
     for _ in range(repeat):
         t = time.perf_counter()
-        r = fm.stability(sol, method="hill")
+        r = fm.stability(sol, method=fm.stability_methods.Hill())
         t_hill.append(time.perf_counter() - t)
         log(f"  hill {t_hill[-1]:.2f} s")
     rec["t_hill"] = t_hill
@@ -222,7 +222,7 @@ def child_case(ne: int, H: int, contact: str, repeat: int) -> dict:
     if model.n_dofs > MAX_DOFS:
         t = time.perf_counter()
         try:
-            fm.stability(sol, method="shooting")
+            fm.stability(sol, method=fm.stability_methods.Shooting())
             rec["shooting_refused"] = None
         except ValueError as exc:
             rec["shooting_refused"] = str(exc)[:160]
@@ -253,7 +253,7 @@ def child_shoot(ne: int, H: int, contact: str, repeat: int) -> dict:
     for _ in range(repeat):
         t = time.perf_counter()
         try:
-            r = fm.stability(sol, method="shooting")
+            r = fm.stability(sol, method=fm.stability_methods.Shooting())
         except Exception as exc:  # noqa: BLE001 - reported, not raised
             times.append(time.perf_counter() - t)
             err = f"{type(exc).__name__}: {exc}"
@@ -656,7 +656,7 @@ def child_profile(ne: int, H: int, contact: str, repeat: int) -> dict:
     prof = cProfile.Profile()
     t = time.perf_counter()
     prof.enable()
-    r = fm.stability(sol, method="hill")
+    r = fm.stability(sol, method=fm.stability_methods.Hill())
     prof.disable()
     rec["t_hill_profiled"] = time.perf_counter() - t
     rec["hill"] = _mu_summary(r.multipliers)

@@ -43,7 +43,7 @@ with threadpool_limits(1):
     rom = fm.craig_bampton(ub.with_stop(solid), 10)
     w1 = float(fm.linear_modes(rom, 1).omega[0]); eg = fm.grazing_energy(rom, 1)
     und = fm.craig_bampton(ub.with_stop(solid, None, None), 10)
-    measure("user blade forced H5", lambda st: fm.frequency_response(rom, (0.9*w1, 1.25*w1), 5, stability="hill" if st is True else st),
+    measure("user blade forced H5", lambda st: fm.frequency_response(rom, (0.9*w1, 1.25*w1), 5, stability=fm.stability_methods.Hill() if st is True else st),
             {"located": True})
     measure("user blade backbone damped H5", lambda st: fm.nonlinear_mode(rom, 1, energy=(0.5*eg, 20*eg), harmonics=5, stability=st),
             {"located": True, "bracket": BR})
@@ -55,7 +55,7 @@ with threadpool_limits(1):
     measure("blade3d backbone H7", lambda st: fm.nonlinear_mode(b3.rom, 1, energy=(0.5 * b3.E_GRAZE, 20 * b3.E_GRAZE), harmonics=b3.H, options=b3.OPTIONS, stability=st),
             {"located": True, "bracket": BR})
     import blade_casing as bc  # noqa: E402
-    measure("casing forced H7", lambda st: fm.frequency_response(bc.forced_rom, bc.SPAN, bc.H, stability="hill" if st is True else st),
+    measure("casing forced H7", lambda st: fm.frequency_response(bc.forced_rom, bc.SPAN, bc.H, stability=fm.stability_methods.Hill() if st is True else st),
             {"located": True}, reps=3)
     measure("casing backbone H7", lambda st: fm.nonlinear_mode(bc.rom, 1, energy=bc.ENERGY, harmonics=bc.H, options=bc.NNM_OPTIONS, stability=st),
             {"located": True}, reps=3)

@@ -48,7 +48,7 @@ def main() -> None:
         rows["backbone + stability"] = t + [len(bbs), len(bbs.bifurcations)]
         fr, *t = timed(lambda: fm.frequency_response(rom, span_w, H))
         rows["forced response"] = t + [len(fr)]
-        frs, *t = timed(lambda: fm.frequency_response(rom, span_w, H, stability="hill"))
+        frs, *t = timed(lambda: fm.frequency_response(rom, span_w, H, stability=fm.stability_methods.Hill()))
         rows["forced response + stability (hill)"] = t + [len(frs), len(frs.bifurcations)]
         frr, *t = timed(lambda: fm.frequency_response(rom, span_w, H, rtol=1e-2))
         rows["forced response + rtol 1e-2"] = t + [len(frr), int(frr.accuracy.met.sum())]

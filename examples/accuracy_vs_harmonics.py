@@ -16,10 +16,10 @@ For each H: the true relative error of the branch's own frequency, the estimate
 ``branch.accuracy.omega`` of ``fm.estimate_error`` (levels H/2, H, 2H), the extrapolated
 ``accuracy.omega_limit`` (impacts only: first order in 1/H) with the relative half-width
 ``accuracy.omega_limit_error`` of its bracket, and the CPU (and wall) time of the plain run and of
-the estimate (``method="levels"``: this example studies the levels of harmonics). Then
+the estimate (``method=fm.error_methods.Levels()``: this example studies the levels of harmonics). Then
 ``nonlinear_mode(..., rtol=2e-3)`` from H = 10 on the free backbone: it adds levels 40, 80 where
 the bracket is too wide; and ``frequency_response(..., rtol=1e-3)`` on the forced oscillator from
-H = 10 and 20 with the default ``error_method="auto"``: a linear model with a rigid stop, so the
+H = 10 and 20 with the default ``error_method`` (``fm.error_methods.Auto()``): a linear model with a rigid stop, so the
 converged orbits come from shooting on the exact flow (``femodes.time.exact``).
 
 Measured (H = 5, 10, 20, 40; estimates at H = 5, 10, 20, odd H = 5 with the levels 5, 10, 20):
@@ -147,7 +147,7 @@ def _estimated(branch, estimate: bool) -> _Clock | None:
     if not estimate:
         return None
     with _Clock() as c:
-        fm.estimate_error(branch, method="levels")  # the levels of harmonics (this example's subject)
+        fm.estimate_error(branch, method=fm.error_methods.Levels())  # the levels of harmonics (this example's subject)
     return c
 
 
@@ -183,7 +183,7 @@ free_rtol = free_backbone(RTOL_H, rtol=RTOL)
 
 
 def forced_shooting(H: int) -> dict:
-    """``frequency_response(..., rtol=1e-3)`` with the default ``error_method="auto"``: this linear
+    """``frequency_response(..., rtol=1e-3)`` with the default ``error_method`` (``fm.error_methods.Auto()``): this linear
     model with a rigid stop gets the converged orbits by shooting on the exact flow."""
     with _Clock() as c:
         b = fm.frequency_response(forced_model, W_SPAN, H, rtol=1e-3)

@@ -78,7 +78,7 @@ SPAN = (0.95 * W1, 1.2 * W1)
 
 # Hill's method (what "auto" chooses here too: the reduced model's fastest natural frequency is
 # 3764 w1, and one shooting of the stiff orbit takes ~3 minutes against 0.14 s for Hill)
-forced = fm.frequency_response(forced_rom, SPAN, H, stability="hill")
+forced = fm.frequency_response(forced_rom, SPAN, H, stability=fm.stability_methods.Hill())
 TIP = forced_rom.dof(("tip_mid", "u_y"))
 folds = np.array(forced.folds)
 peak = int(np.argmax(forced.energy))

@@ -101,7 +101,8 @@ def solve_at(branch, problem, omega):
 coexisting = solve_at(_branch, _problem, W_COEXIST)  # in branch order: resonant, unstable, non-resonant
 coexisting_amplitude = np.array([sol.amplitude(0) for sol in coexisting])
 # their stability, by both methods (Floquet multipliers, largest modulus first)
-coexisting_stability = [{m: fm.stability(sol, method=m) for m in ("hill", "shooting")} for sol in coexisting]
+coexisting_stability = [{m.name: fm.stability(sol, method=m) for m in (fm.stability_methods.Hill(), fm.stability_methods.Shooting())}
+                        for sol in coexisting]
 coexisting_stable = [st["hill"].stable for st in coexisting_stability]
 
 

@@ -27,9 +27,10 @@ from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.threads import limit_blas_threads
-from .accuracy import (AccuracyOptions, check_estimate_method, check_options, rtol_time_limit, meet_tolerance,
-                       refinement_options, shooting_unsupported_for)
+from .accuracy import AccuracyOptions, check_options, meet_tolerance, refinement_options, rtol_time_limit
+from .accuracy.methods import ErrorMethod, as_error_method
 from .floquet import StabilityOptions, annotate_branch
+from .stability_methods import StabilityMethod
 from .nonsmooth_modes import PeriodDriven, continue_past_grazing
 from .static_contact import StaticContactResult, static_contact  # its own module; importable from here too
 
@@ -71,10 +72,10 @@ def frequency_response(
     projection=None,
     progress: bool | Callable = False,
     checkpoint: str | os.PathLike | Checkpoint | None = None,
-    stability: bool | str | StabilityOptions = False,
+    stability: bool | StabilityMethod | StabilityOptions = False,
     rtol: float | None = None,
     max_harmonics: int | None = None,
-    error_method: str = "auto",
+    error_method: ErrorMethod | None = None,
     error_options: AccuracyOptions | None = None,
 ) -> Branch:
     """Forced frequency-response curve by HBM and pseudo-arclength continuation.
@@ -115,17 +116,18 @@ def frequency_response(
         (step bounds, ``max_points``...), the arclength scaling of the run is kept.  Damaged
         files or another format version give a ``ValueError`` naming the file.
 
-    stability : bool, str or StabilityOptions
+    stability : bool, StabilityMethod or StabilityOptions
         Floquet stability of every point and the bifurcations between points
         (:mod:`femodes.floquet`): False (default) none, True the defaults of
-        :class:`~femodes.StabilityOptions`, a method name (``"auto"``, ``"hill"``,
-        ``"shooting"``), or ``StabilityOptions(method, tol, locate)``; ``locate=False`` brackets
-        the bifurcations between points without locating them (no solves beyond the points').
+        :class:`~femodes.StabilityOptions`, a strategy of :mod:`femodes.stability_methods`
+        (``Hill()``, ``Shooting()``, ``Auto()``), or ``StabilityOptions(method, tol, locate)``;
+        ``locate=False`` brackets the bifurcations between points without locating them (no
+        solves beyond the points'). A method name (``"hill"``...) is a deprecated spelling.
     rtol : float, optional
         Requested relative accuracy of the frequency with respect to the converged (``H -> inf``)
         answer (e.g. ``1e-3``). The branch then carries :attr:`~femodes.Branch.accuracy`: with
         complementarity contacts, ``accuracy.omega_limit`` is the converged frequency: computed
-        by shooting on the exact flow with rigid stops (``error_method="auto"``, linear models
+        by shooting on the exact flow with rigid stops (the default ``error_method``, linear models
         with mass at the contact DOFs: exact folds, about 4x the plain curve on the seed cases),
         or extrapolated in ``H`` (first order in ``1/H`` for rigid impacts) and refined by
         further levels where its bracket is wider than ``rtol``; smooth systems are recomputed
@@ -134,14 +136,15 @@ def frequency_response(
         the levels). :mod:`femodes.accuracy`.
     max_harmonics : int, optional
         Largest number of harmonics ``rtol`` may use (default ``8 H``).
-    error_method : {"auto", "shooting", "levels"}, default "auto"
-        How ``rtol`` is met with complementarity contacts (:func:`femodes.estimate_error`):
-        ``"auto"`` computes the converged orbits themselves by shooting on the exact flow with
-        rigid stops where the model is linear with unilateral contacts only (mass at the contact
-        DOFs), and uses the levels of harmonics elsewhere. ``"shooting"`` and ``"levels"`` use
-        that method only: one that cannot apply (shooting on a penalty model, say) is a
-        ValueError before anything runs, as in :func:`femodes.estimate_error`; only ``"auto"``
-        picks. Without ``rtol`` only ``"auto"`` is accepted.
+    error_method : ErrorMethod, optional
+        How ``rtol`` is met with complementarity contacts (:func:`femodes.estimate_error`), a
+        strategy of :mod:`femodes.error_methods`: ``Auto()`` (default) computes the converged
+        orbits themselves by shooting on the exact flow with rigid stops where the model is
+        linear with unilateral contacts only (mass at the contact DOFs), and uses the levels of
+        harmonics elsewhere. ``Shooting()`` and ``Levels()`` use that method only: one that
+        cannot apply (shooting on a penalty model, say) is a ValueError before anything runs, as
+        in :func:`femodes.estimate_error`; only ``Auto()`` picks. Without ``rtol`` it must be
+        left out. A method name (``"levels"``...) is a deprecated spelling.
     error_options : AccuracyOptions, optional
         Tuning of the error estimate of ``rtol`` (:class:`femodes.AccuracyOptions`; the default is
         the measured one), including its time limit: ``rtol_budget`` times the plain branch's
@@ -159,16 +162,15 @@ def frequency_response(
     h = check_harmonics(harmonics, "frequency_response")
     check_continuation_options(options, "frequency_response")
     refinement_options(rtol, max_harmonics, h.n_harmonics, "frequency_response")
-    check_estimate_method(error_method, "frequency_response", "error_method")
+    chosen = error_method
+    error_method = as_error_method(error_method, "frequency_response", "error_method")
     error_options = check_options(error_options, "frequency_response", "error_options")
     span = check_span(omega, "omega", "frequency_response", positive=True)
-    if error_method != "auto" and rtol is None:
-        raise ValueError(f"frequency_response: error_method={error_method!r} chooses how rtol= is met, but rtol is not "
-                         "given; pass rtol=..., or leave error_method at 'auto'")
-    why = shooting_unsupported_for(model, h, projection) if error_method == "shooting" else ""
-    if why:  # an explicit method that does not apply is refused, as estimate_error(method="shooting") does
-        raise ValueError(f"frequency_response: error_method='shooting' cannot take this model: {why}; use "
-                         "error_method='levels' (or 'auto', which picks)")
+    if chosen is not None and rtol is None:
+        raise ValueError(f"frequency_response: error_method={chosen!r} chooses how rtol= is met, but rtol is not "
+                         "given; pass rtol=..., or leave error_method out")
+    # an explicit method that does not apply is refused before anything runs, as estimate_error does
+    error_method.check(model, h, projection, "frequency_response")
     problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
     if x0 is not None:
@@ -207,7 +209,7 @@ def frequency_response(
 
     def rerun(H: int) -> Branch:
         return frequency_response(model, omega, Harmonics(H, subharmonic=h.subharmonic), options=options,
-                                  projection=projection, progress=progress, stability=stability)
+                                  projection=projection, progress=progress, stability=stab or False)
 
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method,
                           time_limit=rtol_time_limit(time.perf_counter() - started, error_options),
@@ -368,7 +370,7 @@ def nonlinear_mode(
     projection=None,
     progress: bool | Callable = False,
     checkpoint: str | os.PathLike | Checkpoint | None = None,
-    stability: bool | str | StabilityOptions = False,
+    stability: bool | StabilityMethod | StabilityOptions = False,
     rtol: float | None = None,
     max_harmonics: int | None = None,
     past_grazing: PeriodDriven | None = PeriodDriven(),
@@ -457,7 +459,7 @@ def nonlinear_mode(
 
     def rerun(H: int) -> Branch:
         return nonlinear_mode(model, mode, energy, Harmonics(H, subharmonic=h.subharmonic), options=user_options,
-                              projection=projection, progress=progress, stability=stability, past_grazing=past_grazing)
+                              projection=projection, progress=progress, stability=stab or False, past_grazing=past_grazing)
 
     return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection,
                           time_limit=rtol_time_limit(time.perf_counter() - started, error_options),

@@ -35,7 +35,7 @@ def _forced(c=0.1, F=0.2, g=1.0):
 @pytest.fixture(scope="module")
 def forced10():
     branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    return estimate_error(branch, method="levels")  # this module tests the levels (shooting: test_exact_flow)
+    return estimate_error(branch, method=fm.error_methods.Levels())  # this module tests the levels (shooting: test_exact_flow)
 
 
 def test_fold_estimate_bounds_true_error(forced10):
@@ -235,7 +235,7 @@ def test_rtol_forced_fold_within_tolerance():
     """frequency_response(rtol=1e-3) from H = 10 on the seed's forced case 1: the upper fold's
     extrapolated frequency within 1e-3 of the event-driven reference (plain H = 10: 4.4 % low;
     measured -0.008 %, bracket half-width 0.057 % with levels 20, 40, 80)."""
-    b = fm.frequency_response(_forced(), (0.5, 2.0), 10, rtol=1e-3, error_method="levels")
+    b = fm.frequency_response(_forced(), (0.5, 2.0), 10, rtol=1e-3, error_method=fm.error_methods.Levels())
     f = b.folds[0]
     ref = upper_fold(0.1, 0.2, 1.0).w
     acc = b.accuracy
@@ -272,7 +272,7 @@ def test_rtol_levels_not_refined_where_they_do_not_contract(caplog):
 
     m = _forced(0.2, 1.0, 2.5)
     with caplog.at_level(logging.INFO, logger="femodes.accuracy"):
-        b = fm.frequency_response(m, (0.5, 2.0), 10, rtol=1e-3, error_method="levels")
+        b = fm.frequency_response(m, (0.5, 2.0), 10, rtol=1e-3, error_method=fm.error_methods.Levels())
     assert "whose last levels do not contract" in caplog.text
     acc = b.accuracy
     stuck = np.flatnonzero(~acc.met & (acc.finest == 20))

@@ -114,10 +114,10 @@ def test_levels_estimate_with_other_options_differs_as_told():
     model = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]]).with_contact(fm.UnilateralContact(at=0, gap=1.0))
              .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
     b = fm.frequency_response(model, (0.9, 1.5), 6)
-    plain = fm.estimate_error(b, method="levels").accuracy
-    default = fm.estimate_error(b, method="levels", options=fm.AccuracyOptions()).accuracy
+    plain = fm.estimate_error(b, method=fm.error_methods.Levels()).accuracy
+    default = fm.estimate_error(b, method=fm.error_methods.Levels(), options=fm.AccuracyOptions()).accuracy
     np.testing.assert_array_equal(plain.omega, default.omega)
-    steep = fm.estimate_error(b, method="levels", options=fm.AccuracyOptions(rate_min=3.0)).accuracy
+    steep = fm.estimate_error(b, method=fm.error_methods.Levels(), options=fm.AccuracyOptions(rate_min=3.0)).accuracy
     ok = np.isfinite(plain.rate) & np.isfinite(steep.rate)
     assert ok.any() and np.all(steep.rate[ok] >= 3.0)
     assert np.all(steep.amplitude[ok] <= plain.amplitude[ok] * (1 + 1e-12))

@@ -41,6 +41,8 @@ LAYERS = {
     "femodes.resonance": 5,
     "femodes.runs": 5,
     "femodes.floquet": 5,
+    "femodes.stability_methods": 5,
+    "femodes.error_methods": 5,
     "femodes.branch_stability": 5,
     "femodes.accuracy": 5,
     "femodes.mesh_error": 5,

@@ -170,7 +170,7 @@ def test_unsupported_models_named():
 @pytest.fixture(scope="module")
 def shot10():
     branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    return estimate_error(branch, rtol=1e-3, method="shooting")
+    return estimate_error(branch, rtol=1e-3, method=fm.error_methods.Shooting())
 
 
 def test_shooting_folds_exact(shot10):
@@ -208,9 +208,9 @@ def test_shooting_method_checked():
     duffing = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.05]]).with_nonlinearity(fm.CubicSpring(at=0, k3=0.5))
                .with_forcing(fm.HarmonicForce(at=0, amplitude=0.1)))
     b = fm.frequency_response(duffing, (0.8, 1.3), 3)
-    with pytest.raises(ValueError, match="method='shooting'"):
-        estimate_error(b, method="shooting")
-    with pytest.raises(ValueError, match="method must be one of"):
+    with pytest.raises(ValueError, match="the shooting error method cannot take this branch"):
+        estimate_error(b, method=fm.error_methods.Shooting())
+    with pytest.raises(ValueError, match="method must be an error method"):
         estimate_error(b, method="exact")
 
 
@@ -388,7 +388,7 @@ def test_chattering_orbit_left_to_the_levels():
     assert np.abs(b.P).max() > 0.1
     options = AccuracyOptions(shooting_auto_max_events=0)
     assert set(estimate_error(b, options=options).accuracy.method) <= {"doubling", "failed"}
-    assert "shooting" in set(estimate_error(b, method="shooting", options=options).accuracy.method)
+    assert "shooting" in set(estimate_error(b, method=fm.error_methods.Shooting(), options=options).accuracy.method)
 
 
 def test_shooting_estimate_saved_and_loaded(shot10, tmp_path):
@@ -406,7 +406,7 @@ def test_defective_state_matrix_falls_back_to_the_levels():
     model = _forced(c=2.0, F=2.0)
     b = fm.frequency_response(model, (0.5, 0.7), 4)
     with pytest.raises(ValueError, match="defective"):
-        estimate_error(b, method="shooting")
+        estimate_error(b, method=fm.error_methods.Shooting())
     assert set(estimate_error(b).accuracy.method) <= {"doubling", "failed"}
 
 
@@ -429,7 +429,7 @@ def test_auto_leaves_stiff_models_to_the_levels():
     b = fm.frequency_response(_forced(), (0.95, 1.05), 6)
     options = AccuracyOptions(shooting_auto_max_work=10.0)
     assert set(estimate_error(b, options=options).accuracy.method) <= {"doubling", "failed"}
-    assert "shooting" in set(estimate_error(b, method="shooting", options=options).accuracy.method)
+    assert "shooting" in set(estimate_error(b, method=fm.error_methods.Shooting(), options=options).accuracy.method)
 
 
 def test_auto_leaves_large_models_to_the_levels():
@@ -438,4 +438,4 @@ def test_auto_leaves_large_models_to_the_levels():
     b = fm.frequency_response(_forced(), (0.95, 1.05), 6)
     options = AccuracyOptions(shooting_auto_max_dofs=0)
     assert set(estimate_error(b, options=options).accuracy.method) <= {"doubling", "failed"}
-    assert "shooting" in set(estimate_error(b, method="shooting", options=options).accuracy.method)
+    assert "shooting" in set(estimate_error(b, method=fm.error_methods.Shooting(), options=options).accuracy.method)

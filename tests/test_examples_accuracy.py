@@ -87,7 +87,7 @@ def test_free_backbone_even_H_estimate_safe_and_bracket_contains_exact():
 def test_forced_fold_even_H_estimate_safe_and_bracket_contains_exact():
     """Seed case 1 at H = 8 (levels 4, 8, 16): fold 5.4 % below the event-driven 1.419158, estimate
     7.0 %, limit +0.23 % inside a bracket of half-width 0.78 %."""
-    b = fm.estimate_error(fm.frequency_response(_forced(), (0.5, 2.0), 8), method="levels")
+    b = fm.estimate_error(fm.frequency_response(_forced(), (0.5, 2.0), 8), method=fm.error_methods.Levels())
     f = b.folds[0]
     ref = upper_fold(0.1, 0.2, 1.0).w
     acc = b.accuracy
@@ -135,7 +135,7 @@ def _bar_fold(ne, H, estimate=False):
     model, span = bar_model(ne)
     b = fm.frequency_response(model, span, H)
     if estimate:
-        fm.estimate_error(b, method="levels")
+        fm.estimate_error(b, method=fm.error_methods.Levels())
     amp = b.amplitude(model.dof("tip"))
     return b, max(b.folds, key=lambda i: amp[i])
 

@@ -194,7 +194,7 @@ def test_animation_carries_the_floquet_multipliers(tmp_path):
     model = (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
              .with_damping(beta=0.01).with_forcing(fm.HarmonicForce(at="tip", amplitude=0.02))
              .with_contact(fm.PenaltyContact(at="tip", gap=0.02, stiffness=5.0)))
-    br = fm.frequency_response(model, (1.4, 1.6), 3, stability="hill")
+    br = fm.frequency_response(model, (1.4, 1.6), 3, stability=fm.stability_methods.Hill())
     sol = br[1]
     assert sol.stable == bool(br.stable[1]) and sol.multipliers.size == 2 * model.n_dofs
     pvd = write_animation(sol, model, tmp_path / "m", n_frames=2)

@@ -193,8 +193,8 @@ def test_frequency_response_and_hill_match_the_dense_damping():
     np.testing.assert_allclose(a.omega[:n], b.omega[:n], rtol=1e-8)
     np.testing.assert_allclose(a.energy[:n], b.energy[:n], rtol=1e-7)
     for i in (2, n - 2):
-        h1 = fm.stability(a[i], method="hill")
-        h2 = fm.stability(b[i], method="hill")
+        h1 = fm.stability(a[i], method=fm.stability_methods.Hill())
+        h2 = fm.stability(b[i], method=fm.stability_methods.Hill())
         np.testing.assert_allclose(np.abs(h1.multipliers[:4]), np.abs(h2.multipliers[:4]), rtol=1e-6)
 
 
@@ -206,7 +206,7 @@ def test_shooting_multipliers_match_the_dense_damping():
         with contextlib.nullcontext() if damped else pytest.warns(UserWarning, match="no damping"):
             frc = fm.frequency_response(m, omega=(0.4, 0.45), harmonics=fm.Harmonics(8),
                                         options=fm.ContinuationOptions(max_points=4))
-        sols.append(fm.stability(frc[1], method="shooting").multipliers)
+        sols.append(fm.stability(frc[1], method=fm.stability_methods.Shooting()).multipliers)
     np.testing.assert_allclose(np.abs(sols[0]), np.abs(sols[1]), rtol=1e-6)
     assert rel(np.abs(sols[2]), np.abs(sols[1])) > 1e-3
 

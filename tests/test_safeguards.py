@@ -172,15 +172,15 @@ def test_explicit_shooting_is_refused_alike_by_frequency_response_and_estimate_e
     penalty = (fm.StructuralModel(M=[[1.0]], K=[[1.0]]).with_damping(alpha=0.1)
                .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2))
                .with_contact(fm.PenaltyContact(at=0, gap=1.0, stiffness=10.0)))
-    with pytest.raises(ValueError, match="frequency_response: error_method='shooting' cannot take this model: the "
+    with pytest.raises(ValueError, match="frequency_response: the shooting error method cannot take this model: the "
                                          "model has penalty contacts"):
-        fm.frequency_response(penalty, (0.8, 1.0), 5, rtol=1e-3, error_method="shooting")
+        fm.frequency_response(penalty, (0.8, 1.0), 5, rtol=1e-3, error_method=fm.error_methods.Shooting())
     br = fm.frequency_response(penalty, (0.8, 1.0), 5)
-    with pytest.raises(ValueError, match="estimate_error: method='shooting' cannot take this branch: the model has "
+    with pytest.raises(ValueError, match="estimate_error: the shooting error method cannot take this branch: the model has "
                                          "penalty contacts"):
-        fm.estimate_error(br, method="shooting")
-    with pytest.raises(ValueError, match="error_method='levels' chooses how rtol= is met, but rtol is not given"):
-        fm.frequency_response(penalty, (0.8, 1.0), 5, error_method="levels")
+        fm.estimate_error(br, method=fm.error_methods.Shooting())
+    with pytest.raises(ValueError, match=r"error_method=Levels\(\) chooses how rtol= is met, but rtol is not given"):
+        fm.frequency_response(penalty, (0.8, 1.0), 5, error_method=fm.error_methods.Levels())
 
 
 # -- item 6: the dense Schur complement is estimated before the first solve -------------------------

@@ -43,10 +43,10 @@ def test_linear_oscillator_exact_multipliers_both_methods():
     sol = branch[len(branch) // 2]
     T = 2 * np.pi / sol.omega
     exact = np.exp((-zeta * w0 + 1j * w0 * math.sqrt(1 - zeta ** 2)) * T)
-    for method, tol in (("hill", 1e-10), ("shooting", 1e-8)):
+    for method, tol in ((fm.stability_methods.Hill(), 1e-10), (fm.stability_methods.Shooting(), 1e-8)):
         # Hill: the linear Hill problem is exact, round-off only; shooting: DOP853 at rtol 1e-11
         r = fm.stability(sol, method=method)
-        assert r.method == method and r.stable
+        assert r.method == method.name and r.stable
         assert sorted(r.multipliers.imag) == pytest.approx(sorted([exact.imag, -exact.imag]), abs=tol)
         assert np.allclose(r.multipliers.real, exact.real, atol=tol)
 
@@ -91,8 +91,8 @@ def test_hill_and_shooting_agree_on_a_smooth_orbit(duffing):
     f0, f1 = duffing.folds[:2]
     for i in (5, f0 - 3, (f0 + f1) // 2):
         sol = duffing[i]
-        h = fm.stability(sol, method="hill").multipliers
-        s = fm.stability(sol, method="shooting").multipliers
+        h = fm.stability(sol, method=fm.stability_methods.Hill()).multipliers
+        s = fm.stability(sol, method=fm.stability_methods.Shooting()).multipliers
         assert np.sort_complex(h) == pytest.approx(np.sort_complex(s), abs=1e-5)
 
 
@@ -100,7 +100,7 @@ def test_hill_multipliers_obey_liouville(duffing):
     # prod mu = exp(-c T) for u'' + c u' + f(u) = F(t): the trace of the linearised system is -c.
     for i in range(0, len(duffing), 7):
         sol = duffing[i]
-        mu = fm.stability(sol, method="hill").multipliers
+        mu = fm.stability(sol, method=fm.stability_methods.Hill()).multipliers
         assert np.prod(mu) == pytest.approx(math.exp(-0.1 * sol.period), rel=1e-9)
 
 
@@ -157,7 +157,7 @@ def test_stability_survives_save_and_load(duffing, tmp_path):
 def test_conservative_backbone_is_stable():
     # free undamped Duffing: multipliers on the unit circle (the two trivial ones at +1 aside)
     model = fm.StructuralModel(M=sp.eye(1), K=sp.eye(1)).with_nonlinearity(fm.CubicSpring(at=0, k3=1.0))
-    b = fm.nonlinear_mode(model, energy=(1e-2, 1.0), harmonics=7, stability="hill")
+    b = fm.nonlinear_mode(model, energy=(1e-2, 1.0), harmonics=7, stability=fm.stability_methods.Hill())
     assert b.stable.all() and not b.bifurcations
     # conservative: every multiplier on the circle; the trivial double +1 is a Jordan block whose
     # computed pair splits by ~sqrt(Newton tolerance 1e-9 relative) ~ 3e-5, the others by round-off
@@ -195,9 +195,9 @@ def test_sparse_hill_finds_the_leading_exponents(monkeypatch, contact, H):
 
 def test_bad_input_names_the_argument(duffing):
     model = oscillator(k3=1.0)
-    with pytest.raises(ValueError, match="stability must be True, False, one of"):
+    with pytest.raises(ValueError, match="stability must be True, False, a strategy"):
         fm.frequency_response(model, (0.5, 1.0), 3, stability="maybe")
-    with pytest.raises(ValueError, match="method must be one of"):
+    with pytest.raises(ValueError, match="method must be a stability strategy"):
         fm.stability(duffing[0], method="floquet")
     with pytest.raises(TypeError, match="PeriodicSolution"):
         fm.stability(duffing)
@@ -212,8 +212,8 @@ def test_shooting_refuses_a_massless_contact_dof():
     model = (fm.StructuralModel(M=M, K=K, C=0.05 * K).with_forcing(fm.HarmonicForce(at=0, amplitude=0.1))
              .with_contact(fm.UnilateralContact(at=1, gap=0.5)))
     b = fm.frequency_response(model, (0.5, 0.6), 3)
-    with pytest.raises(ValueError, match="method='hill'"):
-        fm.stability(b[0], method="shooting")
+    with pytest.raises(ValueError, match=r"stability_methods.Hill\(\)"):
+        fm.stability(b[0], method=fm.stability_methods.Shooting())
     assert fm.stability(b[0]).method == "hill"  # "auto" takes Hill for it
 
 
@@ -255,7 +255,7 @@ def test_a_free_orbit_of_a_model_with_forcing_is_judged_as_free():
     model = (fm.StructuralModel(M=sp.eye(1), K=sp.eye(1)).with_nonlinearity(fm.CubicSpring(at=0, k3=1.0))
              .with_forcing(fm.HarmonicForce(at=0, amplitude=1.0)))
     b = fm.nonlinear_mode(model, energy=(1e-2, 1.0), harmonics=7)
-    r = fm.stability(b[3], method="hill")
+    r = fm.stability(b[3], method=fm.stability_methods.Hill())
     assert b[3].kind == "nonlinear mode" and r.stable
 
 
@@ -264,7 +264,7 @@ def test_shooting_a_free_orbit_of_the_backbone():
     Duffing orbit is stable, its trivial pair at +1 aside."""
     model = fm.StructuralModel(M=sp.eye(1), K=sp.eye(1)).with_nonlinearity(fm.CubicSpring(at=0, k3=1.0))
     b = fm.nonlinear_mode(model, energy=(1e-2, 1.0), harmonics=9)
-    r = fm.stability(b[len(b) // 2], method="shooting")
+    r = fm.stability(b[len(b) // 2], method=fm.stability_methods.Shooting())
     assert r.method == "shooting" and r.stable
     assert np.max(np.abs(r.multipliers - 1.0)) < 1e-3
     with pytest.raises(TypeError, match="tol must be a number"):
@@ -274,13 +274,17 @@ def test_shooting_a_free_orbit_of_the_backbone():
 def test_auto_takes_hill_for_a_stiff_model(monkeypatch):
     """A fastest natural frequency far above the orbit's (here 1414 against 1: two masses joined by
     a spring of stiffness 1e6) makes shooting integrate thousands of fast periods per orbit; "auto"
-    then takes Hill's method without trying (AUTO_MAX_STIFFNESS)."""
-    floquet = importlib.import_module("femodes.floquet")
+    then takes Hill's method without trying (Auto.max_stiffness); a larger one shoots."""
+    methods = importlib.import_module("femodes.stability_methods")
     k = 1e6
     model = (fm.StructuralModel(M=np.eye(2), K=[[1.0 + k, -k], [-k, k]], C=0.1 * np.eye(2))
              .with_contact(fm.UnilateralContact(at=1, gap=1.0)).with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
-    assert floquet._fastest_frequency(model) == pytest.approx(math.sqrt(1.0 + 2.0 * k), rel=1e-6)
+    assert methods.fastest_frequency(model) == pytest.approx(math.sqrt(1.0 + 2.0 * k), rel=1e-6)
     b = fm.frequency_response(model, (0.3, 0.35), 6)
-    monkeypatch.setattr(floquet, "_by_shooting", lambda *a, **kw: pytest.fail("shooting attempted"))
-    assert fm.stability(b[0]).method == "hill"
-    assert fm.stability(b[0], method="auto").method == "hill"
+    with monkeypatch.context() as m:
+        m.setattr(methods, "shooting_multipliers", lambda *a, **kw: pytest.fail("shooting attempted"))
+        assert fm.stability(b[0]).method == "hill"
+        assert fm.stability(b[0], method=fm.stability_methods.Auto()).method == "hill"
+    assert fm.stability(b[0], method=fm.stability_methods.Auto(max_stiffness=1e4)).method == "shooting"
+    with pytest.raises(ValueError, match="max_stiffness must be a positive number"):
+        fm.stability_methods.Auto(max_stiffness=0)

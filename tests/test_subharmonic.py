@@ -80,7 +80,7 @@ def test_branch_points_validated_by_shooting(ex):
 
 
 def test_shooting_multipliers_reproduced_through_fm_stability(ex):
-    """fm.stability(method="shooting") on the HBM points reproduces the example's own Floquet
+    """fm.stability(method=fm.stability_methods.Shooting()) on the HBM points reproduces the example's own Floquet
     multipliers (finite differences of its event-driven map, step 1e-7: ~1e-6 accurate); the
     monodromy's eigenvalues do not depend on the start time of the shooting."""
     checks = [c for c in ex.checks if c["omega"] < 3.3 and c["found"]]
@@ -89,6 +89,6 @@ def test_shooting_multipliers_reproduced_through_fm_stability(ex):
         b = min(ex.branches, key=lambda br: np.min(np.abs(br.omega - c["omega"])))
         i = int(np.argmin(np.abs(b.omega - c["omega"])))
         assert b.omega[i] == c["omega"]
-        r = fm.stability(b[i], method="shooting")
+        r = fm.stability(b[i], method=fm.stability_methods.Shooting())
         assert r.method == "shooting" and r.stable == c["stable"]
         assert np.sort_complex(r.multipliers) == pytest.approx(np.sort_complex(np.asarray(c["multipliers"])), abs=1e-5)

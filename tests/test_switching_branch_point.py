@@ -51,7 +51,7 @@ def pair(kc, c=0.0, force=None):
 @pytest.fixture(scope="module")
 def forced():
     model = pair(KC_F, C, F)
-    b = fm.frequency_response(model, (0.9, 1.7), 7, stability="hill")
+    b = fm.frequency_response(model, (0.9, 1.7), 7, stability=fm.stability_methods.Hill())
     return model, b
 
 
@@ -61,7 +61,7 @@ def backbone():
     # max_step 0.05 (decades of energy): the tongue's instability interval (|mu| - 1 <= 7e-3)
     # must hold no more than a few points for the multipliers to show it at all
     opts = fm.ContinuationOptions(step=0.05, max_step=0.05, p_scale=1.0, newton=fm.NewtonOptions(atol=1e-9, max_iter=20))
-    b = fm.nonlinear_mode(model, 1, (0.1, 1.0), 8, stability="hill", options=opts)
+    b = fm.nonlinear_mode(model, 1, (0.1, 1.0), 8, stability=fm.stability_methods.Hill(), options=opts)
     return model, b
 
 
@@ -176,7 +176,7 @@ def _tongue_point(b):
 def test_backbone_onto_the_tongue_and_off_again(backbone):
     model, b = backbone
     z = _tongue_point(b)
-    tongue = fm.switch_branch(b, z, omega=(0.9, 1.5), stability="hill")
+    tongue = fm.switch_branch(b, z, omega=(0.9, 1.5), stability=fm.stability_methods.Hill())
     info = tongue.meta["switched_from"]
     assert info["kind"] == "branch_point" and info["smallest_singular_value"] < 1e-10
     # floquet located the collision where the augmented Jacobian drops rank, not where |mu| - 1
@@ -288,7 +288,7 @@ def test_bracketed_branch_point_costs_no_solve_and_switches_the_same(forced, mon
 
     with monkeypatch.context() as m:
         m.setattr(branch_stability, "solve_on_secant", no_solve)
-        bb = fm.frequency_response(model, (0.9, 1.7), 7, stability=fm.StabilityOptions(method="hill", locate=False))
+        bb = fm.frequency_response(model, (0.9, 1.7), 7, stability=fm.StabilityOptions(method=fm.stability_methods.Hill(), locate=False))
     np.testing.assert_array_equal(bb.stable, b.stable)
     bracketed = [z for z in bb.bifurcations if z.kind != "fold"]
     assert [(z.kind, z.index) for z in bracketed] == [(z.kind, z.index) for z in located]
@@ -323,7 +323,7 @@ def test_located_by_two_solves_within_the_stated_bracket(forced, cheap_location)
 
     model, b = forced
     with cheap_location() as solves:
-        cheap = fm.frequency_response(model, (0.9, 1.7), 7, stability="hill")
+        cheap = fm.frequency_response(model, (0.9, 1.7), 7, stability=fm.stability_methods.Hill())
     np.testing.assert_array_equal(cheap.stable, b.stable)
     precise = [z for z in b.bifurcations if z.kind != "fold"]
     located = [z for z in cheap.bifurcations if z.kind != "fold"]
@@ -340,7 +340,7 @@ def test_located_by_two_solves_within_the_stated_bracket(forced, cheap_location)
 
 
 def test_stability_options_are_checked():
-    with pytest.raises(ValueError, match="method must be one of"):
+    with pytest.raises(ValueError, match="method must be a stability strategy"):
         fm.StabilityOptions(method="floquet")
     with pytest.raises(ValueError, match="tol must be in"):
         fm.StabilityOptions(tol=2.0)

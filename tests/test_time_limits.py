@@ -27,7 +27,7 @@ def branch():
 def test_estimate_stops_at_its_time_limit_and_says_so(branch, caplog):
     b = branch
     with caplog.at_level(logging.WARNING, logger="femodes.accuracy"):
-        fm.estimate_error(b, rtol=1e-6, method="levels", time_limit=1e-6)
+        fm.estimate_error(b, rtol=1e-6, method=fm.error_methods.Levels(), time_limit=1e-6)
     acc = b.accuracy
     assert np.all(acc.method == "failed") and not acc.met.any()
     text = " ".join(r.getMessage() for r in caplog.records)
@@ -50,7 +50,7 @@ def test_rtol_of_an_analysis_is_bounded_by_the_branch_time(caplog):
     hurried = fm.AccuracyOptions(rtol_budget=1e-9, rtol_min_seconds=1e-9)
     assert accuracy.rtol_time_limit(0.1, hurried) == 1e-9
     with caplog.at_level(logging.WARNING, logger="femodes.accuracy"):
-        b = fm.frequency_response(_oscillator(), (0.8, 1.3), fm.Harmonics(10), rtol=1e-4, error_method="levels",
+        b = fm.frequency_response(_oscillator(), (0.8, 1.3), fm.Harmonics(10), rtol=1e-4, error_method=fm.error_methods.Levels(),
                                   options=fm.ContinuationOptions(max_points=40), error_options=hurried)
     assert b.accuracy is not None and not b.accuracy.met.all()
     assert any("time limit" in r.getMessage() for r in caplog.records)
@@ -61,7 +61,7 @@ def test_stability_run_logs_an_estimate_and_progress(caplog):
              .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2))
              .with_nonlinearity(fm.CubicSpring(at=0, k3=0.5)))
     with caplog.at_level(logging.INFO, logger="femodes.floquet"):
-        b = fm.frequency_response(model, (0.5, 2.0), fm.Harmonics(3), stability="hill",
+        b = fm.frequency_response(model, (0.5, 2.0), fm.Harmonics(3), stability=fm.stability_methods.Hill(),
                                   options=fm.ContinuationOptions(max_points=30))
     text = [r.getMessage() for r in caplog.records]
     assert any(t.startswith(f"stability: {len(b)} points, about") for t in text)

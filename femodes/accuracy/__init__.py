@@ -19,6 +19,8 @@ Modules, one idea each:
   and :mod:`.level_trace` (tracing a level along the branch, by steps or by continuation);
 * shooting's machinery: :mod:`.planes`, :mod:`.shooter` (Newton on the exact orbit),
   :mod:`.exact_fold` (the exact fold next to a fold of the branch);
+* :mod:`.methods`: the strategies a user chooses (``femodes.error_methods``: ``Auto``,
+  ``Shooting``, ``Levels``);
 * :mod:`.estimate` (:func:`estimate_error`) and :mod:`.tolerance` (``rtol=``).
 
 The tuning constants that were module globals (``RATE_MIN``, ``SHOOTING_FLOOR``, ...) are fields of
@@ -31,13 +33,15 @@ from __future__ import annotations
 import dataclasses
 import warnings
 
+from . import methods
 from .estimate import estimate_error
 from .extrapolation import estimate_levels
-from .options import ESTIMATE_METHODS, AccuracyOptions, check_estimate_method, check_options, refinement_options
+from .methods import check_estimate_method
+from .options import ESTIMATE_METHODS, AccuracyOptions, check_options, refinement_options
 from .shooting import GLANCING, shooting_unsupported, shooting_unsupported_for
 from .tolerance import meet_tolerance, rtol_time_limit
 
-__all__ = ["AccuracyOptions", "estimate_error", "estimate_levels", "meet_tolerance", "rtol_time_limit",
+__all__ = ["methods", "AccuracyOptions", "estimate_error", "estimate_levels", "meet_tolerance", "rtol_time_limit",
            "shooting_unsupported", "shooting_unsupported_for", "refinement_options", "check_estimate_method",
            "check_options", "ESTIMATE_METHODS", "GLANCING"]
 

@@ -15,13 +15,12 @@ from ..nonsmooth_modes import family_caveat
 from ..results import Branch, ErrorEstimate
 from ..solvers import NewtonOptions
 from ..solvers.threads import limit_blas_threads
-from .exact_branch import ExactBranchCache, ExactFolds
 from .extrapolation import estimate_levels
 from .ladder import Ladder, OutOfTime, ladder_for
 from .levels import Levels
-from .options import AccuracyOptions, check_estimate_method, check_options, refinement_options
+from .methods import ErrorMethod, as_error_method
+from .options import AccuracyOptions, check_options, refinement_options
 from .protocol import PointErrors
-from .shooting import Shooting, shooting_unsupported
 
 __all__ = ["estimate_error"]
 
@@ -30,7 +29,7 @@ log = logging.getLogger(__name__)
 
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: int | None = None, projection=None,
-                   newton: NewtonOptions | None = None, method: str = "auto", time_limit: float | None = None,
+                   newton: NewtonOptions | None = None, method: ErrorMethod | None = None, time_limit: float | None = None,
                    options: AccuracyOptions | None = None) -> Branch:
     """Attach the estimated error of every point of ``branch`` (``branch.error_estimate``).
 
@@ -64,12 +63,15 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     projection : ExactProjection or SampledProjection, optional
         The projection the branch was computed with (default exact).
     newton : NewtonOptions, optional
-    method : {"auto", "shooting", "levels"}, default "auto"
-        ``"levels"``: harmonic balance at other H (above). ``"shooting"``: the exact orbits of
-        the flow with rigid stops (docs/guide/accuracy.md, "Shooting"; forced branches of linear
-        models with unilateral contacts only, else ValueError), the levels for the points where
-        no orbit is found. ``"auto"``: shooting where it applies, else the levels.
-        :attr:`~femodes.results.ErrorEstimate.method` tells per point which one answered.
+    method : ErrorMethod, optional
+        A strategy of :mod:`femodes.error_methods` (default
+        :class:`~femodes.error_methods.Auto`). ``Levels()``: harmonic balance at other H
+        (above). ``Shooting()``: the exact orbits of the flow with rigid stops
+        (docs/guide/accuracy.md, "Shooting"; forced branches of linear models with unilateral
+        contacts only, else ValueError), the levels for the points where no orbit is found.
+        ``Auto()``: shooting where it applies, else the levels. A method name (``"levels"``...)
+        is a deprecated spelling. :attr:`~femodes.results.ErrorEstimate.method` tells per point
+        which one answered.
     time_limit : float, optional
         Seconds after which the estimate stops (checked between the points of a level): the
         points it has not estimated get none (method ``"failed"``) and a warning says so. The
@@ -100,7 +102,7 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     lad = ladder_for(branch, projection, newton, "estimate_error")
     H = branch.harmonics.n_harmonics
     rtol, max_harmonics = refinement_options(rtol, max_harmonics, H)
-    check_estimate_method(method, "estimate_error")
+    method = as_error_method(method, "estimate_error")
     options = check_options(options, "estimate_error")
     if time_limit is not None:
         if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float, np.integer, np.floating)) \
@@ -111,9 +113,7 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     started = time.perf_counter()
     n = len(branch)
     errors = PointErrors.empty(n, "complementarity" in branch.contacts.kinds, estimate_levels(H)[0][-1])
-    todo = np.ones(n, dtype=bool)
-    if method != "levels":
-        todo = _by_shooting(lad, errors, method, projection, options)
+    todo = method.shoot(lad, errors, projection, options)
     out_of_time = False
     if todo.any():
         try:
@@ -134,34 +134,6 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
                                       amplitude_limit=errors.amplitude_limit,
                                       amplitude_limit_error=errors.amplitude_limit_error, **mesh))
     return branch
-
-
-def _by_shooting(lad: Ladder, errors: PointErrors, method: str, projection, options: AccuracyOptions) -> np.ndarray:
-    """Shooting, then the exact branch's folds (:class:`~.shooting.Shooting`,
-    :class:`~.exact_branch.ExactFolds`) where they apply; the points left for the levels. With
-    ``method="auto"`` a branch they cannot take goes to the levels whole; with ``"shooting"``
-    that is a ValueError."""
-    n = len(lad.branch)
-    why = shooting_unsupported(lad.branch, projection)
-    if why and method == "shooting":
-        raise ValueError(f"estimate_error: method='shooting' cannot take this branch: {why}; use "
-                         "method='levels' (or 'auto')")
-    if why:
-        return np.ones(n, dtype=bool)
-    exact = ExactBranchCache(lad)
-    todo = np.ones(n, dtype=bool)
-    try:
-        for estimator in (Shooting(exact, options, auto=method == "auto"), ExactFolds(exact, options)):
-            todo = estimator.estimate(lad, errors, todo)
-    except ValueError as exc:  # the flow itself (a nearly defective state matrix), or too stiff for auto
-        if method == "shooting":
-            raise ValueError(f"estimate_error: method='shooting': {exc}") from None
-        log.info("accuracy: no shooting (%s); levels", exc)
-        errors.clear()
-        todo = np.ones(n, dtype=bool)
-    if todo.any():
-        log.info("accuracy: shooting found no exact orbit at %d point(s); levels there", int(todo.sum()))
-    return todo
 
 
 def _warn_out_of_time(lad: Ladder, errors: PointErrors, time_limit: float, elapsed: float,

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..solvers.checks import is_real_number, show
 
-__all__ = ["AccuracyOptions", "ESTIMATE_METHODS", "check_estimate_method", "check_options", "refinement_options"]
+__all__ = ["AccuracyOptions", "ESTIMATE_METHODS", "check_options", "refinement_options"]
 
 #: Methods of :func:`~femodes.estimate_error`: "levels" (harmonic balance at other H), "shooting"
 #: (the exact flow with rigid stops), "auto" (shooting where it applies, levels for the rest).
@@ -46,7 +46,7 @@ class AccuracyOptions:
         A level's trace stops once it takes more continuation points than ``level_points_per_point``
         per branch point passed plus ``level_points_slack`` (it follows loops the branch lacks).
     shooting_auto_max_dofs, shooting_auto_max_work, shooting_auto_max_events : default 120, 1e6, 8
-        ``method="auto"`` shoots only models with at most that many DOFs with mass, whose probe
+        ``fm.error_methods.Auto()`` shoots only models with at most that many DOFs with mass, whose probe
         run evaluates at most that many modal terms and has at most that many events at a contact.
     shooting_tol, shooting_step, shooting_max_iter : default 1e-11, 1e-7, 40
         A shooting solve stops at that residual, hyperplane value and relative frequency step, or
@@ -170,13 +170,6 @@ def _check_real(name: str, value, lo: float, hi: float, closed_hi: bool) -> None
     if not ok or (math.isinf(value) and not (closed_hi and math.isinf(hi))):
         end = "]" if closed_hi else ")"
         raise ValueError(f"AccuracyOptions: {name} must be a number in ({lo:g}, {hi:g}{end}, got {show(value)}")
-
-
-def check_estimate_method(method, owner: str, name: str = "method") -> str:
-    """``method`` checked against :data:`ESTIMATE_METHODS`."""
-    if not isinstance(method, str) or method not in ESTIMATE_METHODS:
-        raise ValueError(f"{owner}: {name} must be one of {ESTIMATE_METHODS}, got {method!r}")
-    return method
 
 
 def refinement_options(rtol, max_harmonics, H: int, owner: str = "estimate_error") -> tuple[float | None, int]:

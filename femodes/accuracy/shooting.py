@@ -6,7 +6,7 @@ exact fold (:func:`~.exact_fold.exact_fold`). Just above grazing the exact curve
 hyperplane obliquely or backward (``kappa`` outside ``(0, glancing_max]`` and a crossing cosine
 below ``glancing_cos``): that crossing is no counterpart of the point, the exact orbit at the
 point's own frequency is (its error is then in the amplitude). Seed cases at H = 20: 4 of 94 and
-8 of 68 points are taken so. ``method="auto"`` leaves to the levels a model with too many DOFs with
+8 of 68 points are taken so. ``fm.error_methods.Auto()`` leaves to the levels a model with too many DOFs with
 mass, or whose probe run (one period from the point with the largest contact force) is too costly
 or chatters (:class:`~.options.AccuracyOptions`, ``shooting_auto_*``).
 """
@@ -103,7 +103,7 @@ class Shooting:
         if probe.I.size > opts.shooting_auto_max_dofs:
             raise ValueError(f"the model has {probe.I.size} DOFs with mass; the exact flow's dense modal algebra (cost "
                              f"~ n^3 per run) is left to models of at most {opts.shooting_auto_max_dofs} (reduce the "
-                             "model with fm.craig_bampton, which keeps the contact DOFs, or ask for method='shooting')")
+                             "model with fm.craig_bampton, which keeps the contact DOFs, or ask for method=fm.error_methods.Shooting())")
         run = probe_run(lad, probe, opts)
         work = float(run.samples) * 2 * probe.I.size
         if work > opts.shooting_auto_max_work:
@@ -214,7 +214,7 @@ def shooting_unsupported(branch: Branch, projection=None) -> str:
 
 def shooting_unsupported_for(model, harmonics, projection=None) -> str:
     """:func:`shooting_unsupported` of the forced branch that ``model`` would give on ``harmonics``
-    (checked by :func:`femodes.frequency_response` before it runs, for ``error_method="shooting"``)."""
+    (checked by :func:`femodes.frequency_response` before it runs, for ``error_method=fm.error_methods.Shooting()``)."""
     if harmonics.subharmonic != 1:
         return "sub-harmonic branch"
     if projection is not None and type(projection).__name__ != "ExactProjection":

@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from .methods import ErrorMethod
 from ..results import ERROR_METHODS, Branch
 from ..solvers import NewtonOptions
 from .estimate import estimate_error
@@ -31,7 +32,7 @@ def rtol_time_limit(plain_seconds: float, options: AccuracyOptions | None = None
 
 
 def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun, *, projection=None,
-                   newton: NewtonOptions | None = None, method: str = "auto", time_limit: float | None = None,
+                   newton: NewtonOptions | None = None, method: ErrorMethod | None = None, time_limit: float | None = None,
                    options: AccuracyOptions | None = None) -> Branch:
     """``rtol=`` of :func:`femodes.frequency_response` and :func:`femodes.nonlinear_mode`.
 

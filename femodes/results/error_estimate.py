@@ -24,7 +24,7 @@ def largest_text(v) -> str:
     return f"{np.nanmax(v):.3g}" if np.any(np.isfinite(v)) else "unknown"
 
 #: levels of harmonics (``"doubling"``), from the exact orbit of the flow with rigid stops
-#: (``"shooting"``, :func:`femodes.estimate_error` with ``method="shooting"``), or not at all
+#: (``"shooting"``, :func:`femodes.estimate_error` with ``method=fm.error_methods.Shooting()``), or not at all
 #: (``"failed"``: a level had no solution near the point, e.g. next to a fold that moves by more
 #: than the branch's curvature allows); ``"truncation"``: a fold of the branch that the converged
 #: answer does not have (no fold of the exact branch turns the same way near it: a loop of the

@@ -16,7 +16,7 @@
   exponentials between contact events; impacts at contacts on DOFs with mass, switches of
   condensed massless contact DOFs; events located to round-off by a certified search; exact
   Fourier coefficients): the shooting refinement of :func:`femodes.estimate_error`
-  (``method="shooting"``) and the exact branch :func:`femodes.exact_frequency_response` (an
+  (``method=fm.error_methods.Shooting()``) and the exact branch :func:`femodes.exact_frequency_response` (an
   analysis: ``femodes.time.exact_frequency_response`` and ``femodes.time.ExactBranch`` still work,
   deprecated).
 

@@ -32,7 +32,7 @@ Events (``solve_ivp`` terminal events; the integration stops at each one and res
   DOP853's error estimate honest (it assumes a smooth right-hand side within a step).
 
 What event-driven integration cannot do, and is refused with a ``ValueError`` that points to
-Hill's method on the harmonic balance Jacobian (``fm.stability(solution, method="hill")``): a
+Hill's method on the harmonic balance Jacobian (``fm.stability(solution, fm.stability_methods.Hill())``): a
 unilateral contact on a DOF without mass (mass redistribution; the impact law needs a mass to
 act on), a singular mass matrix, and, with ``restitution < 1``, accumulating impacts (chattering:
 more than :data:`MAX_IMPACTS` impacts in one run, or an impact slower than
@@ -71,7 +71,7 @@ MAX_DOFS = 500
 _MAX_KINKS = 100_000
 
 #: How the refusals of event-driven integration point to the alternative.
-_HILL = 'use Hill\'s method on the harmonic balance Jacobian instead: fm.stability(solution, method="hill")'
+_HILL = 'use Hill\'s method on the harmonic balance Jacobian instead: fm.stability(solution, fm.stability_methods.Hill())'
 
 
 class TrialFailure(ValueError):
@@ -100,7 +100,7 @@ def unsupported(model: StructuralModel, massless_contacts: bool = False) -> str:
     """Why the event-driven shooting cannot take ``model`` (``""`` if it can): more than
     :data:`MAX_DOFS` DOFs, or a UnilateralContact on a DOF without mass (unless
     ``massless_contacts``: the closed-form flow of :mod:`femodes.time.exact` condenses such a DOF).
-    The one place these limits are checked (``fm.stability(method="auto")`` asks before choosing
+    The one place these limits are checked (``fm.stability_methods.Auto()`` asks before choosing
     the method)."""
     n = model.n_dofs
     if n > MAX_DOFS:

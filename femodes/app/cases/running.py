@@ -76,6 +76,8 @@ def run_analysis(case: Case, model, progress, checkpoint=None):
     if "max_points" in an:
         opts["max_points"] = an["max_points"]
     stability = an.get("stability", False)
+    if isinstance(stability, str):  # case files name the strategy
+        stability = fm.stability_methods.by_name(stability)
     rtol = an.get("rtol")
     try:
         if an["type"] == "nonlinear_mode":

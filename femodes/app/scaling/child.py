@@ -61,6 +61,7 @@ import femodes as fm
 
 from ...analyses import frequency_response_options, nonlinear_mode_options
 from ...floquet import annotate_branch
+from ...stability_methods import by_name
 from ...solvers import newton
 from ..cases import Case, CaseError, analysis_span, build_model
 
@@ -240,10 +241,10 @@ def _time_stability(setup: _Setup, branch: fm.Branch, rec: dict) -> None:
     method = setup.analysis.get("stability", False)
     if method is False or not len(branch):
         return
-    method = "auto" if method is True else str(method)
+    strategy = by_name("auto" if method is True else str(method))  # case files name the strategy
     try:
         t = time.perf_counter()
-        annotate_branch(branch, setup.problem(), setup.model, method=method)
+        annotate_branch(branch, setup.problem(), setup.model, method=strategy)
         rec["stability_s"] = (time.perf_counter() - t) / len(branch)
         rec["stability_method"] = "+".join(sorted(set(branch.stability_method)))
     except Exception as exc:  # reported; the rest of the case is still measured
