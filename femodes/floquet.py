@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from .branch_stability import (BRANCH_POINT_DENSE_LIMIT, COLLISION, augmented_jacobian, branch_point_test,
-                               find_bifurcations, refine_branch_point, root_on_secant, solve_on_secant)
+                               find_bifurcations, refine_branch_point, root_on_secant, significant, solve_on_secant)
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .hbm.system import HBMSystem
 from .model import StructuralModel
@@ -203,7 +203,26 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
         mult[i, : r.multipliers.size] = r.multipliers
     branch.set_stability(stable=[is_stable(r.multipliers, tol, not forced) for r in results], multipliers=mult,
                          bifurcations=bifs, methods=[r.method for r in results], tol=tol)
+    _warn_uncertain(results, tol, forced)
     n_fb = sum(r.message != "" for r in results)
     if n_fb:
         log.info("stability: shooting failed at %d of %d points; Hill's method used there", n_fb, len(results))
     return branch
+
+
+def _warn_uncertain(results, tol: float, forced: bool) -> None:
+    """One warning when the estimated error of reduced Hill solves could flip the verdict of a
+    point: its leading multiplier within that error of ``1 + tol``."""
+    near, worst = 0, 0.0
+    for r in results:
+        m = significant(r.multipliers, not forced)
+        err = r.error if np.isfinite(r.error) else 0.0
+        if m.size and err > 0 and abs(abs(m[0]) - 1.0 - tol) <= err:
+            near += 1
+            worst = max(worst, err)
+    if near:
+        log.warning("stability: at %d of %d points the leading multiplier lies within the estimated error of Hill's "
+                    "reduced problem (up to %.2g in |mu|) of the stability limit, so their verdict is uncertain; the "
+                    "reduction is capped at half the model's DOFs: a reduced model with more modes "
+                    "(craig_bampton(model, n_modes)) lets it grow, or check those points with "
+                    "fm.stability(branch[i], fm.stability_methods.Shooting())", near, len(results), worst)

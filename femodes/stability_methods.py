@@ -79,6 +79,10 @@ class StabilityResult:
     orbit_correction : float
         Shooting only: ``max |x_shooting - x_hbm|`` of the state at the start time, relative to
         ``max |x_hbm|`` (how far the HBM orbit is from the true periodic orbit); NaN for Hill.
+    error : float
+        Hill only: the estimated error of the multipliers' moduli from the reduction Hill's
+        problem was solved on (:attr:`femodes.hbm.hill.HillResult.reduction_error`; 0 when solved
+        whole, NaN for shooting).
     """
 
     multipliers: np.ndarray
@@ -86,6 +90,7 @@ class StabilityResult:
     method: str
     message: str = ""
     orbit_correction: float = math.nan
+    error: float = math.nan
 
 
 class ShootingError(RuntimeError):
@@ -129,9 +134,10 @@ class Hill:
     name: ClassVar[str] = "hill"
 
     def __call__(self, orbit: Orbit, tol: float, message: str = "") -> StabilityResult:
-        mu = hill_exponents(orbit.system, orbit.y, orbit.omega, orbit.xi).multipliers
+        res = hill_exponents(orbit.system, orbit.y, orbit.omega, orbit.xi)
+        mu = res.multipliers
         return StabilityResult(multipliers=mu, stable=is_stable(mu, tol, not orbit.forced), method="hill",
-                               message=message)
+                               message=message, error=float(res.reduction_error))
 
 
 @dataclasses.dataclass(frozen=True)
