@@ -230,9 +230,16 @@ class CoefficientStiffness:
             self._cache["lr_cols"] = sp.kron(self.D, sp.csr_matrix(lr.U * lr.d), format="csr")
         return w * self._cache["lr_cols"], self._cache["lr_rows"]
 
-    def exponent_terms(self, w: float, xi: float = 0.0) -> tuple:
+    def exponent_terms(self, w: float, xi: float = 0.0, *, dense: bool = False) -> tuple:
         """``(J1, J2)`` with ``S(w)`` at ``d/dt + s`` equal to ``S(w) + s J1 + s^2 J2`` (Hill's
-        method): ``J1 = I x (C - xi M) + 2 w D x M``, ``J2 = I x M``."""
+        method): ``J1 = I x (C - xi M) + 2 w D x M``, ``J2 = I x M``; dense arrays with
+        ``dense`` (small systems: the dense terms are cached on first use)."""
+        if dense:
+            if "exponent_dense" not in self._cache:
+                self._cache["exponent_dense"] = tuple(self.term(k).toarray() for k in ("IC", "AM", "IM"))
+            IC, AM, IM = self._cache["exponent_dense"]
+            J1 = IC + (2.0 * w) * AM
+            return (J1 - xi * IM if xi else J1), IM
         J1 = self.term("IC") + 2.0 * w * self.term("AM")
         if xi:
             J1 = J1 - xi * self.term("IM")

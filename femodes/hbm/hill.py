@@ -75,7 +75,7 @@ import scipy.sparse.linalg as spla
 
 from ..eigen import krylov_start
 from ..sparse_direct import factorize
-from .hill_elimination import dense_array, eliminate
+from .hill_elimination import algebraic_unknowns, dense_array, eliminate
 from .hill_reduction import FreeInterfaceReduction
 from .system import HBMSystem
 
@@ -161,19 +161,26 @@ class HillResult:
     reduction_error: float = 0.0
 
 
-def hill_matrices(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0.0):
-    """``J0, J1, J2`` (sparse CSR, ``system.size`` square) of Hill's problem at solution ``x``
-    (module docstring); ``J0`` is the harmonic balance Jacobian of ``system``."""
+def hill_matrices(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0.0, *, dense: bool = False):
+    """``J0, J1, J2`` (sparse CSR, ``system.size`` square; dense arrays with ``dense``) of Hill's
+    problem at solution ``x`` (module docstring); ``J0`` is the harmonic balance Jacobian of
+    ``system``."""
     _, J, _, _ = system.residual(np.asarray(x, dtype=float), float(omega), xi=float(xi), forced=False)
-    J0 = J.tocsr()
     # the dynamic stiffness at d/dt + s (its cached Kronecker operators, built once per system)
-    J1q, J2q = system.stiffness.exponent_terms(omega, xi)
-    pad = system.size - system.nq
+    J1q, J2q = system.stiffness.exponent_terms(omega, xi, dense=dense)
+    n, nq = system.size, system.nq
+    if dense:  # small problems: no sparse matrix is built (scipy.sparse's per-call overhead)
+        J0 = J.toarray() if hasattr(J, "toarray") else J.tocsr().toarray()
+        J1, J2 = np.zeros((n, n)), np.zeros((n, n))
+        J1[:nq, :nq], J2[:nq, :nq] = J1q, J2q
+        return J0, J1, J2
 
-    def embed(A):
-        return sp.block_diag([A, sp.csr_matrix((pad, pad))], format="csr") if pad else A.tocsr()
+    def embed(A):  # zero rows and columns of the contact forces appended (CSR index arithmetic)
+        A = A.tocsr()
+        return sp.csr_matrix((A.data, A.indices, np.concatenate([A.indptr, np.full(n - nq, A.indptr[-1])])),
+                             shape=(n, n))
 
-    return J0, embed(J1q), embed(J2q)
+    return J.tocsr(), embed(J1q), embed(J2q)
 
 
 def _complex_harmonics(system: HBMSystem, V: np.ndarray) -> np.ndarray:
@@ -284,10 +291,10 @@ def _hill(system: HBMSystem, x: np.ndarray, omega: float, xi: float, n_shifts: i
     """Hill's problem of ``system`` itself (dense or shift-invert)."""
     base = omega / system.h.subharmonic          # spacing of the copies, w / nu
     T = system.h.period(omega)
-    J0, J1, J2 = hill_matrices(system, x, omega, xi)
     N = system.size
+    J0, J1, J2 = hill_matrices(system, x, omega, xi, dense=N <= SMALL)
     n_keep = 2 * _n_dynamic(system)
-    algebraic = _algebraic(J1, J2)
+    algebraic = algebraic_unknowns(J1, J2)
     if N - np.count_nonzero(algebraic) <= DENSE_LIMIT:
         s, V = _dense(J0, J1, J2, base, algebraic)
         complete = True
@@ -315,22 +322,10 @@ def _n_dynamic_unknowns(system: HBMSystem) -> int:
     return int(np.count_nonzero(dyn))
 
 
-def _algebraic(J1, J2) -> np.ndarray:
-    """Unknowns whose rows and columns of ``J1`` and ``J2`` vanish: their equations hold at every
-    ``s`` without derivatives (contact forces; massless, undamped DOFs)."""
-    nz = np.zeros(J1.shape[0], dtype=bool)
-    for A in (J1, J2):
-        A = A.tocoo()
-        hit = A.data != 0
-        nz[A.row[hit]] = True
-        nz[A.col[hit]] = True
-    return ~nz
-
-
 def _dense(J0, J1, J2, base, algebraic=None, vectors=True):
     """All finite eigenvalues of Hill's pencil, densely.
 
-    The algebraic unknowns (:func:`_algebraic`) are eliminated first, exactly: their rows read
+    The algebraic unknowns (:func:`~.hill_elimination.algebraic_unknowns`) are eliminated first, exactly: their rows read
     ``J0_aa v_a + J0_ad v_d = 0`` at every ``s``, so the pencil on the others is
     ``S0 + s J1_dd + s^2 J2_dd`` with ``S0 = J0_dd - J0_da J0_aa^-1 J0_ad``, and
     ``v_a = -J0_aa^-1 J0_ad v_d``. (When ``J0_aa`` is singular, e.g. a contact closed over the
@@ -338,7 +333,7 @@ def _dense(J0, J1, J2, base, algebraic=None, vectors=True):
     if algebraic is not None and np.any(algebraic):
         a, d = np.flatnonzero(algebraic), np.flatnonzero(~algebraic)
         if J0.shape[0] <= SMALL:  # dense slicing: scipy.sparse's per-call overhead dominates there
-            J0, J1, J2 = (np.asarray(A.toarray()) for A in (J0, J1, J2))
+            J0, J1, J2 = (dense_array(A) for A in (J0, J1, J2))
 
             def block(A, r, c):
                 return A[np.ix_(r, c)]
@@ -411,7 +406,7 @@ class _ShiftInvert:
 
     def __init__(self, J0, J1, J2):
         self.N = J0.shape[0]
-        self.J0, self.J1, self.J2 = (A.astype(complex).tocsc() for A in (J0, J1, J2))
+        self.J0, self.J1, self.J2 = (sp.csc_matrix(A).astype(complex) for A in (J0, J1, J2))
 
     def near(self, sigma: complex, k: int):
         N, J1, J2 = self.N, self.J1, self.J2
@@ -570,8 +565,8 @@ def _error_near(red: FreeInterfaceReduction, m_coarse: int, fine: HillResult, x,
     exponents (one shift-invert each, not a whole Hill solve: the two solves need not return the
     same subset of the spectrum); ``ratio`` is the ratio of the cut-offs."""
     rs = red.system_with(m_coarse)
-    J0, J1, J2 = hill_matrices(rs, red.state(x, rs), omega, xi)
-    algebraic = _algebraic(J1, J2)
+    J0, J1, J2 = hill_matrices(rs, red.state(x, rs), omega, xi, dense=rs.size <= SMALL)
+    algebraic = algebraic_unknowns(J1, J2)
     if J0.shape[0] - np.count_nonzero(algebraic) <= DENSE_LIMIT:
         s_all = _dense(J0, J1, J2, omega / rs.h.subharmonic, algebraic, vectors=False)[0]
 

@@ -15,7 +15,7 @@ import scipy.sparse.linalg as spla
 
 from .linsolve.options import DEFAULT_OPTIONS
 
-__all__ = ["eliminate", "dense_array", "SPARSE_ELIMINATION_DENSITY", "SPARSE_ELIMINATION_MIN"]
+__all__ = ["algebraic_unknowns", "eliminate", "dense_array", "SPARSE_ELIMINATION_DENSITY", "SPARSE_ELIMINATION_MIN"]
 
 #: An algebraic block with at most this fraction of nonzeros is factorised sparse (:func:`eliminate`).
 SPARSE_ELIMINATION_DENSITY = 0.1
@@ -87,3 +87,19 @@ def _dense_solve(As: np.ndarray, B: np.ndarray, c: np.ndarray, floor: float) -> 
     if not rcond > floor:
         return None
     return c[:, None] * sla.lu_solve(lu, B, check_finite=False)
+
+
+def algebraic_unknowns(J1, J2) -> np.ndarray:
+    """Unknowns whose rows and columns of ``J1`` and ``J2`` vanish: their equations hold at every
+    ``s`` without derivatives (contact forces; massless, undamped DOFs)."""
+    nz = np.zeros(J1.shape[0], dtype=bool)
+    for A in (J1, J2):
+        if not sp.issparse(A):
+            hit = np.asarray(A) != 0
+            nz |= hit.any(axis=1) | hit.any(axis=0)
+            continue
+        A = A.tocoo()
+        hit = A.data != 0
+        nz[A.row[hit]] = True
+        nz[A.col[hit]] = True
+    return ~nz
