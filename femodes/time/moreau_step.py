@@ -303,7 +303,7 @@ class Stepper:
         def F(z):
             lam, Pa = z[:s], z[s:]
             Wl = W @ lam
-            fs, dfs = self.smooth_force(base_q + hth * Wl)
+            fs, dfs = self.smooth.force(base_q + hth * Wl)
             r1 = lam + hth * fs
             np.add.at(r1, loc_a, Pa)
             J = np.zeros((s + na, s + na))
