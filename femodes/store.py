@@ -291,6 +291,17 @@ def file_lock(path, refuse: Callable[[str], Exception]):
         f.close()
 
 
+def _write_durable(target: Path, write) -> None:
+    """Write a journal file through ``write(binary file)`` durably (fsync before the rename): the
+    journal is what survives a crash."""
+
+    def to_file(tmp: str) -> None:
+        with open(tmp, "wb") as f:
+            write(f)
+
+    atomic_write(target, to_file, durable=True)
+
+
 class CheckpointStore:
     """Journal of a running continuation next to its final branch file ``path``.
 
@@ -343,15 +354,6 @@ class CheckpointStore:
         return self.journal / f"{int(index):08d}.npz"
 
     # -- writing -----------------------------------------------------------------------------
-    def _write_atomic(self, target: Path, write) -> None:
-        """Write a journal file durably (fsync before the rename): the journal is what survives a crash."""
-
-        def to_file(tmp: str) -> None:
-            with open(tmp, "wb") as f:
-                write(f)
-
-        atomic_write(target, to_file, durable=True)
-
     def create(self, description: dict) -> None:
         """Start a new journal (the directory must not hold one) with ``description`` in its header."""
         self.journal.mkdir(parents=True, exist_ok=True)
@@ -359,13 +361,13 @@ class CheckpointStore:
             raise FileExistsError(f"checkpoint: {str(self.journal)!r} already holds a journal")
         header = {"format": _CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, "run": description}
         text = json.dumps(header, indent=1).encode()
-        self._write_atomic(self.header_path, lambda f: f.write(text))
+        _write_durable(self.header_path, lambda f: f.write(text))
 
     def write_point(self, index: int, arrays: dict) -> Path:
         """Write point ``index`` (a dict of arrays; an ``index`` member is added) atomically."""
         target = self.point_path(index)
         arrays = dict(arrays, index=np.asarray(int(index)))
-        self._write_atomic(target, lambda f: np.savez(f, **arrays))
+        _write_durable(target, lambda f: np.savez(f, **arrays))
         return target
 
     # -- reading -----------------------------------------------------------------------------

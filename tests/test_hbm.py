@@ -223,7 +223,7 @@ def test_nonlinear_part_reuses_its_sparse_pattern():
     """The nonlinear Jacobian's CSR pattern is built once per system and refilled: the same matrix
     as a fresh COO conversion at two different points, and a new pattern when the triplets
     change (duplicates summed either way)."""
-    from femodes.hbm.system import _Triplets
+    from femodes.hbm.nonlinear_forces import Triplets
 
     s = HBMSystem(chain4(), fm.Harmonics(4))
     rng = np.random.default_rng(5)
@@ -231,16 +231,16 @@ def test_nonlinear_part_reuses_its_sparse_pattern():
         x = 0.4 * rng.standard_normal(s.size)
         N = s.residual(x, 1.3)[1].N
         assert "triplets" in s._cache
-        jac = _Triplets()
+        jac = Triplets()
         Q = x[: s.nq].reshape(s.h.n_coef, s.n)
         r = np.zeros(s.size)
-        s._cubic_springs(Q, r, jac)
-        s._penalty_contacts(Q, r, jac)
-        s._complementarity_contacts(x, Q, r, jac)
+        s.nonlinear.cubic_springs(Q, r, jac)
+        s.nonlinear.penalty_contacts(Q, r, jac)
+        s.nonlinear.complementarity_contacts(x, Q, r, jac)
         ref = jac.matrix(s.size)
         assert (N != ref).nnz == 0 and N.has_sorted_indices
     cache: dict = {}
-    a, b = _Triplets(), _Triplets()
+    a, b = Triplets(), Triplets()
     a.entries(np.array([0, 1, 0]), np.array([1, 1, 1]), np.array([1.0, 2.0, 3.0]))
     b.entries(np.array([2, 2]), np.array([0, 0]), np.array([1.0, 5.0]))
     np.testing.assert_array_equal(a.matrix(3, cache).toarray(), [[0, 4, 0], [0, 2, 0], [0, 0, 0]])

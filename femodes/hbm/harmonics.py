@@ -82,6 +82,50 @@ def _readonly(a):
     return a
 
 
+def _time_samples(H: int, n_time: int | None) -> int:
+    """The number ``N`` of phase samples of a basis with ``H`` harmonics: ``n_time``, checked
+    (``N >= 2H + 1``), or by default ``next_fast_len(4H + 1)``; ValueError if the dense
+    ``(N, 2H + 1)`` Fourier operators would exceed :data:`_MAX_DENSE` entries."""
+    if n_time is None:
+        if (2 * H + 1) * (4 * H + 1) > _MAX_DENSE:  # before next_fast_len, which fails for huge H
+            raise ValueError(
+                f"n_harmonics={H} needs dense ({4 * H + 1} x {2 * H + 1}) Fourier operators of more than "
+                f"{8 * _MAX_DENSE / 2**30:.0f} GiB; reduce n_harmonics"
+            )
+        N = int(next_fast_len(4 * H + 1, real=True))
+    else:
+        N = check_int("n_time", n_time, 1)
+        if N < 2 * H + 1:
+            raise ValueError(
+                f"n_time must be >= 2*n_harmonics + 1 = {2 * H + 1}, got {n_time!r}"
+            )
+    if (2 * H + 1) * N > _MAX_DENSE:
+        raise ValueError(
+            f"n_harmonics={H} with n_time={N} needs dense ({N} x {2 * H + 1}) Fourier operators of "
+            f"{8 * (2 * H + 1) * N / 2**30:.3g} GiB (more than {8 * _MAX_DENSE / 2**30:.0f} GiB); "
+            "reduce n_harmonics or n_time"
+        )
+    return N
+
+
+def _harmonic_numbers(k, lowest: int, H: int) -> np.ndarray:
+    """``k`` as an integer array, checked to lie in ``[lowest, H]``."""
+    k_arr = np.asarray(k)
+    if k_arr.dtype.kind not in "iu":
+        raise TypeError(f"harmonic number must be an integer, got {k!r}")
+    if np.any(k_arr < lowest) or np.any(k_arr > H):
+        raise ValueError(f"harmonic number must lie in [{lowest}, {H}], got {k!r}")
+    return k_arr
+
+
+def _basis(h: Harmonics, theta) -> np.ndarray:
+    """Basis functions ``[1, cos theta, sin theta, ...]`` of ``h`` at the phases ``theta``, shape
+    ``theta.shape + (n_coef,)``."""
+    theta = np.asarray(theta, dtype=float)
+    arg = theta[..., None] * h.harmonic_of
+    return np.where(h.is_sine, np.sin(arg), np.cos(arg))
+
+
 class Harmonics:
     r"""Truncated real Fourier basis with ``H`` harmonics of the base frequency ``omega/nu``.
 
@@ -131,25 +175,7 @@ class Harmonics:
             raise ValueError("n_harmonics must be >= 1 (a periodic solution needs at least the fundamental), got 0; "
                              "for static equilibria with contact use femodes.static_contact")
         nu = check_int("subharmonic", subharmonic, 1)
-        if n_time is None:
-            if (2 * H + 1) * (4 * H + 1) > _MAX_DENSE:  # before next_fast_len, which fails for huge H
-                raise ValueError(
-                    f"n_harmonics={H} needs dense ({4 * H + 1} x {2 * H + 1}) Fourier operators of more than "
-                    f"{8 * _MAX_DENSE / 2**30:.0f} GiB; reduce n_harmonics"
-                )
-            N = int(next_fast_len(4 * H + 1, real=True))
-        else:
-            N = check_int("n_time", n_time, 1)
-            if N < 2 * H + 1:
-                raise ValueError(
-                    f"n_time must be >= 2*n_harmonics + 1 = {2 * H + 1}, got {n_time!r}"
-                )
-        if (2 * H + 1) * N > _MAX_DENSE:
-            raise ValueError(
-                f"n_harmonics={H} with n_time={N} needs dense ({N} x {2 * H + 1}) Fourier operators of "
-                f"{8 * (2 * H + 1) * N / 2**30:.3g} GiB (more than {8 * _MAX_DENSE / 2**30:.0f} GiB); "
-                "reduce n_harmonics or n_time"
-            )
+        N = _time_samples(H, n_time)
         object.__setattr__(self, "_H", H)
         object.__setattr__(self, "_N", N)
         object.__setattr__(self, "_nu", nu)
@@ -209,14 +235,6 @@ class Harmonics:
         return self.n_coef * check_int("n", n, 0)
 
     # ----------------------------------------------------------------- layout
-    def _check_harmonics(self, k, lowest) -> np.ndarray:
-        k_arr = np.asarray(k)
-        if k_arr.dtype.kind not in "iu":
-            raise TypeError(f"harmonic number must be an integer, got {k!r}")
-        if np.any(k_arr < lowest) or np.any(k_arr > self._H):
-            raise ValueError(f"harmonic number must lie in [{lowest}, {self._H}], got {k!r}")
-        return k_arr
-
     def cos_index(self, k: int) -> int:
         """Row of ``c_k`` (``k = 0`` gives the mean ``c0`` at row 0): ``max(2k - 1, 0)``; one
         harmonic ``k`` in ``[0, H]`` (several: :meth:`cos_rows`)."""
@@ -228,11 +246,11 @@ class Harmonics:
 
     def cos_rows(self, ks) -> np.ndarray:
         """Rows of ``c_k`` for an integer array ``ks`` in ``[0, H]`` (an array of the same shape)."""
-        return np.maximum(2 * self._check_harmonics(ks, 0) - 1, 0)
+        return np.maximum(2 * _harmonic_numbers(ks, 0, self._H) - 1, 0)
 
     def sin_rows(self, ks) -> np.ndarray:
         """Rows of ``s_k`` for an integer array ``ks`` in ``[1, H]``."""
-        return 2 * self._check_harmonics(ks, 1)
+        return 2 * _harmonic_numbers(ks, 1, self._H)
 
     @property
     def harmonic_of(self) -> np.ndarray:
@@ -365,11 +383,6 @@ class Harmonics:
         return float(theta[int(np.argmax(gaps.min(axis=1)))])
 
     # -------------------------------------------------------------- operators
-    def _basis(self, theta):
-        theta = np.asarray(theta, dtype=float)
-        arg = theta[..., None] * self.harmonic_of
-        return np.where(self.is_sine, np.sin(arg), np.cos(arg))
-
     def synthesis(self, theta=None) -> np.ndarray:
         r"""Synthesis matrix ``E`` with rows :math:`[1, \cos\theta_j, \sin\theta_j, \dots]`.
 
@@ -384,15 +397,15 @@ class Harmonics:
         ndarray, shape ``(len(theta), n_coef)``
         """
         if theta is None:
-            return self.memo("E", lambda: _readonly(self._basis(self.phases())))
+            return self.memo("E", lambda: _readonly(_basis(self, self.phases())))
         theta = np.asarray(theta, dtype=float)
         if theta.ndim != 1:
             raise ValueError(f"theta must be 1-D, got shape {theta.shape}")
-        return self._basis(theta)
+        return _basis(self, theta)
 
     def grid_operators(self, N):
         """Discrete projection on ``N`` equidistant phases (``N >= 2H+1``)."""
-        E = self._basis(_TWO_PI * np.arange(N) / N)
+        E = _basis(self, _TWO_PI * np.arange(N) / N)
         w = np.where(self.harmonic_of == 0, 1.0 / N, 2.0 / N)
         return E, w[:, None] * E.T
 
@@ -441,7 +454,7 @@ class Harmonics:
         self.check_coef(Q, "Q")
         t = np.asarray(t, dtype=float)
         theta = t * (float(omega) / self._nu)
-        return self._basis(theta) @ Q
+        return _basis(self, theta) @ Q
 
     def derivative(self, omega: float) -> np.ndarray:
         r"""Time-derivative operator ``D``: coefficients of ``du/dt`` are ``D @ Q``.

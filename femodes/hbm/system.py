@@ -13,7 +13,8 @@ operator at ``w = 1``, ``x`` the Kronecker product) block diagonal over harmonic
 damping ``C = C_sparse + U diag(d) U^T``: the low-rank part is applied as such, never assembled
 on the residual/Jacobian/solver paths; only the Kronecker operators ``A1``/``IC`` of the
 assembled checks and Hill's method use the assembled matrix), and the
-nonlinear terms living only on the rows/columns of the nonlinear DOFs. The positive part is
+nonlinear terms living only on the rows/columns of the nonlinear DOFs
+(:mod:`femodes.hbm.nonlinear_forces`). The positive part is
 projected *exactly* (integration between the sign changes of the trigonometric polynomial,
 :meth:`Harmonics.positive_part`): sampling it makes the map piecewise linear with jumps and
 semismooth Newton cycles (a sampled continuation of the 1-DOF contact case of Shi & Legrand
@@ -24,7 +25,6 @@ stalls near its resonance, where the exact one runs through both folds). Cubic s
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -39,6 +39,7 @@ from ..solvers.checks import check_memory
 from .linsolve import (DEFAULT_OPTIONS, BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure,
                        build_pattern, solver_memory)
 from .linsolve.lowrank import split_lowrank
+from .nonlinear_forces import ComplementarityContact, NonlinearForces, Triplets
 from .positive_part import ExactProjection
 
 __all__ = ["HBMSystem", "default_contact_parameter", "default_contact_parameters"]
@@ -89,50 +90,54 @@ def default_contact_parameters(model: StructuralModel, dofs) -> np.ndarray:
     return out
 
 
-@dataclass(frozen=True)
-class _Contact:
-    law: UnilateralContact
-    dof: int
-    c: float
-    slot: int  # position among complementarity contacts
+def _forcing_coefficients(h: Harmonics, model: StructuralModel) -> np.ndarray:
+    """Galerkin coefficients ``(n_coef, n_dofs)`` of the forcing of ``model``; the forcing harmonic
+    ``k`` sits at Fourier row ``k nu``."""
+    F = np.zeros((h.n_coef, model.n_dofs))
+    nu, H = h.subharmonic, h.n_harmonics
+    for k, vec in model.force_vectors().items():
+        kk = k * nu
+        if kk > H:
+            raise ValueError(
+                f"forcing at harmonic {k} needs n_harmonics >= {kk} (subharmonic={nu}), got {H}"
+            )
+        if kk == 0:
+            F[0] += vec.real
+        else:
+            F[h.cos_index(kk)] += vec.real
+            F[h.sin_index(kk)] -= vec.imag  # cos(kwt + phi) = cos phi cos - sin phi sin
+    return F
 
 
-class _Triplets:
-    """Dense blocks of the nonlinear Jacobian ``N``, gathered as COO triplets."""
+def _check_memory(harmonics: Harmonics, n_nonlinear: int, n_uc: int, n_aft: int, rank: int, block: bool) -> None:
+    """Refuse, before anything large is allocated, a problem whose dense Schur complement and
+    Fourier operators (:func:`~femodes.hbm.linsolve.solver_memory`) exceed the memory available:
+    ``n_nonlinear`` nonlinear DOFs, ``n_uc`` complementarity contacts, ``n_aft`` signals sampled
+    in time, a low-rank damping of rank ``rank``, the block solver if ``block``."""
+    nc = harmonics.n_coef
+    n_p = nc * n_uc
+    need = solver_memory(nc, harmonics.n_time, n_nonlinear, n_p, rank, n_aft=n_aft, block=block)
+    n_nl = n_nonlinear
+    check_memory(need, f"harmonics: H = {harmonics.n_harmonics} with {n_nl} nonlinear DOF{'s' * (n_nl != 1)} "
+                       f"({n_uc} complementarity contact{'s' * (n_uc != 1)}) gives a dense Schur "
+                       f"complement of size {nc * (n_nl + rank) + n_p + 2} whose factorisation",
+                 "use fewer harmonics (it grows as H^2) or fewer contact nodes (a coarser mesh along the contact "
+                 "boundary)" + (", and Rayleigh instead of modal damping (its modes join the complement)" if rank
+                                else ""))
 
-    def __init__(self):
-        self.rows: list = []
-        self.cols: list = []
-        self.vals: list = []
 
-    def block(self, ri, ci, B) -> None:
-        rr, cc = np.meshgrid(ri, ci, indexing="ij")
-        self.entries(rr, cc, B)
-
-    def entries(self, rows, cols, vals) -> None:
-        """Entries ``vals`` at ``(rows, cols)`` (arrays of one shape)."""
-        self.rows.append(np.ravel(rows))
-        self.cols.append(np.ravel(cols))
-        self.vals.append(np.ravel(vals))
-
-    def matrix(self, size: int, cache: dict | None = None) -> sp.csr_matrix:
-        """The sparse ``size x size`` matrix (duplicates summed). With ``cache`` (a dict kept by
-        the caller), the CSR pattern of the last call is reused when the rows and columns are the
-        same, as they are at every evaluation of one system: the values are summed into it by one
-        ``bincount`` (measured 16 us against 140 us for the COO conversion with 3400 entries)."""
-        if not self.rows:
-            return sp.csr_matrix((size, size))
-        rows, cols, vals = np.concatenate(self.rows), np.concatenate(self.cols), np.concatenate(self.vals)
-        if cache is None:
-            return sp.csr_matrix((vals, (rows, cols)), shape=(size, size))
-        pat = cache.get("triplets")
-        if pat is None or pat[0] != size or not (np.array_equal(pat[1], rows) and np.array_equal(pat[2], cols)):
-            linear, slot = np.unique(rows.astype(np.int64) * size + cols, return_inverse=True)
-            indptr = np.searchsorted(linear // size, np.arange(size + 1))
-            pat = cache["triplets"] = (size, rows, cols, slot.reshape(-1), linear % size, indptr)
-        _, _, _, slot, indices, indptr = pat
-        data = np.bincount(slot, weights=vals, minlength=indices.size)
-        return sp.csr_matrix((data, indices.copy(), indptr.copy()), shape=(size, size))
+def _solve_linear_lsqr(stiffness: CoefficientStiffness, R: np.ndarray, omega: float) -> np.ndarray:
+    """Least-squares ``S(w) q = R`` (a singular harmonic block): on the assembled operator, or
+    with a low-rank damping on ``[[S_sparse, B], [I x U^T, -I]] [q; y] = [R; 0]``."""
+    border = stiffness.lowrank_border(omega)
+    if border is None:
+        return spla.lsqr(stiffness.operator(omega), R.ravel())[0].reshape(R.shape)
+    B, Ur = border
+    S = stiffness.operator(omega, lowrank=False)
+    m = Ur.shape[0]
+    A = sp.bmat([[S, B], [Ur, -sp.identity(m)]], format="csr")
+    rhs = np.concatenate([R.ravel(), np.zeros(m)])
+    return spla.lsqr(A, rhs, atol=1e-14, btol=1e-14)[0][: R.size].reshape(R.shape)
 
 
 class HBMSystem:
@@ -174,14 +179,14 @@ class HBMSystem:
         self.solver_options = self.solver.options if isinstance(self.solver, BlockSolver) else DEFAULT_OPTIONS
         n, nc = model.n_dofs, harmonics.n_coef
         self.n = n
-        self.unilateral: list[_Contact] = []
+        self.unilateral: list[ComplementarityContact] = []
         self.penalty: list = []
         needs = [a.dof for a in model.contacts if isinstance(a.item, UnilateralContact) and a.item.c is None]
         defaults = dict(zip(needs, default_contact_parameters(model, needs)))
         for a in model.contacts:
             if isinstance(a.item, UnilateralContact):
                 c = a.item.c if a.item.c is not None else float(defaults[a.dof])
-                self.unilateral.append(_Contact(a.item, a.dof, c, len(self.unilateral)))
+                self.unilateral.append(ComplementarityContact(a.item, a.dof, c, len(self.unilateral)))
             elif isinstance(a.item, PenaltyContact):
                 self.penalty.append((a.item, a.dof))
         self.cubic = [(a.item, a.dof) for a in model.nonlinearities if isinstance(a.item, CubicSpring)]
@@ -189,12 +194,14 @@ class HBMSystem:
         self.nq = nc * n
         self.np = nc * self.n_uc
         self.size = self.nq + self.np
-        self._check_memory(model, harmonics)
+        lr = model.C_lowrank
+        nonlinear = {ct.dof for ct in self.unilateral} | {d for _, d in self.penalty} | {d for _, d in self.cubic}
+        _check_memory(harmonics, len(nonlinear), self.n_uc, 3 * self.n_uc + len(self.penalty) + len(self.cubic),
+                      int(lr.rank) if lr is not None and lr.rank else 0, isinstance(self.solver, BlockSolver))
         self.D1 = sp.csr_matrix(np.asarray(harmonics.derivative_domega()))
         self.M, self.K, self.C = model.M.tocsr(), model.K.tocsr(), model.C.tocsr()
         # modal damping: the low-rank part U diag(d) U^T of the damping, never assembled on the
         # fast paths (residual, Jacobian products, block solver); C above is the sparse part
-        lr = model.C_lowrank
         self.C_lr = lr if lr is not None and lr.rank else None
         #: the dynamic stiffness S(w) on the coefficients (femodes.dynamic_stiffness): every
         #: linear operator of the harmonic balance comes from it
@@ -210,25 +217,10 @@ class HBMSystem:
         # DOFs see the block-diagonal linear operator only (see femodes.hbm.linsolve)
         self.nonlinear_dofs = np.unique(np.array(
             [ct.dof for ct in self.unilateral] + [d for _, d in self.penalty] + [d for _, d in self.cubic], dtype=int))
+        #: the contact and nonlinear terms of the residual, the Jacobian and the energy
+        self.nonlinear = NonlinearForces(harmonics, n, self.unilateral, self.penalty, self.cubic, self.projection,
+                                         self.E, self.Pa)
         self._cache: dict = {}
-
-    def _check_memory(self, model: StructuralModel, harmonics: Harmonics) -> None:
-        """Refuse, before anything large is allocated, a problem whose dense Schur complement and
-        Fourier operators (:func:`~femodes.hbm.linsolve.solver_memory`) exceed the memory available."""
-        nonlinear = {ct.dof for ct in self.unilateral} | {d for _, d in self.penalty} | {d for _, d in self.cubic}
-        lr = model.C_lowrank
-        rank = int(lr.rank) if lr is not None and lr.rank else 0
-        nc = harmonics.n_coef
-        need = solver_memory(nc, harmonics.n_time, len(nonlinear), self.np, rank,
-                             n_aft=3 * self.n_uc + len(self.penalty) + len(self.cubic),
-                             block=isinstance(self.solver, BlockSolver))
-        n_nl = len(nonlinear)
-        check_memory(need, f"harmonics: H = {harmonics.n_harmonics} with {n_nl} nonlinear DOF{'s' * (n_nl != 1)} "
-                           f"({self.n_uc} complementarity contact{'s' * (self.n_uc != 1)}) gives a dense Schur "
-                           f"complement of size {nc * (n_nl + rank) + self.np + 2} whose factorisation",
-                     "use fewer harmonics (it grows as H^2) or fewer contact nodes (a coarser mesh along the contact "
-                     "boundary)" + (", and Rayleigh instead of modal damping (its modes join the complement)" if rank
-                                    else ""))
 
     # Kronecker-product operators (n_coef n x n_coef n) of the dynamic stiffness: built only on
     # demand (assembled Jacobian, comparisons, Hill's method); the residual and the structured
@@ -346,20 +338,7 @@ class HBMSystem:
         With ``subharmonic = nu`` the forcing harmonic ``k`` sits at Fourier row ``k nu``.
         """
         if self._F is None:
-            F = np.zeros((self.h.n_coef, self.n))
-            nu, H = self.h.subharmonic, self.h.n_harmonics
-            for k, vec in self.model.force_vectors().items():
-                kk = k * nu
-                if kk > H:
-                    raise ValueError(
-                        f"forcing at harmonic {k} needs n_harmonics >= {kk} (subharmonic={nu}), got {H}"
-                    )
-                if kk == 0:
-                    F[0] += vec.real
-                else:
-                    F[self.h.cos_index(kk)] += vec.real
-                    F[self.h.sin_index(kk)] -= vec.imag  # cos(kwt + phi) = cos phi cos - sin phi sin
-            self._F = F.ravel()
+            self._F = _forcing_coefficients(self.h, self.model).ravel()
         return self._F
 
     # -- residual ---------------------------------------------------------------------------
@@ -401,21 +380,8 @@ class HBMSystem:
                     z = low_rank_solver(lu.solve, U, self.stiffness.Z.lowrank_gain(f), U)(rhs)[:, 0]
                 out[c], out[si] = z.real, -z.imag
         except StructureFailure:
-            out = self._solve_linear_lsqr(R, omega)
+            out = _solve_linear_lsqr(self.stiffness, R, omega)
         return out.ravel()
-
-    def _solve_linear_lsqr(self, R: np.ndarray, omega: float) -> np.ndarray:
-        """Least-squares ``S(w) q = R`` (a singular harmonic block): on the assembled operator, or
-        with a low-rank damping on ``[[S_sparse, B], [I x U^T, -I]] [q; y] = [R; 0]``."""
-        border = self.lowrank_border(omega)
-        if border is None:
-            return spla.lsqr(self.linear_operator(omega), R.ravel())[0].reshape(R.shape)
-        B, Ur = border
-        S = self.stiffness.operator(omega, lowrank=False)
-        m = Ur.shape[0]
-        A = sp.bmat([[S, B], [Ur, -sp.identity(m)]], format="csr")
-        rhs = np.concatenate([R.ravel(), np.zeros(m)])
-        return spla.lsqr(A, rhs, atol=1e-14, btol=1e-14)[0][: R.size].reshape(R.shape)
 
     def residual(self, x: np.ndarray, omega: float, *, xi: float = 0.0, forced: bool = True):
         """Residual, Jacobian, ``dr/dw`` and ``dr/dxi`` (artificial damping ``-xi M q'``).
@@ -429,11 +395,8 @@ class HBMSystem:
         """
         Q = x[: self.nq].reshape(self.h.n_coef, self.n)
         r, dr_domega, dr_dxi = self._linear_residual(Q, omega, xi, forced)
-        jac = _Triplets()
-        self._cubic_springs(Q, r, jac)
-        self._penalty_contacts(Q, r, jac)
-        if self.n_uc:
-            self._complementarity_contacts(x, Q, r, jac)
+        jac = Triplets()
+        self.nonlinear.add(x, Q, r, jac)
         N = jac.matrix(self.size, self._cache)
         return r, HarmonicBlockJacobian(self, omega, xi, N), dr_domega, dr_dxi
 
@@ -451,72 +414,6 @@ class HBMSystem:
         if forced:
             r[:nq] -= self.force()
         return r, dr_domega, dr_dxi
-
-    def _cubic_springs(self, Q: np.ndarray, r: np.ndarray, jac: _Triplets) -> None:
-        """Cubic springs by alias-free sampling: add their forces to ``r`` and Jacobians to ``jac``."""
-        for law, dof in self.cubic:
-            U = Q[:, dof]
-            ut = self.E @ U
-            f, df = law.force(ut)
-            idx = self.q_index(dof)
-            r[idx] += self.Pa @ f
-            jac.block(idx, idx, self.Pa @ (df[:, None] * self.E))
-
-    def _penalty_contacts(self, Q: np.ndarray, r: np.ndarray, jac: _Triplets) -> None:
-        """Penalty contacts by the projected positive part: forces into ``r``, Jacobians into ``jac``."""
-        for law, dof in self.penalty:
-            # the law is slope * max(0, u - offset): project the positive part of u - offset
-            slope, offset = law.positive_part_form()
-            phi = Q[:, dof].copy()
-            phi[0] -= offset
-            proj, G = self._positive_one(phi)
-            idx = self.q_index(dof)
-            r[idx] += slope * proj
-            jac.block(idx, idx, slope * G)
-
-    def _complementarity_contacts(self, x: np.ndarray, Q: np.ndarray, r: np.ndarray, jac: _Triplets) -> None:
-        """Signorini contacts by complementarity: contact forces on the structure rows and the
-        equations ``P - proj[max(0, P + c U_c - c g0)] = 0`` on the contact-force rows (all
-        contacts at once)."""
-        nq, L = self.nq, self.h.n_coef
-        P = x[nq : self.size].reshape(L, self.n_uc)
-        dofs, slopes, offsets, Qi, Pi = self._contact_tables()
-        # the law is p - max(0, p + slope (u - offset)), slope = c
-        phis = P + slopes * Q[:, dofs]
-        phis[0] -= slopes * offsets
-        proj, G = self._positive(phis)
-        # contact force acts on the structure along -w_c: +p in the residual of K q = f - p (one
-        # contact per DOF, StructuralModel.with_contact: no repeated index in Qi)
-        r[Qi] += P
-        r[Pi] = P - proj
-        jac.entries(Qi.ravel(), Pi.ravel(), np.ones(Qi.size))
-        rows = np.broadcast_to(Pi.T[:, :, None], G.shape)
-        jac.entries(rows, np.broadcast_to(Pi.T[:, None, :], G.shape), np.eye(L) - G)
-        jac.entries(rows, np.broadcast_to(Qi.T[:, None, :], G.shape), -slopes[:, None, None] * G)
-
-    def _contact_tables(self):
-        """Per complementarity contact (by slot): DOF, slope ``c`` and offset of the law's positive
-        part, and the global indices ``(n_coef, n_uc)`` of its displacement and force coefficients."""
-        def build():
-            order = sorted(self.unilateral, key=lambda ct: ct.slot)
-            forms = [ct.law.positive_part_form(ct.c) for ct in order]
-            dofs = np.array([ct.dof for ct in order], dtype=np.intp)
-            rows = np.arange(self.h.n_coef)[:, None]
-            Qi = self.h.global_index(rows, dofs, self.n)
-            Pi = self.nq + self.h.global_index(rows, np.arange(self.n_uc), self.n_uc)
-            return (dofs, np.array([f[0] for f in forms], dtype=float), np.array([f[1] for f in forms], dtype=float),
-                    Qi, Pi)
-        if "contacts" not in self._cache:
-            self._cache["contacts"] = build()
-        return self._cache["contacts"]
-
-    def _positive(self, phis):
-        """Projection of ``max(0, .)`` of the columns of ``phis`` (n_coef, m): (n_coef, m), (m, n_coef, n_coef)."""
-        return self.projection(self.h, phis)
-
-    def _positive_one(self, phi):
-        proj, G = self.projection(self.h, phi[:, None])
-        return proj[:, 0], G[0]
 
     # -- energy -----------------------------------------------------------------------------
     def energy(self, x: np.ndarray, omega: float) -> tuple[float, np.ndarray, float]:
@@ -536,19 +433,5 @@ class HBMSystem:
         pe = 0.5 * float(np.sum(w * Q * KQ))
         grad = np.zeros(self.size)
         grad[:nq] = ((omega * omega) * (self.D1.T @ (w * MV)) + w * KQ).ravel()
-        N = h.n_time
-        for law, dof in self.cubic:
-            ut = self.E @ Q[:, dof]
-            pe += float(np.mean(law.potential(ut)))
-            f, _ = law.force(ut)
-            grad[self.q_index(dof)] += (f @ self.E) / N
-        for law, dof in self.penalty:
-            # potential slope/2 max(0, u - offset)^2, projected exactly: <max(0, phi)^2> = phi.W G phi
-            slope, offset = law.positive_part_form()
-            phi = Q[:, dof].copy()
-            phi[0] -= offset
-            _, G = self._positive_one(phi)
-            WG = self.w[:, None] * G
-            pe += 0.5 * slope * phi @ WG @ phi
-            grad[self.q_index(dof)] += slope * (WG @ phi)
+        pe = self.nonlinear.add_energy(Q, pe, grad)
         return float(ke + pe), grad, float(2.0 * ke / omega) if omega else 0.0

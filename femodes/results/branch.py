@@ -11,13 +11,12 @@ import numpy as np
 from ..hbm.harmonics import Harmonics
 from ..store import RECORD_SUFFIXES, model_signature, signature_differences, write_record
 from .bifurcation import Bifurcation
+from .branch_record import FORMAT_VERSION, branch_arrays, branch_header
 from .contacts import ContactInfo, contact_differences, contact_quality
 from .error_estimate import ErrorEstimate
 from .solution import PeriodicSolution
 
 __all__ = ["Branch", "FORMAT_VERSION"]
-
-FORMAT_VERSION = 1
 
 
 class Branch:
@@ -290,47 +289,6 @@ class Branch:
         return (f"Branch({self.kind}, {len(self)} points, omega in [{self.omega.min() if len(self) else np.nan:.6g}, "
                 f"{self.omega.max() if len(self) else np.nan:.6g}], folds={list(self.folds)}, success={self.success})")
 
-    # -- persistence -------------------------------------------------------------------------
-    def _arrays(self) -> dict:
-        out = {
-            # "omega": the answer (converged where an error estimate gives it), "omega_truncated": the
-            # frequencies of the series Q, P (older files have only "omega", which was those)
-            "omega": self.omega, "omega_truncated": self.omega_truncated, "Q": self.Q, "P": self.P,
-            "energy": self.energy, "xi": self.xi,
-            "residual_norm": self.residual_norm, "nit": self.nit, "parameter": self.parameter,
-            "folds": np.asarray(self.folds, dtype=int),
-        }
-        if self.accuracy is not None:
-            out.update({f"accuracy_{k}": v for k, v in self.accuracy.arrays().items()})
-        if self.stable is not None and self.multipliers is not None:  # set together (set_stability)
-            bifs = self._bifurcations  # at their series' frequencies (load applies the correction again)
-            out.update({
-                "stable": self.stable.astype(np.int8), "multipliers_re": self.multipliers.real,
-                "multipliers_im": self.multipliers.imag,
-                "bif_index": np.asarray([b.index for b in bifs], dtype=int),
-                "bif_real": np.asarray([[b.omega, b.energy, b.parameter, b.multiplier.real, b.multiplier.imag, b.xi]
-                                        for b in bifs], dtype=float).reshape(len(bifs), 6),
-                "bif_Q": np.asarray([b.Q for b in bifs], dtype=float).reshape((len(bifs),) + self.Q.shape[1:]),
-                "bif_P": np.asarray([b.P for b in bifs], dtype=float).reshape((len(bifs),) + self.P.shape[1:]),
-                "bif_bracket": np.asarray([b.bracket for b in bifs], dtype=float).reshape(len(bifs), 2),
-            })
-        return out
-
-    def _header(self) -> dict:
-        return {
-            "format": "femodes.Branch", "version": FORMAT_VERSION, "kind": self.kind,
-            "harmonics": [self.harmonics.n_harmonics, self.harmonics.n_time, self.harmonics.subharmonic],
-            "contacts": self.contacts.to_json(), "success": self.success, "status": self.status,
-            "message": self.message, "meta": self.meta,
-            "model": model_signature(self.model) if self.model is not None else self.model_signature,
-            "accuracy": None if self.accuracy is None else {
-                "method": [str(m) for m in self.accuracy.method], "rtol": self.accuracy.rtol,
-                "mesh_method": self.accuracy.mesh_method, "caveat": self.accuracy.caveat},
-            "stability": None if self.stable is None or self.stability_method is None else {
-                "methods": [str(m) for m in self.stability_method], "kinds": [b.kind for b in self.bifurcations],
-                "located": [bool(b.located) for b in self.bifurcations]},
-        }
-
     def save(self, path) -> Path:
         """Write the branch atomically to ``.npz`` or ``.h5``/``.hdf5`` (needs h5py)."""
         path = Path(path)
@@ -338,5 +296,6 @@ class Branch:
         suffix = path.suffix.lower()
         if suffix not in RECORD_SUFFIXES:
             raise ValueError(f"Branch.save: use a .npz or .h5 file name, got {str(path)!r}")
-        write_record(path, self._header(), self._arrays())  # atomic: never a half-written file under `path`
+        # atomic: never a half-written file under `path`; the bifurcations at their series' frequencies
+        write_record(path, branch_header(self), branch_arrays(self, self._bifurcations))
         return path

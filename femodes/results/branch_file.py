@@ -18,8 +18,8 @@ __all__ = ["load_branch"]
 
 
 
-#: What a branch file holds (:meth:`Branch._header`, :meth:`Branch._arrays`): header fields and
-#: their types, and the arrays over the points with their number of dimensions.
+#: What a branch file holds (:func:`.branch_record.branch_header`, :func:`.branch_record.branch_arrays`):
+#: header fields and their types, and the arrays over the points with their number of dimensions.
 _HEADER_FIELDS = {"kind": str, "harmonics": list, "contacts": dict, "success": bool, "status": int, "message": str}
 _CONTACT_FIELDS = ("kinds", "dofs", "gaps", "stiffness", "slots", "c")
 _POINT_ARRAYS = {"omega": 1, "Q": 3, "P": 3, "energy": 1, "xi": 1, "residual_norm": 1, "nit": 1, "parameter": 1}

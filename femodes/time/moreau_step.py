@@ -29,11 +29,12 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from ..laws import CubicSpring, PenaltyContact, UnilateralContact
+from ..laws import PenaltyContact, UnilateralContact
 from ..model import StructuralModel, low_rank_solver
 from ..sparse_direct import factorize
 from ..solvers import NewtonOptions, semismooth_newton
 from .impact import ImpactLaw, fischer_burmeister, solve_lcp
+from .smooth_laws import SmoothLaws
 
 __all__ = ["Stepper", "LOCAL_NEWTON", "DENSE_LIMIT", "solve_or_lstsq"]
 
@@ -88,6 +89,47 @@ def _massless_dofs(M: sp.csr_matrix) -> np.ndarray:
 _SINGULAR = "model: the iteration matrix M + h theta C + h^2 theta^2 K is singular"
 
 
+def _iteration_solver(M, K, C, h: float, th: np.ndarray, C_lr, dense: bool):
+    """The iteration matrix ``A = M + h Theta C + h^2 Theta K Theta``: ``(solve, Ainv)`` with
+    ``solve(r) = A^{-1} r``, by the dense inverse ``Ainv`` (small models) or a sparse LU (``Ainv``
+    None). A low-rank damping part ``C_lr`` adds ``(h Theta U) diag(d) U^T`` to the sparse ``A``:
+    Woodbury (:func:`low_rank_solver`)."""
+    Th = sp.diags(th)
+    A = (M + h * (Th @ C) + h * h * (Th @ K @ Th)).tocsc()
+    if dense:
+        Ad = A.toarray()
+        try:
+            Ainv = np.linalg.inv(Ad)
+        except np.linalg.LinAlgError as exc:
+            raise ValueError(f"{_SINGULAR} (a massless DOF without stiffness?)") from exc
+        if not np.all(np.isfinite(Ainv)) or np.linalg.cond(Ad) > 1e15:
+            raise ValueError(_SINGULAR)
+        return (lambda r: Ainv @ r), Ainv
+    try:
+        lu = factorize(A, positive_definite=True)
+    except RuntimeError as exc:
+        raise ValueError(f"{_SINGULAR} (a massless DOF without stiffness?)") from exc
+    if C_lr is None:
+        return lu.solve, None
+    U = C_lr.U
+    return low_rank_solver(lu.solve, h * th[:, None] * U, C_lr.d, U), None
+
+
+def _propagators(h: float, th: np.ndarray, Ai: np.ndarray, Kd: np.ndarray, Cd: np.ndarray, fidx: np.ndarray,
+                 Z: np.ndarray):
+    """Dense propagators ``(Phi, Gam, Psi)`` of the state ``x = [q; v]``: free step
+    ``x_f = Phi x + Gam f_theta``, correction ``Psi lam``."""
+    n = th.size
+    Dq = -h * (Ai @ Kd)
+    Dv = -(Ai @ ((h * h) * th[:, None] * Kd + h * Cd))
+    I = np.eye(n)
+    Phi = np.block([[I + h * th[:, None] * Dq, h * I + h * th[:, None] * Dv], [Dq, I + Dv]])
+    G = h * Ai[:, fidx]
+    Gam = np.vstack([h * th[:, None] * G, G])
+    Psi = np.vstack([h * th[:, None] * Z, Z])
+    return Phi, Gam, Psi
+
+
 class Stepper:
     """Precomputed operators of the Moreau-Jean step for a fixed ``h`` (module docstring).
 
@@ -115,7 +157,10 @@ class Stepper:
         self.massless = _massless_dofs(M)
         # massless rows are algebraic: theta = 1 there (the trapezoidal rule would carry (-1)^k)
         self.th = np.where(self.massless, 1.0, theta)
-        self._factorize(M, K, C)
+        self.dense = self.n <= DENSE_LIMIT
+        self.has_C = C.nnz > 0 or self.C_lr is not None
+        self.M, self.K, self.C = (M.toarray(), K.toarray(), C.toarray()) if self.dense else (M, K, C)
+        self.solve, self.Ainv = _iteration_solver(M, K, C, h, self.th, self.C_lr, self.dense)
         self._forcing(model, omega)
         contacts = list(model.contacts)
         self._local_dofs(model, contacts)
@@ -128,39 +173,9 @@ class Stepper:
         self.P_prev = self.no_impulse  # warm start of the next complementarity problem
         self.lam_prev = None  # warm start of the next smooth-only local problem (None: from lam = 0)
         if self.dense:
-            self._propagators()
+            self.Phi, self.Gam, self.Psi = _propagators(h, self.th, self.Ainv, self.K, self.C, self.fidx, self.Z)
 
     # -- construction, step by step ---------------------------------------------------------------
-    def _factorize(self, M, K, C) -> None:
-        """The iteration matrix ``A = M + h Theta C + h^2 Theta K Theta``: dense inverse (small
-        models) or sparse LU; ``self.solve(r) = A^{-1} r``. A low-rank damping part adds
-        ``(h Theta U) diag(d) U^T`` to the sparse ``A``: Woodbury (:func:`low_rank_solver`)."""
-        h, n = self.h, self.n
-        Th = sp.diags(self.th)
-        A = (M + h * (Th @ C) + h * h * (Th @ K @ Th)).tocsc()
-        self.dense = n <= DENSE_LIMIT
-        self.has_C = C.nnz > 0 or self.C_lr is not None
-        if self.dense:
-            self.M, self.K, self.C = M.toarray(), K.toarray(), C.toarray()
-            Ad = A.toarray()
-            try:
-                self.Ainv = np.linalg.inv(Ad)
-            except np.linalg.LinAlgError as exc:
-                raise ValueError(f"{_SINGULAR} (a massless DOF without stiffness?)") from exc
-            if not np.all(np.isfinite(self.Ainv)) or np.linalg.cond(Ad) > 1e15:
-                raise ValueError(_SINGULAR)
-            self.solve = lambda r: self.Ainv @ r
-        else:
-            self.M, self.K, self.C = M, K, C
-            try:
-                lu = factorize(A, positive_definite=True)
-            except RuntimeError as exc:
-                raise ValueError(f"{_SINGULAR} (a massless DOF without stiffness?)") from exc
-            self.solve = lu.solve
-            if self.C_lr is not None:
-                U = self.C_lr.U
-                self.solve = low_rank_solver(lu.solve, h * self.th[:, None] * U, self.C_lr.d, U)
-
     def _forcing(self, model: StructuralModel, omega: float | None) -> None:
         """Harmonic forcing ``f0 + Re sum_k F_k e^{i k omega t}`` restricted to the forced DOFs."""
         fv = model.force_vectors()
@@ -173,34 +188,21 @@ class Stepper:
         self.thf = self.th[self.fidx]
 
     def _local_dofs(self, model: StructuralModel, contacts: list) -> None:
-        """The local DOFs ``S`` (contacts and smooth laws) and the smooth laws on them.
-
-        Each kind of smooth law is evaluated at once by its stacked law (femodes.laws):
-        ``smooth_laws`` holds (stacked law, local positions, whether a position repeats) per kind;
-        the positions are a slice when contiguous (a view: :meth:`smooth_force` runs in every
-        local Newton iteration).
-        """
+        """The local DOFs ``S`` (contacts and smooth laws) and the smooth laws on them
+        (:class:`~femodes.time.smooth_laws.SmoothLaws`; ``smooth_laws`` is its list of stacked
+        laws, local positions and whether a position repeats)."""
         smooth = [(a.item, a.dof) for a in model.nonlinearities]
         smooth += [(a.item, a.dof) for a in contacts if isinstance(a.item, PenaltyContact)]
         S = sorted({d for _, d in smooth} | {a.dof for a in contacts if isinstance(a.item, UnilateralContact)})
         self.S = np.asarray(S, dtype=int)
         self.thS = self.th[self.S]
         self.pos = {d: i for i, d in enumerate(S)}
-        cubic = sorted(((law, self.pos[d]) for law, d in smooth if isinstance(law, CubicSpring)), key=lambda ld: ld[1])
-        penalty = [(law, self.pos[d]) for law, d in smooth if isinstance(law, PenaltyContact)]
-        self.smooth_laws = []
-        for kind, group in ((CubicSpring, cubic), (PenaltyContact, penalty)):
-            if group:
-                loc = np.asarray([i for _, i in group], dtype=int)
-                if np.array_equal(loc, np.arange(loc[0], loc[0] + loc.size)):
-                    loc = slice(int(loc[0]), int(loc[0]) + loc.size)
-                repeats = not isinstance(loc, slice) and np.unique(loc).size < loc.size
-                self.smooth_laws.append((kind.stack(law for law, _ in group), loc, repeats))
+        self.smooth = SmoothLaws(smooth, self.pos, len(S))
+        self.smooth_laws = self.smooth.laws
         self.has_smooth = bool(self.smooth_laws)
-        self.smooth_everywhere = (len(self.smooth_laws) == 1 and isinstance(self.smooth_laws[0][1], slice)
-                                  and self.smooth_laws[0][1] == slice(0, len(S)))
+        self.smooth_everywhere = self.smooth.everywhere
         # what smooth_force(qS) calls: the stacked law itself when it covers every local DOF
-        self.smooth_force_fn = self.smooth_laws[0][0].force if self.smooth_everywhere else self.smooth_force
+        self.smooth_force_fn = self.smooth.force_fn
         # penalty contacts only: an open contact exerts no force, so a step that leaves them all open
         # needs no local solve
         self.penalty_only = all(isinstance(law, PenaltyContact) for law, _ in smooth)
@@ -244,42 +246,14 @@ class Stepper:
         self.uc_loc1 = int(self.uc_loc[0]) if self.single_uc else -1
         self.W1 = float(self.Wuc[0, 0]) if self.single_uc else math.nan
 
-    def _propagators(self) -> None:
-        """Dense propagators of the state ``x = [q; v]``: free step ``x_f = Phi x + Gam f_theta``,
-        correction ``Psi lam``."""
-        h, n, th = self.h, self.n, self.th
-        Ai, Kd, Cd = self.Ainv, self.K, self.C
-        Dq = -h * (Ai @ Kd)
-        Dv = -(Ai @ ((h * h) * th[:, None] * Kd + h * Cd))
-        I = np.eye(n)
-        self.Phi = np.block([[I + h * th[:, None] * Dq, h * I + h * th[:, None] * Dv], [Dq, I + Dv]])
-        G = h * Ai[:, self.fidx]
-        self.Gam = np.vstack([h * th[:, None] * G, G])
-        self.Psi = np.vstack([h * th[:, None] * self.Z, self.Z])
-
     # -- pieces ----------------------------------------------------------------------------------
     def smooth_force(self, qS: np.ndarray):
         """Local smooth forces (cubic + penalty) and derivatives on the local DOFs."""
-        if self.smooth_everywhere:  # one kind of law, one on every local DOF
-            return self.smooth_laws[0][0].force(qS)
-        f = np.zeros(qS.shape)
-        df = np.zeros(qS.shape)
-        for law, loc, repeats in self.smooth_laws:
-            fl, dfl = law.force(qS[loc])
-            if repeats:  # several laws on one DOF (cubic springs): accumulate
-                np.add.at(f, loc, fl)
-                np.add.at(df, loc, dfl)
-            else:
-                f[loc] += fl
-                df[loc] += dfl
-        return f, df
+        return self.smooth.force(qS)
 
     def smooth_potential(self, qS: np.ndarray) -> np.ndarray:
         """Potential energy of the smooth laws, ``qS`` of shape ``(..., |S|)`` -> shape ``(...)``."""
-        E = np.zeros(qS.shape[:-1])
-        for law, loc, _ in self.smooth_laws:
-            E += np.sum(law.potential(qS[..., loc]), axis=-1)
-        return E
+        return self.smooth.potential(qS)
 
     def penalty_impulse(self, q0, q1) -> np.ndarray:
         """Impulses of the penalty contacts over a step, ``h (theta p(q1) + (1 - theta) p(q0))``."""
@@ -329,7 +303,7 @@ class Stepper:
         def F(z):
             lam, Pa = z[:s], z[s:]
             Wl = W @ lam
-            fs, dfs = self.smooth_force(base_q + hth * Wl)
+            fs, dfs = self.smooth.force(base_q + hth * Wl)
             r1 = lam + hth * fs
             np.add.at(r1, loc_a, Pa)
             J = np.zeros((s + na, s + na))
