@@ -18,9 +18,9 @@ innermost entry point names it.  A frozen options dataclass names its errors wit
 that way: a helper that warns reads the name with :func:`entry_name` (the innermost entry point
 running, or ``None``).  Other exceptions (a user callback's, a failed solve's) are never renamed.
 
-A block that must be named apart uses ``with named_by("name"):``.  The ``owner=`` keyword of
-the validators (and :func:`input_error`) is deprecated-internal, kept only while modules still
-pass it: an ``owner`` given names the error at once, as before.
+A block that must be named apart uses ``with named_by("name"):``; the few ``owner`` arguments
+still accepted (``DofMap.index``, ``StructuralModel.dof`` and ``probe``, the eigen-solve) name
+their errors that way while the modules calling them move to entry points.
 
 Besides the validators: :func:`is_operator` (the duck-typed test for structured Jacobians that
 factorise themselves), :data:`LINSOLVE_ERRORS` (what a failed linear solve raises) and
@@ -56,7 +56,6 @@ __all__ = [
     "check_vector",
     "entry_name",
     "entry_point",
-    "input_error",
     "named_by",
     "inf_norm",
     "is_operator",
@@ -151,72 +150,63 @@ def named_by(name: str | None) -> Iterator[None]:
             _ENTRY.reset(token)
 
 
-def input_error(cls: type[InputError], message: str, owner: str | None = None) -> InputError:
-    """``cls(message)``, left for the entry point to name; ``owner`` (deprecated-internal, for
-    modules not yet converted) names it at once: ``"owner: message"``."""
-    exc = cls(f"{owner}: {message}" if owner else message)
-    if owner:
-        exc.entry_point = owner
-    return exc
-
-
-def check_finite(name: str, value: Any, *, owner: str | None = None) -> float:
+def check_finite(name: str, value: Any) -> float:
     """``value`` as a float: TypeError if it is not a real number, ValueError if not finite."""
     if not is_real_number(value):
-        raise input_error(InputTypeError, f"{name} must be a real number, got {show(value)}", owner)
+        raise InputTypeError(f"{name} must be a real number, got {show(value)}")
     if not math.isfinite(value):
-        raise input_error(InputValueError, f"{name} must be finite, got {show(value)}", owner)
+        raise InputValueError(f"{name} must be finite, got {show(value)}")
     return float(value)
 
 
-def check_in_range(name: str, value: Any, lo: float, hi: float, *, owner: str | None = None) -> float:
+def check_in_range(name: str, value: Any, lo: float, hi: float) -> float:
     """``value`` as a float in ``[lo, hi]`` (:func:`check_finite` first, then ValueError)."""
-    v = check_finite(name, value, owner=owner)
+    v = check_finite(name, value)
     if not lo <= v <= hi:
-        raise input_error(InputValueError, f"{name} must be in [{lo:g}, {hi:g}], got {show(value)}", owner)
+        raise InputValueError(f"{name} must be in [{lo:g}, {hi:g}], got {show(value)}")
     return v
 
 
-def check_positive(name: str, value: Any, *, owner: str | None = None) -> float:
+def check_positive(name: str, value: Any) -> float:
     """``value`` as a float; ValueError unless it is a finite real number > 0."""
     if not is_real_number(value) or not math.isfinite(value) or value <= 0:
-        raise input_error(InputValueError, f"{name} must be a positive finite number, got {show(value)}", owner)
+        raise InputValueError(f"{name} must be a positive finite number, got {show(value)}")
     return float(value)
 
 
-def check_nonnegative(name: str, value: Any, *, owner: str | None = None) -> float:
+def check_nonnegative(name: str, value: Any) -> float:
     """``value`` as a float; ValueError unless it is a finite real number >= 0."""
     if not is_real_number(value) or not math.isfinite(value) or value < 0:
-        raise input_error(InputValueError, f"{name} must be a finite number >= 0, got {show(value)}", owner)
+        raise InputValueError(f"{name} must be a finite number >= 0, got {show(value)}")
     return float(value)
 
 
-def check_int(name: str, value: Any, minimum: int, *, owner: str | None = None) -> int:
+def check_int(name: str, value: Any, minimum: int) -> int:
     """``value`` as an int; TypeError unless it is an integer (bools and integral floats are
     not), ValueError if it is below ``minimum``."""
     if not isinstance(value, numbers.Integral) or isinstance(value, (bool, np.bool_)):
-        raise input_error(InputTypeError, f"{name} must be an integer >= {minimum}, got {show(value)}", owner)
+        raise InputTypeError(f"{name} must be an integer >= {minimum}, got {show(value)}")
     if value < minimum:
-        raise input_error(InputValueError, f"{name} must be an integer >= {minimum}, got {show(value)}", owner)
+        raise InputValueError(f"{name} must be an integer >= {minimum}, got {show(value)}")
     return int(value)
 
 
-def check_bool(name: str, value: Any, *, owner: str | None = None) -> bool:
+def check_bool(name: str, value: Any) -> bool:
     """``value`` as a bool; TypeError unless it is a Python or numpy bool (0 and 1 are not)."""
     if not isinstance(value, (bool, np.bool_)):
-        raise input_error(InputTypeError, f"{name} must be a bool, got {show(value)}", owner)
+        raise InputTypeError(f"{name} must be a bool, got {show(value)}")
     return bool(value)
 
 
-def check_callable(name: str, value: Any, *, owner: str | None = None, optional: bool = True) -> Callable | None:
+def check_callable(name: str, value: Any, *, optional: bool = True) -> Callable | None:
     """``value`` unchanged; TypeError unless it is callable (or ``None`` when ``optional``)."""
     if (value is None and not optional) or (value is not None and not callable(value)):
         what = "callable or None" if optional else "callable"
-        raise input_error(InputTypeError, f"{name} must be {what}, got {show(value)}", owner)
+        raise InputTypeError(f"{name} must be {what}, got {show(value)}")
     return value
 
 
-def check_vector(name: str, value: Any, *, size: int | None = None, owner: str | None = None) -> np.ndarray:
+def check_vector(name: str, value: Any, *, size: int | None = None) -> np.ndarray:
     """``value`` as a read-only, finite, non-empty 1-D float array (of length ``size`` if given).
 
     An array that is already read-only is returned as is (no copy); otherwise a read-only copy.
@@ -225,12 +215,12 @@ def check_vector(name: str, value: Any, *, size: int | None = None, owner: str |
     try:
         a = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise input_error(InputValueError, f"{name} must be a real 1-D array, got {show(value)}", owner) from exc
+        raise InputValueError(f"{name} must be a real 1-D array, got {show(value)}") from exc
     if a.ndim != 1 or a.size == 0 or (size is not None and a.size != size):
         want = f"({size},)" if size is not None else "a non-empty 1-D array"
-        raise input_error(InputValueError, f"{name} has shape {a.shape}, expected {want}", owner)
+        raise InputValueError(f"{name} has shape {a.shape}, expected {want}")
     if not np.all(np.isfinite(a)):
-        raise input_error(InputValueError, f"{name} contains non-finite values (nan or inf)", owner)
+        raise InputValueError(f"{name} contains non-finite values (nan or inf)")
     if a.flags.writeable:
         a = a.copy()
         a.flags.writeable = False
@@ -296,10 +286,10 @@ def available_memory() -> float | None:
     return avail
 
 
-def check_memory(need: float, what: str, fix: str, *, owner: str | None = None) -> None:
+def check_memory(need: float, what: str, fix: str) -> None:
     """ValueError when ``need`` bytes (the estimate of ``what``) exceed :func:`available_memory`:
     ``"<what> needs about 41.5 GiB, more than the 7.2 GiB available; <fix>"``."""
     avail = available_memory()
     if avail is not None and need > avail:
-        raise input_error(InputValueError, f"{what} needs about {need / 2**30:.3g} GiB, more than the "
-                                            f"{avail / 2**30:.3g} GiB available; {fix}", owner)
+        raise InputValueError(f"{what} needs about {need / 2**30:.3g} GiB, more than the "
+                              f"{avail / 2**30:.3g} GiB available; {fix}")
