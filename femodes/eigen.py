@@ -15,6 +15,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .solvers.checks import entry_name, named_by
 from .sparse_direct import factorize
 
 __all__ = ["DENSE_LIMIT", "krylov_start", "IllConditionedWarning", "check_conditioning", "eigenvalue_floor", "mass_normalize", "generalized_eigh",
@@ -57,7 +58,7 @@ def eigenvalue_floor(K, M) -> float:
     return 1e3 * np.finfo(float).eps * scale
 
 
-def check_conditioning(K: sp.spmatrix, solve, n: int, owner: str, *, warn: bool = True) -> float:
+def check_conditioning(K: sp.spmatrix, solve, n: int, *, warn: bool = True) -> float:
     """Estimate cond_1(K) = ||K||_1 ||K^-1||_1 (Hager/Higham estimator) and warn if hopeless.
 
     ``solve`` applies ``K^-1`` (from an existing factorization). Low eigenvalues computed in
@@ -76,7 +77,7 @@ def check_conditioning(K: sp.spmatrix, solve, n: int, owner: str, *, warn: bool 
         return float("nan")
     if warn and est * np.finfo(float).eps > 1e-2:
         warnings.warn(
-            f"{owner}: the stiffness matrix is ill-conditioned (cond_1(K) ~ {est:.1e}, so low frequencies "
+            f"{entry_name()}: the stiffness matrix is ill-conditioned (cond_1(K) ~ {est:.1e}, so low frequencies "
             f"carry relative errors up to ~{est * np.finfo(float).eps:.0e}). Euler-Bernoulli beams reach this "
             "near 1e4-1e5 DOFs; use a coarser mesh, Craig-Bampton on a coarser model, or bars for scaling studies.",
             IllConditionedWarning,
@@ -95,7 +96,7 @@ def mass_normalize(shapes: np.ndarray, M) -> np.ndarray:
     return shapes * signs
 
 
-def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigma: float | None = None,
+def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, *, sigma: float | None = None,
                      factor=None, check: bool = True):
     """Lowest ``n`` eigenpairs of ``K phi = lam M phi`` (symmetric, M semidefinite), ascending.
 
@@ -104,6 +105,8 @@ def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigm
     modes of free structures are found). ``factor``: an existing factorisation of
     ``K - sigma M`` (an object with ``solve``) to reuse. ``check`` estimates cond(K) and warns
     (:class:`IllConditionedWarning`) when the low eigenvalues lose most of their digits.
+    Warnings, log lines and errors start with the public function running
+    (:func:`~femodes.solvers.checks.entry_name`).
     """
     N = K.shape[0]
     if N <= DENSE_LIMIT or n >= N - 1:
@@ -144,28 +147,28 @@ def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigm
             d = K.diagonal() / np.maximum(M.diagonal(), 1e-300)
             d = d[np.isfinite(d) & (d > 0)]
             sigma = -1e-3 * float(d.min()) if d.size else -1.0
-            log.info("%s: K is singular, shift-invert with sigma=%g", owner, sigma)
+            log.info("%s: K is singular, shift-invert with sigma=%g", entry_name(), sigma)
     if sigma is None:
         sigma = 0.0
     if lu is None:
         # K - sigma M is positive definite for sigma <= 0 (CHOLMOD where installed), indefinite above
         lu = factorize(K - sigma * M, positive_definite=sigma <= 0)
     if check and sigma <= 0:
-        check_conditioning(K, lu.solve, N, owner)
+        check_conditioning(K, lu.solve, N)
     op = spla.LinearOperator(K.shape, matvec=lu.solve, dtype=float)
     try:
         lam, vec = spla.eigsh(K, k=n, M=M, sigma=sigma, which="LM", OPinv=op, tol=1e-12, maxiter=max(500, 50 * n),
                               v0=krylov_start(N))
     except spla.ArpackNoConvergence as exc:
         raise RuntimeError(
-            f"{owner}: the Lanczos eigensolver did not converge for {n} modes of a {N}-DOF model "
+            f"{entry_name()}: the Lanczos eigensolver did not converge for {n} modes of a {N}-DOF model "
             "(ill-conditioned K, or pass sigma= close to the frequencies of interest squared)"
         ) from exc
     order = np.argsort(lam)
     return lam[order], vec[:, order]
 
 
-def normal_modes(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigma: float | None = None, factor=None,
+def normal_modes(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str | None = None, *, sigma: float | None = None, factor=None,
                  check: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Lowest ``n`` angular frequencies (rad/s) and mass-normalised shapes of ``(K, M)``
     (:func:`generalized_eigh`, whose arguments these are).
@@ -174,8 +177,10 @@ def normal_modes(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str, *, sigma: f
     small positive ones are kept (a scale-based threshold would also zero genuine low
     frequencies of fine meshes, whose lambda_max grows like h^-4).
     """
-    lam, vec = generalized_eigh(K, M, n, owner, sigma=sigma, factor=factor, check=check)
-    if np.any(lam < 0):
-        log.info("%s: eigenvalues %s < 0 (round-off of rigid-body modes) set to zero frequency", owner, lam[lam < 0])
+    with named_by(owner):
+        lam, vec = generalized_eigh(K, M, n, sigma=sigma, factor=factor, check=check)
+        if np.any(lam < 0):
+            log.info("%s: eigenvalues %s < 0 (round-off of rigid-body modes) set to zero frequency", entry_name(),
+                     lam[lam < 0])
     return np.sqrt(np.maximum(lam, 0.0)), mass_normalize(vec, M)
 

@@ -16,6 +16,7 @@ import numpy as np
 from .exact_branch import EXACT_FOLD_RTOL, ExactBranch, fold_window
 from .model import StructuralModel
 from .solvers import ContinuationOptions, continuation
+from .solvers.checks import InputTypeError, InputValueError, entry_point
 from .time.exact import LinearImpactFlow, periodicity_residual, undamped
 
 __all__ = ["exact_frequency_response", "EXACT_BRANCH_RTOL"]
@@ -83,6 +84,7 @@ class _ShootingResidual:
         return r[S], drdx[np.ix_(S, S)], drdw[S]
 
 
+@entry_point("exact_frequency_response")
 def exact_frequency_response(model: StructuralModel, omega=None, *, x0=None, restitution: float = 1.0,
                              options=None, span=None) -> ExactBranch:
     """The forced response of a linear model with rigid stops, orbit by exact orbit.
@@ -129,27 +131,26 @@ def exact_frequency_response(model: StructuralModel, omega=None, *, x0=None, res
     ValueError
         A model the flow cannot take, a bad ``omega`` or ``x0``.
     """
-    owner = "exact_frequency_response"
     if span is not None:
         if omega is not None:
-            raise TypeError(f"{owner}: give omega= only (span= is its deprecated spelling), not both")
-        warnings.warn(f"{owner}(model, span=...) is deprecated; use {owner}(model, omega=...), as "
-                      "frequency_response", DeprecationWarning, stacklevel=2)
+            raise InputTypeError("give omega= only (span= is its deprecated spelling), not both")
+        warnings.warn("exact_frequency_response(model, span=...) is deprecated; use exact_frequency_response(model, "
+                      "omega=...), as frequency_response", DeprecationWarning, stacklevel=3)  # past the entry_point wrapper
         omega = span
     if omega is None:
-        raise TypeError(f"{owner}: missing the forcing frequencies omega=(w_start, w_end)")
+        raise InputTypeError("missing the forcing frequencies omega=(w_start, w_end)")
     if not isinstance(model, StructuralModel):
-        raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
+        raise InputTypeError(f"model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
     try:
         w0, w1 = (float(omega[0]), float(omega[1]))
     except (TypeError, ValueError, IndexError):
-        raise ValueError(f"{owner}: omega must be two forcing frequencies (w_start, w_end), got {omega!r}") from None
+        raise InputValueError(f"omega must be two forcing frequencies (w_start, w_end), got {omega!r}") from None
     if len(omega) != 2 or not (math.isfinite(w0) and math.isfinite(w1) and w0 > 0.0 and w1 > 0.0) or w0 == w1:
-        raise ValueError(f"{owner}: omega must be two different finite positive frequencies, got {omega!r}")
+        raise InputValueError(f"omega must be two different finite positive frequencies, got {omega!r}")
     if not model.forces:
-        raise ValueError(f"{owner}: the model has no harmonic forcing (add one with with_forcing)")
+        raise InputValueError("the model has no harmonic forcing (add one with with_forcing)")
     if undamped(model, restitution):
-        raise ValueError(f"{owner}: the model has no damping (C = 0) and restitution = {restitution:g}: nothing "
+        raise InputValueError(f"the model has no damping (C = 0) and restitution = {restitution:g}: nothing "
                          "dissipates, so near a resonance of the impacting structure the forced orbits grow without "
                          "bound and the continuation cannot pass it (an undamped oscillator against a stop ran 3000 "
                          "points to a step-size failure); add damping (model.with_damping(alpha=..., beta=...) or "
@@ -162,14 +163,14 @@ def exact_frequency_response(model: StructuralModel, omega=None, *, x0=None, res
     else:
         x0 = np.asarray(x0, dtype=float)
         if x0.shape != (n2,) or not np.all(np.isfinite(x0)):
-            raise ValueError(f"{owner}: x0 must be {n2} finite numbers [q; v], got shape {x0.shape}")
+            raise InputValueError(f"x0 must be {n2} finite numbers [q; v], got shape {x0.shape}")
     if options is None:
         scale = max(float(np.linalg.norm(particular[flow.state_index])), float(np.max(np.abs(flow.gaps), initial=0.0)))
         base = ContinuationOptions()
         options = ContinuationOptions(max_points=3000, newton=dataclasses.replace(
             base.newton, atol=EXACT_BRANCH_RTOL * max(scale, 1e-300)))
     elif not isinstance(options, ContinuationOptions):
-        raise TypeError(f"{owner}: options must be a ContinuationOptions or None, got {type(options).__name__}")
+        raise InputTypeError(f"options must be a ContinuationOptions or None, got {type(options).__name__}")
     problem = _ShootingResidual(flow)
     options = dataclasses.replace(options, callback=problem.callback(options.callback))
     res = continuation(problem, (w0, w1), x0=x0[flow.state_index], options=options)
@@ -179,8 +180,8 @@ def exact_frequency_response(model: StructuralModel, omega=None, *, x0=None, res
         # there): trace the rest back from the other end, from its response without contact
         w_stop = float(res.p[-1])
         back = continuation(problem, (w1, w_stop), x0=flow.at(w1).particular(0.0)[flow.state_index], options=options)
-        log.info("%s: stopped at w = %.6g (%s); traced back from w = %.6g to %.6g (%s)", owner, w_stop, res.message,
-                 w1, float(back.p[-1]) if len(back.p) else w1, back.message)
+        log.info("exact_frequency_response: stopped at w = %.6g (%s); traced back from w = %.6g to %.6g (%s)",
+                 w_stop, res.message, w1, float(back.p[-1]) if len(back.p) else w1, back.message)
         if len(back.p):
             pieces.append(back)
     def joined(arrays):  # the pieces' arrays in the branch's order: the back piece reversed

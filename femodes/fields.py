@@ -18,6 +18,7 @@ and boundaries of meshed solids behind these fields are in :mod:`femodes.solid_c
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 from collections.abc import Mapping
@@ -30,42 +31,42 @@ from .results import PeriodicSolution, contact_differences
 from .store import model_signature, signature_differences
 from .solid_cells import (VTK_QUADRATIC_NODES, boundary_facets, contact_boundaries, polyline_order, solid_cells,
                           tributary_measure)
-from .solvers.checks import check_int
+from .solvers.checks import InputTypeError, InputValueError, check_int, entry_point
 
-__all__ = ["MeshFields", "mesh_fields", "periodic_source", "resolve_model", "check_scale", "tributary_measure",
+__all__ = ["MeshFields", "mesh_fields", "sample_fields", "periodic_source", "resolve_model", "check_scale", "tributary_measure",
            "VTK_QUADRATIC_NODES"]
 
 
 # --------------------------------------------------------------------------------------------
 # Validation helpers
 # --------------------------------------------------------------------------------------------
-def check_scale(scale: Any, owner: str) -> float | None:
+def check_scale(scale: Any) -> float | None:
     """``None`` or a finite non-zero real number."""
     if scale is None:
         return None
     if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{owner}: scale must be a real number or None, got {type(scale).__name__}")
+        raise InputTypeError(f"scale must be a real number or None, got {type(scale).__name__}")
     if not math.isfinite(scale) or scale == 0:
-        raise ValueError(f"{owner}: scale must be finite and non-zero, got {scale!r}")
+        raise InputValueError(f"scale must be finite and non-zero, got {scale!r}")
     return float(scale)
 
 
-def resolve_model(source: Any, model: Any, owner: str) -> StructuralModel:
+def resolve_model(source: Any, model: Any) -> StructuralModel:
     """The model a solution / modes live on: ``model`` or, if None, ``solution.model``."""
     if model is None:
         model = getattr(source, "model", None)
         if model is None:
             what = "linear modes" if isinstance(source, LinearModes) else "this solution (loaded from a file?)"
-            raise ValueError(
-                f"{owner}: model is required for {what}; pass the model it was solved on "
+            raise InputValueError(
+                f"model is required for {what}; pass the model it was solved on "
                 "(or re-attach it with branch.attach(model))"
             )
     if not isinstance(model, StructuralModel):
-        raise TypeError(f"{owner}: model must be a StructuralModel (the model the result lives on), got {type(model).__name__}")
+        raise InputTypeError(f"model must be a StructuralModel (the model the result lives on), got {type(model).__name__}")
     n = source.n_dofs if isinstance(source, PeriodicSolution) else np.asarray(source.shapes).shape[0]
     if model.n_dofs != n:
-        raise ValueError(
-            f"{owner}: model has {model.n_dofs} DOFs but the result has {n}; pass the model the result was computed on "
+        raise InputValueError(
+            f"model has {model.n_dofs} DOFs but the result has {n}; pass the model the result was computed on "
             "(for a Craig-Bampton result, the ReducedModel, not its parent)"
         )
     own = getattr(source, "model", None)
@@ -75,7 +76,7 @@ def resolve_model(source: Any, model: Any, owner: str) -> StructuralModel:
             diff += [d for d in signature_differences(model_signature(own), model_signature(model))
                      if not (d == "contact laws" and diff)]
         if diff:
-            raise ValueError(f"{owner}: model differs from the one the solution was solved on ({'; '.join(diff)}); "
+            raise InputValueError(f"model differs from the one the solution was solved on ({'; '.join(diff)}); "
                              "pass the model the solution was computed on (or leave model=None)")
     return model
 
@@ -297,28 +298,29 @@ class MeshFields:
         return nodes[order], s[order]
 
 
-def periodic_source(source: Any, mode: Any, owner: str):
+def periodic_source(source: Any, mode: Any):
     """``(source, None)`` for a PeriodicSolution; ``(modes, j)`` for LinearModes and the mode number
     ``mode`` (1-based: ``mode=1`` is the first mode, column ``j = mode - 1`` of ``modes.shapes``)."""
     if isinstance(source, PeriodicSolution):
         return source, None
     if isinstance(source, LinearModes):
-        number = check_int("mode", mode, 1, owner=owner)  # mode numbers are 1-based everywhere (mode=1: the first)
+        number = check_int("mode", mode, 1)  # mode numbers are 1-based everywhere (mode=1: the first)
         if number > len(source):
-            raise ValueError(f"{owner}: mode={number} is out of range; the modes hold {len(source)} shapes "
+            raise InputValueError(f"mode={number} is out of range; the modes hold {len(source)} shapes "
                              f"(mode=1 .. {len(source)})")
         j = number - 1
         if not source.omega[j] > 0:
-            raise ValueError(f"{owner}: mode {number} has zero frequency (rigid-body mode); it has no period to animate")
+            raise InputValueError(f"mode {number} has zero frequency (rigid-body mode); it has no period to animate")
         return source, j
-    raise TypeError(
-        f"{owner}: expected a PeriodicSolution (e.g. branch[i]) or LinearModes (femodes.linear_modes), "
+    raise InputTypeError(
+        f"expected a PeriodicSolution (e.g. branch[i]) or LinearModes (femodes.linear_modes), "
         f"got {type(source).__name__}"
     )
 
 
+@entry_point("mesh_fields")
 def mesh_fields(source: Any, model: Any, t: Any = None, *, n_frames: int = 36, mode: int | None = None,
-                owner: str = "mesh_fields") -> MeshFields:
+                owner: str | None = None) -> MeshFields:
     """Sample a periodic motion on the FE mesh.
 
     Parameters
@@ -335,8 +337,9 @@ def mesh_fields(source: Any, model: Any, t: Any = None, *, n_frames: int = 36, m
         Number of samples over one period when ``t`` is not given.
     mode : int, optional
         Mode number for ``LinearModes`` (1 = the first mode, as in ``nonlinear_mode(mode=1)``).
-    owner : str
-        Name used in error messages.
+    owner : str, optional
+        Deprecated and ignored (a DeprecationWarning): error messages name the public function
+        called, here ``mesh_fields``.
 
     Returns
     -------
@@ -349,28 +352,37 @@ def mesh_fields(source: Any, model: Any, t: Any = None, *, n_frames: int = 36, m
     TypeError
         ``source`` or ``model`` of the wrong type.
     """
-    source, j = periodic_source(source, mode, owner)
-    model = resolve_model(source, model, owner)
-    owner_model = model.mesh_owner
-    if owner_model is None:
-        raise ValueError(
-            f"{owner}: the model has no mesh (a discrete StructuralModel); only FE models built with femodes.bar, "
+    if owner is not None:
+        warnings.warn("mesh_fields(..., owner=...) is deprecated and ignored: error messages name the public "
+                      "function called", DeprecationWarning, stacklevel=3)  # past the entry_point wrapper
+    return sample_fields(source, model, t, n_frames=n_frames, mode=mode)
+
+
+def sample_fields(source: Any, model: Any, t: Any = None, *, n_frames: int = 36, mode: int | None = None) -> MeshFields:
+    """:func:`mesh_fields` for the public functions built on it (``animate``, the VTK writers,
+    the plots): its errors are left for the function called to name."""
+    source, j = periodic_source(source, mode)
+    model = resolve_model(source, model)
+    mesh_model = model.mesh_owner
+    if mesh_model is None:
+        raise InputValueError(
+            "the model has no mesh (a discrete StructuralModel); only FE models built with femodes.bar, "
             "femodes.beam or femodes.solid (or Craig-Bampton reductions of them) can be exported on a mesh. For discrete systems plot "
             "time histories instead (femodes.plot.time_history, femodes.plot.mode_shape)"
         )
-    fe = owner_model.fe
+    fe = mesh_model.fe
     if j is None:
         omega, period = float(source.omega), float(source.period)
     else:
         omega = float(source.omega[j])
         period = 2.0 * math.pi / omega
     if t is None:
-        n_frames = check_int("n_frames", n_frames, 1, owner=owner)
+        n_frames = check_int("n_frames", n_frames, 1)
         t = np.arange(n_frames) * period / n_frames  # exactly j * T / n_frames
     else:
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if t.ndim != 1 or not np.all(np.isfinite(t)):
-            raise ValueError(f"{owner}: t must be a 1-D array of finite times, got shape {t.shape}")
+            raise InputValueError(f"t must be a 1-D array of finite times, got shape {t.shape}")
     if j is None:
         q, v = source.displacement(t), source.velocity(t)
         force = source.contact_force(t)
@@ -415,14 +427,14 @@ def mesh_fields(source: Any, model: Any, t: Any = None, *, n_frames: int = 36, m
     direction = np.zeros((nodes.size, 3))
     for j, (node, comp) in enumerate(zip(nodes, comps)):
         if node >= 0:  # e_comp, or the nodal-frame axis of a rotated node (inclined or negative normal)
-            direction[j, :dim] = owner_model.dofmap.axis(int(node), int(comp))
+            direction[j, :dim] = mesh_model.dofmap.axis(int(node), int(comp))
         else:
             direction[j, comp] = 1.0
-    groups = {name: np.asarray(g, dtype=np.int64) for name, g in owner_model.dofmap.groups.items()}
+    groups = {name: np.asarray(g, dtype=np.int64) for name, g in mesh_model.dofmap.groups.items()}
     boundary = contact_boundaries(groups, nodes, np.asarray(comps))
     measure = np.zeros(nodes.size)
     for name in sorted(set(boundary) - {""}):
-        bnodes, a = tributary_measure(owner_model, name)
+        bnodes, a = tributary_measure(mesh_model, name)
         lookup = dict(zip(bnodes.tolist(), a.tolist()))
         for j, b in enumerate(boundary):
             if b == name:

@@ -61,6 +61,8 @@ from typing import Any
 
 import numpy as np
 
+from .solvers.checks import InputTypeError, InputValueError, entry_point
+
 __all__ = [
     "UnilateralContact",
     "PenaltyContact",
@@ -73,68 +75,68 @@ __all__ = [
 Location = str | int | tuple
 
 
-def check_location(at: Any, owner: str) -> Any:
+def check_location(at: Any) -> Any:
     """Validate the form of an ``at=`` argument (not whether it exists in a model)."""
     if isinstance(at, bool):
-        raise TypeError(f"{owner}: at must be a location name, a (name, component) pair or a DOF index, got {at!r}")
+        raise InputTypeError(f"at must be a location name, a (name, component) pair or a DOF index, got {at!r}")
     if isinstance(at, (int, np.integer)):
         if at < 0:
-            raise ValueError(f"{owner}: at={at!r} is a negative DOF index; use 0 <= at < n_dofs")
+            raise InputValueError(f"at={at!r} is a negative DOF index; use 0 <= at < n_dofs")
         return int(at)
     if isinstance(at, str):
         if not at:
-            raise ValueError(f"{owner}: at must not be an empty string")
+            raise InputValueError("at must not be an empty string")
         return at
     if isinstance(at, tuple) and len(at) == 2 and all(isinstance(a, str) for a in at):
         return at
-    raise TypeError(
-        f"{owner}: at must be a location name like 'tip', a (name, component) pair like "
+    raise InputTypeError(
+        f"at must be a location name like 'tip', a (name, component) pair like "
         f"('tip', 'w'), or a DOF index, got {at!r}"
     )
 
 
-def _positive(value: Any, name: str, owner: str, *, allow_zero: bool = False) -> float:
+def _positive(value: Any, name: str, *, allow_zero: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{owner}: {name} must be a real number, got {value!r}")
+        raise InputTypeError(f"{name} must be a real number, got {value!r}")
     v = float(value)
     if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
         what = "a finite non-negative number" if allow_zero else "a finite positive number"
-        raise ValueError(f"{owner}: {name} must be {what}, got {value!r}")
+        raise InputValueError(f"{name} must be {what}, got {value!r}")
     return v
 
 
-def _finite(value: Any, name: str, owner: str) -> float:
+def _finite(value: Any, name: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{owner}: {name} must be a real number, got {value!r}")
+        raise InputTypeError(f"{name} must be a real number, got {value!r}")
     v = float(value)
     if not math.isfinite(v):
-        raise ValueError(f"{owner}: {name} must be finite, got {value!r}")
+        raise InputValueError(f"{name} must be finite, got {value!r}")
     return v
 
 
-def _direction(value: Any, owner: str):
+def _direction(value: Any):
     """``None`` or a unit vector (tuple of 1 to 3 floats) from ``direction=``."""
     if value is None:
         return None
     if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)):
-        raise TypeError(f"{owner}: direction must be a vector like (1.0, 0.0), got {value!r}")
+        raise InputTypeError(f"direction must be a vector like (1.0, 0.0), got {value!r}")
     try:
         d = np.asarray(value, dtype=float).reshape(-1)
     except (TypeError, ValueError):
-        raise TypeError(f"{owner}: direction must be a vector of real numbers like (1.0, 0.0), got {value!r}") from None
+        raise InputTypeError(f"direction must be a vector of real numbers like (1.0, 0.0), got {value!r}") from None
     if not 1 <= d.size <= 3 or not np.all(np.isfinite(d)):
-        raise ValueError(f"{owner}: direction must have 1 to 3 finite components, got {value!r}")
+        raise InputValueError(f"direction must have 1 to 3 finite components, got {value!r}")
     norm = float(np.linalg.norm(d))
     if norm == 0.0:
-        raise ValueError(f"{owner}: direction must not be the zero vector, got {value!r}")
+        raise InputValueError(f"direction must not be the zero vector, got {value!r}")
     return tuple(float(v) for v in d / norm)
 
 
-def _gap(value: Any, owner: str):
+def _gap(value: Any):
     """A non-negative gap, or a callable of node coordinates (evaluated by ``with_contact``)."""
     if callable(value):
         return value
-    return _positive(value, "gap", owner, allow_zero=True)
+    return _positive(value, "gap", allow_zero=True)
 
 
 def _normal_gap(gap, u):
@@ -210,12 +212,13 @@ class UnilateralContact(_Stackable):
     c: float | None = None
     direction: tuple | None = None
 
+    @entry_point("UnilateralContact")
     def __post_init__(self):
-        object.__setattr__(self, "at", check_location(self.at, "UnilateralContact"))
-        object.__setattr__(self, "gap", _gap(self.gap, "UnilateralContact"))
-        object.__setattr__(self, "direction", _direction(self.direction, "UnilateralContact"))
+        object.__setattr__(self, "at", check_location(self.at))
+        object.__setattr__(self, "gap", _gap(self.gap))
+        object.__setattr__(self, "direction", _direction(self.direction))
         if self.c is not None:
-            object.__setattr__(self, "c", _positive(self.c, "c", "UnilateralContact"))
+            object.__setattr__(self, "c", _positive(self.c, "c"))
 
     def gap_function(self, u):
         """Normal gap ``g_N = gap - u`` (negative: penetration)."""
@@ -259,11 +262,12 @@ class PenaltyContact(_Stackable):
     stiffness: float
     direction: tuple | None = None
 
+    @entry_point("PenaltyContact")
     def __post_init__(self):
-        object.__setattr__(self, "at", check_location(self.at, "PenaltyContact"))
-        object.__setattr__(self, "gap", _gap(self.gap, "PenaltyContact"))
-        object.__setattr__(self, "stiffness", _positive(self.stiffness, "stiffness", "PenaltyContact"))
-        object.__setattr__(self, "direction", _direction(self.direction, "PenaltyContact"))
+        object.__setattr__(self, "at", check_location(self.at))
+        object.__setattr__(self, "gap", _gap(self.gap))
+        object.__setattr__(self, "stiffness", _positive(self.stiffness, "stiffness"))
+        object.__setattr__(self, "direction", _direction(self.direction))
 
     def gap_function(self, u):
         """Normal gap ``g_N = gap - u`` (negative: penetration)."""
@@ -303,11 +307,12 @@ class CubicSpring(_Stackable):
     at: Location
     k3: float
 
+    @entry_point("CubicSpring")
     def __post_init__(self):
-        object.__setattr__(self, "at", check_location(self.at, "CubicSpring"))
-        k3 = _finite(self.k3, "k3", "CubicSpring")
+        object.__setattr__(self, "at", check_location(self.at))
+        k3 = _finite(self.k3, "k3")
         if k3 == 0.0:
-            raise ValueError("CubicSpring: k3 must be non-zero (a zero spring does nothing), got 0.0")
+            raise InputValueError("k3 must be non-zero (a zero spring does nothing), got 0.0")
         object.__setattr__(self, "k3", k3)
 
     def force(self, u):

@@ -16,7 +16,7 @@ from .dynamic_stiffness import DynamicStiffness
 from .eigen import IllConditionedWarning, eigenvalue_floor, normal_modes
 from .model import StructuralModel, low_rank_solver
 from .sparse_direct import factorize
-from .solvers.checks import check_int
+from .solvers.checks import InputTypeError, InputValueError, check_int, entry_point
 
 __all__ = ["LinearModes", "LinearResponse", "linear_modes", "linear_response", "grazing_energy", "IllConditionedWarning"]
 
@@ -46,13 +46,16 @@ class LinearModes:
         return self.omega.size
 
 
-def _check_n(n, n_max: int, owner: str) -> int:
-    n = check_int("n", n, 1, owner=owner)
+def _check_n(n, n_max: int) -> int:
+    n = check_int("n", n, 1)
     if n > n_max:
-        raise ValueError(f"{owner}: n={n} modes requested but the model has only {n_max} DOFs")
+        raise InputValueError(f"n={n} modes requested but the model has only {n_max} DOFs")
     return int(n)
 
 
+
+
+@entry_point("grazing_energy")
 def grazing_energy(model: StructuralModel, mode: int = 1, *, modes: LinearModes | None = None) -> float:
     """Energy at which linear mode ``mode`` first touches a contact: ``E_g = w^2 a_g^2 / 2``.
 
@@ -64,19 +67,19 @@ def grazing_energy(model: StructuralModel, mode: int = 1, *, modes: LinearModes 
     model's linear modes if already computed (at least ``mode`` of them).
     """
     if not isinstance(model, StructuralModel):
-        raise TypeError(f"grazing_energy: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
-    mode = check_int("mode", mode, 1, owner="grazing_energy")
+        raise InputTypeError(f"model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
+    mode = check_int("mode", mode, 1)
     gapped = [(c.dof, float(c.item.gap)) for c in model.contacts
               if isinstance(getattr(c.item, "gap", None), (int, float, np.floating)) and float(c.item.gap) > 0.0]
     if not gapped:
-        raise ValueError("grazing_energy: the model has no contact with a positive gap; declare one with "
+        raise InputValueError("the model has no contact with a positive gap; declare one with "
                          "model.with_contact(fm.UnilateralContact(at=..., gap=...))")
     if modes is None or modes.omega.size < mode:
         modes = linear_modes(model, n=mode)
     w, phi = float(modes.omega[mode - 1]), modes.shapes[:, mode - 1]
     amp = [g / abs(phi[d]) for d, g in gapped if abs(phi[d]) > 1e-12 * float(np.max(np.abs(phi)))]
     if not amp:
-        raise ValueError(f"grazing_energy: linear mode {mode} does not move any contact DOF (a node of the mode "
+        raise InputValueError(f"linear mode {mode} does not move any contact DOF (a node of the mode "
                          "shape sits on every contact); choose another mode")
     return 0.5 * w * w * min(amp) ** 2
 
@@ -95,6 +98,9 @@ def rigid_body_message(count: int, owner: str) -> str:
             "fm.beam) or merge the mesh's duplicate nodes")
 
 
+
+
+@entry_point("linear_modes")
 def linear_modes(model: StructuralModel, n: int = 6, *, sigma: float | None = None) -> LinearModes:
     """Lowest ``n`` linear modes of ``model``: ``(K - w^2 M) phi = 0``.
 
@@ -117,15 +123,15 @@ def linear_modes(model: StructuralModel, n: int = 6, *, sigma: float | None = No
         If cond(K) makes the low frequencies unreliable (very fine beam meshes).
     """
     if not isinstance(model, StructuralModel):
-        raise TypeError(f"linear_modes: model must be a StructuralModel, got {type(model).__name__}")
-    n = _check_n(n, model.n_dofs, "linear_modes")
+        raise InputTypeError(f"model must be a StructuralModel, got {type(model).__name__}")
+    n = _check_n(n, model.n_dofs)
     if sigma is not None:
         if isinstance(sigma, (bool, np.bool_)) or not isinstance(sigma, (int, float, np.integer, np.floating)):
-            raise TypeError(f"linear_modes: sigma must be a real shift (in w^2 units) or None, got {sigma!r}")
+            raise InputTypeError(f"sigma must be a real shift (in w^2 units) or None, got {sigma!r}")
         if not np.isfinite(sigma):
-            raise ValueError(f"linear_modes: sigma must be finite, got {sigma!r}")
+            raise InputValueError(f"sigma must be finite, got {sigma!r}")
         sigma = float(sigma)
-    omega, shapes = normal_modes(model.K, model.M, n, "linear_modes", sigma=sigma)
+    omega, shapes = normal_modes(model.K, model.M, n, sigma=sigma)
     return LinearModes(omega=omega, shapes=shapes)
 
 

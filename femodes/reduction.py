@@ -24,7 +24,7 @@ from scipy.sparse.csgraph import connected_components
 from .eigen import IllConditionedWarning, check_conditioning, normal_modes
 from .model import Attached, StructuralModel
 from .sparse_direct import factorize
-from .solvers.checks import check_int, check_memory
+from .solvers.checks import InputValueError, check_int, check_memory, entry_point
 
 __all__ = ["ReducedModel", "craig_bampton"]
 
@@ -67,13 +67,14 @@ class ReducedModel(StructuralModel):
     def n_modes(self) -> int:
         return self.n_dofs - self.n_kept
 
+    @entry_point("ReducedModel.truncated")
     def truncated(self, n_modes: int) -> ReducedModel:
         """The same reduction with only its first ``n_modes`` fixed-interface modes: exactly
         ``craig_bampton(parent, n_modes)`` with the same kept DOFs (the modes are nested), without
         a new eigen-solve."""
-        n_modes = check_int("n_modes", n_modes, 0, owner="ReducedModel.truncated")
+        n_modes = check_int("n_modes", n_modes, 0)
         if n_modes > self.n_modes:
-            raise ValueError(f"ReducedModel.truncated: n_modes={n_modes} exceeds the {self.n_modes} modes of this reduction")
+            raise InputValueError(f"n_modes={n_modes} exceeds the {self.n_modes} modes of this reduction")
         k = self.n_kept + n_modes
         dofmap = self.parent.dofmap.restrict(self.kept).extended([f"cb mode {j + 1}" for j in range(n_modes)])
         return dataclasses.replace(
@@ -117,12 +118,13 @@ class ReducedModel(StructuralModel):
 
 
 def _check_n_modes(n_modes, n_interior: int) -> int:
-    n_modes = check_int("n_modes", n_modes, 0, owner="craig_bampton")
+    n_modes = check_int("n_modes", n_modes, 0)
     if n_modes > n_interior:
-        raise ValueError(f"craig_bampton: n_modes={n_modes} exceeds the {n_interior} interior DOFs")
+        raise InputValueError(f"n_modes={n_modes} exceeds the {n_interior} interior DOFs")
     return int(n_modes)
 
 
+@entry_point("craig_bampton")
 def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence | None = None) -> ReducedModel:
     """Craig-Bampton reduction of ``model``.
 
@@ -159,8 +161,7 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
     # are dense: three arrays of n_dofs x (kept + modes) floats, refused before they are allocated
     width = kept.size + n_modes
     check_memory(24.0 * model.n_dofs * width, f"the dense reduction basis of {model.n_dofs} DOFs x {kept.size} kept "
-                 f"DOFs + {n_modes} modes", "keep fewer DOFs (contacts and forces on fewer nodes) or fewer modes",
-                 owner="craig_bampton")
+                 f"DOFs + {n_modes} modes", "keep fewer DOFs (contacts and forces on fewer nodes) or fewer modes")
     T, omega_i = _reduction_basis(model.K.tocsr(), model.M.tocsr(), kept, interior, n_modes)
     reduced = _reduced_model(model, kept, T, omega_i, n_modes)
     log.info("craig_bampton: %d DOFs -> %d kept + %d modes", n, kept.size, n_modes)
@@ -234,13 +235,13 @@ def _factor_interior(KII) -> Any:
             "craig_bampton: the interior stiffness K_II is singular: the structure is not restrained when the "
             "kept DOFs are fixed (keep more DOFs or add supports)"
         ) from exc
-    cond = check_conditioning(KII, lu.solve, KII.shape[0], "craig_bampton", warn=False)
+    cond = check_conditioning(KII, lu.solve, KII.shape[0], warn=False)
     if 1e-2 < cond * np.finfo(float).eps <= 10.0:
         warnings.warn(
             f"craig_bampton: the interior stiffness is ill-conditioned (cond_1 ~ {cond:.1e}); low frequencies lose "
             "digits. Euler-Bernoulli beams reach this near 1e4 DOFs; use bars for larger studies.",
             IllConditionedWarning,
-            stacklevel=4,  # the caller of craig_bampton (via _reduction_basis)
+            stacklevel=5,  # the caller of craig_bampton (via _reduction_basis and its entry_point wrapper)
         )
     elif cond * np.finfo(float).eps > 10.0:
         raise ValueError(
@@ -273,7 +274,7 @@ def _fixed_interface_modes(KII, MII, lu: Any, n_modes: int) -> tuple[np.ndarray,
     n_parts, label = connected_components(abs(KII) + abs(MII), directed=False)
     if n_parts == 1:
         # K_II is definite here (factorised above): shift-invert at 0 reuses its factor
-        _, phi = normal_modes(KII, MII, n_modes, "craig_bampton", sigma=0.0, factor=lu, check=False)
+        _, phi = normal_modes(KII, MII, n_modes, sigma=0.0, factor=lu, check=False)
         omega, phi = _rayleigh_ritz(KII, MII, phi)
         return phi, omega
     omegas, columns = [], []
@@ -283,7 +284,7 @@ def _fixed_interface_modes(KII, MII, lu: Any, n_modes: int) -> tuple[np.ndarray,
         if not Mp.nnz:
             continue  # massless part: no dynamic mode
         n = min(n_modes, idx.size)
-        _, phi = normal_modes(Kp.tocsc(), Mp.tocsc(), n, "craig_bampton", sigma=0.0, check=False)
+        _, phi = normal_modes(Kp.tocsc(), Mp.tocsc(), n, sigma=0.0, check=False)
         w, phi = _rayleigh_ritz(Kp, Mp, phi)
         for j in range(w.size):
             col = np.zeros(KII.shape[0])

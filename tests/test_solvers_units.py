@@ -18,8 +18,10 @@ from femodes.solvers.checks import (
     check_nonnegative,
     check_positive,
     check_vector,
+    entry_point,
     is_operator,
     is_real_number,
+    named_by,
     show,
     start_vector,
 )
@@ -52,12 +54,12 @@ def test_validators_return_the_normalised_value():
     [
         (lambda: check_positive("atol", np.float64(-1.0)), ValueError,
          "atol must be a positive finite number, got -1.0"),
-        (lambda: check_positive("step", "x", owner="Foo"), ValueError,
+        (lambda: entry_point("Foo")(check_positive)("step", "x"), ValueError,
          "Foo: step must be a positive finite number, got 'x'"),
         (lambda: check_nonnegative("rtol", float("nan")), ValueError, "rtol must be a finite number >= 0, got nan"),
         (lambda: check_int("n", 2.0, 1), TypeError, "n must be an integer >= 1, got 2.0"),
         (lambda: check_int("n", True, 0), TypeError, "n must be an integer >= 0, got True"),
-        (lambda: check_int("n", 0, 1, owner="bar"), ValueError, "bar: n must be an integer >= 1, got 0"),
+        (lambda: entry_point("bar")(check_int)("n", 0, 1), ValueError, "bar: n must be an integer >= 1, got 0"),
         (lambda: check_bool("flag", 1), TypeError, "flag must be a bool, got 1"),
         (lambda: check_callable("cb", 3), TypeError, "cb must be callable or None, got 3"),
         (lambda: check_callable("cb", None, optional=False), TypeError, "cb must be callable, got None"),
@@ -74,7 +76,8 @@ def test_check_vector_read_only_and_shapes():
     assert not a.flags.writeable and a.dtype == float
     assert check_vector("x", a) is a  # already read-only: no copy
     with pytest.raises(ValueError, match=r"^S: t has shape \(1,\), expected \(2,\)$"):
-        check_vector("t", [1.0], size=2, owner="S")
+        with named_by("S"):
+            check_vector("t", [1.0], size=2)
     with pytest.raises(ValueError, match="x has shape .* non-empty 1-D array"):
         check_vector("x", [[1.0]])
     with pytest.raises(ValueError, match="x contains non-finite values"):

@@ -23,6 +23,7 @@ import scipy.sparse as sp
 import skfem
 
 from ..model import DofMap, StructuralModel
+from ..solvers.checks import InputTypeError, InputValueError, entry_point
 from .quadrature import orders
 
 __all__ = ["FEInfo", "BasisRecipe", "element_property", "build_fe_model", "checked_basis", "stiffness_basis", "mass_basis",
@@ -52,8 +53,9 @@ class BasisRecipe:
     def nodal_dofs(self) -> np.ndarray:
         return self.dofs.nodal_dofs
 
+    @entry_point("FEInfo.basis")
     def build(self, mesh: Any) -> Any:
-        return checked_basis(mesh, self.elem, "FEInfo.basis", intorder=self.intorder, dofs=self.dofs)
+        return checked_basis(mesh, self.elem, intorder=self.intorder, dofs=self.dofs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,28 +146,28 @@ class FEInfo:
         return int(np.asarray(self.node_coordinates).shape[0])
 
 
-def check_mesh(mesh: Any, owner: str) -> None:
-    """A line mesh (FE constructors of bars and beams), else TypeError naming ``owner``."""
+def check_mesh(mesh: Any) -> None:
+    """A line mesh (FE constructors of bars and beams), else TypeError (named by the public constructor called)."""
     if not isinstance(mesh, skfem.MeshLine):
-        raise TypeError(
-            f"{owner}: mesh must be a skfem.MeshLine (use femodes.line_mesh or femodes.load_mesh), got {type(mesh).__name__}"
+        raise InputTypeError(
+            f"mesh must be a skfem.MeshLine (use femodes.line_mesh or femodes.load_mesh), got {type(mesh).__name__}"
         )
 
 
-def checked_basis(mesh: Any, element: Any, owner: str, **options: Any) -> Any:
+def checked_basis(mesh: Any, element: Any, **options: Any) -> Any:
     """``skfem.Basis(mesh, element, **options)``, with a degenerate mesh reported as a ValueError naming it."""
     with np.errstate(all="ignore"):
         try:
             return skfem.Basis(mesh, element, **options)
         except np.linalg.LinAlgError as exc:
             h = np.diff(np.asarray(mesh.p[0]))
-            raise ValueError(
-                f"{owner}: mesh element lengths {h.min():.3g}..{h.max():.3g} are too small for the "
+            raise InputValueError(
+                f"mesh element lengths {h.min():.3g}..{h.max():.3g} are too small for the "
                 f"{type(element).__name__} basis (its element map is numerically singular); rescale the length unit"
             ) from exc
 
 
-def stiffness_basis(mesh: Any, element: Any, owner: str) -> Any:
+def stiffness_basis(mesh: Any, element: Any) -> Any:
     """Basis of the stiffness form with the lowest quadrature exact on affine elements
     (:func:`femodes.fe.quadrature.orders`; scikit-fem's default rule on curved meshes).
 
@@ -175,22 +177,22 @@ def stiffness_basis(mesh: Any, element: Any, owner: str) -> Any:
     """
     o = orders(mesh, element)
     if o is None or o.stiffness == o.mass:
-        return checked_basis(mesh, element, owner, intorder=None if o is None else o.mass)
-    return checked_basis(mesh, element, owner, intorder=o.stiffness, disable_doflocs=True)
+        return checked_basis(mesh, element, intorder=None if o is None else o.mass)
+    return checked_basis(mesh, element, intorder=o.stiffness, disable_doflocs=True)
 
 
-def mass_basis(stiffness: Any, owner: str) -> Any:
+def mass_basis(stiffness: Any) -> Any:
     """Basis of the mass form: the stiffness basis itself when both forms take the same rule
     (Q1/Q2 quadrilaterals and hexahedra, curved meshes), else one with the mass rule that shares
     its DOF numbering and geometry map."""
     o = orders(stiffness.mesh, stiffness.elem)
     if o is None or o.stiffness == o.mass:
         return stiffness
-    return checked_basis(stiffness.mesh, stiffness.elem, owner, intorder=o.mass, mapping=stiffness.mapping,
+    return checked_basis(stiffness.mesh, stiffness.elem, intorder=o.mass, mapping=stiffness.mapping,
                          dofs=stiffness.dofs)
 
 
-def assemble_blocks(mesh: Any, element: Any, owner: str, stiffness: tuple, mass: tuple) -> tuple:
+def assemble_blocks(mesh: Any, element: Any, stiffness: tuple, mass: tuple) -> tuple:
     """``K``, ``M`` and the model's basis (or its :class:`BasisRecipe`): each form assembled by
     scikit-fem with the quadrature of :func:`stiffness_basis` / :func:`mass_basis`.
 
@@ -214,9 +216,9 @@ def assemble_blocks(mesh: Any, element: Any, owner: str, stiffness: tuple, mass:
     block = assembly_block(mesh, element)
     (kform, kcoef), (mform, mcoef) = stiffness, mass
     if block >= n_el:
-        kbasis = stiffness_basis(mesh, element, owner)
+        kbasis = stiffness_basis(mesh, element)
         K = kform.assemble(kbasis, **_coefficients(kbasis, kcoef, None))
-        basis = mass_basis(kbasis, owner)
+        basis = mass_basis(kbasis)
         del kbasis  # one basis held at a time
         M = mform.assemble(basis, **_coefficients(basis, mcoef, None))
         return K, M, basis
@@ -224,13 +226,13 @@ def assemble_blocks(mesh: Any, element: Any, owner: str, stiffness: tuple, mass:
     ko, mo = (None, None) if o is None else (o.stiffness, o.mass)
     mapping = mesh.mapping()
     # the global numbering and DOF locations (of every element) from the first block's basis
-    first = checked_basis(mesh, element, owner, intorder=mo, mapping=mapping, elements=np.arange(block))
+    first = checked_basis(mesh, element, intorder=mo, mapping=mapping, elements=np.arange(block))
     dofs, doflocs = first.dofs, np.asarray(first.doflocs)
     del first
     # K over all blocks, then M: one matrix's pieces held at a time (P2 tetrahedra: the two forms
     # take different rules, so each block needs two bases anyway)
-    K = _assemble_in_blocks(mesh, element, owner, kform, kcoef, ko, mapping, dofs, block)
-    M = _assemble_in_blocks(mesh, element, owner, mform, mcoef, mo, mapping, dofs, block)
+    K = _assemble_in_blocks(mesh, element, kform, kcoef, ko, mapping, dofs, block)
+    M = _assemble_in_blocks(mesh, element, mform, mcoef, mo, mapping, dofs, block)
     return K, M, BasisRecipe(elem=element, intorder=mo, dofs=dofs, doflocs=doflocs)
 
 
@@ -239,13 +241,13 @@ def assemble_blocks(mesh: Any, element: Any, owner: str, stiffness: tuple, mass:
 SUM_TRIPLETS = 2**24
 
 
-def _assemble_in_blocks(mesh, element, owner, form, coefficients, intorder, mapping, dofs, block) -> sp.csr_matrix:
+def _assemble_in_blocks(mesh, element, form, coefficients, intorder, mapping, dofs, block) -> sp.csr_matrix:
     """``form`` assembled block by block (:func:`assemble_blocks`), summed as CSR."""
     n_el, n = int(mesh.nelements), int(dofs.N)
     total, pending, count = None, [], 0
     for e0 in range(0, n_el, block):
         idx = np.arange(e0, min(n_el, e0 + block))
-        b = checked_basis(mesh, element, owner, intorder=intorder, mapping=mapping, elements=idx, dofs=dofs,
+        b = checked_basis(mesh, element, intorder=intorder, mapping=mapping, elements=idx, dofs=dofs,
                           disable_doflocs=True)
         pending.append(form.assemble(b, **_coefficients(b, coefficients, idx)).tocoo())
         count += pending[-1].nnz
@@ -279,7 +281,7 @@ def _sum_blocks(blocks: list, n: int) -> sp.csr_matrix:
     return sp.csr_matrix((data, (rows, cols)), shape=(n, n))
 
 
-def _check_assembled(owner: str, mesh: Any, M: sp.spmatrix, K: sp.spmatrix) -> None:
+def _check_assembled(mesh: Any, M: sp.spmatrix, K: sp.spmatrix) -> None:
     """Overflow/underflow of the assembled matrices, reported against the inputs that cause it."""
     if np.asarray(mesh.p).shape[0] == 1:
         h = np.diff(np.asarray(mesh.p[0]))
@@ -293,12 +295,12 @@ def _check_assembled(owner: str, mesh: Any, M: sp.spmatrix, K: sp.spmatrix) -> N
                   "material (E, rho) and the thickness")
     for name, A in (("mass", M), ("stiffness", K)):
         if not np.all(np.isfinite(A.data)):
-            raise ValueError(f"{owner}: the {name} matrix has non-finite entries (overflow) for the given material, section and {scales}")
+            raise InputValueError(f"the {name} matrix has non-finite entries (overflow) for the given material, section and {scales}")
     if not M.nnz or not np.any(M.diagonal() > 0):
-        raise ValueError(f"{owner}: the mass matrix is zero (underflow of rho * area) for the given material, section and {scales}")
+        raise InputValueError(f"the mass matrix is zero (underflow of rho * area) for the given material, section and {scales}")
 
 
-def element_property(mesh: Any, value: Any, cls: type, owner: str, arg: str) -> np.ndarray:
+def element_property(mesh: Any, value: Any, cls: type, arg: str) -> np.ndarray:
     """Per-element objects from one object or a mapping {subdomain name: object}."""
     n_el = mesh.t.shape[1]
     if isinstance(value, cls):
@@ -308,18 +310,18 @@ def element_property(mesh: Any, value: Any, cls: type, owner: str, arg: str) -> 
         out = np.full(n_el, None, dtype=object)
         for name, v in value.items():
             if name not in subs:
-                raise ValueError(f"{owner}: {arg} names subdomain {name!r}, but the mesh has subdomains {sorted(subs)}")
+                raise InputValueError(f"{arg} names subdomain {name!r}, but the mesh has subdomains {sorted(subs)}")
             if not isinstance(v, cls):
-                raise TypeError(f"{owner}: {arg}[{name!r}] must be a {cls.__name__}, got {type(v).__name__}")
+                raise InputTypeError(f"{arg}[{name!r}] must be a {cls.__name__}, got {type(v).__name__}")
             out[np.asarray(subs[name])] = v
         missing = np.flatnonzero(out == None)  # noqa: E711 (object array comparison)
         if missing.size:
-            raise ValueError(
-                f"{owner}: {arg} does not cover {missing.size} element(s) (first: element {missing[0]}); "
+            raise InputValueError(
+                f"{arg} does not cover {missing.size} element(s) (first: element {missing[0]}); "
                 f"give a {cls.__name__} for every subdomain or a single {cls.__name__}"
             )
         return out
-    raise TypeError(f"{owner}: {arg} must be a {cls.__name__} or a mapping {{subdomain: {cls.__name__}}}, got {type(value).__name__}")
+    raise InputTypeError(f"{arg} must be a {cls.__name__} or a mapping {{subdomain: {cls.__name__}}}, got {type(value).__name__}")
 
 
 def quad_field(basis: Any, per_element: np.ndarray) -> np.ndarray:
@@ -327,7 +329,7 @@ def quad_field(basis: Any, per_element: np.ndarray) -> np.ndarray:
     return np.repeat(np.asarray(per_element, dtype=float)[:, None], basis.X.shape[1], axis=1)
 
 
-def support_names(value: Any, owner: str, arg: str) -> list:
+def support_names(value: Any, arg: str) -> list:
     """Boundary/point names of a support argument (``clamped="clamp"`` or a list of names)."""
     if value is None:
         return []
@@ -335,23 +337,22 @@ def support_names(value: Any, owner: str, arg: str) -> list:
         return [value]
     if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
         return list(value)
-    raise TypeError(f"{owner}: {arg} must be a location name or a list of names, got {value!r}")
+    raise InputTypeError(f"{arg} must be a location name or a list of names, got {value!r}")
 
 
-def _location_node(mesh: Any, name: str, owner: str, arg: str) -> int:
+def _location_node(mesh: Any, name: str, arg: str) -> int:
     b = mesh.boundaries or {}
     if name not in b:
-        raise ValueError(f"{owner}: {arg} names location {name!r}, but the mesh has named points {sorted(b)}")
+        raise InputValueError(f"{arg} names location {name!r}, but the mesh has named points {sorted(b)}")
     facets = np.asarray(b[name])
     if facets.size != 1:
-        raise ValueError(f"{owner}: location {name!r} has {facets.size} points; a support/contact location must be one point")
+        raise InputValueError(f"location {name!r} has {facets.size} points; a support/contact location must be one point")
     # For MeshLine the facets are the vertices: facet index == vertex index.
     return int(mesh.facets[0, facets[0]])
 
 
 def build_fe_model(
     *,
-    owner: str,
     kind: str,
     mesh: Any,
     basis: Any,
@@ -384,19 +385,19 @@ def build_fe_model(
     n_full = basis.N
     M = sp.csr_matrix(M)
     K = sp.csr_matrix(K)
-    _check_assembled(owner, mesh, M, K)
+    _check_assembled(mesh, M, K)
     if locations is None:
-        locations = {name: _location_node(mesh, name, owner, "mesh boundaries") for name in (mesh.boundaries or {})}
+        locations = {name: _location_node(mesh, name, "mesh boundaries") for name in (mesh.boundaries or {})}
     groups = {} if groups is None else {k: np.asarray(v, dtype=int) for k, v in groups.items()}
     coords = np.asarray(mesh.p if node_coordinates is None else node_coordinates, dtype=float)
-    dofs = _NodalDofs(owner=owner, mesh=mesh, nodal=nodal, components=tuple(components), aliases=aliases,
+    dofs = _NodalDofs(mesh=mesh, nodal=nodal, components=tuple(components), aliases=aliases,
                       locations=dict(locations), groups=groups)
     constrained = _constrained_dofs(dofs, constraints)
     added_mass = _lumped_values(dofs, "point_masses", point_masses)
     added_stiffness = _lumped_values(dofs, "springs", springs)
     M = _add_diagonal(M, added_mass, n_full)
     K = _add_diagonal(K, added_stiffness, n_full)
-    free, node_dof = _free_dofs(owner, nodal, n_full, constrained, constraints)
+    free, node_dof = _free_dofs(nodal, n_full, constrained, constraints)
     dofmap = DofMap(
         n_dofs=free.size,
         components=tuple(components),
@@ -419,7 +420,6 @@ def build_fe_model(
 class _NodalDofs:
     """Resolves locations and component names of one FE model to nodes and component indices."""
 
-    owner: str
     mesh: Any
     nodal: np.ndarray
     components: tuple
@@ -431,7 +431,7 @@ class _NodalDofs:
         """Index of component ``comp`` (or its alias), else ValueError naming ``arg``."""
         c = self.aliases.get(comp, comp)
         if c not in self.components:
-            raise ValueError(f"{self.owner}: {arg} uses unknown component {comp!r}; components are {list(self.components)}")
+            raise InputValueError(f"{arg} uses unknown component {comp!r}; components are {list(self.components)}")
         return self.components.index(c)
 
     def node(self, name: str, arg: str) -> int:
@@ -439,12 +439,12 @@ class _NodalDofs:
         if name in self.locations:
             return int(self.locations[name])
         if name in self.groups:
-            raise ValueError(
-                f"{self.owner}: {arg} names boundary {name!r} with {len(self.groups[name])} nodes; this needs one "
+            raise InputValueError(
+                f"{arg} names boundary {name!r} with {len(self.groups[name])} nodes; this needs one "
                 f"point: name it (gmsh physical point, or points={{...}} of femodes.solid)"
             )
         known = sorted(set(self.locations) | set(self.groups))
-        raise ValueError(f"{self.owner}: {arg} names location {name!r}, but the mesh has the named locations {known}")
+        raise InputValueError(f"{arg} names location {name!r}, but the mesh has the named locations {known}")
 
     def nodes(self, name: str, arg: str) -> np.ndarray:
         """Nodes of a named point or boundary."""
@@ -459,7 +459,7 @@ class _NodalDofs:
         elif isinstance(at, tuple) and len(at) == 2 and all(isinstance(a, str) for a in at):
             loc, c = at[0], self.component(at[1], arg)
         else:
-            raise TypeError(f"{self.owner}: {arg} keys must be location names or (name, component) pairs, got {at!r}")
+            raise InputTypeError(f"{arg} keys must be location names or (name, component) pairs, got {at!r}")
         return self.node(loc, arg), c
 
 
@@ -481,10 +481,10 @@ def _lumped_values(dofs: _NodalDofs, arg: str, table: Mapping | None) -> tuple[l
     if table is None:
         return idx, vals
     if not isinstance(table, Mapping):
-        raise TypeError(f"{dofs.owner}: {arg} must be a mapping {{location: value}}, got {type(table).__name__}")
+        raise InputTypeError(f"{arg} must be a mapping {{location: value}}, got {type(table).__name__}")
     for at, value in table.items():
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not math.isfinite(value) or value < 0:
-            raise ValueError(f"{dofs.owner}: {arg}[{at!r}] must be a finite non-negative number, got {value!r}")
+            raise InputValueError(f"{arg}[{at!r}] must be a finite non-negative number, got {value!r}")
         node, c = dofs.resolve(at, arg)
         idx.append(int(dofs.nodal[c, node]))
         vals.append(float(value))
@@ -499,13 +499,13 @@ def _add_diagonal(A: sp.spmatrix, added: tuple[list, list], n_full: int) -> sp.s
     return A + sp.csr_matrix((vals, (idx, idx)), shape=(n_full, n_full))
 
 
-def _free_dofs(owner: str, nodal: np.ndarray, n_full: int, constrained: dict, constraints: Sequence) -> tuple[np.ndarray, np.ndarray]:
+def _free_dofs(nodal: np.ndarray, n_full: int, constrained: dict, constraints: Sequence) -> tuple[np.ndarray, np.ndarray]:
     """Full FE index of each model DOF, and the model DOF of each (node, component) (-1: fixed)."""
     fixed_full = np.array(sorted(nodal[c, node] for node, c in constrained), dtype=int)
     free = np.setdiff1d(np.arange(n_full), fixed_full)
     if free.size == 0:
         given = ", ".join(f"{arg}={list(names)!r}" for arg, names, _ in constraints if names)
-        raise ValueError(f"{owner}: the supports ({given}) fix every DOF of the mesh; leave at least one DOF free")
+        raise InputValueError(f"the supports ({given}) fix every DOF of the mesh; leave at least one DOF free")
     free_of_full = np.full(n_full, -1, dtype=int)
     free_of_full[free] = np.arange(free.size)
     return free, free_of_full[nodal.T]  # node_dof: (n_nodes, n_components)

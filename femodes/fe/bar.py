@@ -10,6 +10,7 @@ import skfem
 from skfem.helpers import dot, grad
 
 from ..model import StructuralModel
+from ..solvers.checks import entry_point
 from .assembly import check_mesh, support_names, build_fe_model, element_property, mass_basis, quad_field, stiffness_basis
 from .material import Material, Section
 from .checks import check_assembly
@@ -29,6 +30,9 @@ def _mass(u, v, w):
     return w["rhoA"] * u * v
 
 
+
+
+@entry_point("bar")
 def bar(
     mesh: Any,
     material: Material | Mapping[str, Material],
@@ -67,19 +71,19 @@ def bar(
     Quadrature (:mod:`femodes.fe.quadrature`), exact on every element: Gauss with 2 (P1) or 3
     (P2) points for the mass (``u v``: degree 2 p), 2 points for the stiffness (degree 2 p - 2).
     """
-    check_mesh(mesh, "bar")
+    check_mesh(mesh)
     if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer)) or order not in (1, 2):
         raise ValueError(f"bar: order must be 1 or 2, got {order!r}")
     if not isinstance(lumped, bool):
         raise TypeError(f"bar: lumped must be True or False, got {lumped!r}")
     if lumped and order != 1:
         raise ValueError("bar: lumped=True is only available for order=1 (P2 row-sum lumping gives zero masses)")
-    mats = element_property(mesh, material, Material, "bar", "material")
-    check_assembly(mesh, skfem.ElementLineP1() if order == 1 else skfem.ElementLineP2(), "bar")
-    secs = element_property(mesh, section, Section, "bar", "section")
+    mats = element_property(mesh, material, Material, "material")
+    check_assembly(mesh, skfem.ElementLineP1() if order == 1 else skfem.ElementLineP2())
+    secs = element_property(mesh, section, Section, "section")
     element = skfem.ElementLineP1() if order == 1 else skfem.ElementLineP2()
-    kbasis = stiffness_basis(mesh, element, "bar")  # quadrature exact on each element (femodes.fe.quadrature)
-    basis = mass_basis(kbasis, "bar")
+    kbasis = stiffness_basis(mesh, element)  # quadrature exact on each element (femodes.fe.quadrature)
+    basis = mass_basis(kbasis)
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
         EA = quad_field(kbasis, [m.E * s.area for m, s in zip(mats, secs)])
         rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])
@@ -90,7 +94,6 @@ def bar(
 
         M = sp.diags(np.asarray(M.sum(axis=1)).ravel())
     return build_fe_model(
-        owner="bar",
         kind="bar",
         mesh=mesh,
         basis=basis,
@@ -98,7 +101,7 @@ def bar(
         K=K,
         components=("u",),
         aliases={"u_x": "u"},
-        constraints=[("clamped", support_names(clamped, "bar", "clamped"), ("u",))],
+        constraints=[("clamped", support_names(clamped, "clamped"), ("u",))],
         point_masses=point_masses,
         springs=springs,
     )

@@ -10,6 +10,7 @@ import skfem
 from skfem.helpers import dd, ddot, dot, grad
 
 from ..model import StructuralModel
+from ..solvers.checks import entry_point
 from .assembly import check_mesh, support_names, build_fe_model, element_property, mass_basis, quad_field, stiffness_basis
 from .material import Material, Section
 from .checks import check_assembly
@@ -29,6 +30,9 @@ def _mass(u, v, w):
     return w["rhoA"] * u * v + w["rhoI"] * dot(grad(u), grad(v))
 
 
+
+
+@entry_point("beam")
 def beam(
     mesh: Any,
     material: Material | Mapping[str, Material],
@@ -65,16 +69,16 @@ def beam(
     Quadrature (:mod:`femodes.fe.quadrature`), exact on every element: 4-point Gauss for the
     mass (``w v``: degree 6), 2-point for the stiffness (``w'' v''``: degree 2).
     """
-    check_mesh(mesh, "beam")
-    check_assembly(mesh, skfem.ElementLineHermite(), "beam")
-    mats = element_property(mesh, material, Material, "beam", "material")
-    secs = element_property(mesh, section, Section, "beam", "section")
+    check_mesh(mesh)
+    check_assembly(mesh, skfem.ElementLineHermite())
+    mats = element_property(mesh, material, Material, "material")
+    secs = element_property(mesh, section, Section, "section")
     for s in set(secs):
         if s.inertia is None:
             raise ValueError("beam: section.inertia is required for beams, got Section(inertia=None)")
     # quadrature exact on each element (femodes.fe.quadrature): 4-point Gauss for M, 2-point for K
-    kbasis = stiffness_basis(mesh, skfem.ElementLineHermite(), "beam")
-    basis = mass_basis(kbasis, "beam")
+    kbasis = stiffness_basis(mesh, skfem.ElementLineHermite())
+    basis = mass_basis(kbasis)
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
         EI = quad_field(kbasis, [m.E * s.inertia for m, s in zip(mats, secs)])
         rhoA = quad_field(basis, [m.rho * s.area for m, s in zip(mats, secs)])
@@ -82,7 +86,6 @@ def beam(
         K = _stiffness.assemble(kbasis, EI=EI)
         M = _mass.assemble(basis, rhoA=rhoA, rhoI=rhoI)
     return build_fe_model(
-        owner="beam",
         kind="beam",
         mesh=mesh,
         basis=basis,
@@ -91,8 +94,8 @@ def beam(
         components=("w", "theta"),
         aliases={"u_y": "w", "w_x": "theta", "theta_z": "theta"},
         constraints=[
-            ("clamped", support_names(clamped, "beam", "clamped"), ("w", "theta")),
-            ("pinned", support_names(pinned, "beam", "pinned"), ("w",)),
+            ("clamped", support_names(clamped, "clamped"), ("w", "theta")),
+            ("pinned", support_names(pinned, "pinned"), ("w",)),
         ],
         point_masses=point_masses,
         springs=springs,

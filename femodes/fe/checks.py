@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import skfem
 
-from ..solvers.checks import check_memory
+from ..solvers.checks import InputValueError, check_memory
 
 __all__ = ["ASSEMBLY_BLOCK_BYTES", "assembly_block", "assembly_memory", "check_assembly", "check_element_measures", "outward_normal"]
 
@@ -72,14 +72,14 @@ def assembly_memory(mesh: Any, element: Any) -> float:
     return float(block) * per_element + 2.0 * n_el * nb * nb * _BLOCK_TRIPLET_BYTES
 
 
-def check_assembly(mesh: Any, element: Any, owner: str) -> None:
+def check_assembly(mesh: Any, element: Any, fix: str = "use a coarser mesh") -> None:
     """ValueError when :func:`assembly_memory` exceeds the memory available, before anything is built."""
     n_el, nb = int(np.asarray(mesh.t).shape[1]), int(np.asarray(element.doflocs).shape[0])
     check_memory(assembly_memory(mesh, element), f"assembling M and K on {n_el} elements of {nb} DOFs each",
-                 "use a coarser mesh" + (" or order=1" if owner == "solid" else ""), owner=owner)
+                 fix)
 
 
-def check_element_measures(mesh: Any, owner: str) -> None:
+def check_element_measures(mesh: Any) -> None:
     """ValueError naming the first degenerate element of a 2-D or 3-D mesh (zero or non-finite
     area or volume: collinear or coplanar vertices). Measures from the mesh's geometry map at a
     few reference points per element; zero means below 1e-12 of the median element's measure,
@@ -96,7 +96,7 @@ def check_element_measures(mesh: Any, owner: str) -> None:
         verts = np.asarray(mesh.t[:, i])
         coords = ", ".join("(" + ", ".join(f"{v:.6g}" for v in mesh.p[:, j]) + ")" for j in verts)
         what = "area" if dim == 2 else "volume"
-        raise ValueError(f"{owner}: mesh element {i} has zero {what} (vertices {verts.tolist()} at {coords} are "
+        raise InputValueError(f"mesh element {i} has zero {what} (vertices {verts.tolist()} at {coords} are "
                          f"{'collinear' if dim == 2 else 'coplanar'}; {bad.size} such element{'s' * (bad.size != 1)}); "
                          "remove or repair the degenerate elements of the mesh")
 

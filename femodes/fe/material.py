@@ -7,17 +7,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..solvers.checks import InputTypeError, InputValueError, entry_point
 __all__ = ["Material", "Section"]
 
 
-def _pos(owner: str, name: str, v, *, allow_none: bool = False):
+def _pos(name: str, v, *, allow_none: bool = False):
     if v is None and allow_none:
         return None
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{owner}: {name} must be a positive real number, got {v!r}")
+        raise InputTypeError(f"{name} must be a positive real number, got {v!r}")
     v = float(v)
     if not math.isfinite(v) or v <= 0:
-        raise ValueError(f"{owner}: {name} must be a finite positive number, got {v!r}")
+        raise InputValueError(f"{name} must be a finite positive number, got {v!r}")
     return v
 
 
@@ -34,16 +35,17 @@ class Material:
     rho: float
     nu: float = 0.3
 
+    @entry_point("Material")
     def __post_init__(self):
-        object.__setattr__(self, "E", _pos("Material", "E", self.E))
-        object.__setattr__(self, "rho", _pos("Material", "rho", self.rho))
+        object.__setattr__(self, "E", _pos("E", self.E))
+        object.__setattr__(self, "rho", _pos("rho", self.rho))
         nu = self.nu
         if isinstance(nu, bool) or not isinstance(nu, (int, float, np.integer, np.floating)):
-            raise TypeError(f"Material: nu must be a real number in (-1, 0.5), got {nu!r}")
+            raise InputTypeError(f"nu must be a real number in (-1, 0.5), got {nu!r}")
         nu = float(nu)
         if not -1.0 < nu < 0.5:
-            raise ValueError(
-                f"Material: nu must satisfy -1 < nu < 0.5 (positive definite isotropic elasticity), got {self.nu!r}; "
+            raise InputValueError(
+                f"nu must satisfy -1 < nu < 0.5 (positive definite isotropic elasticity), got {self.nu!r}; "
                 "for a nearly incompressible material use e.g. nu=0.49"
             )
         object.__setattr__(self, "nu", nu)
@@ -72,10 +74,11 @@ class Section:
     inertia: float | None = None
     rotary_inertia: bool = False
 
+    @entry_point("Section")
     def __post_init__(self):
-        object.__setattr__(self, "area", _pos("Section", "area", self.area))
-        object.__setattr__(self, "inertia", _pos("Section", "inertia", self.inertia, allow_none=True))
+        object.__setattr__(self, "area", _pos("area", self.area))
+        object.__setattr__(self, "inertia", _pos("inertia", self.inertia, allow_none=True))
         if isinstance(self.rotary_inertia, np.bool_):
             object.__setattr__(self, "rotary_inertia", bool(self.rotary_inertia))
         if not isinstance(self.rotary_inertia, bool):
-            raise TypeError(f"Section: rotary_inertia must be True or False, got {self.rotary_inertia!r}")
+            raise InputTypeError(f"rotary_inertia must be True or False, got {self.rotary_inertia!r}")

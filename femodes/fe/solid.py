@@ -16,6 +16,7 @@ import skfem
 from skfem.helpers import ddot, div, dot, grad, transpose
 
 from ..model import StructuralModel
+from ..solvers.checks import entry_point
 from .assembly import assemble_blocks, build_fe_model, element_property, support_names
 from .material import Material
 from .checks import check_assembly, check_element_measures
@@ -159,7 +160,7 @@ def _plane_options(dim: int, plane: Any, thickness: Any) -> tuple[str | None, fl
 
 def _supports(clamped: Any, supports: Any, components: tuple) -> list:
     """``[(argument, names, components)]`` for :func:`build_fe_model`."""
-    out = [("clamped", support_names(clamped, "solid", "clamped"), components)]
+    out = [("clamped", support_names(clamped, "clamped"), components)]
     if supports is None:
         return out
     if not isinstance(supports, Mapping):
@@ -179,6 +180,9 @@ def _supports(clamped: Any, supports: Any, components: tuple) -> list:
     return out
 
 
+
+
+@entry_point("solid")
 def solid(
     mesh: Any,
     material: Material | Mapping[str, Material],
@@ -248,9 +252,9 @@ def solid(
     dim, scalar = _elements(mesh, int(order))
     plane, t = _plane_options(dim, plane, thickness)
     components = _COMPONENTS[dim]
-    check_assembly(mesh, skfem.ElementVector(scalar), "solid")  # refused before anything large is built
-    check_element_measures(mesh, "solid")  # a flat element is named, not left to look like an overflow
-    mats = element_property(mesh, material, Material, "solid", "material")
+    check_assembly(mesh, skfem.ElementVector(scalar), "use a coarser mesh or order=1")  # refused before anything large is built
+    check_element_measures(mesh)  # a flat element is named, not left to look like an overflow
+    mats = element_property(mesh, material, Material, "material")
     lam, mu = np.array([m.lame for m in mats]).T
     if plane == "stress":  # sigma_zz = 0 eliminates eps_zz: lambda* = 2 lambda mu / (lambda + 2 mu) = E nu / (1 - nu^2)
         lam = 2.0 * lam * mu / (lam + 2.0 * mu)
@@ -258,7 +262,7 @@ def solid(
     # K first, its basis dropped before the mass basis is built (peak memory: one basis); large meshes in
     # blocks of elements (assemble_blocks: the model then keeps a recipe of its basis, not the basis)
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):  # overflow is reported by build_fe_model
-        K, M, basis = assemble_blocks(mesh, skfem.ElementVector(scalar), "solid",
+        K, M, basis = assemble_blocks(mesh, skfem.ElementVector(scalar),
                                       stiffness=(_stiffness, {"lam": lam, "mu": mu, "t": t}),
                                       mass=(_mass, {"rho": np.array([m.rho for m in mats], dtype=float), "t": t}))
     nodal = _lagrange_nodes(basis, dim)
@@ -268,7 +272,6 @@ def solid(
     groups, weights = _groups(mesh, basis, scalar, nodal, node_of_full)
     locations = _points(mesh, coords, points, groups)
     return build_fe_model(
-        owner="solid",
         kind="solid",
         mesh=mesh,
         basis=basis,

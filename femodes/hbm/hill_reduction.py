@@ -46,6 +46,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from ..solvers.checks import named_by
 from ..eigen import normal_modes
 from ..model import Attached, StructuralModel
 from ..sparse_direct import factorize
@@ -124,7 +125,8 @@ class _Basis:
             return False
         m = min(n_max, max(n, FIRST_MODES, 2 * self.Phi.shape[1]))
         try:
-            w, Phi = normal_modes(self.model.K, self.model.M, m, "hill_exponents", check=False)
+            with named_by("hill_exponents"):  # hill_exponents is not an entry point yet
+                w, Phi = normal_modes(self.model.K, self.model.M, m, check=False)
         except (RuntimeError, ValueError, np.linalg.LinAlgError) as exc:
             log.info("hill_exponents: free-interface modes failed (%s)", exc)
             return False

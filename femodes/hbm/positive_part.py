@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..solvers.checks import check_int
+from ..solvers.checks import check_int, entry_point
 from .trigroots import DEGREE_TOL, GridRoots, sign_changes_of
 
 __all__ = ["positive_part", "positive_intervals", "positive_part_sampled", "ExactProjection", "SampledProjection"]
@@ -211,8 +211,9 @@ class SampledProjection:
     ``n_time`` points (:func:`positive_part_sampled`); for comparison only (its Jacobian jumps and
     semismooth Newton cycles near contact onset). Same call as :class:`ExactProjection`."""
 
+    @entry_point("SampledProjection")
     def __init__(self, n_time: int | None = None):
-        self.n_time = None if n_time is None else check_int("n_time", n_time, 1, owner="SampledProjection")
+        self.n_time = None if n_time is None else check_int("n_time", n_time, 1)
 
     def __call__(self, h, Phi):
         return _sampled(h, check_phi(h, Phi, single=False), self.n_time)

@@ -31,8 +31,8 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ..fields import MeshFields, check_scale, mesh_fields
-from ..solvers.checks import check_int
+from ..fields import MeshFields, check_scale, sample_fields
+from ..solvers.checks import InputTypeError, InputValueError, check_int, entry_name, entry_point
 from ..linear import LinearModes
 from ..model import StructuralModel
 from ..results import PeriodicSolution
@@ -46,14 +46,14 @@ log = logging.getLogger(__name__)
 # --------------------------------------------------------------------------------------------
 # Writers
 # --------------------------------------------------------------------------------------------
-def _stem(path: Any, owner: str) -> Path:
+def _stem(path: Any) -> Path:
     if not isinstance(path, (str, os.PathLike)):
-        raise TypeError(f"{owner}: path must be a str or os.PathLike file stem (e.g. 'out/mode1'), got {type(path).__name__}")
+        raise InputTypeError(f"path must be a str or os.PathLike file stem (e.g. 'out/mode1'), got {type(path).__name__}")
     p = Path(path)
     if p.suffix.lower() in (".pvd", ".vtu"):
         p = p.with_suffix("")
     if not p.name:
-        raise ValueError(f"{owner}: path must name a file stem such as 'out/mode1', got {str(path)!r}")
+        raise InputValueError(f"path must name a file stem such as 'out/mode1', got {str(path)!r}")
     return p
 
 
@@ -123,7 +123,7 @@ def _frame_data(fields: MeshFields, scale: float | None) -> tuple[list, dict, li
     return [(fields.cell_type, fields.cells)], field_base, frames
 
 
-def _write_series(fields: MeshFields, stem: Path, scale: float | None, owner: str, extra: dict | None = None) -> Path:
+def _write_series(fields: MeshFields, stem: Path, scale: float | None, extra: dict | None = None) -> Path:
     import meshio
 
     stem.parent.mkdir(parents=True, exist_ok=True)
@@ -153,7 +153,7 @@ def _write_series(fields: MeshFields, stem: Path, scale: float | None, owner: st
     for old in stem.parent.glob(f"{glob.escape(stem.name)}_*.vtu"):
         if pattern.fullmatch(old.name) and old.name not in written:
             old.unlink(missing_ok=True)
-    log.info("%s: wrote %d frames and %s", owner, n, pvd)
+    log.info("%s: wrote %d frames and %s", entry_name(), n, pvd)
     return pvd
 
 
@@ -163,9 +163,9 @@ SI_UNITS = {"displacement": "m", "velocity": "m/s", "rotation": "rad", "contact_
             "(2-D) or 1 (bars, beams)", "omega": "rad/s", "period": "s", "TimeValue": "s"}
 
 
-def _units_and_quality(solution: PeriodicSolution, units: Any, owner: str) -> dict:
+def _units_and_quality(solution: PeriodicSolution, units: Any) -> dict:
     """Field data that say the units and how far the truncated contact law is from exact."""
-    out = _units(units, owner)
+    out = _units(units)
     if solution.P.size:
         pen, ten = float(solution.penetration), float(solution.tension)
         out["max_penetration"] = np.array([pen])
@@ -179,7 +179,7 @@ def _units_and_quality(solution: PeriodicSolution, units: Any, owner: str) -> di
     return out
 
 
-def _units(units: Any, owner: str) -> dict:
+def _units(units: Any) -> dict:
     """Field data that say the units (``units`` of the writers).
 
     meshio cannot read VTK string arrays, so text is carried by array *names* (value 1): ParaView
@@ -192,10 +192,13 @@ def _units(units: Any, owner: str) -> dict:
     elif isinstance(units, dict) and all(isinstance(k, str) and isinstance(v, str) for k, v in units.items()):
         marks = {f"unit {q}: {u}": 1 for q, u in units.items()}
     else:
-        raise ValueError(f"{owner}: units must be None, 'SI' or a dict {{quantity: unit}} of strings, got {units!r}")
+        raise InputValueError(f"units must be None, 'SI' or a dict {{quantity: unit}} of strings, got {units!r}")
     return {k: np.array([v], dtype=np.int64) for k, v in marks.items()}
 
 
+
+
+@entry_point("write_animation")
 def write_animation(solution: PeriodicSolution, model: StructuralModel | None, path: Any, n_frames: int = 36,
                     scale: float | None = None, *, units: Any = None) -> Path:
     """Write one period of a periodic solution as a ParaView time series.
@@ -264,21 +267,23 @@ def write_animation(solution: PeriodicSolution, model: StructuralModel | None, p
     TypeError
         Wrong types for ``solution``, ``model``, ``path`` or ``scale``.
     """
-    owner = "write_animation"
     if not isinstance(solution, PeriodicSolution):
-        raise TypeError(f"{owner}: solution must be a PeriodicSolution (e.g. branch[i]), got {type(solution).__name__}")
-    n_frames = check_int("n_frames", n_frames, 2, owner=owner)
-    scale = check_scale(scale, owner)
-    stem = _stem(path, owner)
-    extra = _units_and_quality(solution, units, owner)
-    fields = mesh_fields(solution, model, n_frames=n_frames, owner=owner)
+        raise InputTypeError(f"solution must be a PeriodicSolution (e.g. branch[i]), got {type(solution).__name__}")
+    n_frames = check_int("n_frames", n_frames, 2)
+    scale = check_scale(scale)
+    stem = _stem(path)
+    extra = _units_and_quality(solution, units)
+    fields = sample_fields(solution, model, n_frames=n_frames)
     if solution.multipliers is not None:  # computed with stability=True
         extra.update({"floquet_multipliers_real": solution.multipliers.real,
                       "floquet_multipliers_imag": solution.multipliers.imag,
                       "stable": np.array([int(bool(solution.stable))], dtype=np.int64)})
-    return _write_series(fields, stem, scale, owner, extra)
+    return _write_series(fields, stem, scale, extra)
 
 
+
+
+@entry_point("write_linear_mode")
 def write_linear_mode(modes: LinearModes, model: StructuralModel, path: Any, n_frames: int = 36,
                       scale: float | None = None, *, mode: int = 1, units: Any = None) -> Path:
     """Write a linear mode as a ParaView time series ``q(t) = phi cos(w t)``.
@@ -311,15 +316,14 @@ def write_linear_mode(modes: LinearModes, model: StructuralModel, path: Any, n_f
     TypeError
         ``modes`` not LinearModes, wrong ``model`` or ``path`` type.
     """
-    owner = "write_linear_mode"
     if not isinstance(modes, LinearModes):
-        raise TypeError(f"{owner}: modes must be LinearModes (femodes.linear_modes), got {type(modes).__name__}")
+        raise InputTypeError(f"modes must be LinearModes (femodes.linear_modes), got {type(modes).__name__}")
     if model is None:
-        raise ValueError(f"{owner}: model is required (the model the modes were computed on)")
-    n_frames = check_int("n_frames", n_frames, 2, owner=owner)
-    scale = check_scale(scale, owner)
-    stem = _stem(path, owner)
-    extra = _units(units, owner)
-    fields = mesh_fields(modes, model, n_frames=n_frames, mode=mode, owner=owner)
+        raise InputValueError("model is required (the model the modes were computed on)")
+    n_frames = check_int("n_frames", n_frames, 2)
+    scale = check_scale(scale)
+    stem = _stem(path)
+    extra = _units(units)
+    fields = sample_fields(modes, model, n_frames=n_frames, mode=mode)
     extra["note: linear mode shape, mass-normalised (its amplitude is arbitrary)"] = np.array([1], dtype=np.int64)
-    return _write_series(fields, stem, scale, owner, extra)
+    return _write_series(fields, stem, scale, extra)

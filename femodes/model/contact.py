@@ -20,7 +20,7 @@ from .damping import redamped_after_contact
 from .declarations import CONTACT_LAWS, SMOOTH_LAWS, Attached, show_vector
 from .frames import AXIS_TOL, nodal_frame, rotated_model, same_normal
 
-__all__ = ["add_contacts", "bind_contacts", "expand_contact", "two_normals"]
+__all__ = ["add_contacts", "bind_contacts", "contact_label", "expand_contact", "two_normals"]
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,6 @@ def bind_contacts(model, laws, node_of: np.ndarray, comp_of: np.ndarray) -> tupl
                 f"with_contact: expected UnilateralContact or PenaltyContact, got {type(law).__name__}"
                 + (" (use with_nonlinearity for smooth springs)" if isinstance(law, SMOOTH_LAWS) else "")
             )
-        owner = f"with_contact: {type(law).__name__}(at={law.at!r})"
         if law.direction is None and not callable(law.gap) and dm.group_of(law.at) is None:
             pairs, rot = [(law, model.dof(law.at, f"with_contact: {type(law).__name__}"))], {}
         else:
@@ -78,15 +77,15 @@ def bind_contacts(model, laws, node_of: np.ndarray, comp_of: np.ndarray) -> tupl
             old = frames.get(k)
             if old is not None:
                 if not same_normal(old, frame):
-                    raise ValueError(two_normals(dm, owner, k, old.normal, frame.normal))
+                    raise ValueError(two_normals(dm, law, k, old.normal, frame.normal))
             elif k in normals:
-                raise ValueError(two_normals(dm, owner, k, normals[k], frame.normal))
+                raise ValueError(two_normals(dm, law, k, normals[k], frame.normal))
             else:
                 pending[k] = frames[k] = frame
         for item, dof in pairs:
             k, c = int(node_of[dof]), int(comp_of[dof])
             if k in pending and k not in rot:  # a component of a node this call rotates
-                raise ValueError(two_normals(dm, owner, k, pending[k].normal, dm.axis(k, c)))
+                raise ValueError(two_normals(dm, law, k, pending[k].normal, dm.axis(k, c)))
             if dof in used:
                 what = f"{pending[k].components[c]!r} of node {k}" if k in pending else repr(dm.label(dof))
                 raise ValueError(f"with_contact: {type(law).__name__}(at={law.at!r}): DOF {what} already has a "
@@ -104,44 +103,44 @@ def expand_contact(model, law) -> tuple[list, dict]:
     node. An inclined or negative normal acts on the normal DOF of a nodal frame; the nodes to
     rotate come second (empty for a positive axis)."""
     dm = model.dofmap
-    owner = f"with_contact: {type(law).__name__}(at={law.at!r})"
+    label = contact_label(law)
     at = law.at
     if law.direction is not None:
-        _warn_direction_into_body(model, law, owner)
-        comp = _direction_component(dm, law.direction, owner)
+        _warn_direction_into_body(model, law)
+        comp = _direction_component(dm, law)
         if comp is None:
-            return _expand_inclined(model, law, owner)
+            return _expand_inclined(model, law)
         if isinstance(at, tuple):
             if dm.component_index(at[1]) != comp:
-                raise ValueError(f"{owner}: direction={law.direction} selects {dm.displacement[comp]!r} but at= names "
+                raise ValueError(f"{label}: direction={law.direction} selects {dm.displacement[comp]!r} but at= names "
                                  f"component {at[1]!r}; give one of them")
             at = at[0]
         if not isinstance(at, str):
-            raise ValueError(f"{owner}: direction= needs a named location (boundary or point), not a DOF index")
+            raise ValueError(f"{label}: direction= needs a named location (boundary or point), not a DOF index")
         at = (at, dm.components[comp])
     group = dm.group_of(at)
     if law.direction is None and isinstance(at, str) and group is not None and len(dm.displacement) > 1:
         # a boundary of a 2-D/3-D solid without a direction: the contact acts along +x, which is
         # rarely what was meant (a stop above a blade tip is along z)
-        warnings.warn(f"{owner}: no direction= for boundary {at!r} of a {len(dm.displacement)}-D solid; the contact "
+        warnings.warn(f"{label}: no direction= for boundary {at!r} of a {len(dm.displacement)}-D solid; the contact "
                       f"acts along +x ({dm.displacement[0]!r}). Give the stop's direction, e.g. "
                       f"direction={tuple(1.0 if i == len(dm.displacement) - 1 else 0.0 for i in range(len(dm.displacement)))}, "
                       f"or at=({at!r}, {dm.displacement[0]!r}) to keep +x and silence this", UserWarning,
                       stacklevel=_DEPTH + 2)  # the frame above the caller of with_contact, as before the split
     if group is None:
-        dof = model.dof(at, owner)
+        dof = model.dof(at, label)
         nodes, dofs = None, np.array([dof])
     else:
         name, c = group
         nodes = np.asarray(dm.groups[name])
         dofs = dm.node_dof[nodes, c]
         if np.any(dofs == -2):
-            raise ValueError(f"{owner}: boundary {name!r} is not kept in this reduced model; attach the contact "
+            raise ValueError(f"{label}: boundary {name!r} is not kept in this reduced model; attach the contact "
                              "before reducing (craig_bampton keeps contact DOFs)")
         held = dofs < 0
         if held.all():
             support = dm.constrained_by.get((int(nodes[0]), c), "a support")
-            raise ValueError(f"{owner}: every node of {name!r} is constrained ({support!r}) in {dm.components[c]!r}; "
+            raise ValueError(f"{label}: every node of {name!r} is constrained ({support!r}) in {dm.components[c]!r}; "
                              "contact cannot act on a constrained DOF")
         if held.any():
             log.info("with_contact: %d of %d nodes of %r are constrained in %r and get no contact",
@@ -149,33 +148,34 @@ def expand_contact(model, law) -> tuple[list, dict]:
         nodes, dofs = nodes[~held], dofs[~held]
         for k in nodes:
             if int(k) in dm.frames:
-                raise ValueError(two_normals(dm, owner, int(k), dm.frames[int(k)].normal, dm.axis(int(k), c)))
-    gaps = _contact_gaps(dm, law.gap, nodes, dofs, owner)
+                raise ValueError(two_normals(dm, law, int(k), dm.frames[int(k)].normal, dm.axis(int(k), c)))
+    gaps = _contact_gaps(dm, law, nodes, dofs)
     return [(dataclasses.replace(law, at=int(d), gap=float(g), direction=None), int(d)) for d, g in zip(dofs, gaps)], {}
 
 
-def _expand_inclined(model, law, owner: str) -> tuple[list, dict]:
+def _expand_inclined(model, law) -> tuple[list, dict]:
     """:func:`expand_contact` of a law whose normal is not a positive coordinate axis: each of
     its nodes gets the nodal frame of the normal; the law acts on the normal DOF ``u_n``."""
     dm = model.dofmap
+    label = contact_label(law)
     direction = law.direction
     if model.fe is None:
-        raise ValueError(f"{owner}: direction={direction} is not along +x, +y or +z: the contact acts on the normal "
+        raise ValueError(f"{label}: direction={direction} is not along +x, +y or +z: the contact acts on the normal "
                          "DOF of a nodal rotation, which is done on the meshed solid itself; attach the contact "
                          "before reducing (craig_bampton keeps contact DOFs)")
     at = law.at
     if isinstance(at, tuple):
-        raise ValueError(f"{owner}: direction={direction} is not along +x, +y or +z: the contact acts on the normal "
+        raise ValueError(f"{label}: direction={direction} is not along +x, +y or +z: the contact acts on the normal "
                          f"DOF 'u_n' of rotated nodes, not on a component; give at= a boundary or point name only "
                          f"(at={at[0]!r})")
     if not isinstance(at, str):
-        raise ValueError(f"{owner}: direction= needs a named location (boundary or point), not a DOF index")
+        raise ValueError(f"{label}: direction= needs a named location (boundary or point), not a DOF index")
     if at in dm.groups and at not in dm.locations:
         name, nodes = at, np.asarray(dm.groups[at], dtype=int)
     elif at in dm.locations:
         name, nodes = None, np.array([int(dm.locations[at])])
     else:
-        model.dof(at, owner)  # raises: unknown location
+        model.dof(at, label)  # raises: unknown location
         raise AssertionError("unreachable")  # pragma: no cover
     frame = nodal_frame(direction)
     node_dof = dm.node_dof[nodes]  # (k, dim)
@@ -188,34 +188,41 @@ def _expand_inclined(model, law, owner: str) -> tuple[list, dict]:
         support = dm.constrained_by.get((k, c), "a support")
         free = [dm.components[j] for j in range(dm.node_dof.shape[1]) if dm.node_dof[k, j] >= 0]
         raise ValueError(
-            f"{owner}: node {k} at {show_vector(dm.node_coordinates[:, k])} is constrained in {dm.components[c]!r} by "
+            f"{label}: node {k} at {show_vector(dm.node_coordinates[:, k])} is constrained in {dm.components[c]!r} by "
             f"{support} but free in {free}: the contact normal {show_vector(frame.normal)} rotates the node's DOFs, "
             "which would mix constrained and free DOFs; constrain that node fully (clamped=...) or not at all"
         )
     if every.all():
         support = dm.constrained_by.get((int(nodes[0]), 0), "a support")
         where = f"every node of {name!r} is" if name is not None else f"{at!r} is"
-        raise ValueError(f"{owner}: {where} constrained ({support!r}); contact cannot act on a constrained DOF")
+        raise ValueError(f"{label}: {where} constrained ({support!r}); contact cannot act on a constrained DOF")
     if every.any():
         log.info("with_contact: %d of %d nodes of %r are constrained and get no contact", int(every.sum()),
                  every.size, name)
     nodes = nodes[~every]
     dofs = dm.node_dof[nodes, frame.slot]
-    gaps = _contact_gaps(dm, law.gap, nodes, dofs, owner)
+    gaps = _contact_gaps(dm, law, nodes, dofs)
     pairs = [(dataclasses.replace(law, at=int(d), gap=float(g), direction=None), int(d)) for d, g in zip(dofs, gaps)]
     return pairs, {int(k): frame for k in nodes}
 
 
-def two_normals(dm, owner: str, node: int, old, new) -> str:
+def contact_label(law) -> str:
+    """How the messages of :meth:`~femodes.StructuralModel.with_contact` name a contact law."""
+    return f"with_contact: {type(law).__name__}(at={law.at!r})"
+
+
+def two_normals(dm, law, node: int, old, new) -> str:
+    """The message of a node that ``law`` would give a second contact normal."""
+    label = contact_label(law)
     X = dm.node_coordinates
     where = f" at {show_vector(X[:, node])}" if X is not None else ""
-    return (f"{owner}: node {node}{where} would get two contact normals, {show_vector(old)} and {show_vector(new)}: a node "
+    return (f"{label}: node {node}{where} would get two contact normals, {show_vector(old)} and {show_vector(new)}: a node "
             "with an inclined or negative normal has its DOFs rotated into one nodal frame (u_n along the normal), "
             "so all contacts of that node must share that normal (or act on its tangent DOF, at=(point, 'u_t')); "
             "give the stops the same direction or put them on different nodes")
 
 
-def _warn_direction_into_body(model, law, owner: str) -> None:
+def _warn_direction_into_body(model, law) -> None:
     """A stop along ``direction`` from a boundary whose outward normal points the other way sits
     inside the material (``direction`` is the way the structure moves towards the stop)."""
     name = law.at[0] if isinstance(law.at, tuple) else law.at
@@ -231,39 +238,41 @@ def _warn_direction_into_body(model, law, owner: str) -> None:
         def show(v):
             return "(" + ", ".join(f"{float(x) + 0.0:.4g}" for x in v) + ")"
 
-        warnings.warn(f"{owner}: direction={show(d)} points into the body at boundary {name!r} (its outward "
+        warnings.warn(f"{contact_label(law)}: direction={show(d)} points into the body at boundary {name!r} (its outward "
                       f"normal is {show(n)}), so the stop sits inside the material; give the direction in which "
                       f"{name!r} moves towards the stop, e.g. direction={show(-d)}", UserWarning,
                       stacklevel=_DEPTH + 2)  # the caller of with_contact
 
 
-def _direction_component(dm, direction: tuple, owner: str) -> int | None:
-    """Component of a contact ``direction`` along a positive coordinate axis, or None for an
+def _direction_component(dm, law) -> int | None:
+    """Component of a contact law's ``direction`` along a positive coordinate axis, or None for an
     inclined or negative normal (a nodal rotation, :func:`_expand_inclined`)."""
+    label, direction = contact_label(law), law.direction
     if not dm.displacement:
-        raise ValueError(f"{owner}: direction= needs a meshed solid (femodes.solid); for bars, beams and discrete "
+        raise ValueError(f"{label}: direction= needs a meshed solid (femodes.solid); for bars, beams and discrete "
                          "models give the DOF with at=(name, component)")
     dim = len(dm.displacement)
     if len(direction) != dim:
-        raise ValueError(f"{owner}: direction={direction} has {len(direction)} components, this model is {dim}-D "
+        raise ValueError(f"{label}: direction={direction} has {len(direction)} components, this model is {dim}-D "
                          f"(give {dim} components, e.g. {tuple([1.0] + [0.0] * (dim - 1))})")
     d = np.asarray(direction, dtype=float)
     if not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
-        raise ValueError(f"{owner}: direction={direction} must be a finite non-zero vector")
+        raise ValueError(f"{label}: direction={direction} must be a finite non-zero vector")
     axis = int(np.argmax(np.abs(d)))
     if d[axis] >= 1.0 - AXIS_TOL:
         return dm.component_index(dm.displacement[axis])
     return None
 
 
-def _contact_gaps(dm, gap, nodes, dofs, owner: str) -> np.ndarray:
-    """The gap of each contact DOF: the number, or the callable at the nodes' coordinates."""
+def _contact_gaps(dm, law, nodes, dofs) -> np.ndarray:
+    """The gap of each contact DOF: the law's number, or its callable at the nodes' coordinates."""
+    label, gap = contact_label(law), law.gap
     n = len(dofs)
     if not callable(gap):
         return np.full(n, float(gap))
     X = dm.node_coordinates
     if X is None:
-        raise ValueError(f"{owner}: a callable gap needs a meshed model with node coordinates; give a number")
+        raise ValueError(f"{label}: a callable gap needs a meshed model with node coordinates; give a number")
     X = np.asarray(X, dtype=float)
     if nodes is None:  # a named point or a (point, component) pair
         loc = dm.node_dof
@@ -281,11 +290,11 @@ def _contact_gaps(dm, gap, nodes, dofs, owner: str) -> np.ndarray:
         try:
             g = np.array([float(gap(x[:, k])) for k in range(n)])
         except Exception as exc:  # noqa: BLE001 - report any error of the user's function
-            raise ValueError(f"{owner}: the gap function failed at node {tuple(x[:, 0])}: {exc!r}; it must map "
+            raise ValueError(f"{label}: the gap function failed at node {tuple(x[:, 0])}: {exc!r}; it must map "
                              "coordinates of shape (dim,) or (dim, n) to gaps") from exc
     bad = np.flatnonzero(~np.isfinite(g) | (g < 0))
     if bad.size:
         k = int(bad[0])
-        raise ValueError(f"{owner}: the gap function gives {g[k]!r} at node {tuple(float(v) for v in x[:, k])}; "
+        raise ValueError(f"{label}: the gap function gives {g[k]!r} at node {tuple(float(v) for v in x[:, k])}; "
                          "gaps must be finite and >= 0")
     return g

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from ..solvers.checks import named_by
 from ..eigen import normal_modes
 
 __all__ = ["DENSE_DAMPING_MAX_DOFS", "LowRankDamping", "low_rank_solver", "damped", "damping_fingerprint",
@@ -218,7 +219,8 @@ def damped(model, alpha: float = 0.0, beta: float = 0.0, modal: Any = None, n_mo
     if alpha or beta:
         raise ValueError("with_damping: give either Rayleigh coefficients (alpha, beta) or modal=, not both")
     zeta, nm = _modal_ratios(model, modal, n_modes)
-    omega, phi = normal_modes(model.K, model.M, nm, "with_damping")
+    with named_by("with_damping"):  # with_damping is not an entry point yet
+        omega, phi = normal_modes(model.K, model.M, nm)
     lowrank = LowRankDamping(model.M @ phi, 2.0 * zeta * omega, modes=np.asarray(phi), eigenvalues=omega**2)
     ratios = f"{zeta[0]:g}" if np.all(zeta == zeta[0]) else f"{zeta.min():g}..{zeta.max():g}"
     spec = (("modal", tuple(float(z) for z in np.atleast_1d(np.asarray(modal, dtype=float)))), ("n_modes", n_modes))

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..laws import CubicSpring, Location, PenaltyContact, UnilateralContact, check_location
+from ..solvers.checks import InputValueError, entry_point
 
 __all__ = ["HarmonicForce", "Attached", "CONTACT_LAWS", "SMOOTH_LAWS", "show_vector", "bind_nonlinearities"]
 
@@ -31,16 +32,17 @@ class HarmonicForce:
     harmonic: int = 1
     phase: float = 0.0
 
+    @entry_point("HarmonicForce")
     def __post_init__(self):
-        object.__setattr__(self, "at", check_location(self.at, "HarmonicForce"))
+        object.__setattr__(self, "at", check_location(self.at))
         for name in ("amplitude", "phase"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
-                raise ValueError(f"HarmonicForce: {name} must be a finite real number, got {v!r}")
+                raise InputValueError(f"{name} must be a finite real number, got {v!r}")
             object.__setattr__(self, name, float(v))
         h = self.harmonic
         if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or h < 0:
-            raise ValueError(f"HarmonicForce: harmonic must be an integer >= 0 (0 = static load), got {h!r}")
+            raise InputValueError(f"harmonic must be an integer >= 0 (0 = static load), got {h!r}")
         object.__setattr__(self, "harmonic", int(h))
 
 

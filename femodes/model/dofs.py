@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..laws import Location, check_location
+from ..solvers.checks import InputValueError, named_by
 from .declarations import show_vector
 from .frames import NodalFrame
 
@@ -106,10 +107,12 @@ class DofMap:
             )
         return self.components.index(name)
 
-    def index(self, at: Location, owner: str = "DofMap") -> int:
+    def index(self, at: Location, owner: str | None = "DofMap") -> int:
         """Model DOF index of ``at`` (a name, a (name, component) pair or an index).
 
-        ``owner`` (e.g. ``"with_contact"``) starts the error messages.
+        ``owner`` starts the error messages (``"DofMap"`` by default). It is being retired (the
+        public function called names the errors, :mod:`femodes.solvers.checks`): ``None`` leaves
+        them to it; :meth:`~femodes.StructuralModel.dof` still passes its own.
 
         Raises
         ------
@@ -117,11 +120,15 @@ class DofMap:
             Unknown name or component, index out of range, or a constrained / not-kept DOF
             (the message names it and the support that constrains it).
         """
-        at = check_location(at, owner)
-        where = f"{owner}: at={at!r}"
+        with named_by(owner):
+            return self._index(at)
+
+    def _index(self, at: Location) -> int:
+        at = check_location(at)
+        where = f"at={at!r}"
         if isinstance(at, int):
             if at >= self.n_dofs:
-                raise ValueError(
+                raise InputValueError(
                     f"{where}: DOF index at={at} is out of range for a model with {self.n_dofs} DOFs "
                     f"(use 0 <= at < {self.n_dofs})"
                 )
@@ -133,22 +140,22 @@ class DofMap:
         else:
             loc, comp = at
         if loc in self.groups and loc not in self.locations:
-            raise ValueError(
+            raise InputValueError(
                 f"{where}: {loc!r} is a boundary with {len(self.groups[loc])} nodes, not one DOF; contact laws "
                 f"and forces accept boundaries, for anything else name a point (gmsh physical point, or "
                 f"points={{...}} of femodes.solid)"
             )
         if loc not in self.locations:
             known = sorted(set(self.locations) | set(self.groups)) + list(self.dof_names)
-            raise ValueError(f"{where}: unknown location {loc!r}; known names are {known}")
+            raise InputValueError(f"{where}: unknown location {loc!r}; known names are {known}")
         if comp is None:
-            raise ValueError(f"{where}: location {loc!r} has no components in this model")
+            raise InputValueError(f"{where}: location {loc!r} has no components in this model")
         node = self.locations[loc]
         frame = self.frames.get(node)
         if frame is not None and comp in frame.components:
             c = frame.components.index(comp)
         elif frame is not None:
-            raise ValueError(
+            raise InputValueError(
                 f"{where}: node {node} ({loc!r}) has rotated DOFs {list(frame.components)} (the nodal frame of a contact "
                 f"with normal n={show_vector(frame.normal)}), so {comp!r} is not one of this model's DOFs; use "
                 f"({loc!r}, {frame.components[frame.slot]!r}) or a tangent (forces in physical components are rotated "
@@ -158,32 +165,37 @@ class DofMap:
             try:
                 c = self.component_index(comp)
             except ValueError as exc:
-                raise ValueError(f"{where}: {exc}") from None
+                raise InputValueError(f"{where}: {exc}") from None
         dof = int(self.node_dof[node, c])
         if dof == -1:
             support = self.constrained_by.get((node, c), "a support")
-            raise ValueError(
+            raise InputValueError(
                 f"{where}: DOF ({loc!r}, {self.components[c]!r}) is constrained by {support!r}; "
                 "contact, forcing and springs cannot act on a constrained DOF"
             )
         if dof == -2:
-            raise ValueError(
+            raise InputValueError(
                 f"{where}: DOF ({loc!r}, {self.components[c]!r}) is not kept in this reduced model; "
                 f"pass keep=[({loc!r}, {self.components[c]!r})] to craig_bampton"
             )
         return dof
 
-    def node_dofs(self, at: Location, owner: str = "DofMap") -> list[int]:
+    def node_dofs(self, at: Location, owner: str | None = "DofMap") -> list[int]:
         """Model DOFs of ``at``: every free component of a named point (a node is taken whole),
-        or the single DOF of a ``(name, component)`` pair, a DOF name or an index."""
-        at = check_location(at, owner)
+        or the single DOF of a ``(name, component)`` pair, a DOF name or an index (``owner`` as
+        in :meth:`index`)."""
+        with named_by(owner):
+            return self._node_dofs(at)
+
+    def _node_dofs(self, at: Location) -> list[int]:
+        at = check_location(at)
         if isinstance(at, str) and at in self.locations and at not in self.dof_names:
             node = self.locations[at]
             dofs = [int(d) for d in self.node_dof[node] if d >= 0]
             if not dofs:
-                raise ValueError(f"{owner}: at={at!r}: every component of {at!r} is constrained or not kept")
+                raise InputValueError(f"at={at!r}: every component of {at!r} is constrained or not kept")
             return dofs
-        return [self.index(at, owner)]
+        return [self._index(at)]
 
     def label(self, i: int) -> str:
         return self.labels[i] if i < len(self.labels) else f"dof {i}"

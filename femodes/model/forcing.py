@@ -29,8 +29,7 @@ def bind_forces(model, forces) -> list[Attached]:
     for f in forces:
         if not isinstance(f, HarmonicForce):
             raise TypeError(f"with_forcing: expected HarmonicForce, got {type(f).__name__}")
-        owner = f"with_forcing: HarmonicForce(at={f.at!r})"
-        framed = _frame_group(dm, f.at, owner)
+        framed = _frame_group(dm, f)
         if framed is not None:
             dofs, weights = framed
             new.extend(Attached(dataclasses.replace(f, at=int(d), amplitude=f.amplitude * float(w)), int(d))
@@ -42,7 +41,7 @@ def bind_forces(model, forces) -> list[Attached]:
             if rotated is None:
                 new.append(Attached(f, model.dof(f.at, "with_forcing: HarmonicForce")))
             else:
-                new.extend(_rotated_force(dm, f, *rotated, 1.0, owner))
+                new.extend(_rotated_force(dm, f, *rotated, 1.0))
             continue
         name, c = group
         nodes = np.asarray(dm.groups[name])
@@ -58,15 +57,21 @@ def bind_forces(model, forces) -> list[Attached]:
             if d < 0 or w == 0.0:
                 continue
             if int(node) in dm.frames:
-                new.extend(_rotated_force(dm, f, int(node), c, float(w), owner))
+                new.extend(_rotated_force(dm, f, int(node), c, float(w)))
             else:
                 new.append(Attached(dataclasses.replace(f, at=int(d), amplitude=f.amplitude * float(w)), int(d)))
     return new
 
 
-def _frame_group(dm: DofMap, at: Location, owner: str) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(dofs, weights)`` of ``at=(boundary, nodal-frame component)`` (e.g. ``("right", "u_n")``),
-    else None; every free node of the boundary must be rotated."""
+def force_label(f: HarmonicForce) -> str:
+    """How the messages of :meth:`~femodes.StructuralModel.with_forcing` name a force."""
+    return f"with_forcing: HarmonicForce(at={f.at!r})"
+
+
+def _frame_group(dm: DofMap, f: HarmonicForce) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(dofs, weights)`` of a force at ``at=(boundary, nodal-frame component)`` (e.g.
+    ``("right", "u_n")``), else None; every free node of the boundary must be rotated."""
+    at = f.at
     if not (dm.frames and isinstance(at, tuple) and len(at) == 2 and at[0] in dm.groups
             and at[0] not in dm.locations and at[1] not in dm.components and at[1] not in dm.aliases):
         return None
@@ -81,13 +86,13 @@ def _frame_group(dm: DofMap, at: Location, owner: str) -> tuple[np.ndarray, np.n
         frame = dm.frames.get(int(k))
         if frame is None or comp not in frame.components:
             raise ValueError(
-                f"{owner}: node {int(k)} of {name!r} has no nodal-frame component {comp!r} (only nodes rotated "
+                f"{force_label(f)}: node {int(k)} of {name!r} has no nodal-frame component {comp!r} (only nodes rotated "
                 f"by a contact with an inclined or negative normal have u_n, u_t...); give a physical component "
                 f"of {list(dm.components)}"
             )
         dofs[j] = row[frame.components.index(comp)]
         if dofs[j] == -2:
-            raise ValueError(f"{owner}: boundary {name!r} is not kept in this reduced model; attach the force "
+            raise ValueError(f"{force_label(f)}: boundary {name!r} is not kept in this reduced model; attach the force "
                              "before reducing")
     lost = float(weights[dofs < 0].sum())
     if lost > 0:
@@ -112,11 +117,11 @@ def _rotated_point(dm: DofMap, at: Location) -> tuple[int, int] | None:
     return node, dm.component_index(comp)
 
 
-def _rotated_force(dm: DofMap, f: HarmonicForce, node: int, c: int, weight: float, owner: str) -> list:
+def _rotated_force(dm: DofMap, f: HarmonicForce, node: int, c: int, weight: float) -> list:
     """The share ``weight`` of force ``f`` along physical component ``c`` of rotated ``node``, on
     the node's nodal-frame DOFs (``R^T e_c``)."""
     dofs = dm.node_dof[node]
     if np.any(dofs < 0):
-        raise ValueError(f"{owner}: the DOFs of rotated node {node} are not all kept in this reduced model; "
+        raise ValueError(f"{force_label(f)}: the DOFs of rotated node {node} are not all kept in this reduced model; "
                          f"attach the force before reducing or keep the node (craig_bampton(keep=...))")
     return frame_forces(f, dm.frames[node].rotation, dofs, c, weight)

@@ -6,30 +6,37 @@ from __future__ import annotations
 import numpy as np
 
 from ..laws import Location
+from ..solvers.checks import InputValueError, named_by
 from .dofs import DofMap
 
 __all__ = ["probe_weights"]
 
 
-def probe_weights(dm: DofMap, at: Location, how: str = "mean", owner: str = "probe") -> np.ndarray:
+def probe_weights(dm: DofMap, at: Location, how: str = "mean", owner: str | None = "probe") -> np.ndarray:
     """Weights that read ``at`` from the DOFs of ``dm``: the unit vector of a DOF, the consistent
     mean of a boundary's nodes (``how="mean"``, shape ``(n_dofs,)``) or one row per free node
-    (``how="max"``, shape ``(k, n_dofs)``)."""
+    (``how="max"``, shape ``(k, n_dofs)``). ``owner`` (being retired, as in
+    :meth:`DofMap.index`; ``None``: the public function called) names the errors."""
+    with named_by(owner):
+        return _weights(dm, at, how)
+
+
+def _weights(dm: DofMap, at: Location, how: str) -> np.ndarray:
     if how not in ("mean", "max"):
-        raise ValueError(f"{owner}: how must be 'mean' or 'max' (over the boundary's nodes), got {how!r}")
+        raise InputValueError(f"how must be 'mean' or 'max' (over the boundary's nodes), got {how!r}")
     group = dm.group_of(at)
     if group is None:
         w = np.zeros(dm.n_dofs)
-        w[dm.index(at, owner)] = 1.0
+        w[dm.index(at, None)] = 1.0
         return w
     name, c = group
     dofs = dm.node_dof[np.asarray(dm.groups[name]), c]
     weights = np.asarray(dm.group_weights[name], dtype=float)
     if np.any(dofs == -2):
-        raise ValueError(f"{owner}: boundary {name!r} is not kept in this model; read it on the full model")
+        raise InputValueError(f"boundary {name!r} is not kept in this model; read it on the full model")
     free = dofs >= 0
     if not free.any():
-        raise ValueError(f"{owner}: every node of boundary {name!r} is supported in that component")
+        raise InputValueError(f"every node of boundary {name!r} is supported in that component")
     if how == "max":
         W = np.zeros((int(free.sum()), dm.n_dofs))
         W[np.arange(W.shape[0]), dofs[free]] = 1.0

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ..solvers.checks import InputTypeError, InputValueError, entry_point
 from ..results import Branch
 from .common import axes, freq, freq_label, positional_deprecated, reader, to_keywords
 
@@ -15,6 +16,7 @@ __all__ = ["frequency_energy", "frequency_amplitude", "frequency_response"]
 
 
 @positional_deprecated(1, "ax")
+@entry_point("frequency_energy")
 def frequency_energy(branches: Any, *, ax: Any = None, labels: Any = None, hz: bool = False,
                      mark_folds: bool = True, show_points: bool = False):
     """Frequency-energy plot: backbones and forced curves on the same axes.
@@ -44,16 +46,15 @@ def frequency_energy(branches: Any, *, ax: Any = None, labels: Any = None, hz: b
         Frequency on the x-axis, energy on a log y-axis (as in the examples); one line per
         branch (in order, data ``(omega, energy)``), followed by the fold markers.
     """
-    owner = "frequency_energy"
     if isinstance(branches, Branch):
         branches = [branches]
     if not isinstance(branches, (list, tuple)) or not branches or not all(isinstance(b, Branch) for b in branches):
-        raise TypeError(f"{owner}: branches must be a Branch or a non-empty list of Branch objects")
+        raise InputTypeError("branches must be a Branch or a non-empty list of Branch objects")
     if labels is not None:
         labels = list(labels)
         if len(labels) != len(branches):
-            raise ValueError(f"{owner}: labels has {len(labels)} entries for {len(branches)} branches")
-    ax = axes(ax, owner)
+            raise InputValueError(f"labels has {len(labels)} entries for {len(branches)} branches")
+    ax = axes(ax)
     folds = []
     for i, br in enumerate(branches):
         if labels is not None:
@@ -84,6 +85,7 @@ def frequency_energy(branches: Any, *, ax: Any = None, labels: Any = None, hz: b
 
 
 @positional_deprecated(2, "ax")
+@entry_point("frequency_amplitude")
 def frequency_amplitude(branch: Branch, dof: Any, *, ax: Any = None, label: str | None = None, hz: bool = False,
                         mark_folds: bool = True, how: str = "mean"):
     """Amplitude ``max_t |q_dof(t)|`` against frequency, folds marked.
@@ -122,11 +124,10 @@ def frequency_amplitude(branch: Branch, dof: Any, *, ax: Any = None, label: str 
         than folds (period doubling squares, Neimark-Sacker diamonds, branch points circles,
         nonsmooth triangles).
     """
-    owner = "frequency_amplitude"
     if not isinstance(branch, Branch):
-        raise TypeError(f"{owner}: branch must be a Branch, got {type(branch).__name__}")
-    W, dof_label = reader(branch, dof, owner, branch.Q.shape[2], how)
-    ax = axes(ax, owner)
+        raise InputTypeError(f"branch must be a Branch, got {type(branch).__name__}")
+    W, dof_label = reader(branch, dof, branch.Q.shape[2], how)
+    ax = axes(ax)
 
     def amplitude(Q):  # max over the rows of W of max_t |W q(t)| of the series Q
         QW = np.asarray(Q) @ W.T

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ..solvers.checks import InputTypeError, InputValueError
 from ..results import PeriodicSolution
 
 __all__ = ["pyplot", "to_keywords", "positional_deprecated", "axes", "freq", "freq_label", "dof_index", "reader", "check_solution"]
@@ -54,7 +55,7 @@ def positional_deprecated(n_positional: int, *names: str):
     return decorate
 
 
-def axes(ax: Any, owner: str):
+def axes(ax: Any):
     plt = pyplot()
     if ax is None:
         _, ax = plt.subplots(layout="constrained")
@@ -62,7 +63,7 @@ def axes(ax: Any, owner: str):
     from matplotlib.axes import Axes
 
     if not isinstance(ax, Axes):
-        raise TypeError(f"{owner}: ax must be a matplotlib Axes or None, got {type(ax).__name__}")
+        raise InputTypeError(f"ax must be a matplotlib Axes or None, got {type(ax).__name__}")
     return ax
 
 
@@ -74,42 +75,42 @@ def freq_label(hz: bool) -> str:
     return "frequency [Hz]" if hz else r"$\omega$ [rad/s]"
 
 
-def dof_index(obj: Any, dof: Any, owner: str, n_dofs: int) -> tuple[int, str]:
+def dof_index(obj: Any, dof: Any, n_dofs: int) -> tuple[int, str]:
     """Resolve ``dof`` (index or location name) to a model DOF index and a label."""
     model = getattr(obj, "model", None)
     if isinstance(dof, (str, tuple)):
         if model is None:
-            raise ValueError(f"{owner}: dof={dof!r} is a name but no model is attached; pass an integer DOF index")
+            raise InputValueError(f"dof={dof!r} is a name but no model is attached; pass an integer DOF index")
         idx = model.dof(dof)
         return idx, model.dofmap.label(idx) if model.dofmap.labels else str(dof)
     if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)):
-        raise TypeError(f"{owner}: dof must be an integer index or a location name, got {type(dof).__name__}")
+        raise InputTypeError(f"dof must be an integer index or a location name, got {type(dof).__name__}")
     if not -n_dofs <= dof < n_dofs:
-        raise ValueError(f"{owner}: dof={dof} is out of range for {n_dofs} DOFs")
+        raise InputValueError(f"dof={dof} is out of range for {n_dofs} DOFs")
     idx = int(dof) % n_dofs
     label = model.dofmap.label(idx) if model is not None else f"dof {idx}"
     return idx, label
 
 
-def reader(obj: Any, dof: Any, owner: str, n_dofs: int, how: str) -> tuple[np.ndarray, str]:
+def reader(obj: Any, dof: Any, n_dofs: int, how: str) -> tuple[np.ndarray, str]:
     """Weights ``W`` (rows: responses, the largest amplitude taken) and a label: a DOF, or a
     named boundary read through :meth:`femodes.StructuralModel.probe` (mean or max over its
     nodes; for a reduced model also boundaries it does not keep)."""
     model = getattr(obj, "model", None)
     if isinstance(dof, (str, tuple)) and model is not None:
         try:
-            W = np.atleast_2d(model.probe(dof, how, owner))
+            W = np.atleast_2d(model.probe(dof, how))
         except ValueError:
             W = None
         if W is not None and not (W.shape[0] == 1 and np.count_nonzero(W) == 1):
             return W, f"{dof}, {how} over its nodes" if not isinstance(dof, tuple) else f"{dof[0]} {dof[1]}, {how}"
-    idx, label = dof_index(obj, dof, owner, n_dofs)
+    idx, label = dof_index(obj, dof, n_dofs)
     W = np.zeros((1, n_dofs))
     W[0, idx] = 1.0
     return W, label
 
 
-def check_solution(solution: Any, owner: str) -> PeriodicSolution:
+def check_solution(solution: Any) -> PeriodicSolution:
     if not isinstance(solution, PeriodicSolution):
-        raise TypeError(f"{owner}: solution must be a PeriodicSolution (e.g. branch[i]), got {type(solution).__name__}")
+        raise InputTypeError(f"solution must be a PeriodicSolution (e.g. branch[i]), got {type(solution).__name__}")
     return solution

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from ..solvers.checks import InputTypeError, InputValueError, entry_point
 from ..results import PeriodicSolution
 from .common import axes, check_solution, pyplot
 
@@ -33,6 +34,9 @@ def _columns(s: np.ndarray, values: np.ndarray, extent: float) -> tuple[np.ndarr
     return centres, out
 
 
+
+
+@entry_point("contact_pressure")
 def contact_pressure(solution: PeriodicSolution, model: Any = None, *, boundary: str | None = None,
                      n_frames: int = 64, ax: Any = None, cmap: str = "YlOrRd"):
     """Space-time map of the contact pressure along a contact boundary over one period.
@@ -82,36 +86,35 @@ def contact_pressure(solution: PeriodicSolution, model: Any = None, *, boundary:
     TypeError
         ``solution`` not a PeriodicSolution; ``boundary`` not a str; ``ax`` not an Axes.
     """
-    owner = "contact_pressure"
-    from ..fields import mesh_fields
+    from ..fields import sample_fields
     from ..solvers.checks import check_int
 
-    solution = check_solution(solution, owner)
-    n_frames = check_int("n_frames", n_frames, 2, owner=owner)
+    solution = check_solution(solution)
+    n_frames = check_int("n_frames", n_frames, 2)
     if boundary is not None and not isinstance(boundary, str):
-        raise TypeError(f"{owner}: boundary must be the name of a boundary of the mesh (str) or None, "
+        raise InputTypeError(f"boundary must be the name of a boundary of the mesh (str) or None, "
                         f"got {type(boundary).__name__}")
     if not isinstance(cmap, str):
-        raise TypeError(f"{owner}: cmap must be a colormap name (str), got {type(cmap).__name__}")
-    f = mesh_fields(solution, model, n_frames=n_frames, owner=owner)
+        raise InputTypeError(f"cmap must be a colormap name (str), got {type(cmap).__name__}")
+    f = sample_fields(solution, model, n_frames=n_frames)
     if f.dim == 1:
-        raise ValueError(f"{owner}: the contact pressure needs a meshed solid (femodes.solid); this is a {f.kind} "
+        raise InputValueError(f"the contact pressure needs a meshed solid (femodes.solid); this is a {f.kind} "
                          "model, whose contact forces femodes.plot.time_history draws")
     counts: dict = {}
     for b in f.contact_boundary:
         if b:
             counts[b] = counts.get(b, 0) + 1
     if not counts:
-        raise ValueError(f"{owner}: the model has no contacts on a named boundary of its mesh; add some with "
+        raise InputValueError("the model has no contacts on a named boundary of its mesh; add some with "
                          "model.with_contact(fm.UnilateralContact(at=<boundary>, gap=..., direction=...))")
     carrying = ", ".join(repr(b) for b in sorted(counts))
     if boundary is None:
         boundary = max(sorted(counts), key=lambda b: counts[b])
     elif boundary not in f.boundaries:
         known = ", ".join(repr(b) for b in sorted(f.boundaries))
-        raise ValueError(f"{owner}: unknown boundary {boundary!r}; the mesh has {known} (contacts on {carrying})")
+        raise InputValueError(f"unknown boundary {boundary!r}; the mesh has {known} (contacts on {carrying})")
     elif boundary not in counts:
-        raise ValueError(f"{owner}: boundary {boundary!r} carries no contacts; contacts are on {carrying}")
+        raise InputValueError(f"boundary {boundary!r} carries no contacts; contacts are on {carrying}")
     mine = np.array([c for c, b in enumerate(f.contact_boundary) if b == boundary])
     pressure = np.zeros((f.t.size, f.n_nodes))
     for c in mine:
@@ -131,7 +134,7 @@ def contact_pressure(solution: PeriodicSolution, model: Any = None, *, boundary:
         fig, ax = plt.subplots(figsize=(8.0, 4.5))
         fig.subplots_adjust(left=0.09, right=0.9, bottom=0.12, top=0.9)
     else:
-        ax = axes(ax, owner)
+        ax = axes(ax)
         fig = ax.figure
     # the map takes 64 % of the axes' box, then the force panel and the colour bar (as
     # fig.colorbar(ax=...) steals room from its axes)

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from ..solvers.checks import InputValueError, entry_point
 from ..results import PeriodicSolution
 from .common import axes, check_solution, dof_index, positional_deprecated, pyplot, reader
 
@@ -18,6 +19,7 @@ def _default_dof(solution: PeriodicSolution) -> int:
 
 
 @positional_deprecated(2, "ax", "n_periods")
+@entry_point("time_history")
 def time_history(solution: PeriodicSolution, dof: Any = None, *, ax: Any = None, n_periods: float = 1,
                  n_points: int = 400, contact: bool = True, how: str = "mean"):
     """Displacement of one DOF over time, contact forces on a twin axis.
@@ -44,18 +46,17 @@ def time_history(solution: PeriodicSolution, dof: Any = None, *, ax: Any = None,
         The displacement axes (line 0 is ``q_dof(t)``). The contact-force twin, when drawn, is
         ``[a for a in ax.figure.axes if a is not ax and a.bbox.bounds == ax.bbox.bounds]``.
     """
-    owner = "time_history"
-    solution = check_solution(solution, owner)
-    W, dof_label = reader(solution, _default_dof(solution) if dof is None else dof, owner, solution.n_dofs, how)
+    solution = check_solution(solution)
+    W, dof_label = reader(solution, _default_dof(solution) if dof is None else dof, solution.n_dofs, how)
     idx = int(np.flatnonzero(W[0])[0]) if W.shape[0] == 1 and np.count_nonzero(W[0]) == 1 else None
     if isinstance(n_periods, bool) or not isinstance(n_periods, (int, float, np.integer, np.floating)) or not (
         0 < n_periods < 1e6
     ):
-        raise ValueError(f"{owner}: n_periods must be a positive number, got {n_periods!r}")
+        raise InputValueError(f"n_periods must be a positive number, got {n_periods!r}")
     from ..solvers.checks import check_int
 
-    n_points = check_int("n_points", n_points, 2, owner=owner)
-    ax = axes(ax, owner)
+    n_points = check_int("n_points", n_points, 2)
+    ax = axes(ax)
     T = solution.period
     t = np.linspace(0.0, n_periods * T, max(2, int(round(n_points * n_periods))) + 1)
     q = solution.displacement(t) @ W.T
@@ -80,6 +81,7 @@ def time_history(solution: PeriodicSolution, dof: Any = None, *, ax: Any = None,
 
 
 @positional_deprecated(2, "ax")
+@entry_point("phase_portrait")
 def phase_portrait(solution: PeriodicSolution, dof: Any, *, ax: Any = None, n_points: int = 400,
                    label: str | None = None):
     """Phase portrait ``(q_dof, q'dof_index)`` over one period.
@@ -98,13 +100,12 @@ def phase_portrait(solution: PeriodicSolution, dof: Any, *, ax: Any = None, n_po
     matplotlib Axes
         Line 0 is the closed orbit; a dotted vertical line marks the gap if ``dof`` is a contact DOF.
     """
-    owner = "phase_portrait"
-    solution = check_solution(solution, owner)
-    idx, dof_label = dof_index(solution, dof, owner, solution.n_dofs)
+    solution = check_solution(solution)
+    idx, dof_label = dof_index(solution, dof, solution.n_dofs)
     from ..solvers.checks import check_int
 
-    n_points = check_int("n_points", n_points, 3, owner=owner)
-    ax = axes(ax, owner)
+    n_points = check_int("n_points", n_points, 3)
+    ax = axes(ax)
     t = np.linspace(0.0, solution.period, n_points + 1)
     q = solution.displacement(t)[:, idx]
     v = solution.velocity(t)[:, idx]
@@ -120,6 +121,7 @@ def phase_portrait(solution: PeriodicSolution, dof: Any, *, ax: Any = None, n_po
 
 
 @positional_deprecated(2, "ax", "n_snapshots")
+@entry_point("mode_shape")
 def mode_shape(source: Any, model: Any = None, *, ax: Any = None, n_snapshots: int = 8, mode: int = 1,
                cmap: str = "viridis", show_obstacle: bool = True):
     """Deflection snapshots along the structure over one period.
@@ -148,14 +150,13 @@ def mode_shape(source: Any, model: Any = None, *, ax: Any = None, n_snapshots: i
         Lines 0 .. n_snapshots-1 are the snapshots (``x``, deflection); then one marker line
         per contact if ``show_obstacle``.
     """
-    owner = "mode_shape"
-    from ..fields import mesh_fields, periodic_source, resolve_model
+    from ..fields import periodic_source, resolve_model, sample_fields
     from ..solvers.checks import check_int
 
-    n_snapshots = check_int("n_snapshots", n_snapshots, 1, owner=owner)
-    src, j = periodic_source(source, mode, owner)
-    model = resolve_model(src, model, owner)
-    ax = axes(ax, owner)
+    n_snapshots = check_int("n_snapshots", n_snapshots, 1)
+    src, j = periodic_source(source, mode)
+    model = resolve_model(src, model)
+    ax = axes(ax)
     plt = pyplot()
     colors = plt.get_cmap(cmap)(np.linspace(0.0, 0.9, n_snapshots))
     if model.mesh_owner is None:
@@ -177,9 +178,9 @@ def mode_shape(source: Any, model: Any = None, *, ax: Any = None, n_snapshots: i
         ax.grid(True, alpha=0.3)
         ax.legend()
         return ax
-    f = mesh_fields(src, model, n_frames=n_snapshots, mode=mode, owner=owner)
+    f = sample_fields(src, model, n_frames=n_snapshots, mode=mode)
     if f.dim != 1:
-        raise ValueError(f"{owner}: draws bars and beams (deflection along the axis); for a {f.dim}-D solid use "
+        raise InputValueError(f"draws bars and beams (deflection along the axis); for a {f.dim}-D solid use "
                          "femodes.viz.animate or femodes.io.write_animation (ParaView), and "
                          "femodes.plot.contact_pressure for the contact boundary")
     order = np.argsort(f.x)

@@ -1,12 +1,26 @@
 """Validators and small helpers shared by the solvers (and usable by every layer above).
 
 Each validator checks one kind of value and raises with a message that names the argument and
-quotes the bad value: ``"<owner>: <name> must be ..., got <value>"`` (the ``owner: `` prefix only
-when ``owner`` is given, e.g. the public function or class that received the value).  Numpy
-scalars are shown as the Python numbers they hold, so messages read the same whichever the
-caller passed.  Validators return the value converted to the checked kind (``float``, ``int``,
-``bool``, a read-only array), so ``self.x = check_positive("x", x)`` validates and normalises in
-one line.
+quotes the bad value: ``"<name> must be ..., got <value>"``.  Numpy scalars are shown as the
+Python numbers they hold, so messages read the same whichever the caller passed.  Validators
+return the value converted to the checked kind (``float``, ``int``, ``bool``, a read-only array),
+so ``self.x = check_positive("x", x)`` validates and normalises in one line.
+
+Who names an error.  A bad argument raises :class:`InputValueError` or :class:`InputTypeError`
+(subclasses of ``ValueError`` and ``TypeError``, so ``except ValueError`` still catches them),
+without saying which public function received it: helpers and validators do not know, and take
+no ``owner``.  The public function or method the user called is decorated with
+:func:`entry_point`, which catches these errors on the way out and starts their message with its
+name (``"simulate: dt must be a positive finite number, got -1"``), once: an error already named
+by an inner entry point (a public function calling another) passes through unchanged, so the
+innermost entry point names it.  A frozen options dataclass names its errors with an
+``@entry_point("ClassName")`` on ``__post_init__``.  Warnings and log lines cannot be caught
+that way: a helper that warns reads the name with :func:`entry_name` (the innermost entry point
+running, or ``None``).  Other exceptions (a user callback's, a failed solve's) are never renamed.
+
+A block that must be named apart uses ``with named_by("name"):``; the few ``owner`` arguments
+still accepted (``DofMap.index``, ``StructuralModel.dof`` and ``probe``, the eigen-solve) name
+their errors that way while the modules calling them move to entry points.
 
 Besides the validators: :func:`is_operator` (the duck-typed test for structured Jacobians that
 factorise themselves), :data:`LINSOLVE_ERRORS` (what a failed linear solve raises) and
@@ -16,15 +30,21 @@ estimated and refused before it is made, naming its size and what to change).
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import functools
 import math
 import numbers
 import os
-from typing import Any
-from collections.abc import Callable
+from typing import Any, TypeVar
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
 __all__ = [
+    "InputError",
+    "InputTypeError",
+    "InputValueError",
     "LINSOLVE_ERRORS",
     "available_memory",
     "check_memory",
@@ -34,6 +54,9 @@ __all__ = [
     "check_nonnegative",
     "check_positive",
     "check_vector",
+    "entry_name",
+    "entry_point",
+    "named_by",
     "inf_norm",
     "is_operator",
     "is_real_number",
@@ -58,67 +81,132 @@ def is_real_number(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
-def _prefix(owner: str | None) -> str:
-    return f"{owner}: " if owner else ""
+class InputError(Exception):
+    """Mixin of the errors a public entry point names (see the module docstring): a bad argument,
+    or a failure the arguments cause, whose message does not yet say which function was called."""
+
+    #: The entry point that named the error (``None`` until one did).
+    entry_point: str | None = None
 
 
-def check_finite(name: str, value: Any, *, owner: str | None = None) -> float:
+class InputValueError(InputError, ValueError):
+    """A bad argument value (a ``ValueError``), named by the public entry point that received it."""
+
+
+class InputTypeError(InputError, TypeError):
+    """An argument of the wrong type (a ``TypeError``), named by the public entry point that received it."""
+
+
+_ENTRY: contextvars.ContextVar[str | None] = contextvars.ContextVar("femodes_entry_point", default=None)
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def _name(exc: InputError, name: str) -> None:
+    if exc.entry_point is None:
+        exc.entry_point = name
+        if exc.args and isinstance(exc.args[0], str):
+            exc.args = (f"{name}: {exc.args[0]}", *exc.args[1:])
+
+
+def entry_point(name: str) -> Callable[[_F], _F]:
+    """Decorator of a public function or method that receives user arguments: an
+    :class:`InputError` leaving it, not yet named by an inner entry point, has ``"name: "``
+    put in front of its message (the same exception object is re-raised, traceback kept)."""
+
+    def decorate(func: _F) -> _F:
+        @functools.wraps(func)
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            with named_by(name):
+                return func(*args, **kwargs)
+
+        return wrapper  # type: ignore[return-value]
+
+    return decorate
+
+
+def entry_name() -> str | None:
+    """Name of the innermost :func:`entry_point` (or :func:`named_by` block) running, for
+    warnings and log lines; ``None`` outside any."""
+    return _ENTRY.get()
+
+
+@contextlib.contextmanager
+def named_by(name: str | None) -> Iterator[None]:
+    """The block form of :func:`entry_point`: an :class:`InputError` raised inside (not yet named)
+    is named ``name`` at once, and :func:`entry_name` answers ``name`` there (``None``: nothing
+    changes, the entry point around names them). For a part of a public call
+    named apart (``ContinuationState``'s arrays) and for the ``owner`` arguments still accepted
+    while the last modules move to entry points (:meth:`femodes.DofMap.index`)."""
+    token = _ENTRY.set(name) if name else None
+    try:
+        yield
+    except InputError as exc:
+        if name:
+            _name(exc, name)
+        raise
+    finally:
+        if token is not None:
+            _ENTRY.reset(token)
+
+
+def check_finite(name: str, value: Any) -> float:
     """``value`` as a float: TypeError if it is not a real number, ValueError if not finite."""
     if not is_real_number(value):
-        raise TypeError(f"{_prefix(owner)}{name} must be a real number, got {show(value)}")
+        raise InputTypeError(f"{name} must be a real number, got {show(value)}")
     if not math.isfinite(value):
-        raise ValueError(f"{_prefix(owner)}{name} must be finite, got {show(value)}")
+        raise InputValueError(f"{name} must be finite, got {show(value)}")
     return float(value)
 
 
-def check_in_range(name: str, value: Any, lo: float, hi: float, *, owner: str | None = None) -> float:
+def check_in_range(name: str, value: Any, lo: float, hi: float) -> float:
     """``value`` as a float in ``[lo, hi]`` (:func:`check_finite` first, then ValueError)."""
-    v = check_finite(name, value, owner=owner)
+    v = check_finite(name, value)
     if not lo <= v <= hi:
-        raise ValueError(f"{_prefix(owner)}{name} must be in [{lo:g}, {hi:g}], got {show(value)}")
+        raise InputValueError(f"{name} must be in [{lo:g}, {hi:g}], got {show(value)}")
     return v
 
 
-def check_positive(name: str, value: Any, *, owner: str | None = None) -> float:
+def check_positive(name: str, value: Any) -> float:
     """``value`` as a float; ValueError unless it is a finite real number > 0."""
     if not is_real_number(value) or not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{_prefix(owner)}{name} must be a positive finite number, got {show(value)}")
+        raise InputValueError(f"{name} must be a positive finite number, got {show(value)}")
     return float(value)
 
 
-def check_nonnegative(name: str, value: Any, *, owner: str | None = None) -> float:
+def check_nonnegative(name: str, value: Any) -> float:
     """``value`` as a float; ValueError unless it is a finite real number >= 0."""
     if not is_real_number(value) or not math.isfinite(value) or value < 0:
-        raise ValueError(f"{_prefix(owner)}{name} must be a finite number >= 0, got {show(value)}")
+        raise InputValueError(f"{name} must be a finite number >= 0, got {show(value)}")
     return float(value)
 
 
-def check_int(name: str, value: Any, minimum: int, *, owner: str | None = None) -> int:
+def check_int(name: str, value: Any, minimum: int) -> int:
     """``value`` as an int; TypeError unless it is an integer (bools and integral floats are
     not), ValueError if it is below ``minimum``."""
     if not isinstance(value, numbers.Integral) or isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{_prefix(owner)}{name} must be an integer >= {minimum}, got {show(value)}")
+        raise InputTypeError(f"{name} must be an integer >= {minimum}, got {show(value)}")
     if value < minimum:
-        raise ValueError(f"{_prefix(owner)}{name} must be an integer >= {minimum}, got {show(value)}")
+        raise InputValueError(f"{name} must be an integer >= {minimum}, got {show(value)}")
     return int(value)
 
 
-def check_bool(name: str, value: Any, *, owner: str | None = None) -> bool:
+def check_bool(name: str, value: Any) -> bool:
     """``value`` as a bool; TypeError unless it is a Python or numpy bool (0 and 1 are not)."""
     if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{_prefix(owner)}{name} must be a bool, got {show(value)}")
+        raise InputTypeError(f"{name} must be a bool, got {show(value)}")
     return bool(value)
 
 
-def check_callable(name: str, value: Any, *, owner: str | None = None, optional: bool = True) -> Callable | None:
+def check_callable(name: str, value: Any, *, optional: bool = True) -> Callable | None:
     """``value`` unchanged; TypeError unless it is callable (or ``None`` when ``optional``)."""
     if (value is None and not optional) or (value is not None and not callable(value)):
         what = "callable or None" if optional else "callable"
-        raise TypeError(f"{_prefix(owner)}{name} must be {what}, got {show(value)}")
+        raise InputTypeError(f"{name} must be {what}, got {show(value)}")
     return value
 
 
-def check_vector(name: str, value: Any, *, size: int | None = None, owner: str | None = None) -> np.ndarray:
+def check_vector(name: str, value: Any, *, size: int | None = None) -> np.ndarray:
     """``value`` as a read-only, finite, non-empty 1-D float array (of length ``size`` if given).
 
     An array that is already read-only is returned as is (no copy); otherwise a read-only copy.
@@ -127,12 +215,12 @@ def check_vector(name: str, value: Any, *, size: int | None = None, owner: str |
     try:
         a = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{_prefix(owner)}{name} must be a real 1-D array, got {show(value)}") from exc
+        raise InputValueError(f"{name} must be a real 1-D array, got {show(value)}") from exc
     if a.ndim != 1 or a.size == 0 or (size is not None and a.size != size):
         want = f"({size},)" if size is not None else "a non-empty 1-D array"
-        raise ValueError(f"{_prefix(owner)}{name} has shape {a.shape}, expected {want}")
+        raise InputValueError(f"{name} has shape {a.shape}, expected {want}")
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"{_prefix(owner)}{name} contains non-finite values (nan or inf)")
+        raise InputValueError(f"{name} contains non-finite values (nan or inf)")
     if a.flags.writeable:
         a = a.copy()
         a.flags.writeable = False
@@ -198,10 +286,10 @@ def available_memory() -> float | None:
     return avail
 
 
-def check_memory(need: float, what: str, fix: str, *, owner: str | None = None) -> None:
+def check_memory(need: float, what: str, fix: str) -> None:
     """ValueError when ``need`` bytes (the estimate of ``what``) exceed :func:`available_memory`:
-    ``"<owner>: <what> needs about 41.5 GiB, more than the 7.2 GiB available; <fix>"``."""
+    ``"<what> needs about 41.5 GiB, more than the 7.2 GiB available; <fix>"``."""
     avail = available_memory()
     if avail is not None and need > avail:
-        raise ValueError(f"{_prefix(owner)}{what} needs about {need / 2**30:.3g} GiB, more than the "
-                         f"{avail / 2**30:.3g} GiB available; {fix}")
+        raise InputValueError(f"{what} needs about {need / 2**30:.3g} GiB, more than the "
+                              f"{avail / 2**30:.3g} GiB available; {fix}")

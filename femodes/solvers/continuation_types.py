@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .checks import check_bool, check_callable, check_int, check_positive, check_vector, is_real_number, show
+from .checks import check_bool, check_callable, check_int, check_positive, check_vector, is_real_number, named_by, show
 from .newton import NewtonOptions
 
 __all__ = [
@@ -404,11 +404,11 @@ class ContinuationState:
     n_rejected: int = 0
 
     def __post_init__(self) -> None:
-        owner = "ContinuationState"
-        x = check_vector("x", self.x, owner=owner)
-        object.__setattr__(self, "x", x)
-        object.__setattr__(self, "tangent", check_vector("tangent", self.tangent, size=x.size + 1, owner=owner))
-        object.__setattr__(self, "x_scale", check_vector("x_scale", self.x_scale, size=x.size, owner=owner))
+        with named_by("ContinuationState"):
+            x = check_vector("x", self.x)
+            object.__setattr__(self, "x", x)
+            object.__setattr__(self, "tangent", check_vector("tangent", self.tangent, size=x.size + 1))
+            object.__setattr__(self, "x_scale", check_vector("x_scale", self.x_scale, size=x.size))
         if np.any(self.x_scale <= 0):
             raise ValueError(f"ContinuationState: x_scale must be positive, got {show(self.x_scale)}")
         if not is_real_number(self.p) or not math.isfinite(self.p):

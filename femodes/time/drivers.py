@@ -17,7 +17,8 @@ import numpy as np
 
 from ..model import StructuralModel
 from ..solvers import NewtonOptions
-from ..solvers.checks import check_finite, check_in_range, check_int, check_positive
+from ..solvers.checks import (InputTypeError, InputValueError, check_finite, check_in_range, check_int, check_positive,
+                              entry_name, entry_point)
 from ..solvers.threads import limit_blas_threads
 from .results import SteadyState, TimeHistory
 from .stepper import Segment, Stepper, integrate
@@ -61,39 +62,39 @@ def _state(x: Any, name: str, n: int) -> np.ndarray:
     return arr.copy()
 
 
-def _check_omega(model: StructuralModel, omega: Any, owner: str) -> float | None:
+def _check_omega(model: StructuralModel, omega: Any) -> float | None:
     harmonic = any(a.item.harmonic >= 1 for a in model.forces)
     if omega is None:
         if harmonic:
-            raise ValueError(f"{owner}: omega (forcing frequency, rad/s) is required: the model has harmonic forcing")
+            raise InputValueError("omega (forcing frequency, rad/s) is required: the model has harmonic forcing")
         return None
-    check_finite("omega", omega, owner=owner)
-    w = check_positive("omega", omega, owner=owner)
+    check_finite("omega", omega)
+    w = check_positive("omega", omega)
     if not harmonic:
-        raise ValueError(
-            f"{owner}: omega={omega!r} given but the model has no harmonic forcing (add with_forcing or omit omega)"
+        raise InputValueError(
+            f"omega={omega!r} given but the model has no harmonic forcing (add with_forcing or omit omega)"
         )
     return w
 
 
-def _check_common(model, dt, restitution, theta, newton, owner):
+def _check_common(model, dt, restitution, theta, newton):
     if not isinstance(model, StructuralModel):
-        raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
-    check_finite("dt", dt, owner=owner)
-    dt = check_positive("dt", dt, owner=owner)
-    e = check_in_range("restitution", restitution, 0.0, 1.0, owner=owner)
-    th = check_in_range("theta", theta, 0.5, 1.0, owner=owner)
+        raise InputTypeError(f"model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
+    check_finite("dt", dt)
+    dt = check_positive("dt", dt)
+    e = check_in_range("restitution", restitution, 0.0, 1.0)
+    th = check_in_range("theta", theta, 0.5, 1.0)
     if newton is not None and not isinstance(newton, NewtonOptions):
-        raise TypeError(f"{owner}: newton must be a NewtonOptions or None, got {type(newton).__name__}")
+        raise InputTypeError(f"newton must be a NewtonOptions or None, got {type(newton).__name__}")
     return model, dt, e, th
 
 
-def _n_steps(span: float, dt: float, what: str, owner: str) -> int:
+def _n_steps(span: float, dt: float, what: str) -> int:
     """``ceil(span / dt)`` steps, or a ValueError naming ``dt`` when that is not a sane count."""
     ratio = span / dt
     if not math.isfinite(ratio) or ratio > _MAX_STEPS:
-        raise ValueError(
-            f"{owner}: dt={dt!r} gives {ratio:.3g} steps over {what} = {span:.6g} (more than {_MAX_STEPS:.0e}); "
+        raise InputValueError(
+            f"dt={dt!r} gives {ratio:.3g} steps over {what} = {span:.6g} (more than {_MAX_STEPS:.0e}); "
             "increase dt"
         )
     return max(1, int(math.ceil(ratio - 1e-9)))
@@ -102,7 +103,7 @@ def _n_steps(span: float, dt: float, what: str, owner: str) -> int:
 # --------------------------------------------------------------------------------------------
 # Reports
 # --------------------------------------------------------------------------------------------
-def _check_steps_per_period(dt: float, w: float | None, owner: str) -> None:
+def _check_steps_per_period(dt: float, w: float | None) -> None:
     """ValueError naming ``dt`` when it gives fewer than :data:`MIN_STEPS_PER_PERIOD` steps per
     forcing period ``2 pi / w`` (nothing to check without forcing)."""
     if w is None:
@@ -111,8 +112,8 @@ def _check_steps_per_period(dt: float, w: float | None, owner: str) -> None:
     n = T / dt
     if n < MIN_STEPS_PER_PERIOD:
         err = (2.0 * math.pi / math.ceil(n)) ** 2 / 12.0
-        raise ValueError(
-            f"{owner}: dt={dt!r} gives {n:.3g} steps per forcing period 2 pi / omega = {T:.6g}, fewer than the "
+        raise InputValueError(
+            f"dt={dt!r} gives {n:.3g} steps per forcing period 2 pi / omega = {T:.6g}, fewer than the "
             f"{MIN_STEPS_PER_PERIOD} the integrator needs (its period error (w h)^2 / 12 would be {err:.1%}); "
             f"use dt <= {T / MIN_STEPS_PER_PERIOD:.4g}"
         )
@@ -164,27 +165,28 @@ class TimeSteppingOptions:
     tol: float = 1e-8
     periods_per_check: int = 1
 
+    @entry_point("TimeSteppingOptions")
     def __post_init__(self) -> None:
-        owner = "TimeSteppingOptions"
-        object.__setattr__(self, "theta", check_in_range("theta", self.theta, 0.5, 1.0, owner=owner))
+        object.__setattr__(self, "theta", check_in_range("theta", self.theta, 0.5, 1.0))
         if self.newton is not None and not isinstance(self.newton, NewtonOptions):
-            raise TypeError(f"{owner}: newton must be a NewtonOptions or None, got {type(self.newton).__name__}")
-        object.__setattr__(self, "t0", check_finite("t0", self.t0, owner=owner))
+            raise InputTypeError(f"newton must be a NewtonOptions or None, got {type(self.newton).__name__}")
+        object.__setattr__(self, "t0", check_finite("t0", self.t0))
         for name in ("store_every", "n_periods_max", "periods_per_check"):
-            object.__setattr__(self, name, check_int(name, getattr(self, name), 1, owner=owner))
-        check_finite("tol", self.tol, owner=owner)
-        object.__setattr__(self, "tol", check_positive("tol", self.tol, owner=owner))
+            object.__setattr__(self, name, check_int(name, getattr(self, name), 1))
+        check_finite("tol", self.tol)
+        object.__setattr__(self, "tol", check_positive("tol", self.tol))
 
 
-def _options(options: Any, owner: str) -> TimeSteppingOptions:
+def _options(options: Any) -> TimeSteppingOptions:
     if options is None:
         return TimeSteppingOptions()
     if not isinstance(options, TimeSteppingOptions):
-        raise TypeError(f"{owner}: options must be a femodes.TimeSteppingOptions or None, got {type(options).__name__}")
+        raise InputTypeError(f"options must be a femodes.TimeSteppingOptions or None, got {type(options).__name__}")
     return options
 
 
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
+@entry_point("simulate")
 def simulate(
     model: StructuralModel,
     t_end: float,
@@ -239,32 +241,31 @@ def simulate(
     FloatingPointError
         If the state becomes non-finite.
     """
-    owner = "simulate"
-    opts = _options(options, owner)
+    opts = _options(options)
     theta, newton, t0, store_every = opts.theta, opts.newton, opts.t0, opts.store_every
-    model, dt, e, th = _check_common(model, dt, restitution, theta, newton, owner)
-    t_end = check_finite("t_end", t_end, owner=owner)
+    model, dt, e, th = _check_common(model, dt, restitution, theta, newton)
+    t_end = check_finite("t_end", t_end)
     if t_end <= t0:
-        raise ValueError(f"{owner}: t_end must be > t0 = {t0}, got {t_end!r}")
+        raise InputValueError(f"t_end must be > t0 = {t0}, got {t_end!r}")
     if not math.isfinite(t_end - t0):
-        raise ValueError(f"{owner}: t_end - t0 overflows: t_end={t_end!r}, t0={t0!r}")
+        raise InputValueError(f"t_end - t0 overflows: t_end={t_end!r}, t0={t0!r}")
     if dt >= t_end - t0:
-        raise ValueError(f"{owner}: dt must be smaller than t_end - t0 = {t_end - t0:g}, got {dt!r}")
-    w = _check_omega(model, omega, owner)
-    _check_steps_per_period(dt, w, owner)
+        raise InputValueError(f"dt must be smaller than t_end - t0 = {t_end - t0:g}, got {dt!r}")
+    w = _check_omega(model, omega)
+    _check_steps_per_period(dt, w)
     n = model.n_dofs
     q = _state(u0, "u0", n)
     v = _state(v0, "v0", n)
-    n_steps = _n_steps(t_end - t0, dt, "t_end - t0", owner)
+    n_steps = _n_steps(t_end - t0, dt, "t_end - t0")
     n_stored = (n_steps // store_every + 2) * max(n, 1)
     if n_stored > _MAX_STORED:
-        raise ValueError(
-            f"{owner}: storing {n_steps} steps of {n} DOFs every store_every={store_every} step(s) needs "
+        raise InputValueError(
+            f"storing {n_steps} steps of {n} DOFs every store_every={store_every} step(s) needs "
             f"{n_stored:.3g} values per array (more than {_MAX_STORED:.3g}); increase store_every or dt"
         )
     h = (t_end - t0) / n_steps
     st = Stepper(model, h, th, e, w, newton)
-    _warn_massless_trapezoidal(st, owner)
+    _warn_massless_trapezoidal(st)
     for j, a in enumerate(model.contacts):
         g = float(a.item.gap_function(q[a.dof]))
         if g < 0:
@@ -280,17 +281,18 @@ def simulate(
                        success=status == 0, status=status, message=message)
 
 
-def _warn_massless_trapezoidal(st, owner: str) -> None:
+def _warn_massless_trapezoidal(st) -> None:
     """Warn when the trapezoidal rule meets a contact on a massless DOF (:mod:`femodes.time.moreau`):
     every switch of that contact excites stiff modes that theta = 1/2 neither resolves nor damps."""
     if st.theta == 0.5 and st.impact.any_massless:
         log.warning("%s: theta = 1/2 with a contact on a massless DOF: each switch of the contact adds energy "
                     "(O(dt^2)) to stiff modes the trapezoidal rule does not damp; over long runs this can grow "
                     "without bound (the 10-element cantilever with its tip stop, dt = T/400: 1e76 after 480 "
-                    "periods). Use TimeSteppingOptions(theta=0.55) or steps far below the fastest period", owner)
+                    "periods). Use TimeSteppingOptions(theta=0.55) or steps far below the fastest period", entry_name())
 
 
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
+@entry_point("steady_state")
 def steady_state(
     model: StructuralModel,
     omega: float,
@@ -330,29 +332,28 @@ def steady_state(
         ``converged`` says whether the period-start state repeated; ``success``/``status``/
         ``message`` also report steps whose local problem was not solved.
     """
-    owner = "steady_state"
-    opts = _options(options, owner)
+    opts = _options(options)
     theta, newton = opts.theta, opts.newton
     n_periods_max, tol, periods_per_check = opts.n_periods_max, opts.tol, opts.periods_per_check
-    model, dt, e, th = _check_common(model, dt, restitution, theta, newton, owner)
-    w = _check_omega(model, omega, owner)
+    model, dt, e, th = _check_common(model, dt, restitution, theta, newton)
+    w = _check_omega(model, omega)
     if w is None:
-        raise ValueError(f"{owner}: omega is required")
+        raise InputValueError("omega is required")
     T = 2.0 * math.pi / w
     if dt >= T:
-        raise ValueError(f"{owner}: dt must be smaller than the forcing period {T:g}, got {dt!r}")
-    _check_steps_per_period(dt, w, owner)
+        raise InputValueError(f"dt must be smaller than the forcing period {T:g}, got {dt!r}")
+    _check_steps_per_period(dt, w)
     n = model.n_dofs
     q = _state(u0, "u0", n)
     v = _state(v0, "v0", n)
-    N = _n_steps(T, dt, "the forcing period 2 pi / omega", owner)
+    N = _n_steps(T, dt, "the forcing period 2 pi / omega")
     if N * max(n, 1) > _MAX_STORED:
-        raise ValueError(
-            f"{owner}: dt={dt!r} gives {N} steps per period for {n} DOFs (more than {_MAX_STORED:.3g} stored "
+        raise InputValueError(
+            f"dt={dt!r} gives {N} steps per period for {n} DOFs (more than {_MAX_STORED:.3g} stored "
             "values); increase dt"
         )
     st = Stepper(model, T / N, th, e, w, newton)
-    _warn_massless_trapezoidal(st, owner)
+    _warn_massless_trapezoidal(st)
     orbit = _PeriodMap(st, N, T, q, v)
     nu, converged = orbit.iterate(n_periods_max, periods_per_check, tol)
     j = orbit.n_periods

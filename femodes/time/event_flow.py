@@ -52,6 +52,7 @@ from scipy.integrate import solve_ivp
 
 from ..laws import PenaltyContact, UnilateralContact
 from ..model import StructuralModel
+from ..solvers.checks import InputTypeError, InputValueError, entry_name
 
 __all__ = ["Flow", "Run", "TrialFailure", "split_state", "v_index", "unsupported", "MAX_IMPACTS", "GRAZING_VELOCITY",
            "MAX_DOFS"]
@@ -76,7 +77,8 @@ _HILL = 'use Hill\'s method on the harmonic balance Jacobian instead: fm.stabili
 
 class TrialFailure(ValueError):
     """A state the flow cannot start from or follow (penetration, chattering, integration failure);
-    :func:`shoot` treats it as a rejected trial step, everyone else sees a ValueError."""
+    :func:`shoot` treats it as a rejected trial step, everyone else sees an ``InputValueError`` named
+    by the public function that ran the flow."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -119,14 +121,14 @@ def unsupported(model: StructuralModel, massless_contacts: bool = False) -> str:
 class Flow:
     """Vector field, Jacobian, events and resets of a model (dense matrices; see module docstring)."""
 
-    def __init__(self, model: Any, omega: float, restitution: float, rtol: float, atol: float, owner: str):
+    def __init__(self, model: Any, omega: float, restitution: float, rtol: float, atol: float):
         if not isinstance(model, StructuralModel):
-            raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
+            raise InputTypeError(f"model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
         n = model.n_dofs
         why = unsupported(model)
         if why:
-            raise ValueError(f"{owner}: {why}")
-        self.n, self.owner = n, owner
+            raise InputValueError(f"{why}")
+        self.n = n
         self.omega, self.e, self.rtol, self.atol = omega, restitution, rtol, atol
         M = model.M.toarray()
         self._contacts(model, M)
@@ -137,7 +139,6 @@ class Flow:
 
     def _contacts(self, model, M: np.ndarray) -> None:
         """Unilateral contacts (on DOFs with mass) and penalty contacts."""
-        owner = self.owner
         self.unilateral: list[tuple[int, UnilateralContact, int]] = []
         self.penalty: list[tuple[int, PenaltyContact, int]] = []
         for j, a in enumerate(model.contacts):
@@ -146,7 +147,7 @@ class Flow:
             elif isinstance(a.item, PenaltyContact):
                 self.penalty.append((j, a.item, a.dof))
             else:
-                raise TypeError(f"{owner}: model: contact law {type(a.item).__name__} is not known to the shooting")
+                raise InputTypeError(f"model: contact law {type(a.item).__name__} is not known to the shooting")
 
     def _inverse_mass(self, model, M: np.ndarray) -> None:
         """``M^-1``, ``M^-1 K``, ``M^-1 C`` (dense); M must be definite."""
@@ -155,8 +156,8 @@ class Flow:
         lam = np.linalg.eigvalsh(M)
         if lam[0] <= 1e-12 * lam[-1]:
             massless = [model.dofmap.label(i) for i in np.flatnonzero(np.diag(M) <= 0.0)[:5]]
-            raise ValueError(
-                f"{self.owner}: model: M is singular (smallest eigenvalue {lam[0]:.3g}, largest {lam[-1]:.3g}"
+            raise InputValueError(
+                f"model: M is singular (smallest eigenvalue {lam[0]:.3g}, largest {lam[-1]:.3g}"
                 + (f"; massless DOFs {massless}" if massless else "")
                 + f"), so the state equations M v' = ... cannot be integrated explicitly: {_HILL}"
             )
@@ -178,8 +179,8 @@ class Flow:
         groups: dict[type, list] = {}
         for a in list(model.nonlinearities) + [model.contacts[j] for j, _, _ in self.penalty]:
             if not callable(getattr(a.item, "force", None)) or not hasattr(type(a.item), "stack"):
-                raise TypeError(
-                    f"{self.owner}: model: law {type(a.item).__name__} has no force(); the shooting cannot use it"
+                raise InputTypeError(
+                    f"model: law {type(a.item).__name__} has no force(); the shooting cannot use it"
                 )
             groups.setdefault(type(a.item), []).append(a)
         self.smooth = [(cls.stack([a.item for a in atts]), np.array([a.dof for a in atts], dtype=int))
@@ -269,27 +270,27 @@ class Run:
     def _impact(self, t: float, x: np.ndarray, j: int, law: UnilateralContact, c: int) -> np.ndarray:
         flow, n = self.flow, self.flow.n
         vc = x[v_index(n, c)]
-        owner = flow.owner
+        name = entry_name()
         if vc <= 0.0:
             # a root of the gap without approach (tangency at rest, or round-off of a restart on
             # the stop): nothing to reverse
-            log.debug("%s: contact %d touches at t = %.9g without approaching (v_c = %.3g)", owner, j, t, vc)
+            log.debug("%s: contact %d touches at t = %.9g without approaching (v_c = %.3g)", name, j, t, vc)
             return x
         self.impacts.append((t, j))
         if len(self.impacts) > MAX_IMPACTS:
             raise TrialFailure(
-                f"{owner}: more than {MAX_IMPACTS} impacts in one run (t = {self.t0:.6g} .. {t:.6g}): "
+                f"more than {MAX_IMPACTS} impacts in one run (t = {self.t0:.6g} .. {t:.6g}): "
                 f"an accumulation of impacts (chattering) that event-driven integration cannot follow; {_HILL}"
             )
         if vc <= GRAZING_VELOCITY * self.vscale:
             if flow.e < 1.0:
                 raise TrialFailure(
-                    f"{owner}: restitution={flow.e!r}: impact at contact {j} at t = {t:.9g} with velocity {vc:.3g} "
+                    f"restitution={flow.e!r}: impact at contact {j} at t = {t:.9g} with velocity {vc:.3g} "
                     f"(below {GRAZING_VELOCITY:g} times the velocity scale {self.vscale:.3g}): impacts accumulate "
                     f"(chattering, then sticking), which event-driven integration cannot follow; {_HILL}"
                 )
             log.warning("%s: grazing impact at contact %d at t = %.9g (velocity %.3g, scale %.3g): the saltation "
-                        "matrix grows like 1/velocity, multipliers are unreliable near grazing", owner, j, t, vc,
+                        "matrix grows like 1/velocity, multipliers are unreliable near grazing", name, j, t, vc,
                         self.vscale)
         R = flow.reset_matrix(j, c)
         f_minus = flow.field(t, x)
@@ -297,7 +298,7 @@ class Run:
         f_plus = flow.field(t, x_plus)
         if flow.e < 1.0 and x_plus[v_index(n, c)] >= -GRAZING_VELOCITY * self.vscale and f_plus[v_index(n, c)] > 0:
             raise TrialFailure(
-                f"{owner}: restitution={flow.e!r}: contact {j} comes to rest on the obstacle after the impact at "
+                f"restitution={flow.e!r}: contact {j} comes to rest on the obstacle after the impact at "
                 f"t = {t:.9g} (rebound velocity {-x_plus[v_index(n, c)]:.3g}, below {GRAZING_VELOCITY:g} times the "
                 f"velocity scale {self.vscale:.3g}, and the forces push it in): impacts accumulate (chattering) into "
                 f"sticking, which event-driven integration cannot follow; {_HILL}"
@@ -320,7 +321,7 @@ class Run:
             g = self._gap(x, law, c)
             if g < -self._touch_tol(x, law):
                 raise TrialFailure(
-                    f"{self.flow.owner}: x0 starts inside the obstacle of contact {j}: gap g_N = {g:.6g} < 0 "
+                    f"x0 starts inside the obstacle of contact {j}: gap g_N = {g:.6g} < 0 "
                     f"(q[{c}] = {x[c]:.9g}, gap {law.gap:.9g})"
                 )
 
@@ -382,7 +383,7 @@ class Run:
             sol = solve_ivp(fun, (t, self.t1), y, method="DOP853", events=[e[-1] for e in events] or None,
                             rtol=flow.rtol, atol=flow.atol, dense_output=self.dense)
             if sol.status == -1:
-                raise TrialFailure(f"{flow.owner}: the integration failed at t = {sol.t[-1]:.9g}: {sol.message}")
+                raise TrialFailure(f"the integration failed at t = {sol.t[-1]:.9g}: {sol.message}")
             if self.dense:
                 self.segments.append(sol)
             y = sol.y[:, -1]
@@ -390,7 +391,7 @@ class Run:
             if self.variational:
                 self.Phi = y[n2:].reshape(n2, n2).copy()
             if not np.all(np.isfinite(y)):
-                raise TrialFailure(f"{flow.owner}: the state became non-finite at t = {sol.t[-1]:.9g}")
+                raise TrialFailure(f"the state became non-finite at t = {sol.t[-1]:.9g}")
             t = float(sol.t[-1])
             if sol.status == 0:
                 break
@@ -402,6 +403,6 @@ class Run:
                 self.kinks.append((t, j))  # saltation matrix = identity: nothing to do
                 self.active[j] = not self.active[j]
                 if len(self.kinks) > _MAX_KINKS:
-                    raise TrialFailure(f"{flow.owner}: more than {_MAX_KINKS} penalty-contact kinks in one run")
+                    raise TrialFailure(f"more than {_MAX_KINKS} penalty-contact kinks in one run")
         return x, self.segments
 

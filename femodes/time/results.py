@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..solvers.checks import InputValueError, entry_point
+
 __all__ = ["TimeHistory", "SteadyState", "STATUS"]
 
 #: Meaning of the ``status`` codes of :class:`TimeHistory` and :class:`SteadyState`.
@@ -34,10 +36,10 @@ STATUS = {
 }
 
 
-def _times(t, owner: str) -> np.ndarray:
+def _times(t) -> np.ndarray:
     t = np.atleast_1d(np.asarray(t, dtype=float))
     if t.ndim != 1 or not np.all(np.isfinite(t)):
-        raise ValueError(f"{owner}.contact_force: t must be a scalar or 1-D array of finite times, got shape {t.shape}")
+        raise InputValueError(f"t must be a scalar or 1-D array of finite times, got shape {t.shape}")
     return t
 
 
@@ -98,6 +100,7 @@ class TimeHistory:
             out[1:] = self.impulse[1:] / np.diff(self.t)[:, None]
         return out
 
+    @entry_point("TimeHistory.contact_force")
     def contact_force(self, t) -> np.ndarray:
         """Contact forces at times ``t`` (compression positive), shape ``(len(t), n_contacts)``.
 
@@ -110,7 +113,7 @@ class TimeHistory:
         ValueError
             If a time lies outside ``[t[0], t[-1]]`` or is not finite.
         """
-        t = _times(t, "TimeHistory")
+        t = _times(t)
         t0, t1 = float(self.t[0]), float(self.t[-1])
         slack = 1e-12 * max(abs(t0), abs(t1), t1 - t0)
         if t.size and (t.min() < t0 - slack or t.max() > t1 + slack):
@@ -178,6 +181,7 @@ class SteadyState:
         """Average contact force over each step, ``impulse / dt`` (row 0 is zero)."""
         return self.impulse / self.dt
 
+    @entry_point("SteadyState.contact_force")
     def contact_force(self, t) -> np.ndarray:
         """Contact forces at times ``t`` (compression positive), shape ``(len(t), n_contacts)``.
 
@@ -185,7 +189,7 @@ class SteadyState:
         like :meth:`femodes.PeriodicSolution.contact_force`), and the value is the average force
         over the step ``(t_{i-1}, t_i]`` containing it (:attr:`mean_contact_force`).
         """
-        tau = np.mod(_times(t, "SteadyState"), self.period)
+        tau = np.mod(_times(t), self.period)
         i = np.searchsorted(self.t, tau, side="left")
         i[i == 0] = self.t.size - 1  # t = 0 is t = period: the last step of the orbit
         return self.mean_contact_force[np.minimum(i, self.t.size - 1)]

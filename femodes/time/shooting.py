@@ -34,7 +34,8 @@ import numpy as np
 
 from ..model import StructuralModel
 from ..solvers import NewtonOptions, semismooth_newton
-from ..solvers.checks import check_finite, check_in_range, check_int, check_positive, show
+from ..solvers.checks import (InputValueError, check_finite, check_in_range, check_int, check_positive, entry_name,
+                              entry_point, show)
 from .event_flow import (GRAZING_VELOCITY, MAX_DOFS, MAX_IMPACTS, Flow, Run, TrialFailure, split_state, unsupported,
                          v_index)
 from .stepper import solve_or_lstsq
@@ -151,20 +152,20 @@ class ShootingResult:
 # --------------------------------------------------------------------------------------------
 # Validation
 # --------------------------------------------------------------------------------------------
-def _state0(x0: Any, n: int, owner: str) -> np.ndarray:
+def _state0(x0: Any, n: int) -> np.ndarray:
     try:
         x = np.array(x0, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ValueError(
-            f"{owner}: x0 must be a real array [q; v] of shape ({2 * n},), got {show(x0)}"
+        raise InputValueError(
+            f"x0 must be a real array [q; v] of shape ({2 * n},), got {show(x0)}"
         ) from exc
     if x.shape != (2 * n,):
-        raise ValueError(
-            f"{owner}: x0 must have shape ({2 * n},) (displacements then velocities of the {n} DOFs, "
+        raise InputValueError(
+            f"x0 must have shape ({2 * n},) (displacements then velocities of the {n} DOFs, "
             f"x = [q; v]), got shape {x.shape}"
         )
     if not np.all(np.isfinite(x)):
-        raise ValueError(f"{owner}: x0 contains NaN or infinite values: {show(x0)}")
+        raise InputValueError(f"x0 contains NaN or infinite values: {show(x0)}")
     return x
 
 
@@ -173,29 +174,29 @@ def _forced(model: StructuralModel) -> bool:
     return any(k >= 1 and np.any(F != 0) for k, F in model.force_vectors().items())
 
 
-def _period(model: StructuralModel, omega: float, period: Any, owner: str) -> float:
+def _period(model: StructuralModel, omega: float, period: Any) -> float:
     base = 2.0 * math.pi / omega
     if period is None:
         return base
-    T = check_positive("period", period, owner=owner)
+    T = check_positive("period", period)
     if _forced(model):
         # A forced orbit repeats only after a whole number of forcing periods (sub-harmonic nu).
         nu = T / base
         if round(nu) < 1 or abs(nu - round(nu)) > 1e-9 * max(1.0, nu):
-            raise ValueError(
-                f"{owner}: period={show(period)} is {nu:.12g} forcing periods 2 pi/omega = {base:.12g}; a forced "
+            raise InputValueError(
+                f"period={show(period)} is {nu:.12g} forcing periods 2 pi/omega = {base:.12g}; a forced "
                 "orbit needs a whole number nu of them (period = nu * 2 pi / omega)"
             )
     return T
 
 
-def _setup(model, omega, x0, restitution, rtol, atol, owner):
-    w = check_positive("omega", omega, owner=owner)
-    e = check_in_range("restitution", restitution, 0.0, 1.0, owner=owner)
-    rtol = check_positive("rtol", rtol, owner=owner)
-    atol = check_positive("atol", atol, owner=owner)
-    flow = Flow(model, w, e, rtol, atol, owner)
-    x0 = _state0(x0, flow.n, owner)
+def _setup(model, omega, x0, restitution, rtol, atol):
+    w = check_positive("omega", omega)
+    e = check_in_range("restitution", restitution, 0.0, 1.0)
+    rtol = check_positive("rtol", rtol)
+    atol = check_positive("atol", atol)
+    flow = Flow(model, w, e, rtol, atol)
+    x0 = _state0(x0, flow.n)
     return flow, x0
 
 
@@ -227,6 +228,7 @@ def _state0_renamed(f):
 
 
 @_state0_renamed
+@entry_point("monodromy")
 def monodromy(
     model: StructuralModel,
     omega: float,
@@ -279,17 +281,17 @@ def monodromy(
         sticking with ``restitution < 1``, ``x0`` inside an obstacle), with a pointer to
         Hill's method.
     """
-    owner = "monodromy"
-    flow, x0 = _setup(model, omega, x0, restitution, rtol, atol, owner)
-    t0 = check_finite("t0", t0, owner=owner)
-    T = _period(model, flow.omega, period, owner)
+    flow, x0 = _setup(model, omega, x0, restitution, rtol, atol)
+    t0 = check_finite("t0", t0)
+    T = _period(model, flow.omega, period)
     try:
         return _monodromy(flow, x0, t0, T)
     except TrialFailure as exc:
-        raise ValueError(str(exc)) from None
+        raise InputValueError(str(exc)) from None
 
 
 @_state0_renamed
+@entry_point("trajectory")
 def trajectory(
     model: StructuralModel,
     omega: float,
@@ -315,12 +317,11 @@ def trajectory(
     -------
     ndarray (len(t), 2 n_dofs)
     """
-    owner = "trajectory"
-    flow, x0 = _setup(model, omega, x0, restitution, rtol, atol, owner)
-    t0 = check_finite("t0", t0, owner=owner)
+    flow, x0 = _setup(model, omega, x0, restitution, rtol, atol)
+    t0 = check_finite("t0", t0)
     tt = np.atleast_1d(np.asarray(t, dtype=float))
     if tt.ndim != 1 or tt.size == 0 or not np.all(np.isfinite(tt)) or np.any(tt < t0):
-        raise ValueError(f"{owner}: t must be a non-empty 1-D array of finite times >= t0 = {t0}, got {show(t)}")
+        raise InputValueError(f"t must be a non-empty 1-D array of finite times >= t0 = {t0}, got {show(t)}")
     t1 = float(tt.max())
     out = np.empty((tt.size, 2 * flow.n))
     if t1 == t0:
@@ -329,7 +330,7 @@ def trajectory(
     try:
         x_end, segments = Run(flow, x0, t0, t1, variational=False, dense=True).run()
     except TrialFailure as exc:
-        raise ValueError(str(exc)) from None
+        raise InputValueError(str(exc)) from None
     done = np.zeros(tt.size, dtype=bool)
     for s in segments:
         sel = ~done & (tt >= s.t[0]) & (tt <= s.t[-1])
@@ -357,9 +358,9 @@ class _ShootingEquations:
     """
 
     def __init__(self, flow, x0: np.ndarray, T0: float, t0: float, free: np.ndarray, rows: np.ndarray,
-                 autonomous: bool, owner: str):
+                 autonomous: bool):
         self.flow, self.x0, self.T0, self.t0 = flow, x0, T0, t0
-        self.free, self.rows, self.autonomous, self.owner = free, rows, autonomous, owner
+        self.free, self.rows, self.autonomous = free, rows, autonomous
         self.z0 = np.append(x0[free], T0) if autonomous else x0.copy()
         self._cache: dict = {}
 
@@ -373,7 +374,7 @@ class _ShootingEquations:
         if key not in self._cache:
             self(z)
         if key not in self._cache:  # pragma: no cover - the iterate returned was evaluated finite
-            raise ValueError(f"{self.owner}: the flow cannot be followed from the final iterate")
+            raise InputValueError("the flow cannot be followed from the final iterate")
         return self._cache[key]
 
     def __call__(self, z: np.ndarray):
@@ -384,7 +385,7 @@ class _ShootingEquations:
         try:
             mono = _monodromy(self.flow, x, self.t0, T)
         except TrialFailure as exc:
-            log.debug("%s: trial state rejected: %s", self.owner, exc)
+            log.debug("%s: trial state rejected: %s", entry_name(), exc)
             return np.full(size, np.inf), np.eye(size)
         self._cache = {z.tobytes(): mono}
         n2 = 2 * self.flow.n
@@ -396,6 +397,7 @@ class _ShootingEquations:
 
 
 @_state0_renamed
+@entry_point("shoot")
 def shoot(
     model: StructuralModel,
     omega: float,
@@ -468,12 +470,11 @@ def shoot(
         Invalid arguments, or a first guess the event-driven integration cannot follow (as in
         :func:`monodromy`).
     """
-    owner = "shoot"
-    flow, x = _setup(model, omega, x0, restitution, rtol, atol, owner)
-    t0 = check_finite("t0", t0, owner=owner)
-    T = _period(model, flow.omega, period, owner)
-    tol = check_positive("tol", tol, owner=owner)
-    max_iter = check_int("max_iter", max_iter, 1, owner=owner)
+    flow, x = _setup(model, omega, x0, restitution, rtol, atol)
+    t0 = check_finite("t0", t0)
+    T = _period(model, flow.omega, period)
+    tol = check_positive("tol", tol)
+    max_iter = check_int("max_iter", max_iter, 1)
     n = flow.n
     autonomous = not _forced(model)
     free = np.arange(2 * n)
@@ -481,21 +482,21 @@ def shoot(
         if phase_dof is None:
             j = int(np.argmax(np.abs(split_state(x)[0])))
         else:
-            j = check_int("phase_dof", phase_dof, 0, owner=owner)
+            j = check_int("phase_dof", phase_dof, 0)
             if j >= n:
-                raise ValueError(f"{owner}: phase_dof must be a DOF index in [0, {n}), got {show(phase_dof)}")
+                raise InputValueError(f"phase_dof must be a DOF index in [0, {n}), got {show(phase_dof)}")
         x[v_index(n, j)] = 0.0  # phase condition: t0 at a turning point of DOF j
         free = np.setdiff1d(free, [j, v_index(n, j)])
     elif phase_dof is not None:
-        raise ValueError(f"{owner}: phase_dof={show(phase_dof)} is for autonomous models; this model is forced "
+        raise InputValueError(f"phase_dof={show(phase_dof)} is for autonomous models; this model is forced "
                          "(its phase is fixed by the forcing)")
 
     rows = np.setdiff1d(np.arange(2 * n), [j]) if autonomous else np.arange(2 * n)
-    problem = _ShootingEquations(flow, x, T, t0, free, rows, autonomous, owner)
+    problem = _ShootingEquations(flow, x, T, t0, free, rows, autonomous)
     try:
         problem(problem.z0)
     except TrialFailure as exc:
-        raise ValueError(f"{str(exc)} (first guess x0)") from None
+        raise InputValueError(f"{exc} (first guess x0)") from None
     # One Newton for all of femodes: semismooth_newton with a monotone Armijo search (no
     # watchdog: each trial is a whole period of integration), the house's least-squares fallback
     # at a singular Phi - I, and the stopping rule max|x(T) - x0| <= tol max(1, max|x0|).
@@ -516,7 +517,7 @@ def shoot(
            f"max|x(T) - x0| = {norm:.3g}",
     }[status]
     res = norm
-    (log.info if status == 0 else log.debug)("%s: %s", owner, message)  # reported in the result
+    (log.info if status == 0 else log.debug)("shoot: %s", message)  # reported in the result
     return ShootingResult(
         x=x, success=status == 0, status=status, message=message, nit=nit, residual_norm=res,
         multipliers=mono.multipliers, monodromy=mono.matrix, impacts=mono.impacts, period=T,

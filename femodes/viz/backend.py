@@ -13,6 +13,8 @@ from __future__ import annotations
 import ctypes
 import os
 
+from ..solvers.checks import entry_name
+
 __all__ = ["render_backend", "import_pyvista", "INSTALL_HINT", "snapshot"]
 
 INSTALL_HINT = (
@@ -68,7 +70,7 @@ def import_pyvista():
     return pyvista
 
 
-def snapshot(plotter, owner: str):
+def snapshot(plotter):
     """The rendered frame of ``plotter`` as an RGB array (a RuntimeError with the install hint if
     the renderer returns none)."""
     import numpy as np
@@ -76,5 +78,5 @@ def snapshot(plotter, owner: str):
     plotter.render()
     img = plotter.screenshot(return_img=True)
     if img is None or img.size == 0:
-        raise RuntimeError(f"{owner}: the renderer returned no image. {INSTALL_HINT}")
+        raise RuntimeError(f"{entry_name()}: the renderer returned no image. {INSTALL_HINT}")
     return np.asarray(img)[..., :3].copy()

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..solvers.checks import entry_name
 from .backend import INSTALL_HINT, snapshot
 from .style import AnimationStyle, ContactQuality, frame_label
 
@@ -74,13 +75,13 @@ def _period_bounds(frames_pts: np.ndarray, radius: float, obstacles: list) -> tu
     return lo, hi
 
 
-def line_geometry(pv, f, n_frames: int, scale: float | None, radius: float | None, owner: str) -> _Geometry:
+def line_geometry(pv, f, n_frames: int, scale: float | None, radius: float | None) -> _Geometry:
     """Displacement scale (default: max |u| drawn as 15 % of the length), frames, obstacles and bounds."""
     length = float(np.ptp(f.x)) or 1.0
     umax = float(np.max(np.abs(f.displacement)))
     if scale is None:
         scale = 0.15 * length / umax if umax > 0 else 1.0
-        log.info("%s: displacement scale %.4g (max |u| = %.4g drawn as 15%% of the length)", owner, scale, umax)
+        log.info("%s: displacement scale %.4g (max |u| = %.4g drawn as 15%% of the length)", entry_name(), scale, umax)
     radius = 0.01 * length if radius is None else float(radius)
     axis = 0 if f.kind == "bar" else 1
     frames_pts = np.repeat(f.points()[None], n_frames, axis=0)
@@ -146,7 +147,7 @@ def _draw_contacts(pv, plotter, geom: _Geometry, quality: ContactQuality, j: int
 
 
 def _render_frame(pv, plotter, geom: _Geometry, quality: ContactQuality | None, j: int, n_frames: int,
-                  cmap: str, owner: str) -> np.ndarray:
+                  cmap: str) -> np.ndarray:
     """Draw frame ``j`` (structure, contact overlay, time label) and return its RGB image."""
     if j:
         plotter.add_mesh(geom.structure(pv, j), scalars="|u|", cmap=cmap, clim=geom.clim, name="structure",
@@ -155,20 +156,20 @@ def _render_frame(pv, plotter, geom: _Geometry, quality: ContactQuality | None, 
     if quality is not None:
         _draw_contacts(pv, plotter, geom, quality, j)
     plotter.add_text(now, font_size=9, color=color, position="lower_left", name="time")
-    return snapshot(plotter, owner)
+    return snapshot(plotter)
 
 
 def render_line_frames(pv, geom: _Geometry, quality: ContactQuality | None, style: AnimationStyle, caption: str,
-                   size: tuple[int, int], n_frames: int, owner: str) -> list[np.ndarray]:
+                   size: tuple[int, int], n_frames: int) -> list[np.ndarray]:
     """All frames, off screen with a fixed camera; raises RuntimeError on blank output."""
     plotter = pv.Plotter(off_screen=True, window_size=size)
     images = []
     try:
         _setup_scene(pv, plotter, geom, style, caption, size)
         for j in range(n_frames):
-            images.append(_render_frame(pv, plotter, geom, quality, j, n_frames, style.cmap, owner))
+            images.append(_render_frame(pv, plotter, geom, quality, j, n_frames, style.cmap))
     finally:
         plotter.close()
     if np.all(images[0] == images[0].reshape(-1, 3)[0]):
-        raise RuntimeError(f"{owner}: the renderer produced a blank frame (broken OpenGL?). {INSTALL_HINT}")
+        raise RuntimeError(f"{entry_name()}: the renderer produced a blank frame (broken OpenGL?). {INSTALL_HINT}")
     return images

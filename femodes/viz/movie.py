@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from ..fields import check_scale, mesh_fields
-from ..solvers.checks import check_int
+from ..fields import check_scale, sample_fields
+from ..solvers.checks import InputTypeError, InputValueError, check_int, entry_point
 from .backend import import_pyvista
 from .lines import make_caption, line_geometry, render_line_frames
 from .solids import render_solid, solid_scene
@@ -27,14 +27,14 @@ __all__ = ["animate"]
 
 log = logging.getLogger(__name__)
 
-def _check_path(path: Any, owner: str) -> tuple[Path, str]:
+def _check_path(path: Any) -> tuple[Path, str]:
     """The output path and its lower-case suffix (``.gif`` or ``.mp4``)."""
     if not isinstance(path, (str, os.PathLike)):
-        raise TypeError(f"{owner}: path must be a str or os.PathLike ending in .gif or .mp4, got {type(path).__name__}")
+        raise InputTypeError(f"path must be a str or os.PathLike ending in .gif or .mp4, got {type(path).__name__}")
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".gif", ".mp4"):
-        raise ValueError(f"{owner}: path must end in .gif or .mp4, got {str(path)!r}")
+        raise InputValueError(f"path must end in .gif or .mp4, got {str(path)!r}")
     return path, suffix
 
 
@@ -69,6 +69,9 @@ def _write_movie(iio, path: Path, suffix: str, images: list[np.ndarray], fps: fl
                 w.append_data(img)
 
 
+
+
+@entry_point("animate")
 def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: float | None = None, *,
             mode: int | None = None, style: AnimationStyle | None = None) -> Path:
     """Render one period of a periodic motion to an animated GIF or an MP4 video, off screen.
@@ -114,15 +117,14 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
     ImportError
         pyvista / imageio (/ imageio-ffmpeg for ``.mp4``) not installed.
     """
-    owner = "animate"
-    n_frames = check_int("n_frames", n_frames, 2, owner=owner)
-    scale = check_scale(scale, owner)
-    style = check_style(style, owner)
-    path, suffix = _check_path(path, owner)
+    n_frames = check_int("n_frames", n_frames, 2)
+    scale = check_scale(scale)
+    style = check_style(style)
+    path, suffix = _check_path(path)
     width, height = _frame_size(style, suffix)
-    f = mesh_fields(solution, model, n_frames=n_frames, mode=mode, owner=owner)
+    f = sample_fields(solution, model, n_frames=n_frames, mode=mode)
     if f.dim == 1 and style.scalars == "contact_pressure":
-        raise ValueError(f"{owner}: style.scalars='contact_pressure' needs a meshed solid (femodes.solid); bars and "
+        raise InputValueError("style.scalars='contact_pressure' needs a meshed solid (femodes.solid); bars and "
                          "beams are coloured by the displacement (scalars='displacement')")
     quality = contact_quality(solution, f, model) if style.show_contact else None
     iio = _import_imageio(suffix)
@@ -130,18 +132,18 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
 
     t0 = time.perf_counter()
     if f.dim == 1:
-        geom = line_geometry(pv, f, n_frames, scale, style.radius, owner)
+        geom = line_geometry(pv, f, n_frames, scale, style.radius)
         caption = make_caption(style, f, geom.scale, quality)
-        images = render_line_frames(pv, geom, quality, style, caption, (width, height), n_frames, owner)
+        images = render_line_frames(pv, geom, quality, style, caption, (width, height), n_frames)
     else:
-        scene = solid_scene(pv, f, scale, style.scalars == "contact_pressure", style.unit, owner)
+        scene = solid_scene(pv, f, scale, style.scalars == "contact_pressure", style.unit)
         caption = make_caption(style, f, scene.scale, quality)
         if quality is not None:
             caption += "\ncontact nodes: grey open, blue closed, red penetrating"
-        images = render_solid(pv, f, scene, quality, style, caption, (width, height), n_frames, owner)
+        images = render_solid(pv, f, scene, quality, style, caption, (width, height), n_frames)
     t_render = time.perf_counter() - t0
 
     _write_movie(iio, path, suffix, images, style.fps)
-    log.info("%s: %d frames %dx%d rendered in %.2f s, wrote %s (%d bytes)", owner, n_frames, width, height, t_render,
+    log.info("animate: %d frames %dx%d rendered in %.2f s, wrote %s (%d bytes)", n_frames, width, height, t_render,
              path, path.stat().st_size)
     return path

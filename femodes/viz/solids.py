@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..solvers.checks import entry_name
 from ..fields import VTK_QUADRATIC_NODES
 from .backend import INSTALL_HINT, snapshot
 from .lines import fix_camera
@@ -153,7 +154,7 @@ def _contact_paths(f) -> list:
     return paths
 
 
-def solid_scene(pv, f, scale: float | None, pressure: bool, unit: str | None, owner: str) -> _SolidScene:
+def solid_scene(pv, f, scale: float | None, pressure: bool, unit: str | None) -> _SolidScene:
     """Displacement scale (default: the largest |u| over the period drawn as 15 % of the largest
     extent of the mesh), frames, colouring, obstacles and the bounds over the period."""
     X = f.points()
@@ -162,7 +163,7 @@ def solid_scene(pv, f, scale: float | None, pressure: bool, unit: str | None, ow
     umax = float(mag.max())
     if scale is None:
         scale = 0.15 * length / umax if umax > 0 else 1.0
-        log.info("%s: displacement scale %.4g (max |u| = %.4g drawn as 15%% of the largest extent)", owner, scale, umax)
+        log.info("%s: displacement scale %.4g (max |u| = %.4g drawn as 15%% of the largest extent)", entry_name(), scale, umax)
     frames_pts = X[None] + scale * f.displacement
     paths = _contact_paths(f)
     if pressure:
@@ -252,7 +253,7 @@ def _draw_solid_contacts(pv, plotter, scene: _SolidScene, quality: ContactQualit
 
 
 def render_solid(pv, f, scene: _SolidScene, quality: ContactQuality | None, style: AnimationStyle, caption: str,
-                  size: tuple[int, int], n_frames: int, owner: str) -> list[np.ndarray]:
+                  size: tuple[int, int], n_frames: int) -> list[np.ndarray]:
     """All frames of a meshed solid, off screen with a fixed camera."""
     plotter = pv.Plotter(off_screen=True, window_size=size)
     images = []
@@ -272,9 +273,9 @@ def render_solid(pv, f, scene: _SolidScene, quality: ContactQuality | None, styl
             if quality is not None:
                 _draw_solid_contacts(pv, plotter, scene, quality, j)
             plotter.add_text(now, font_size=9, color=color, position="lower_left", name="time")
-            images.append(snapshot(plotter, owner))
+            images.append(snapshot(plotter))
     finally:
         plotter.close()
     if np.all(images[0] == images[0].reshape(-1, 3)[0]):
-        raise RuntimeError(f"{owner}: the renderer produced a blank frame (broken OpenGL?). {INSTALL_HINT}")
+        raise RuntimeError(f"{entry_name()}: the renderer produced a blank frame (broken OpenGL?). {INSTALL_HINT}")
     return images

@@ -14,13 +14,15 @@ from typing import Any
 
 import numpy as np
 
+from ..solvers.checks import InputTypeError, InputValueError, entry_point
+
 
 __all__ = ["AnimationStyle", "ContactQuality", "check_style", "contact_quality", "frame_label"]
 
-def _check_window(window_size: Any, owner: str) -> tuple[int, int]:
+def _check_window(window_size: Any) -> tuple[int, int]:
     if (not isinstance(window_size, (tuple, list)) or len(window_size) != 2
             or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and 16 <= v <= 8192 for v in window_size)):
-        raise ValueError(f"{owner}: window_size must be (width, height) integers in [16, 8192], got {window_size!r}")
+        raise InputValueError(f"window_size must be (width, height) integers in [16, 8192], got {window_size!r}")
     return int(window_size[0]), int(window_size[1])
 
 
@@ -136,34 +138,34 @@ class AnimationStyle:
     scalars: str = "displacement"
     pressure_cmap: str = "YlOrRd"
 
+    @entry_point("AnimationStyle")
     def __post_init__(self):
-        owner = "AnimationStyle"
-        object.__setattr__(self, "window_size", _check_window(self.window_size, owner))
+        object.__setattr__(self, "window_size", _check_window(self.window_size))
         fps = self.fps
         if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)) or not 0 < fps <= 240:
-            raise ValueError(f"{owner}: fps must be a number in (0, 240], got {fps!r}")
+            raise InputValueError(f"fps must be a number in (0, 240], got {fps!r}")
         r = self.radius
         if r is not None and (isinstance(r, bool) or not isinstance(r, (int, float)) or not r > 0):
-            raise ValueError(f"{owner}: radius must be a positive number or None, got {r!r}")
+            raise InputValueError(f"radius must be a positive number or None, got {r!r}")
         for name in ("unit", "title"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, str):
-                raise TypeError(f"{owner}: {name} must be a str or None, got {type(value).__name__}")
+                raise InputTypeError(f"{name} must be a str or None, got {type(value).__name__}")
         for name in ("cmap", "pressure_cmap"):
             if not isinstance(getattr(self, name), str):
-                raise TypeError(f"{owner}: {name} must be a colormap name (str), "
+                raise InputTypeError(f"{name} must be a colormap name (str), "
                                 f"got {type(getattr(self, name)).__name__}")
         if not isinstance(self.show_contact, (bool, np.bool_)):
-            raise TypeError(f"{owner}: show_contact must be True or False, got {self.show_contact!r}")
+            raise InputTypeError(f"show_contact must be True or False, got {self.show_contact!r}")
         if self.scalars not in ("displacement", "contact_pressure"):
-            raise ValueError(f"{owner}: scalars must be 'displacement' or 'contact_pressure' (the point data of "
+            raise InputValueError(f"scalars must be 'displacement' or 'contact_pressure' (the point data of "
                              f"femodes.io.write_animation that colours the structure), got {self.scalars!r}")
 
 
-def check_style(style: Any, owner: str) -> AnimationStyle:
+def check_style(style: Any) -> AnimationStyle:
     style = AnimationStyle() if style is None else style
     if not isinstance(style, AnimationStyle):
-        raise TypeError(f"{owner}: style must be a femodes.viz.AnimationStyle, got {type(style).__name__}")
+        raise InputTypeError(f"style must be a femodes.viz.AnimationStyle, got {type(style).__name__}")
     return style
 
 

@@ -25,7 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ...solvers.checks import check_int
+from ...solvers.checks import check_int, named_by
 from ..cases import SOLID_DIVISIONS, Case, load_case
 from ..progress import ProgressBar
 from .child import run_child as _run_child  # a module global, looked up per case: tests replace it
@@ -99,7 +99,8 @@ def scaling_study(
         case = load_case(case)
     harmonics_list = _harmonics_values(case, harmonics)
     sizes = _size_values(case, elements, refine)
-    repeat = check_int("repeat", repeat, 1, owner="scaling_study")
+    with named_by("scaling_study"):
+        repeat = check_int("repeat", repeat, 1)
     points = _points_value(points)
     if timeout is not None and not (isinstance(timeout, numbers.Real) and timeout > 0):
         raise ValueError(f"scaling_study: timeout must be a positive number of seconds, got {timeout!r}")
@@ -327,7 +328,8 @@ def _elements_values(case: Case, elements: Sequence[int] | None) -> list[int | N
 
 
 def _points_value(points: Any) -> int:
-    points = check_int("points", points, 0, owner="scaling_study")
+    with named_by("scaling_study"):
+        points = check_int("points", points, 0)
     if points == 1:
         raise ValueError("scaling_study: points must be 0 (skip the continuation) or >= 2, got 1")
     return points

@@ -196,11 +196,11 @@ def _unguarded_main_call() -> str | None:
     return str(path)
 
 
-def check_main_guarded(owner: str) -> None:
-    """RuntimeError naming the script if ``owner`` (e.g. ``"run_sweep"``) is called from a main
+def check_main_guarded(function: str) -> None:
+    """RuntimeError naming the script if ``function`` (e.g. ``"run_sweep"``) is called from a main
     script's top-level code outside ``if __name__ == "__main__":``."""
     script = _unguarded_main_call()
     if script is not None:
-        raise RuntimeError(f"{owner} starts worker processes that import {script} again: put the code that runs the "
+        raise RuntimeError(f"{function} starts worker processes that import {script} again: put the code that runs the "
                            "sweep under `if __name__ == \"__main__\":` (or pass executor=..., e.g. a scheduler "
                            "address)")
