@@ -26,6 +26,7 @@ from .results import Branch, ContactInfo
 from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
+from .solvers.checks import entry_point
 from .solvers.threads import limit_blas_threads
 from .accuracy import AccuracyOptions, check_options, meet_tolerance, refinement_options, rtol_time_limit
 from .accuracy.methods import ErrorMethod, as_error_method
@@ -61,6 +62,7 @@ def branch_from_continuation(problem, result, *, kind: str, model: StructuralMod
     )
 
 
+@entry_point("frequency_response")
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def frequency_response(
     model: StructuralModel,
@@ -157,26 +159,26 @@ def frequency_response(
         at the smallest step); ``status == 2`` if it stopped at ``options.max_points`` before the
         end of the span (valid points, ``success`` True, a warning in the log).
     """
-    model = check_model(model, "frequency_response")
-    checkpoint = checkpoint_spec(checkpoint, "frequency_response")
-    h = check_harmonics(harmonics, "frequency_response")
-    check_continuation_options(options, "frequency_response")
-    refinement_options(rtol, max_harmonics, h.n_harmonics, "frequency_response")
+    model = check_model(model)
+    checkpoint = checkpoint_spec(checkpoint)
+    h = check_harmonics(harmonics)
+    check_continuation_options(options)
+    refinement_options(rtol, max_harmonics, h.n_harmonics)
     chosen = error_method
-    error_method = as_error_method(error_method, "frequency_response", "error_method")
-    error_options = check_options(error_options, "frequency_response", "error_options")
-    span = check_span(omega, "omega", "frequency_response", positive=True)
+    error_method = as_error_method(error_method, "error_method")
+    error_options = check_options(error_options, "error_options")
+    span = check_span(omega, "omega", positive=True)
     if chosen is not None and rtol is None:
         raise ValueError(f"frequency_response: error_method={chosen!r} chooses how rtol= is met, but rtol is not "
                          "given; pass rtol=..., or leave error_method out")
     # an explicit method that does not apply is refused before anything runs, as estimate_error does
-    error_method.check(model, h, projection, "frequency_response")
+    error_method.check(model, h, projection)
     problem = ForcedResponseProblem(model, h, projection=projection)
     opts = options or frequency_response_options()
     if x0 is not None:
         x0 = start_vector(x0, problem.size, f"{model.n_dofs} DOFs x {h.n_coef} coefficients"
                            + (f" + {problem.size - model.n_dofs * h.n_coef} contact-force coefficients"
-                              if problem.size > model.n_dofs * h.n_coef else ""), "frequency_response")
+                              if problem.size > model.n_dofs * h.n_coef else ""))
 
     def start(run_options: ContinuationOptions) -> tuple[np.ndarray, ContinuationOptions]:
         if x0 is not None:
@@ -191,7 +193,7 @@ def frequency_response(
             run_options = dataclasses.replace(run_options, x_scale=_response_scale(problem, span, xs))
         return xs, run_options
 
-    stab = StabilityOptions.parse(stability, "frequency_response")
+    stab = StabilityOptions.parse(stability)
 
     def wrap(res, meta) -> Branch:
         branch = branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span), **meta})
@@ -359,6 +361,7 @@ class _Required:
 _REQUIRED = _Required()
 
 
+@entry_point("nonlinear_mode")
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def nonlinear_mode(
     model: StructuralModel,
@@ -410,20 +413,20 @@ def nonlinear_mode(
     Branch
         ``omega`` (rad/s) against ``energy``.
     """
-    model = check_model(model, "nonlinear_mode")
-    checkpoint = checkpoint_spec(checkpoint, "nonlinear_mode")
+    model = check_model(model)
+    checkpoint = checkpoint_spec(checkpoint)
     if harmonics is _REQUIRED:  # not None: an explicit None stays the TypeError it was
         warnings.warn("nonlinear_mode without harmonics= is deprecated (it uses 10); pass harmonics=10 (or a "
                       "femodes.Harmonics), as frequency_response requires", DeprecationWarning,
-                      stacklevel=3)  # 3: the caller's line, past limit_blas_threads' wrapper
+                      stacklevel=4)  # 4: the caller's line, past the entry_point and limit_blas_threads wrappers
         harmonics = 10
-    h = check_harmonics(harmonics, "nonlinear_mode")
-    check_continuation_options(options, "nonlinear_mode")
-    refinement_options(rtol, max_harmonics, h.n_harmonics, "nonlinear_mode")
-    error_options = check_options(error_options, "nonlinear_mode", "error_options")
+    h = check_harmonics(harmonics)
+    check_continuation_options(options)
+    refinement_options(rtol, max_harmonics, h.n_harmonics)
+    error_options = check_options(error_options, "error_options")
     if past_grazing is not None and not isinstance(past_grazing, PeriodDriven):
         raise TypeError(f"nonlinear_mode: past_grazing must be a femodes.PeriodDriven or None, got {past_grazing!r}")
-    e0, e1 = check_span(energy, "energy", "nonlinear_mode", positive=True)
+    e0, e1 = check_span(energy, "energy", positive=True)
     if e1 < e0:
         raise ValueError(f"nonlinear_mode: energy must increase, got energy={tuple(energy)!r}: the backbone starts "
                          f"from the linear mode at energy[0], where the motion is nearly linear; pass "
@@ -434,7 +437,7 @@ def nonlinear_mode(
     x0 = problem.linear_guess(e0)
     user_options = options
     options = nonlinear_mode_options(problem, x0, options)
-    stab = StabilityOptions.parse(stability, "nonlinear_mode")
+    stab = StabilityOptions.parse(stability)
 
     def wrap(res, meta) -> Branch:
         if res.status == 5:  # the start failed: say it in the user's terms, not as p = log10(E)

@@ -15,38 +15,39 @@ from .hbm.harmonics import Harmonics
 from .linear import rigid_body_message, rigid_body_modes
 from .model import StructuralModel
 from .solvers import ContinuationOptions
+from .solvers.checks import InputTypeError, InputValueError
 
 __all__ = ["check_harmonics", "check_span", "check_continuation_options", "check_model", "start_vector", "largest_unknown",
            "warn_rigid_body", "warn_undamped"]
 
 
-def check_harmonics(h: Any, owner: str) -> Harmonics:
+def check_harmonics(h: Any) -> Harmonics:
     if isinstance(h, Harmonics):
         return h
     if isinstance(h, (int, np.integer)) and not isinstance(h, bool):
         if h < 1:
-            raise ValueError(f"{owner}: harmonics must be >= 1 (the number of harmonics), got {int(h)}")
+            raise InputValueError(f"harmonics must be >= 1 (the number of harmonics), got {int(h)}")
         return Harmonics(int(h))
-    raise TypeError(f"{owner}: harmonics must be a femodes.Harmonics (or an int number of harmonics), got {h!r}")
+    raise InputTypeError(f"harmonics must be a femodes.Harmonics (or an int number of harmonics), got {h!r}")
 
 
-def check_span(value: Any, name: str, owner: str, *, positive: bool) -> tuple[float, float]:
+def check_span(value: Any, name: str, *, positive: bool) -> tuple[float, float]:
     try:
         a, b = (float(v) for v in value)
     except (TypeError, ValueError):
-        raise TypeError(f"{owner}: {name} must be a pair (start, end) of numbers, got {value!r}") from None
+        raise InputTypeError(f"{name} must be a pair (start, end) of numbers, got {value!r}") from None
     if not (math.isfinite(a) and math.isfinite(b)) or a == b or (positive and (a <= 0 or b <= 0)):
-        raise ValueError(f"{owner}: {name} must be two distinct finite{' positive' if positive else ''} numbers, got {value!r}")
+        raise InputValueError(f"{name} must be two distinct finite{' positive' if positive else ''} numbers, got {value!r}")
     # (b - a) * (b - a): a Python float's ** raises OverflowError where * gives inf
     if not math.isfinite((b - a) * (b - a)) or (b - a) * (b - a) == 0.0 or (positive and not 1e-150 < min(a, b) <= max(a, b) < 1e150):
-        raise ValueError(f"{owner}: {name} = {value!r} is out of the representable range (its width squared under- or "
-                         "overflows); rescale the units")
+        raise InputValueError(f"{name} = {value!r} is out of the representable range (its width squared under- or "
+                              "overflows); rescale the units")
     return a, b
 
 
-def check_continuation_options(options: Any, owner: str) -> ContinuationOptions | None:
+def check_continuation_options(options: Any) -> ContinuationOptions | None:
     if options is not None and not isinstance(options, ContinuationOptions):
-        raise TypeError(f"{owner}: options must be a femodes.ContinuationOptions or None, got {type(options).__name__}")
+        raise InputTypeError(f"options must be a femodes.ContinuationOptions or None, got {type(options).__name__}")
     return options
 
 
@@ -55,12 +56,12 @@ def warn_rigid_body(model: StructuralModel) -> None:
     harmonic has no stiffness, so the mean position is whatever the contacts and the start make it.
     One eigen-solve of the lowest mode (about one Newton iteration of the branch)."""
     try:
-        omega, _ = normal_modes(model.K, model.M, 1, "frequency_response", check=False)
+        omega, _ = normal_modes(model.K, model.M, 1, check=False)
     except (RuntimeError, ValueError, np.linalg.LinAlgError):
         return
     rigid = rigid_body_modes(model, omega)
     if rigid.any():
-        warnings.warn(rigid_body_message(1, "frequency_response") + " (the mean position of the response is then "
+        warnings.warn("frequency_response: " + rigid_body_message(1) + " (the mean position of the response is then "
                       "not determined by the structure)", UserWarning, stacklevel=3)
 
 
@@ -73,26 +74,26 @@ def warn_undamped(model: StructuralModel) -> None:
                       "model.with_damping(modal=0.01) or model.with_damping(beta=...)", UserWarning, stacklevel=2)
 
 
-def check_model(model: Any, owner: str) -> StructuralModel:
+def check_model(model: Any) -> StructuralModel:
     if not isinstance(model, StructuralModel):
-        raise TypeError(f"{owner}: model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
+        raise InputTypeError(f"model must be a StructuralModel (or ReducedModel), got {type(model).__name__}")
     return model
 
 
-def start_vector(x0, size: int, layout: str, label: str) -> np.ndarray:
+def start_vector(x0, size: int, layout: str) -> np.ndarray:
     """``x0`` as a finite float vector of ``size`` unknowns, else a ValueError naming ``x0`` (not a
     derived quantity such as the scales computed from it)."""
     try:
         x = np.asarray(x0, dtype=float)
     except (TypeError, ValueError):
-        raise TypeError(f"{label}: x0 must be a real vector of {size} unknowns ({layout}), got {x0!r}") from None
+        raise InputTypeError(f"x0 must be a real vector of {size} unknowns ({layout}), got {x0!r}") from None
     if x.shape != (size,):
-        raise ValueError(f"{label}: x0 has shape {x.shape}, this problem has {size} unknowns ({layout}); pass an x0 "
-                         "of that size (e.g. a point's unknowns from a branch on the same model and harmonics)")
+        raise InputValueError(f"x0 has shape {x.shape}, this problem has {size} unknowns ({layout}); pass an x0 "
+                              "of that size (e.g. a point's unknowns from a branch on the same model and harmonics)")
     if not np.all(np.isfinite(x)):
-        raise ValueError(f"{label}: x0 contains non-finite values (nan or inf)")
+        raise InputValueError("x0 contains non-finite values (nan or inf)")
     if np.max(np.abs(x), initial=0.0) > largest_unknown(size):
-        raise ValueError(f"{label}: x0 has entries up to {np.max(np.abs(x)):.3g}, whose squares overflow floating point "
+        raise InputValueError(f"x0 has entries up to {np.max(np.abs(x)):.3g}, whose squares overflow floating point "
                          f"(above {largest_unknown(size):.3g} for {size} unknowns); pass an x0 of the solution's size, "
                          "or rescale the units")
     return x

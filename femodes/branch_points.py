@@ -176,7 +176,7 @@ def _null_directions(aug: Augmented, z_bp: np.ndarray, za: np.ndarray, zb: np.nd
 
 def switch_at_branch_point(branch: Branch, bif: Bifurcation, span: tuple[float, float], amplitude, options,
                             stability, window: int) -> Branch:
-    stab = StabilityOptions.parse(stability, "switch_branch")  # a bad value is refused before the work
+    stab = StabilityOptions.parse(stability)  # a bad value is refused before the work
     aug = Augmented(branch)
     w_lo, w_hi = min(span), max(span)
     if not w_lo < bif.omega_truncated < w_hi:

@@ -31,6 +31,7 @@ from .hbm.system import HBMSystem
 from .model import StructuralModel
 from .results import Branch, PeriodicSolution
 from .solvers import NewtonOptions
+from .solvers.checks import InputTypeError, InputValueError, entry_point
 from .solvers.threads import limit_blas_threads
 from .stability_methods import (AUTO_MAX_STIFFNESS, MAX_CORRECTION, METHODS, Auto, Orbit, ShootingError,
                                 StabilityMethod, StabilityResult, as_stability_method, by_name, is_stable)
@@ -85,20 +86,21 @@ class StabilityOptions:
     tol: float = TOL
     locate: bool | float = True
 
+    @entry_point("StabilityOptions")
     def __post_init__(self):
-        object.__setattr__(self, "method", as_stability_method(self.method, "StabilityOptions"))
-        object.__setattr__(self, "tol", _check_tol(self.tol, "StabilityOptions"))
+        object.__setattr__(self, "method", as_stability_method(self.method))
+        object.__setattr__(self, "tol", _check_tol(self.tol))
         loc = self.locate
         if isinstance(loc, (bool, np.bool_)):
             object.__setattr__(self, "locate", bool(loc))
         elif isinstance(loc, (int, float, np.integer, np.floating)) and 0.0 < float(loc) < 1.0:
             object.__setattr__(self, "locate", float(loc))
         else:
-            raise TypeError(f"StabilityOptions: locate must be True, False or a bracket width xtol in (0, 1) "
-                            f"(a fraction of the segment between two points), got {loc!r}")
+            raise InputTypeError(f"locate must be True, False or a bracket width xtol in (0, 1) "
+                                 f"(a fraction of the segment between two points), got {loc!r}")
 
     @classmethod
-    def parse(cls, stability: Any, owner: str) -> StabilityOptions | None:
+    def parse(cls, stability: Any) -> StabilityOptions | None:
         """``stability=`` of an analysis: False or None (no stability), True (the defaults), a
         strategy of :mod:`femodes.stability_methods`, or a :class:`StabilityOptions` (a method
         name is a deprecated spelling of its strategy)."""
@@ -109,19 +111,20 @@ class StabilityOptions:
         if isinstance(stability, cls):
             return stability
         if isinstance(stability, str) and stability not in METHODS:
-            raise ValueError(f"{owner}: stability must be True, False, a strategy of femodes.stability_methods "
-                             f"(Auto(), Hill(), Shooting()) or a femodes.StabilityOptions, got {stability!r}")
-        return cls(method=as_stability_method(stability, owner, "stability"))
+            raise InputValueError(f"stability must be True, False, a strategy of femodes.stability_methods "
+                                  f"(Auto(), Hill(), Shooting()) or a femodes.StabilityOptions, got {stability!r}")
+        return cls(method=as_stability_method(stability, "stability"))
 
 
-def _check_tol(tol: Any, owner: str) -> float:
+def _check_tol(tol: Any) -> float:
     if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{owner}: tol must be a number (the margin of |mu| above 1), got {tol!r}")
+        raise InputTypeError(f"tol must be a number (the margin of |mu| above 1), got {tol!r}")
     if not 0 <= tol < 1:
-        raise ValueError(f"{owner}: tol must be in [0, 1) (the margin of |mu| above 1), got {tol!r}")
+        raise InputValueError(f"tol must be in [0, 1) (the margin of |mu| above 1), got {tol!r}")
     return float(tol)
 
 
+@entry_point("stability")
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def stability(solution: PeriodicSolution, method: StabilityMethod | None = None, *, tol: float = TOL) -> StabilityResult:
     """Floquet multipliers and stability of one periodic solution (module docstring).
@@ -142,8 +145,8 @@ def stability(solution: PeriodicSolution, method: StabilityMethod | None = None,
     """
     if not isinstance(solution, PeriodicSolution):
         raise TypeError(f"stability: solution must be a femodes PeriodicSolution (branch[i]), got {type(solution).__name__}")
-    method = Auto() if method is None else as_stability_method(method, "stability")
-    tol = _check_tol(tol, "stability")
+    method = Auto() if method is None else as_stability_method(method)
+    tol = _check_tol(tol)
     model = solution.model
     if model is None:
         raise ValueError("stability: the solution has no model (loaded from a file?); attach it with "

@@ -92,8 +92,10 @@ def rigid_body_modes(model: StructuralModel, omega: np.ndarray) -> np.ndarray:
     return np.asarray(omega, dtype=float) ** 2 <= eigenvalue_floor(model.K, model.M)
 
 
-def rigid_body_message(count: int, owner: str) -> str:
-    return (f"{owner}: the model has {count} rigid-body mode(s) (zero frequency): it is not supported, or a part "
+def rigid_body_message(count: int) -> str:
+    """What is wrong with a model that has ``count`` rigid-body modes, and the fix (no name: the
+    caller puts its own in front)."""
+    return (f"the model has {count} rigid-body mode(s) (zero frequency): it is not supported, or a part "
             "of its mesh is not connected to the supports; give supports (clamped=... in fm.solid, fm.bar, "
             "fm.beam) or merge the mesh's duplicate nodes")
 

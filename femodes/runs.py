@@ -28,7 +28,7 @@ from .model import StructuralModel
 from .results import Branch, load_branch
 from .store import Checkpoint, CheckpointStore, model_fingerprint
 from .solvers import ContinuationOptions, continuation
-from .solvers.checks import available_memory
+from .solvers.checks import InputTypeError, InputValueError, available_memory
 from .solvers.continuation import ContinuationResult, ContinuationState
 
 __all__ = ["run_continuation", "checkpoint_spec", "model_fingerprint"]
@@ -156,19 +156,19 @@ def _merge(records: list[dict], res: ContinuationResult) -> ContinuationResult:
     )
 
 
-def checkpoint_spec(checkpoint, label: str) -> Checkpoint | None:
+def checkpoint_spec(checkpoint) -> Checkpoint | None:
     """The :class:`~femodes.store.Checkpoint` of an analysis' ``checkpoint=`` argument: ``None``,
-    a path (a new run, ``Checkpoint(path)``) or a ``Checkpoint``; errors name ``label``."""
+    a path (a new run, ``Checkpoint(path)``) or a ``Checkpoint``."""
     if checkpoint is None or isinstance(checkpoint, Checkpoint):
         return checkpoint
     if not isinstance(checkpoint, (str, os.PathLike)):
-        raise TypeError(f"{label}: checkpoint must be a file name (.npz or .h5) or a femodes.Checkpoint(path, "
-                        f"resume=...), got {checkpoint!r}")
+        raise InputTypeError(f"checkpoint must be a file name (.npz or .h5) or a femodes.Checkpoint(path, "
+                             f"resume=...), got {checkpoint!r}")
     try:
         return Checkpoint(checkpoint)
     except ValueError as exc:
-        raise ValueError(f"{label}: checkpoint {str(checkpoint)!r}: use a .npz or .h5 file name for the final "
-                         "branch") from exc
+        raise InputValueError(f"checkpoint {str(checkpoint)!r}: use a .npz or .h5 file name for the final "
+                              "branch") from exc
 
 
 def run_continuation(problem, span, options: ContinuationOptions, label: str, progress, *, x0: Callable,

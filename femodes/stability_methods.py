@@ -40,6 +40,7 @@ from .hbm.hill import hill_exponents
 from .hbm.system import HBMSystem
 from .laws import UnilateralContact
 from .model import StructuralModel
+from .solvers.checks import InputValueError, entry_name, entry_point
 from .time.shooting import shoot, unsupported
 
 __all__ = ["StabilityMethod", "Orbit", "Hill", "Shooting", "Auto", "StabilityResult", "ShootingError",
@@ -168,10 +169,11 @@ class Auto:
     max_stiffness: float = AUTO_MAX_STIFFNESS
     name: ClassVar[str] = "auto"
 
+    @entry_point("Auto")
     def __post_init__(self):
         m = self.max_stiffness
         if isinstance(m, bool) or not isinstance(m, (int, float, np.integer, np.floating)) or not m > 0:
-            raise ValueError(f"Auto: max_stiffness must be a positive number, got {m!r}")
+            raise InputValueError(f"max_stiffness must be a positive number, got {m!r}")
 
     def __call__(self, orbit: Orbit, tol: float) -> StabilityResult:
         if not self.shoots(orbit):
@@ -203,22 +205,22 @@ def by_name(name: str) -> StabilityMethod:
     return _BY_NAME[name]
 
 
-def as_stability_method(value: Any, owner: str, name: str = "method") -> StabilityMethod:
+def as_stability_method(value: Any, name: str = "method") -> StabilityMethod:
     """``value`` as a strategy: a strategy object as it is; one of the names ``"auto"``,
     ``"hill"``, ``"shooting"`` as its object, with a DeprecationWarning; anything else a
     ValueError that lists the strategies."""
     if isinstance(value, type) and issubclass(value, (Auto, Hill, Shooting)):
-        raise ValueError(f"{owner}: {name} must be a strategy object: femodes.stability_methods.{value.__name__}() "
-                         f"(with the parentheses), got the class")
+        raise InputValueError(f"{name} must be a strategy object: femodes.stability_methods.{value.__name__}() "
+                              "(with the parentheses), got the class")
     if isinstance(value, (Auto, Hill, Shooting)) or (callable(value) and isinstance(getattr(value, "name", None), str)):
         return value
     if isinstance(value, str) and value in _BY_NAME:
         cls = type(_BY_NAME[value]).__name__
-        warnings.warn(f"{owner}: {name}={value!r} is deprecated; pass {name}=femodes.stability_methods.{cls}()",
-                      DeprecationWarning, stacklevel=3)
+        warnings.warn(f"{entry_name() or 'femodes'}: {name}={value!r} is deprecated; pass "
+                      f"{name}=femodes.stability_methods.{cls}()", DeprecationWarning, stacklevel=4)
         return _BY_NAME[value]
-    raise ValueError(f"{owner}: {name} must be a stability strategy: femodes.stability_methods.Auto(), Hill() or "
-                     f"Shooting(), got {value!r}")
+    raise InputValueError(f"{name} must be a stability strategy: femodes.stability_methods.Auto(), Hill() or "
+                          f"Shooting(), got {value!r}")
 
 
 # -- shooting from an HBM orbit ------------------------------------------------------------------

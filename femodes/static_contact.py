@@ -13,6 +13,7 @@ from .hbm.system import default_contact_parameters
 from .laws import PenaltyContact, UnilateralContact
 from .model import StructuralModel
 from .solvers import NewtonOptions, semismooth_newton
+from .solvers.checks import entry_point
 from .solvers.threads import limit_blas_threads
 
 __all__ = ["static_contact", "StaticContactResult"]
@@ -38,6 +39,7 @@ class StaticContactResult:
         return float(max(0.0, np.max(-self.gap))) if self.gap.size else 0.0
 
 
+@entry_point("static_contact")
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def static_contact(model: StructuralModel, force: np.ndarray | None = None, *, x0: np.ndarray | None = None,
                    options: NewtonOptions | None = None) -> StaticContactResult:
@@ -47,7 +49,7 @@ def static_contact(model: StructuralModel, force: np.ndarray | None = None, *, x
     defaults to the static part of the declared forcing plus the amplitudes of harmonic-1 forces
     (a quasi-static load).
     """
-    model = check_model(model, "static_contact")
+    model = check_model(model)
     n = model.n_dofs
     if force is None:
         fv = model.force_vectors()
@@ -86,8 +88,7 @@ def static_contact(model: StructuralModel, force: np.ndarray | None = None, *, x
         J = sp.block_diag([K, sp.csr_matrix((m, m))], format="csr") + sp.csr_matrix((vals, (rows, cols)), shape=(n + m, n + m))
         return r, J
 
-    x_init = np.zeros(n + m) if x0 is None else start_vector(x0, n + m, f"{n} DOFs + {m} contact forces",
-                                                             "static_contact")
+    x_init = np.zeros(n + m) if x0 is None else start_vector(x0, n + m, f"{n} DOFs + {m} contact forces")
     res = semismooth_newton(fun, x_init, options=options or NewtonOptions(atol=1e-10, max_iter=50))
     q = res.x[:n]
     forces = np.zeros(len(model.contacts))

@@ -76,6 +76,7 @@ from .hbm.problems import ForcedResponseProblem
 from .results import Bifurcation, Branch
 from .floquet import (StabilityOptions, root_on_secant)
 from .solvers import (ContinuationOptions, NewtonOptions, semismooth_newton)
+from .solvers.checks import entry_point
 from .solvers.threads import limit_blas_threads
 from .branch_points import DENSE_LIMIT, switch_at_branch_point
 
@@ -151,7 +152,6 @@ def _locate_hbm_doubling(branch: Branch, bif: Bifurcation, dbl: _Doubled, newton
     return p1.unpack(best[:-1], best[-1]), i
 
 
-@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def _same_bifurcation(a: Bifurcation, b: Bifurcation) -> bool:
     """``b`` is ``a``, or a copy of it (the same bifurcation of a branch loaded again from its file)."""
     if a is b:
@@ -161,6 +161,8 @@ def _same_bifurcation(a: Bifurcation, b: Bifurcation) -> bool:
             and np.array_equal(a.Q, b.Q) and np.shape(a.P) == np.shape(b.P) and np.array_equal(a.P, b.P))
 
 
+@entry_point("switch_branch")
+@limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def switch_branch(branch: Branch, bifurcation: Bifurcation, omega: tuple[float, float], *,
                   amplitude: float | None = None, options: ContinuationOptions | None = None,
                   stability: bool | str | StabilityOptions = False, window: int = 10) -> Branch:

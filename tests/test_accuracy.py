@@ -297,7 +297,7 @@ def test_level_trace_stops_when_it_does_not_pass_the_branch():
     from femodes.accuracy.level_trace import Progress
 
     b = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    lad = ladder_for(b, None, None, "test")
+    lad = ladder_for(b, None, None)
     H = 10
     near = lad.weights(H)
 
@@ -323,7 +323,7 @@ def test_level_traced_for_some_points_stops_past_the_last(caplog):
     from femodes.accuracy.level_trace import trace_by_continuation
 
     branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    lad = ladder_for(branch, None, None, "test")
+    lad = ladder_for(branch, None, None)
     n = len(branch)
     need = np.zeros(n, dtype=bool)
     need[n // 4: n // 2] = True
@@ -348,7 +348,7 @@ def test_level_traced_backward_for_the_far_side(caplog):
     from femodes.accuracy.level_trace import plan_traces, trace_by_continuation
 
     branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    lad = ladder_for(branch, None, None, "test")
+    lad = ladder_for(branch, None, None)
     n = len(branch)
     contact = np.flatnonzero(~without_contact(branch))
     upper, lower = branch.folds[:2]
@@ -386,7 +386,7 @@ def test_level_continuation_restarts_after_a_stop(caplog):
     from femodes.accuracy.level_trace import complete_level, trace_by_continuation, trace_level_by_continuation
 
     branch = fm.frequency_response(_forced(), (0.5, 2.0), 10)
-    lad = ladder_for(branch, None, None, "test")
+    lad = ladder_for(branch, None, None)
     n = len(branch)
     every = trace_level_by_continuation(lad, 20, OPTIONS)
     free = without_contact(branch)
@@ -413,7 +413,7 @@ def test_walk_deadline_abandons_a_stalling_solve(caplog):
     from femodes.accuracy.level_trace import trace_level_by_continuation
 
     b = fm.frequency_response(_forced(), (0.5, 2.0), 20)
-    lad = ladder_for(b, None, None, "test")
+    lad = ladder_for(b, None, None)
     peak = contact_force_peak(b)
     peak[list(b.folds)] = -np.inf  # a fold's level point is the level's fold, not on the point's hyperplane
     i = int(np.argmax(peak))

@@ -53,7 +53,7 @@ def orbit():
     model = _forced()
     b = fm.frequency_response(model, (0.5, 2.0), 10)
     i = max(b.folds, key=lambda j: b.omega[j]) - 5
-    x, theta0 = Shooter(ladder_for(b, None, None, "test"), OPTIONS).start(i)
+    x, theta0 = Shooter(ladder_for(b, None, None), OPTIONS).start(i)
     w = float(b.omega[i])
     flow = LinearImpactFlow(model, w)
     x, run = _periodic(flow, x, theta0 / w)
@@ -234,7 +234,7 @@ def test_fe_bar_orbit_matches_event_driven_integration():
     i = max(b.folds, key=lambda j: b.omega[j]) - 3
     # the exact orbit on the point's hyperplane (a plain Newton from the point lands on the
     # coexisting orbit without impacts)
-    x, w, theta0, run = Shooter(ladder_for(b, None, None, "test"), OPTIONS).solve(i)[:4]
+    x, w, theta0, run = Shooter(ladder_for(b, None, None), OPTIONS).solve(i)[:4]
     flow = run.flow
     tip = model.dof("tip")
     assert len(run.impacts) >= 1 and np.max(np.abs(run.x_end - x)) <= 1e-10 * np.max(np.abs(x))
@@ -344,7 +344,7 @@ def test_certified_search_same_as_fine_search(monkeypatch):
     w1 = float(fm.linear_modes(model, n=1).omega[0])
     b = fm.frequency_response(model, (0.9 * w1, 1.25 * w1), 6)
     i = max(b.folds, key=lambda j: b.omega[j]) - 2
-    x, w, theta0, run = Shooter(ladder_for(b, None, None, "test"), OPTIONS).solve(i)[:4]
+    x, w, theta0, run = Shooter(ladder_for(b, None, None), OPTIONS).solve(i)[:4]
     flow = run.flow
     again = flow.run(x, theta0 / w, variational=True)
     monkeypatch.setattr(exact_events, "REFINE", 10 ** 9)
@@ -363,7 +363,7 @@ def test_crossing_cosine_separates_glancing_points():
     way to the upper fold crosses nearly at right angles (cosine above 0.9)."""
     b = fm.frequency_response(_forced(), (0.5, 2.0), 20)
     keep = AccuracyOptions(glancing_max=math.inf)  # keep the orbits of glancing points
-    lad = ladder_for(b, None, None, "test")
+    lad = ladder_for(b, None, None)
     sh = Shooter(lad, keep)
     solved = shoot_branch(sh, ExactBranchCache(lad), keep)
     first = int(np.flatnonzero(~without_contact(b))[0])

@@ -75,6 +75,6 @@ def test_the_shooting_error_method_says_before_any_work_what_it_cannot_take():
                .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2))
                .with_contact(fm.PenaltyContact(at=0, gap=1.0, stiffness=10.0)))
     with pytest.raises(ValueError, match="cannot take this model: the model has penalty contacts"):
-        fm.error_methods.Shooting().check(penalty, fm.Harmonics(5), None, "mine")
-    fm.error_methods.Levels().check(penalty, fm.Harmonics(5), None, "mine")
-    fm.error_methods.Auto().check(penalty, fm.Harmonics(5), None, "mine")
+        fm.error_methods.Shooting().check(penalty, fm.Harmonics(5), None)
+    fm.error_methods.Levels().check(penalty, fm.Harmonics(5), None)
+    fm.error_methods.Auto().check(penalty, fm.Harmonics(5), None)

@@ -14,6 +14,7 @@ import numpy as np
 from ..nonsmooth_modes import family_caveat
 from ..results import Branch, ErrorEstimate
 from ..solvers import NewtonOptions
+from ..solvers.checks import entry_point
 from ..solvers.threads import limit_blas_threads
 from .extrapolation import estimate_levels
 from .ladder import Ladder, OutOfTime, ladder_for
@@ -27,6 +28,7 @@ __all__ = ["estimate_error"]
 log = logging.getLogger(__name__)
 
 
+@entry_point("estimate_error")
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: int | None = None, projection=None,
                    newton: NewtonOptions | None = None, method: ErrorMethod | None = None, time_limit: float | None = None,
@@ -99,11 +101,11 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     point, 6e-4 to 1.6e-2 against true errors of 3e-4 to 7e-3). A point whose level has no orbit
     near it (in a tongue of internal resonance) gets no estimate (method ``"failed"``).
     """
-    lad = ladder_for(branch, projection, newton, "estimate_error")
+    lad = ladder_for(branch, projection, newton)
     H = branch.harmonics.n_harmonics
     rtol, max_harmonics = refinement_options(rtol, max_harmonics, H)
-    method = as_error_method(method, "estimate_error")
-    options = check_options(options, "estimate_error")
+    method = as_error_method(method)
+    options = check_options(options)
     if time_limit is not None:
         if isinstance(time_limit, bool) or not isinstance(time_limit, (int, float, np.integer, np.floating)) \
                 or not time_limit > 0:

@@ -18,6 +18,7 @@ from ..results import Branch
 from ..solvers import NewtonOptions
 from ..solvers.arclength import ArclengthSystem
 from ..solvers.bordered import bordered_solver
+from ..solvers.checks import InputTypeError, InputValueError
 from .points import State, anchor, branch_tangents
 
 __all__ = ["Ladder", "OutOfTime", "ladder_for"]
@@ -172,17 +173,17 @@ class Ladder:
                      state.xi + a_to.xi - a_from.xi, state.p + a_to.p - a_from.p)
 
 
-def ladder_for(branch, projection, newton, owner: str) -> Ladder:
+def ladder_for(branch, projection, newton) -> Ladder:
     """The :class:`Ladder` of ``branch``, after checking that it can have one (a Branch of at least two
     points, estimated with the projection it was computed with)."""
     if not isinstance(branch, Branch):
-        raise TypeError(f"{owner}: branch must be a femodes.Branch, got {type(branch).__name__}")
+        raise InputTypeError(f"branch must be a femodes.Branch, got {type(branch).__name__}")
     if len(branch) < 2:
-        raise ValueError(f"{owner}: the branch has {len(branch)} point(s); at least 2 are needed (its direction)")
+        raise InputValueError(f"the branch has {len(branch)} point(s); at least 2 are needed (its direction)")
     used = branch.meta.get("projection")
     given = type(projection).__name__ if projection is not None else "ExactProjection"
     if isinstance(used, str) and used != given:
-        raise ValueError(f"{owner}: the branch was computed with {used} but projection={projection!r} means {given}: "
+        raise InputValueError(f"the branch was computed with {used} but projection={projection!r} means {given}: "
                          "its levels would be another discretisation than the branch; pass the projection the branch "
                          f"was computed with (projection={used}(...))")
     return Ladder(branch, projection, newton)

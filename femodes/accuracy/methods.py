@@ -34,6 +34,7 @@ from .options import AccuracyOptions
 from .protocol import PointErrors
 from .shooting import Shooting as ShootingEstimator
 from .shooting import shooting_unsupported, shooting_unsupported_for
+from ..solvers.checks import InputValueError, entry_name
 
 __all__ = ["ErrorMethod", "Auto", "Shooting", "Levels", "as_error_method", "check_estimate_method", "by_name", "NAMES"]
 
@@ -48,7 +49,7 @@ class ErrorMethod(Protocol):
 
     name: ClassVar[str]
 
-    def check(self, model, harmonics, projection, owner: str) -> None:
+    def check(self, model, harmonics, projection) -> None:
         """Raise ValueError when this strategy cannot take ``model`` (before any work)."""
 
     def shoot(self, lad: Ladder, errors: PointErrors, projection, options: AccuracyOptions) -> np.ndarray:
@@ -61,7 +62,7 @@ class Levels:
 
     name: ClassVar[str] = "levels"
 
-    def check(self, model, harmonics, projection, owner: str) -> None:
+    def check(self, model, harmonics, projection) -> None:
         return None
 
     def shoot(self, lad: Ladder, errors: PointErrors, projection, options: AccuracyOptions) -> np.ndarray:
@@ -74,7 +75,7 @@ class Auto:
 
     name: ClassVar[str] = "auto"
 
-    def check(self, model, harmonics, projection, owner: str) -> None:
+    def check(self, model, harmonics, projection) -> None:
         return None
 
     def shoot(self, lad: Ladder, errors: PointErrors, projection, options: AccuracyOptions) -> np.ndarray:
@@ -87,11 +88,11 @@ class Shooting:
 
     name: ClassVar[str] = "shooting"
 
-    def check(self, model, harmonics, projection, owner: str) -> None:
+    def check(self, model, harmonics, projection) -> None:
         why = shooting_unsupported_for(model, harmonics, projection)
         if why:
-            raise ValueError(f"{owner}: the shooting error method cannot take this model: {why}; use "
-                             "femodes.error_methods.Levels() (or Auto(), which picks)")
+            raise InputValueError(f"the shooting error method cannot take this model: {why}; use "
+                                  "femodes.error_methods.Levels() (or Auto(), which picks)")
 
     def shoot(self, lad: Ladder, errors: PointErrors, projection, options: AccuracyOptions) -> np.ndarray:
         return _shooting(lad, errors, projection, options, strict=True)
@@ -100,7 +101,7 @@ class Shooting:
 _BY_NAME: dict[str, ErrorMethod] = {"auto": Auto(), "levels": Levels(), "shooting": Shooting()}
 
 
-def as_error_method(value: Any, owner: str, name: str = "method") -> ErrorMethod:
+def as_error_method(value: Any, name: str = "method") -> ErrorMethod:
     """``value`` as a strategy: None is :class:`Auto`; a strategy object as it is; one of the
     names ``"auto"``, ``"levels"``, ``"shooting"`` its object, with a DeprecationWarning;
     anything else a ValueError that lists the strategies."""
@@ -110,19 +111,19 @@ def as_error_method(value: Any, owner: str, name: str = "method") -> ErrorMethod
         return value
     if isinstance(value, str) and value in _BY_NAME:
         cls = type(_BY_NAME[value]).__name__
-        warnings.warn(f"{owner}: {name}={value!r} is deprecated; pass {name}=femodes.error_methods.{cls}()",
-                      DeprecationWarning, stacklevel=3)
+        warnings.warn(f"{entry_name() or 'femodes'}: {name}={value!r} is deprecated; pass "
+                      f"{name}=femodes.error_methods.{cls}()", DeprecationWarning, stacklevel=4)
         return _BY_NAME[value]
     if isinstance(value, type) and issubclass(value, (Auto, Levels, Shooting)):
-        raise ValueError(f"{owner}: {name} must be a strategy object: femodes.error_methods.{value.__name__}() "
-                         "(with the parentheses), got the class")
-    raise ValueError(f"{owner}: {name} must be an error method: femodes.error_methods.Auto(), Shooting() or "
-                     f"Levels(), got {value!r}")
+        raise InputValueError(f"{name} must be a strategy object: femodes.error_methods.{value.__name__}() "
+                              "(with the parentheses), got the class")
+    raise InputValueError(f"{name} must be an error method: femodes.error_methods.Auto(), Shooting() or "
+                          f"Levels(), got {value!r}")
 
 
-def check_estimate_method(method: Any, owner: str, name: str = "method") -> ErrorMethod:
+def check_estimate_method(method: Any, name: str = "method") -> ErrorMethod:
     """:func:`as_error_method` (the name this check had when methods were strings)."""
-    return as_error_method(method, owner, name)
+    return as_error_method(method, name)
 
 
 def by_name(name: str) -> ErrorMethod:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..solvers.checks import is_real_number, show
+from ..solvers.checks import InputTypeError, InputValueError, is_real_number, show
 
 __all__ = ["AccuracyOptions", "ESTIMATE_METHODS", "check_options", "refinement_options"]
 
@@ -172,25 +172,25 @@ def _check_real(name: str, value, lo: float, hi: float, closed_hi: bool) -> None
         raise ValueError(f"AccuracyOptions: {name} must be a number in ({lo:g}, {hi:g}{end}, got {show(value)}")
 
 
-def refinement_options(rtol, max_harmonics, H: int, owner: str = "estimate_error") -> tuple[float | None, int]:
+def refinement_options(rtol, max_harmonics, H: int) -> tuple[float | None, int]:
     """Checked ``(rtol, max_harmonics)`` (default ``8 H``) for a branch with ``H`` harmonics."""
     if rtol is not None:
         if isinstance(rtol, bool) or not isinstance(rtol, (int, float, np.floating, np.integer)) \
                 or not 0.0 < float(rtol) < 0.5:
-            raise ValueError(f"{owner}: rtol must be a relative tolerance in (0, 0.5), e.g. 1e-3; got {rtol!r}")
+            raise InputValueError(f"rtol must be a relative tolerance in (0, 0.5), e.g. 1e-3; got {rtol!r}")
         rtol = float(rtol)
     if max_harmonics is None:
         return rtol, 8 * H
     if isinstance(max_harmonics, bool) or not isinstance(max_harmonics, (int, np.integer)) or max_harmonics < 2 * H:
-        raise ValueError(f"{owner}: max_harmonics must be an integer >= 2 H = {2 * H} (the estimate's own "
-                         f"finest level); got {max_harmonics!r}")
+        raise InputValueError(f"max_harmonics must be an integer >= 2 H = {2 * H} (the estimate's own "
+                              f"finest level); got {max_harmonics!r}")
     return rtol, int(max_harmonics)
 
 
-def check_options(options, owner: str, name: str = "options") -> AccuracyOptions:
+def check_options(options, name: str = "options") -> AccuracyOptions:
     """``options`` (default :class:`AccuracyOptions`) checked."""
     if options is None:
         return AccuracyOptions()
     if not isinstance(options, AccuracyOptions):
-        raise TypeError(f"{owner}: {name} must be a femodes.AccuracyOptions, got {type(options).__name__}")
+        raise InputTypeError(f"{name} must be a femodes.AccuracyOptions, got {type(options).__name__}")
     return options

@@ -15,6 +15,7 @@ import numpy as np
 from .methods import ErrorMethod
 from ..results import ERROR_METHODS, Branch
 from ..solvers import NewtonOptions
+from ..solvers.checks import entry_point
 from .estimate import estimate_error
 from .options import AccuracyOptions, check_options, refinement_options
 
@@ -23,11 +24,12 @@ __all__ = ["meet_tolerance", "rtol_time_limit"]
 log = logging.getLogger(__name__)
 
 
+@entry_point("rtol_time_limit")
 def rtol_time_limit(plain_seconds: float, options: AccuracyOptions | None = None) -> float:
     """Seconds the analyses' ``rtol=`` gives its error estimate after a plain branch that took
     ``plain_seconds``: ``max(rtol_budget * plain_seconds, rtol_min_seconds)`` of ``options``
     (default :class:`AccuracyOptions`: 10 times, at least 60 s)."""
-    options = check_options(options, "rtol_time_limit")
+    options = check_options(options)
     return max(options.rtol_budget * float(plain_seconds), options.rtol_min_seconds)
 
 

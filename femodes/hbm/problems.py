@@ -153,11 +153,11 @@ class NonlinearModeProblem:
         self.omega0 = float(modes.omega[-1])
         rigid = rigid_body_modes(model, modes.omega)
         if self.omega0 <= 0 or rigid[-1]:
-            raise ValueError(rigid_body_message(int(rigid.sum()), "NonlinearModeProblem")
+            raise ValueError("NonlinearModeProblem: " + rigid_body_message(int(rigid.sum()))
                              + f"; mode {mode} is one of them (w = {self.omega0:.3g} rad/s): its backbone is not a "
                              "vibration")
         if rigid.any():
-            warnings.warn(rigid_body_message(int(rigid.sum()), "nonlinear_mode") + f"; mode {mode} is counted "
+            warnings.warn("nonlinear_mode: " + rigid_body_message(int(rigid.sum())) + f"; mode {mode} is counted "
                           "after them", UserWarning, stacklevel=3)
         self.shape = modes.shapes[:, -1]
         s = self.system
