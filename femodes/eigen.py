@@ -15,7 +15,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .solvers.checks import entry_name, named_by
+from .solvers.checks import entry_name
 from .sparse_direct import factorize
 
 __all__ = ["DENSE_LIMIT", "krylov_start", "IllConditionedWarning", "check_conditioning", "eigenvalue_floor", "mass_normalize", "generalized_eigh",
@@ -168,7 +168,7 @@ def generalized_eigh(K: sp.spmatrix, M: sp.spmatrix, n: int, *, sigma: float | N
     return lam[order], vec[:, order]
 
 
-def normal_modes(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str | None = None, *, sigma: float | None = None, factor=None,
+def normal_modes(K: sp.spmatrix, M: sp.spmatrix, n: int, *, sigma: float | None = None, factor=None,
                  check: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Lowest ``n`` angular frequencies (rad/s) and mass-normalised shapes of ``(K, M)``
     (:func:`generalized_eigh`, whose arguments these are).
@@ -177,10 +177,9 @@ def normal_modes(K: sp.spmatrix, M: sp.spmatrix, n: int, owner: str | None = Non
     small positive ones are kept (a scale-based threshold would also zero genuine low
     frequencies of fine meshes, whose lambda_max grows like h^-4).
     """
-    with named_by(owner):
-        lam, vec = generalized_eigh(K, M, n, sigma=sigma, factor=factor, check=check)
-        if np.any(lam < 0):
-            log.info("%s: eigenvalues %s < 0 (round-off of rigid-body modes) set to zero frequency", entry_name(),
-                     lam[lam < 0])
+    lam, vec = generalized_eigh(K, M, n, sigma=sigma, factor=factor, check=check)
+    if np.any(lam < 0):
+        log.info("%s: eigenvalues %s < 0 (round-off of rigid-body modes) set to zero frequency", entry_name(),
+                 lam[lam < 0])
     return np.sqrt(np.maximum(lam, 0.0)), mass_normalize(vec, M)
 

@@ -24,7 +24,8 @@ from scipy.sparse.csgraph import connected_components
 from .eigen import IllConditionedWarning, check_conditioning, normal_modes
 from .model import Attached, StructuralModel
 from .sparse_direct import factorize
-from .solvers.checks import InputValueError, check_int, check_memory, entry_point
+from .model.dofs import node_dof_list
+from .solvers.checks import InputValueError, check_int, check_memory, entry_point, named_by
 
 __all__ = ["ReducedModel", "craig_bampton"]
 
@@ -89,9 +90,9 @@ class ReducedModel(StructuralModel):
             raise ValueError(f"expand: expected last axis of length {self.n_dofs} (reduced DOFs), got shape {q.shape}")
         return q @ self.basis.T
 
-    def probe(self, at, how: str = "mean", owner: str = "probe") -> np.ndarray:
+    def probe(self, at, how: str = "mean", owner: str | None = None) -> np.ndarray:
         """:meth:`StructuralModel.probe` of the parent, through the basis: any boundary or DOF
-        of the full model, kept or not."""
+        of the full model, kept or not (``owner`` deprecated, as there)."""
         return self.parent.probe(at, how, owner) @ self.basis
 
     def full_field(self, q: np.ndarray) -> np.ndarray:
@@ -182,7 +183,8 @@ def kept_dofs(model: StructuralModel, keep: Sequence | None = None) -> np.ndarra
                 "craig_bampton: keep must be a location or a list of locations (names, (name, component) pairs "
                 f"or DOF indices), got {keep!r}"
             )
-        extra = [d for k in keep for d in model.dofmap.node_dofs(k, "craig_bampton: keep")]
+        with named_by("craig_bampton: keep"):
+            extra = [d for k in keep for d in node_dof_list(model.dofmap, k)]
     kept = np.array(sorted(set(declared) | set(extra)), dtype=int)
     if kept.size == 0:
         raise ValueError(

@@ -168,3 +168,21 @@ def test_named_by_and_entry_name():
     assert entry_name() is None
     with named_by(None), pytest.raises(ValueError, match=_exactly("z must be a positive finite number, got 0")):
         check_positive("z", 0)
+
+
+def test_the_owner_arguments_left_are_deprecated_and_still_name_the_error():
+    """``StructuralModel.dof``/``probe`` and ``DofMap.index``/``node_dofs`` took an ``owner`` that
+    named their errors: still honoured for a release, with a DeprecationWarning that points at the
+    caller's line; without it the methods name themselves as before."""
+    mesh = fm.line_mesh(length=1.0, n_elements=4, boundaries={"clamp": 0.0, "tip": 1.0})
+    model = fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp")
+    with pytest.raises(ValueError, match=r"^dof: "):
+        model.dof("nowhere")
+    with pytest.raises(ValueError, match=r"^DofMap: "):
+        model.dofmap.index("nowhere")
+    with pytest.warns(DeprecationWarning, match="StructuralModel.dof: owner= is deprecated") as rec:
+        with pytest.raises(ValueError, match=r"^mine: "):
+            model.dof("nowhere", "mine")
+    assert rec[0].filename == __file__
+    with pytest.warns(DeprecationWarning, match="DofMap.node_dofs: owner= is deprecated"):
+        assert model.dofmap.node_dofs("tip", "mine") == [model.dof("tip")]

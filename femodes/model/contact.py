@@ -19,6 +19,7 @@ from .contact_mass import redistributed_mass
 from .damping import redamped_after_contact
 from .declarations import CONTACT_LAWS, SMOOTH_LAWS, Attached, show_vector
 from .frames import AXIS_TOL, nodal_frame, rotated_model, same_normal
+from ..solvers.checks import named_by
 
 __all__ = ["add_contacts", "bind_contacts", "contact_label", "expand_contact", "two_normals"]
 
@@ -70,7 +71,8 @@ def bind_contacts(model, laws, node_of: np.ndarray, comp_of: np.ndarray) -> tupl
                 + (" (use with_nonlinearity for smooth springs)" if isinstance(law, SMOOTH_LAWS) else "")
             )
         if law.direction is None and not callable(law.gap) and dm.group_of(law.at) is None:
-            pairs, rot = [(law, model.dof(law.at, f"with_contact: {type(law).__name__}"))], {}
+            with named_by(f"with_contact: {type(law).__name__}"):
+                pairs, rot = [(law, dm.find(law.at))], {}
         else:
             pairs, rot = expand_contact(model, law)
         for k, frame in rot.items():
@@ -128,7 +130,8 @@ def expand_contact(model, law) -> tuple[list, dict]:
                       f"or at=({at!r}, {dm.displacement[0]!r}) to keep +x and silence this", UserWarning,
                       stacklevel=_DEPTH + 2)  # the frame above the caller of with_contact, as before the split
     if group is None:
-        dof = model.dof(at, label)
+        with named_by(label):
+            dof = dm.find(at)
         nodes, dofs = None, np.array([dof])
     else:
         name, c = group
@@ -175,7 +178,8 @@ def _expand_inclined(model, law) -> tuple[list, dict]:
     elif at in dm.locations:
         name, nodes = None, np.array([int(dm.locations[at])])
     else:
-        model.dof(at, label)  # raises: unknown location
+        with named_by(label):
+            dm.find(at)  # raises: unknown location
         raise AssertionError("unreachable")  # pragma: no cover
     frame = nodal_frame(direction)
     node_dof = dm.node_dof[nodes]  # (k, dim)

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..laws import CubicSpring, Location, PenaltyContact, UnilateralContact, check_location
-from ..solvers.checks import InputValueError, entry_point
+from ..solvers.checks import InputValueError, entry_point, named_by
 
 __all__ = ["HarmonicForce", "Attached", "CONTACT_LAWS", "SMOOTH_LAWS", "show_vector", "bind_nonlinearities"]
 
@@ -70,5 +70,6 @@ def bind_nonlinearities(model, laws) -> list[Attached]:
                 f"with_nonlinearity: expected CubicSpring, got {type(law).__name__}"
                 + (" (use with_contact for contact laws)" if isinstance(law, CONTACT_LAWS) else "")
             )
-        new.append(Attached(law, model.dof(law.at, "with_nonlinearity: CubicSpring")))
+        with named_by("with_nonlinearity: CubicSpring"):
+            new.append(Attached(law, model.dofmap.find(law.at)))
     return new

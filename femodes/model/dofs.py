@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -15,7 +16,7 @@ from ..solvers.checks import InputValueError, named_by
 from .declarations import show_vector
 from .frames import NodalFrame
 
-__all__ = ["DofMap"]
+__all__ = ["DofMap", "node_dof_list", "deprecated_owner"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,12 +108,12 @@ class DofMap:
             )
         return self.components.index(name)
 
-    def index(self, at: Location, owner: str | None = "DofMap") -> int:
+    def index(self, at: Location, owner: str | None = None) -> int:
         """Model DOF index of ``at`` (a name, a (name, component) pair or an index).
 
-        ``owner`` starts the error messages (``"DofMap"`` by default). It is being retired (the
-        public function called names the errors, :mod:`femodes.solvers.checks`): ``None`` leaves
-        them to it; :meth:`~femodes.StructuralModel.dof` still passes its own.
+        Errors start with ``"DofMap: "`` (:mod:`femodes.solvers.checks`); inside femodes,
+        :meth:`find` leaves them to the public function called. ``owner`` is deprecated
+        (it named the errors).
 
         Raises
         ------
@@ -120,10 +121,11 @@ class DofMap:
             Unknown name or component, index out of range, or a constrained / not-kept DOF
             (the message names it and the support that constrains it).
         """
-        with named_by(owner):
-            return self._index(at)
+        with named_by(deprecated_owner(owner, "DofMap.index") or "DofMap"):
+            return self.find(at)
 
-    def _index(self, at: Location) -> int:
+    def find(self, at: Location) -> int:
+        """:meth:`index` with its errors left to the public function called (femodes' own use)."""
         at = check_location(at)
         where = f"at={at!r}"
         if isinstance(at, int):
@@ -180,11 +182,11 @@ class DofMap:
             )
         return dof
 
-    def node_dofs(self, at: Location, owner: str | None = "DofMap") -> list[int]:
+    def node_dofs(self, at: Location, owner: str | None = None) -> list[int]:
         """Model DOFs of ``at``: every free component of a named point (a node is taken whole),
-        or the single DOF of a ``(name, component)`` pair, a DOF name or an index (``owner`` as
-        in :meth:`index`)."""
-        with named_by(owner):
+        or the single DOF of a ``(name, component)`` pair, a DOF name or an index (errors and
+        ``owner`` as in :meth:`index`)."""
+        with named_by(deprecated_owner(owner, "DofMap.node_dofs") or "DofMap"):
             return self._node_dofs(at)
 
     def _node_dofs(self, at: Location) -> list[int]:
@@ -195,7 +197,7 @@ class DofMap:
             if not dofs:
                 raise InputValueError(f"at={at!r}: every component of {at!r} is constrained or not kept")
             return dofs
-        return [self._index(at)]
+        return [self.find(at)]
 
     def label(self, i: int) -> str:
         return self.labels[i] if i < len(self.labels) else f"dof {i}"
@@ -254,3 +256,16 @@ class DofMap:
             node_of[nd[k, c]] = k
             comp_of[nd[k, c]] = c
         return node_of, comp_of
+
+
+def node_dof_list(dm: DofMap, at: Location) -> list[int]:
+    """:meth:`DofMap.node_dofs` with its errors left unnamed."""
+    return dm._node_dofs(at)
+
+
+def deprecated_owner(owner: str | None, where: str, stacklevel: int = 3) -> str | None:
+    """``owner`` (a DeprecationWarning when given: the public function called names the errors)."""
+    if owner is not None:
+        warnings.warn(f"{where}: owner= is deprecated and will be removed; the public function called names the "
+                      "errors", DeprecationWarning, stacklevel=stacklevel)
+    return owner

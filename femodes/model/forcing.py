@@ -14,6 +14,7 @@ from ..laws import Location
 from .declarations import Attached, HarmonicForce
 from .dofs import DofMap
 from .frames import frame_forces
+from ..solvers.checks import named_by
 
 __all__ = ["bind_forces"]
 
@@ -39,7 +40,8 @@ def bind_forces(model, forces) -> list[Attached]:
         if group is None:
             rotated = _rotated_point(dm, f.at)
             if rotated is None:
-                new.append(Attached(f, model.dof(f.at, "with_forcing: HarmonicForce")))
+                with named_by("with_forcing: HarmonicForce"):
+                    new.append(Attached(f, dm.find(f.at)))
             else:
                 new.extend(_rotated_force(dm, f, *rotated, 1.0))
             continue

@@ -6,28 +6,22 @@ from __future__ import annotations
 import numpy as np
 
 from ..laws import Location
-from ..solvers.checks import InputValueError, named_by
+from ..solvers.checks import InputValueError
 from .dofs import DofMap
 
 __all__ = ["probe_weights"]
 
 
-def probe_weights(dm: DofMap, at: Location, how: str = "mean", owner: str | None = "probe") -> np.ndarray:
+def probe_weights(dm: DofMap, at: Location, how: str = "mean") -> np.ndarray:
     """Weights that read ``at`` from the DOFs of ``dm``: the unit vector of a DOF, the consistent
     mean of a boundary's nodes (``how="mean"``, shape ``(n_dofs,)``) or one row per free node
-    (``how="max"``, shape ``(k, n_dofs)``). ``owner`` (being retired, as in
-    :meth:`DofMap.index`; ``None``: the public function called) names the errors."""
-    with named_by(owner):
-        return _weights(dm, at, how)
-
-
-def _weights(dm: DofMap, at: Location, how: str) -> np.ndarray:
+    (``how="max"``, shape ``(k, n_dofs)``); its errors are named by the public function called."""
     if how not in ("mean", "max"):
         raise InputValueError(f"how must be 'mean' or 'max' (over the boundary's nodes), got {how!r}")
     group = dm.group_of(at)
     if group is None:
         w = np.zeros(dm.n_dofs)
-        w[dm.index(at, None)] = 1.0
+        w[dm.find(at)] = 1.0
         return w
     name, c = group
     dofs = dm.node_dof[np.asarray(dm.groups[name]), c]

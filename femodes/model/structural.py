@@ -13,11 +13,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..laws import Location
+from ..solvers.checks import entry_point, named_by
 from .checks import check_fields
 from .contact import add_contacts
 from .damping import DENSE_DAMPING_MAX_DOFS, LowRankDamping, damped
 from .declarations import HarmonicForce, bind_nonlinearities
-from .dofs import DofMap
+from .dofs import DofMap, deprecated_owner
 from .forcing import bind_forces
 from .probes import probe_weights
 
@@ -121,11 +122,15 @@ class StructuralModel:
             )
         return sp.csr_matrix(self.C.toarray() + lr.toarray())
 
-    def dof(self, at: Location, owner: str = "dof") -> int:
-        """Model DOF index of a location (see :class:`DofMap`); ``owner`` starts error messages."""
-        return self.dofmap.index(at, owner)
+    @entry_point("dof")
+    def dof(self, at: Location, owner: str | None = None) -> int:
+        """Model DOF index of a location (see :class:`DofMap`); ``owner`` is deprecated (it named
+        the errors, which start with ``"dof: "``)."""
+        with named_by(deprecated_owner(owner, "StructuralModel.dof", 4)):
+            return self.dofmap.find(at)
 
-    def probe(self, at: Location, how: str = "mean", owner: str = "probe") -> np.ndarray:
+    @entry_point("probe")
+    def probe(self, at: Location, how: str = "mean", owner: str | None = None) -> np.ndarray:
         """Weights ``w`` that read a response at ``at`` from the model's DOFs: ``w @ q``.
 
         A DOF location gives its unit vector (shape ``(n_dofs,)``). A named boundary of a meshed
@@ -136,7 +141,8 @@ class StructuralModel:
         A Craig-Bampton model reads boundaries of its parent, kept or not (``w_parent @ T``), so
         responses anywhere need no new model.
         """
-        return probe_weights(self.dofmap, at, how, owner)
+        with named_by(deprecated_owner(owner, "StructuralModel.probe", 4)):
+            return probe_weights(self.dofmap, at, how)
 
     def force_vectors(self) -> dict:
         """Complex force amplitude per harmonic: ``{k: F_k}`` with ``f(t) = Re sum F_k e^{i k w t}``."""

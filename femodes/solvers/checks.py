@@ -18,9 +18,10 @@ innermost entry point names it.  A frozen options dataclass names its errors wit
 that way: a helper that warns reads the name with :func:`entry_name` (the innermost entry point
 running, or ``None``).  Other exceptions (a user callback's, a failed solve's) are never renamed.
 
-A block that must be named apart uses ``with named_by("name"):``; the few ``owner`` arguments
-still accepted (``DofMap.index``, ``StructuralModel.dof`` and ``probe``, the eigen-solve) name
-their errors that way while the modules calling them move to entry points.
+A block that must be named apart uses ``with named_by("name"):`` (``with_contact`` names a
+contact's errors ``"with_contact: UnilateralContact: ..."`` so). The ``owner`` arguments of
+``StructuralModel.dof``/``probe`` and ``DofMap.index``/``node_dofs`` are deprecated: still
+honoured that way for a release, with a DeprecationWarning.
 
 Besides the validators: :func:`is_operator` (the duck-typed test for structured Jacobians that
 factorise themselves), :data:`LINSOLVE_ERRORS` (what a failed linear solve raises) and

@@ -10,6 +10,7 @@ from typing import Any
 from collections.abc import Callable
 
 from .schema import Case, CaseError, fmt_value, suggest
+from ...solvers.checks import named_by
 
 __all__ = ["CaseApi", "build_model", "as_location", "discrete_model", "case_mesh", "fe_model", "add_damping",
            "add_contacts", "add_cubic_springs", "add_forces"]
@@ -68,7 +69,7 @@ def build_model(case: Case):
 
         model = api("reduction", "craig_bampton", fm.craig_bampton, model, d["reduction"]["craig_bampton"])
     if "outputs" in d and "response_dof" in d["outputs"]:
-        api("outputs", "response_dof", model.dof, as_location(d["outputs"]["response_dof"]), "response_dof")
+        api("outputs", "response_dof", _response_dof, model, as_location(d["outputs"]["response_dof"]))
     return model, full
 
 
@@ -185,3 +186,9 @@ def add_forces(case: Case, api: CaseApi, model):
                  amplitude=f.get("amplitude", 1.0), harmonic=f.get("harmonic", 1), phase=f.get("phase", 0.0), index=i)
         model = api("force", ["at"], model.with_forcing, hf, index=i)
     return model
+
+
+def _response_dof(model, at) -> int:
+    """The DOF of ``[outputs] response_dof``, its errors named after the key."""
+    with named_by("response_dof"):
+        return model.dofmap.find(at)
