@@ -216,16 +216,17 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
 def _warn_uncertain(results, tol: float, forced: bool) -> None:
     """One warning when the estimated error of reduced Hill solves could flip the verdict of a
     point: its leading multiplier within that error of ``1 + tol``."""
-    near, worst = 0, 0.0
-    for r in results:
+    near, worst = [], 0.0
+    for i, r in enumerate(results):
         m = significant(r.multipliers, not forced)
         err = r.error if np.isfinite(r.error) else 0.0
         if m.size and err > 0 and abs(abs(m[0]) - 1.0 - tol) <= err:
-            near += 1
+            near.append(i)
             worst = max(worst, err)
     if near:
-        log.warning("stability: at %d of %d points the leading multiplier lies within the estimated error of Hill's "
-                    "reduced problem (up to %.2g in |mu|) of the stability limit, so their verdict is uncertain; the "
-                    "reduction is capped at half the model's DOFs: a reduced model with more modes "
-                    "(craig_bampton(model, n_modes)) lets it grow, or check those points with "
-                    "fm.stability(branch[i], fm.stability_methods.Shooting())", near, len(results), worst)
+        shown = ", ".join(map(str, near[:8])) + (", ..." if len(near) > 8 else "")
+        log.warning("stability: at %d of %d points (%s) the leading multiplier lies within the estimated error of "
+                    "Hill's reduced problem (up to %.2g in |mu|) of the stability limit, so their verdict is uncertain. "
+                    "The reduction holds at most half the model's DOFs: a reduced model with more modes "
+                    "(craig_bampton(model, n_modes)) lets it grow; or check those points with "
+                    "fm.stability(branch[i], fm.stability_methods.Shooting())", len(near), len(results), shown, worst)
