@@ -30,7 +30,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import warnings
 from typing import Any, ClassVar, Protocol
 
 import numpy as np
@@ -40,16 +39,13 @@ from .hbm.hill import hill_exponents
 from .hbm.system import HBMSystem
 from .laws import UnilateralContact
 from .model import StructuralModel
-from .solvers.checks import InputValueError, entry_name, entry_point
+from .solvers.checks import InputValueError, entry_point, strategy
 from .time.shooting import shoot, unsupported
 
 __all__ = ["StabilityMethod", "Orbit", "Hill", "Shooting", "Auto", "StabilityResult", "ShootingError",
            "as_stability_method", "by_name", "METHODS", "AUTO_MAX_STIFFNESS", "MAX_CORRECTION"]
 
 log = logging.getLogger(__name__)
-
-#: The deprecated method names, in the order of :class:`Auto`, :class:`Hill`, :class:`Shooting`.
-METHODS = ("auto", "hill", "shooting")
 
 #: :class:`Auto` shoots only when the fastest natural frequency of the model is at most this many
 #: times the orbit's frequency: the explicit integration of the variational equations needs steps
@@ -199,6 +195,9 @@ class Auto:
 
 _BY_NAME: dict[str, StabilityMethod] = {"auto": Auto(), "hill": Hill(), "shooting": Shooting()}
 
+#: The deprecated method names (case files keep them).
+METHODS = tuple(_BY_NAME)
+
 
 def by_name(name: str) -> StabilityMethod:
     """The strategy a :class:`StabilityResult` names (``"hill"``, ``"shooting"``)."""
@@ -206,21 +205,12 @@ def by_name(name: str) -> StabilityMethod:
 
 
 def as_stability_method(value: Any, name: str = "method") -> StabilityMethod:
-    """``value`` as a strategy: a strategy object as it is; one of the names ``"auto"``,
-    ``"hill"``, ``"shooting"`` as its object, with a DeprecationWarning; anything else a
-    ValueError that lists the strategies."""
-    if isinstance(value, type) and issubclass(value, (Auto, Hill, Shooting)):
-        raise InputValueError(f"{name} must be a strategy object: femodes.stability_methods.{value.__name__}() "
-                              "(with the parentheses), got the class")
-    if isinstance(value, (Auto, Hill, Shooting)) or (callable(value) and isinstance(getattr(value, "name", None), str)):
-        return value
-    if isinstance(value, str) and value in _BY_NAME:
-        cls = type(_BY_NAME[value]).__name__
-        warnings.warn(f"{entry_name() or 'femodes'}: {name}={value!r} is deprecated; pass "
-                      f"{name}=femodes.stability_methods.{cls}()", DeprecationWarning, stacklevel=4)
-        return _BY_NAME[value]
-    raise InputValueError(f"{name} must be a stability strategy: femodes.stability_methods.Auto(), Hill() or "
-                          f"Shooting(), got {value!r}")
+    """``value`` as a strategy (:func:`~femodes.solvers.checks.strategy`): a strategy object, or
+    any callable with a ``name``, as it is; one of the names ``"auto"``, ``"hill"``,
+    ``"shooting"`` its object, with a DeprecationWarning; anything else a ValueError that lists
+    the strategies."""
+    return strategy(value, name, _BY_NAME, "femodes.stability_methods", "a stability strategy",
+                    lambda v: callable(v) and isinstance(getattr(v, "name", None), str))
 
 
 # -- shooting from an HBM orbit ------------------------------------------------------------------

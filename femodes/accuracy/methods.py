@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import warnings
 from typing import Any, ClassVar, Protocol
 
 import numpy as np
@@ -34,14 +33,11 @@ from .options import AccuracyOptions
 from .protocol import PointErrors
 from .shooting import Shooting as ShootingEstimator
 from .shooting import shooting_unsupported, shooting_unsupported_for
-from ..solvers.checks import InputValueError, entry_name
+from ..solvers.checks import InputValueError, strategy
 
-__all__ = ["ErrorMethod", "Auto", "Shooting", "Levels", "as_error_method", "check_estimate_method", "by_name", "NAMES"]
+__all__ = ["ErrorMethod", "Auto", "Shooting", "Levels", "as_error_method", "check_estimate_method", "by_name"]
 
 log = logging.getLogger(__name__)
-
-#: The deprecated names of the strategies.
-NAMES = ("auto", "levels", "shooting")
 
 
 class ErrorMethod(Protocol):
@@ -98,27 +94,17 @@ class Shooting:
         return _shooting(lad, errors, projection, options, strict=True)
 
 
-_BY_NAME: dict[str, ErrorMethod] = {"auto": Auto(), "levels": Levels(), "shooting": Shooting()}
+_BY_NAME: dict[str, ErrorMethod] = {"auto": Auto(), "shooting": Shooting(), "levels": Levels()}
 
 
 def as_error_method(value: Any, name: str = "method") -> ErrorMethod:
-    """``value`` as a strategy: None is :class:`Auto`; a strategy object as it is; one of the
-    names ``"auto"``, ``"levels"``, ``"shooting"`` its object, with a DeprecationWarning;
-    anything else a ValueError that lists the strategies."""
+    """``value`` as a strategy (:func:`~femodes.solvers.checks.strategy`): None is :class:`Auto`;
+    a strategy object as it is; one of the names ``"auto"``, ``"levels"``, ``"shooting"`` its
+    object, with a DeprecationWarning; anything else a ValueError that lists the strategies."""
     if value is None:
         return _BY_NAME["auto"]
-    if isinstance(value, (Auto, Levels, Shooting)):
-        return value
-    if isinstance(value, str) and value in _BY_NAME:
-        cls = type(_BY_NAME[value]).__name__
-        warnings.warn(f"{entry_name() or 'femodes'}: {name}={value!r} is deprecated; pass "
-                      f"{name}=femodes.error_methods.{cls}()", DeprecationWarning, stacklevel=4)
-        return _BY_NAME[value]
-    if isinstance(value, type) and issubclass(value, (Auto, Levels, Shooting)):
-        raise InputValueError(f"{name} must be a strategy object: femodes.error_methods.{value.__name__}() "
-                              "(with the parentheses), got the class")
-    raise InputValueError(f"{name} must be an error method: femodes.error_methods.Auto(), Shooting() or "
-                          f"Levels(), got {value!r}")
+    return strategy(value, name, _BY_NAME, "femodes.error_methods", "an error method",
+                    lambda v: isinstance(v, (Auto, Levels, Shooting)))
 
 
 def check_estimate_method(method: Any, name: str = "method") -> ErrorMethod:

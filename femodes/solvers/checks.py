@@ -37,6 +37,7 @@ import functools
 import math
 import numbers
 import os
+import warnings
 from typing import Any, TypeVar
 from collections.abc import Callable, Iterator
 
@@ -63,6 +64,7 @@ __all__ = [
     "is_real_number",
     "show",
     "start_vector",
+    "strategy",
 ]
 
 #: Exceptions of a linear solve that mean "singular / failed factorisation" (LAPACK raises
@@ -240,6 +242,26 @@ def start_vector(value: Any, name: str = "x0") -> np.ndarray:
     if not np.all(np.isfinite(x)):
         raise ValueError(f"{name} contains non-finite values (nan or inf)")
     return x
+
+
+def strategy(value: Any, name: str, table: dict, module: str, kind: str, accepts: Callable[[Any], bool]) -> Any:
+    """``value`` as a strategy object of ``module`` (``"femodes.stability_methods"``): as it is
+    when ``accepts(value)``; one of the deprecated names of ``table`` (name -> object) its
+    object, with a DeprecationWarning that names the object to pass; a strategy class given
+    without its parentheses, or anything else, an :class:`InputValueError` that says so (``kind``
+    reads "a stability strategy", "an error method")."""
+    classes = tuple(type(v) for v in table.values())
+    if isinstance(value, type) and issubclass(value, classes):
+        raise InputValueError(f"{name} must be a strategy object: {module}.{value.__name__}() (with the parentheses), "
+                              "got the class")
+    if accepts(value):
+        return value
+    if isinstance(value, str) and value in table:
+        warnings.warn(f"{entry_name() or 'femodes'}: {name}={value!r} is deprecated; pass "
+                      f"{name}={module}.{type(table[value]).__name__}()", DeprecationWarning, stacklevel=5)
+        return table[value]
+    names = [f"{type(v).__name__}()" for v in table.values()]
+    raise InputValueError(f"{name} must be {kind}: {module}.{', '.join(names[:-1])} or {names[-1]}, got {value!r}")
 
 
 def is_operator(J: Any) -> bool:
