@@ -48,6 +48,17 @@ def backend(monkeypatch):
     return use
 
 
+@pytest.fixture
+def forced_box(box, backend, name):
+    """``(model, tol)``: the box with a force at its right face, on the back-end ``name`` of the
+    test's parametrisation (skipped when it is not installed)."""
+    if name not in INSTALLED:
+        pytest.skip(f"{name} not installed")
+    model, K, Z, tol = box
+    backend(name)
+    return model.with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=1e-3)), tol
+
+
 @pytest.mark.parametrize("name", OPTIONAL)
 def test_backend_agrees_with_superlu(box, backend, name):
     if name not in INSTALLED:
@@ -257,17 +268,13 @@ def test_pattern_factorizer_matches_factorize(box, backend, name):
 
 
 @pytest.mark.parametrize("name", ["superlu"] + OPTIONAL)
-def test_hbm_steps_with_shared_analysis_and_harmonic_zero(box, backend, name):
+def test_hbm_steps_with_shared_analysis_and_harmonic_zero(forced_box, name):
     """Newton steps of one HBM system at several frequencies (harmonic 0's factors kept across
     frequencies, the other harmonics' analysis shared, the condensation columns solved as sparse
     right-hand sides) equal those of a fresh system at each frequency (none of it shared), to the
     block solver's refinement tolerance (a backward error of a few eps ||J||: cond(J) eps forward;
     the multiple 100 of the fixture's tol covers cond(J) / cond(K) of this small box)."""
-    if name not in INSTALLED:
-        pytest.skip(f"{name} not installed")
-    model, K, Z, tol = box
-    model = model.with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=1e-3))
-    backend(name)
+    model, tol = forced_box
     H = fm.Harmonics(3)
     pr = fm.ForcedResponseProblem(model, H)
     x = pr.initial_guess(1.5)
@@ -291,7 +298,7 @@ def test_hbm_steps_with_shared_analysis_and_harmonic_zero(box, backend, name):
 
 
 @pytest.mark.parametrize("name", ["superlu"] + OPTIONAL)
-def test_reuse_by_gmres_on_sparse_blocks(box, backend, name):
+def test_reuse_by_gmres_on_sparse_blocks(forced_box, name):
     """BlockSolver(reuse=True) on sparse-direct blocks solves by GMRES preconditioned with the
     factors of w0 (hbm.linsolve.krylov): the step equals the exact path's at w to the fixture's
     cond eps tolerance (GMRES stops at a hundredth of the exact path's backward-error test, below
@@ -299,11 +306,7 @@ def test_reuse_by_gmres_on_sparse_blocks(box, backend, name):
     from femodes.hbm.linsolve import BlockSolver
     from femodes.hbm.linsolve.krylov import KrylovReusedFactorization
 
-    if name not in INSTALLED:
-        pytest.skip(f"{name} not installed")
-    model, K, Z, tol = box
-    model = model.with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=1e-3))
-    backend(name)
+    model, tol = forced_box
     H = fm.Harmonics(3)
     solver = BlockSolver(reuse=True, max_passes=60)
     pr = fm.ForcedResponseProblem(model, H, solver=solver)
