@@ -78,3 +78,14 @@ def test_the_shooting_error_method_says_before_any_work_what_it_cannot_take():
         fm.error_methods.Shooting().check(penalty, fm.Harmonics(5), None)
     fm.error_methods.Levels().check(penalty, fm.Harmonics(5), None)
     fm.error_methods.Auto().check(penalty, fm.Harmonics(5), None)
+
+
+def test_a_deprecated_name_warns_at_the_callers_line(duffing_branch):
+    """The deprecation points at the user's line, not at femodes' decorators or a dataclass's
+    generated __init__."""
+    _, b = duffing_branch
+    for call in (lambda: fm.stability(b[0], "hill"), lambda: fm.estimate_error(b, method="levels"),
+                 lambda: fm.StabilityOptions(method="hill")):
+        with pytest.warns(DeprecationWarning, match="is deprecated; pass") as rec:
+            call()
+        assert rec[0].filename == __file__

@@ -37,7 +37,9 @@ import functools
 import math
 import numbers
 import os
+import sys
 import warnings
+from types import FrameType
 from typing import Any, TypeVar
 from collections.abc import Callable, Iterator
 
@@ -65,6 +67,7 @@ __all__ = [
     "show",
     "start_vector",
     "strategy",
+    "user_stacklevel",
 ]
 
 #: Exceptions of a linear solve that mean "singular / failed factorisation" (LAPACK raises
@@ -244,6 +247,22 @@ def start_vector(value: Any, name: str = "x0") -> np.ndarray:
     return x
 
 
+def user_stacklevel() -> int:
+    """The ``stacklevel`` that makes a warning raised by the caller of this function point at the
+    first frame outside femodes, the standard library's decorator wrappers (``contextlib``) and
+    generated code (a dataclass's ``__init__``): the user's line, however many decorators and
+    helpers lie between."""
+    frame: FrameType | None = sys._getframe(1)
+    level = 1
+    while frame is not None:
+        module = str(frame.f_globals.get("__name__", ""))
+        if not (module == "femodes" or module.startswith("femodes.") or module == "contextlib"
+                or frame.f_code.co_filename.startswith("<")):
+            break
+        frame, level = frame.f_back, level + 1
+    return level
+
+
 def strategy(value: Any, name: str, table: dict, module: str, kind: str, accepts: Callable[[Any], bool]) -> Any:
     """``value`` as a strategy object of ``module`` (``"femodes.stability_methods"``): as it is
     when ``accepts(value)``; one of the deprecated names of ``table`` (name -> object) its
@@ -258,7 +277,8 @@ def strategy(value: Any, name: str, table: dict, module: str, kind: str, accepts
         return value
     if isinstance(value, str) and value in table:
         warnings.warn(f"{entry_name() or 'femodes'}: {name}={value!r} is deprecated; pass "
-                      f"{name}={module}.{type(table[value]).__name__}()", DeprecationWarning, stacklevel=5)
+                      f"{name}={module}.{type(table[value]).__name__}()", DeprecationWarning,
+                      stacklevel=user_stacklevel())
         return table[value]
     names = [f"{type(v).__name__}()" for v in table.values()]
     raise InputValueError(f"{name} must be {kind}: {module}.{', '.join(names[:-1])} or {names[-1]}, got {value!r}")
