@@ -26,7 +26,7 @@ from .results import Branch, ContactInfo
 from .runs import checkpoint_spec, model_fingerprint, run_continuation
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
-from .solvers.checks import entry_point
+from .solvers.checks import entry_point, user_stacklevel
 from .solvers.threads import limit_blas_threads
 from .accuracy import AccuracyOptions, check_options, meet_tolerance, refinement_options, rtol_time_limit
 from .accuracy.methods import ErrorMethod, as_error_method
@@ -418,7 +418,7 @@ def nonlinear_mode(
     if harmonics is _REQUIRED:  # not None: an explicit None stays the TypeError it was
         warnings.warn("nonlinear_mode without harmonics= is deprecated (it uses 10); pass harmonics=10 (or a "
                       "femodes.Harmonics), as frequency_response requires", DeprecationWarning,
-                      stacklevel=4)  # 4: the caller's line, past the entry_point and limit_blas_threads wrappers
+                      stacklevel=user_stacklevel())
         harmonics = 10
     h = check_harmonics(harmonics)
     check_continuation_options(options)

@@ -16,7 +16,7 @@ import numpy as np
 from .exact_branch import EXACT_FOLD_RTOL, ExactBranch, fold_window
 from .model import StructuralModel
 from .solvers import ContinuationOptions, continuation
-from .solvers.checks import InputTypeError, InputValueError, entry_point
+from .solvers.checks import InputTypeError, InputValueError, entry_point, user_stacklevel
 from .time.exact import LinearImpactFlow, periodicity_residual, undamped
 
 __all__ = ["exact_frequency_response", "EXACT_BRANCH_RTOL"]
@@ -135,7 +135,8 @@ def exact_frequency_response(model: StructuralModel, omega=None, *, x0=None, res
         if omega is not None:
             raise InputTypeError("give omega= only (span= is its deprecated spelling), not both")
         warnings.warn("exact_frequency_response(model, span=...) is deprecated; use exact_frequency_response(model, "
-                      "omega=...), as frequency_response", DeprecationWarning, stacklevel=3)  # past the entry_point wrapper
+                      "omega=...), as frequency_response", DeprecationWarning,
+                      stacklevel=user_stacklevel())
         omega = span
     if omega is None:
         raise InputTypeError("missing the forcing frequencies omega=(w_start, w_end)")

@@ -31,7 +31,7 @@ from .results import PeriodicSolution, contact_differences
 from .store import model_signature, signature_differences
 from .solid_cells import (VTK_QUADRATIC_NODES, boundary_facets, contact_boundaries, polyline_order, solid_cells,
                           tributary_measure)
-from .solvers.checks import InputTypeError, InputValueError, check_int, entry_point
+from .solvers.checks import InputTypeError, InputValueError, check_int, entry_point, user_stacklevel
 
 __all__ = ["MeshFields", "mesh_fields", "sample_fields", "periodic_source", "resolve_model", "check_scale", "tributary_measure",
            "VTK_QUADRATIC_NODES"]
@@ -354,7 +354,7 @@ def mesh_fields(source: Any, model: Any, t: Any = None, *, n_frames: int = 36, m
     """
     if owner is not None:
         warnings.warn("mesh_fields(..., owner=...) is deprecated and ignored: error messages name the public "
-                      "function called", DeprecationWarning, stacklevel=3)  # past the entry_point wrapper
+                      "function called", DeprecationWarning, stacklevel=user_stacklevel())
     return sample_fields(source, model, t, n_frames=n_frames, mode=mode)
 
 

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..laws import Location, check_location
-from ..solvers.checks import InputValueError, named_by
+from ..solvers.checks import InputValueError, named_by, user_stacklevel
 from .declarations import show_vector
 from .frames import NodalFrame
 
@@ -263,9 +263,9 @@ def node_dof_list(dm: DofMap, at: Location) -> list[int]:
     return dm._node_dofs(at)
 
 
-def deprecated_owner(owner: str | None, where: str, stacklevel: int = 3) -> str | None:
+def deprecated_owner(owner: str | None, where: str) -> str | None:
     """``owner`` (a DeprecationWarning when given: the public function called names the errors)."""
     if owner is not None:
         warnings.warn(f"{where}: owner= is deprecated and will be removed; the public function called names the "
-                      "errors", DeprecationWarning, stacklevel=stacklevel)
+                      "errors", DeprecationWarning, stacklevel=user_stacklevel())
     return owner

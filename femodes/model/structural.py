@@ -126,7 +126,7 @@ class StructuralModel:
     def dof(self, at: Location, owner: str | None = None) -> int:
         """Model DOF index of a location (see :class:`DofMap`); ``owner`` is deprecated (it named
         the errors, which start with ``"dof: "``)."""
-        with named_by(deprecated_owner(owner, "StructuralModel.dof", 4)):
+        with named_by(deprecated_owner(owner, "StructuralModel.dof")):
             return self.dofmap.find(at)
 
     @entry_point("probe")
@@ -141,7 +141,7 @@ class StructuralModel:
         A Craig-Bampton model reads boundaries of its parent, kept or not (``w_parent @ T``), so
         responses anywhere need no new model.
         """
-        with named_by(deprecated_owner(owner, "StructuralModel.probe", 4)):
+        with named_by(deprecated_owner(owner, "StructuralModel.probe")):
             return probe_weights(self.dofmap, at, how)
 
     def force_vectors(self) -> dict:
