@@ -29,12 +29,13 @@ from .switching import switch_branch
 from .store import Checkpoint
 from .time import SteadyState, TimeHistory, TimeSteppingOptions, simulate, steady_state
 from . import io, plot  # outputs; matplotlib is imported lazily inside plot functions
-from . import error_methods, stability_methods  # strategies: stability=stability_methods.Hill(), ...
+from . import error_methods, predictors, stability_methods  # strategies: stability=stability_methods.Hill(), ...
 
 __version__ = "0.1.0"
 
 __all__ = [
     "stability_methods",
+    "predictors",
     "error_methods",
     "Material",
     "Section",

@@ -43,6 +43,7 @@ LAYERS = {
     "femodes.floquet": 5,
     "femodes.stability_methods": 5,
     "femodes.error_methods": 5,
+    "femodes.predictors": 0,
     "femodes.branch_stability": 5,
     "femodes.accuracy": 5,
     "femodes.mesh_error": 5,

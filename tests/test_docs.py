@@ -25,11 +25,11 @@ def test_api_reference_documents_every_public_name():
     """Each name of ``femodes.__all__`` has an autodoc entry (``io``, ``plot`` and the strategy
     modules are modules with a section of their own)."""
     documented = set(re.findall(r"^\.\. auto(?:class|function|data)::\s+(\w+)", API, flags=re.M))
-    modules = {"io", "plot", "stability_methods", "error_methods"}
+    modules = {"io", "plot", "stability_methods", "error_methods", "predictors"}
     missing = sorted(set(femodes.__all__) - documented - modules)
     assert not missing, f"add {missing} to docs/api/*.rst"
     assert "femodes.plot" in API and "femodes.io" in API
-    assert "femodes.stability_methods" in API and "femodes.error_methods" in API
+    assert "femodes.stability_methods" in API and "femodes.error_methods" in API and "femodes.predictors" in API
 
 
 def test_docs_pages_name_existing_files():

@@ -73,11 +73,11 @@ def test_phase_predictor_takes_fewer_points_for_the_same_curve(monkeypatch):
     calls = _counted(monkeypatch)
     model = _seed()
     out = {}
-    for predictor in ("tangent", "phase"):
+    for predictor in (fm.predictors.Tangent(), fm.predictors.Phase()):
         calls[0] = 0
         b = fm.frequency_response(model, (0.5, 2.0), 20, options=frequency_response_options(predictor=predictor))
         assert b.success and len(b.folds) == 2
-        out[predictor] = (len(b), calls[0], np.sort(b.omega[list(b.folds)]))
+        out[predictor.name] = (len(b), calls[0], np.sort(b.omega[list(b.folds)]))
     (n_t, e_t, f_t), (n_p, e_p, f_p) = out["tangent"], out["phase"]
     assert f_p == pytest.approx(f_t, rel=1e-7)
     assert f_p[1] == pytest.approx(1.38498, abs=1e-5)  # README_steps / bench_peers: upper fold at H = 20
@@ -92,7 +92,8 @@ def test_a_fold_is_located_or_approached_with_shorter_steps():
     also with target_norm_change=0.3 (with the tangent predictor the fold is then a corner met at
     a short step: located after the halvings down to 1/64 of the initial step, marked 2e-4 off
     with 1/4)."""
-    for predictor, norm in (("tangent", None), ("phase", None), ("tangent", 0.3), ("phase", 0.3)):
+    tangent, phase = fm.predictors.Tangent(), fm.predictors.Phase()
+    for predictor, norm in ((tangent, None), (phase, None), (tangent, 0.3), (phase, 0.3)):
         b = fm.frequency_response(_seed("penalty"), (0.5, 2.0), 40,
                                   options=frequency_response_options(predictor=predictor, target_norm_change=norm))
         folds = np.sort(b.omega[list(b.folds)])
@@ -112,14 +113,65 @@ def test_problems_without_phase_methods_get_the_tangent_predictor():
     """predictor="phase" needs phase_shift and phase_generator; without them the run is the
     tangent predictor's, bit for bit."""
     runs = [continuation(_Circle(), (-0.5, 0.5), x0=np.array([0.9, 0.0]), options=ContinuationOptions(predictor=p))
-            for p in ("phase", "tangent")]
+            for p in (fm.predictors.Phase(), fm.predictors.Tangent())]
     assert runs[0].success and runs[0].x.shape == runs[1].x.shape
     assert np.array_equal(runs[0].x, runs[1].x) and np.array_equal(runs[0].p, runs[1].p)
 
 
 def test_bad_predictor_is_named():
-    with pytest.raises(ValueError, match="predictor must be one of 'phase', 'tangent', got 'secant'"):
+    with pytest.raises(ValueError, match=r"ContinuationOptions: predictor must be a predictor: "
+                                         r"femodes\.predictors\.Phase\(\) or Tangent\(\), got 'secant'"):
         ContinuationOptions(predictor="secant")
+    with pytest.raises(ValueError, match=r"femodes\.predictors\.Tangent\(\) \(with the parentheses\)"):
+        ContinuationOptions(predictor=fm.predictors.Tangent)
+
+
+def test_predictor_names_are_deprecated_spellings_of_the_strategies():
+    """``predictor="tangent"`` still works for a release: the same strategy, with a warning that
+    names the object to pass and points at the caller's line."""
+    with pytest.warns(DeprecationWarning, match=r"predictor='tangent' is deprecated; pass "
+                                                r"predictor=femodes\.predictors\.Tangent\(\)") as rec:
+        opts = ContinuationOptions(predictor="tangent")
+    assert rec[0].filename == __file__
+    assert opts.predictor == fm.predictors.Tangent() and ContinuationOptions().predictor == fm.predictors.Phase()
+
+
+class _Secant:
+    """A predictor of the user's own: the secant through the last two points (the tangent at the first)."""
+
+    name = "secant"
+
+    def bind(self, system):
+        return _SecantStep()
+
+
+class _SecantStep:
+    tau = None
+
+    def __init__(self):
+        self.last = None
+        self.calls = 0
+
+    def predict(self, a, ds):
+        self.calls += 1
+        d = a.t if self.last is None else (a.y - self.last)
+        self.last = a.y.copy()
+        return a.y + ds * d / np.linalg.norm(d)
+
+    def reference_tangent(self, a):
+        return a.t
+
+
+def test_a_predictor_of_the_users_own_is_used():
+    """Any object with ``name`` and ``bind(system)`` is a predictor: it predicts every step and the
+    run still ends on the circle (the corrector does the rest)."""
+    pred = _Secant()
+    steps = []
+    orig = pred.bind
+    pred.bind = lambda system: steps.append(orig(system)) or steps[-1]
+    run = continuation(_Circle(), (-0.5, 0.5), x0=np.array([0.9, 0.0]), options=ContinuationOptions(predictor=pred))
+    assert run.success and steps and steps[0].calls >= len(run.p) - 1
+    np.testing.assert_allclose(run.x[:, 0] ** 2 + run.p ** 2, 1.0, atol=1e-8)
 
 
 def test_level_start_between_two_points_follows_the_phase():

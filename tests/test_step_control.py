@@ -143,7 +143,7 @@ def test_options_disable_and_defaults():
     opts = fm.ContinuationOptions(target_angle=None, target_contraction=None, corrector_deadline=None)
     assert opts.target_angle is None and opts.target_contraction is None and opts.corrector_deadline is None
     d = fm.ContinuationOptions()
-    assert (d.target_angle, d.target_contraction, d.corrector_deadline, d.predictor) == (10.0, 0.25, 3, "phase")
+    assert (d.target_angle, d.target_contraction, d.corrector_deadline, d.predictor) == (10.0, 0.25, 3, fm.predictors.Phase())
     assert frequency_response_options().max_step == 3.0
 
 

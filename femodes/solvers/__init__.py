@@ -10,7 +10,7 @@
   factorise themselves (``J.factorize().solve(b)``, duck-typed).
 
 Modules: ``newton`` (semismooth Newton), ``continuation`` (the driver),
-``tracing`` (one run: the tracer) and its parts ``predictors``, ``step_control``, ``guard``
+``tracing`` (one run: the tracer) and its parts ``predictors`` (strategies, public as ``femodes.predictors``), ``step_control``, ``guard``
 (branch jumping), ``folds``, ``span_ends`` and ``trace_record`` (the run's points),
 ``protocols`` (what a problem provides, with the optional phase hook),
 ``continuation_types`` (options, points, states, results),

@@ -140,7 +140,7 @@ def continuation(
        the first tangent, whose sign of ``dp`` is set by ``direction``;
        ``c = S t_prev`` afterwards, which keeps ``<t, t_prev>_S > 0`` and
        passes folds), normalised in the scaled norm.
-    3. Predictor ``y + ds t`` (``predictor="phase"`` with a problem that has
+    3. Predictor ``y + ds t`` (``predictor=Phase()`` with a problem that has
        the optional hook :class:`~femodes.solvers.protocols.SupportsPhaseShift`,
        ``phase_shift``/``phase_generator``: the phase part of ``t`` applied
        as an exact delay, see :class:`ContinuationOptions`); corrector:

@@ -15,6 +15,7 @@ import numpy as np
 
 from .checks import check_bool, check_callable, check_int, check_positive, check_vector, is_real_number, named_by, show
 from .newton import NewtonOptions
+from .predictors import Phase, PredictorStrategy, as_predictor
 
 __all__ = [
     "ContinuationOptions",
@@ -37,10 +38,6 @@ STATUS_MESSAGES = {
 
 def _default_newton() -> NewtonOptions:
     return NewtonOptions(atol=1e-9, max_iter=12)
-
-
-#: predictors of :class:`ContinuationOptions`
-PREDICTORS = ("phase", "tangent")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -166,30 +163,19 @@ class ContinuationOptions:
         predictor distance shrank to <= 75 % (and is <= 2 ds); a jump to a
         different branch does not show this distance scaling.  Both guards
         are also waived once halving would take the step below ``min_step``.
-    predictor : {"phase", "tangent"}, default "phase"
-        ``"tangent"``: the Euler predictor ``y + ds t``.  ``"phase"``, for a
-        problem with methods ``phase_shift(x, tau)`` (the unknowns of the
-        periodic motion delayed by the phase ``tau``) and
-        ``phase_generator(x)`` (its ``d/dtau`` at 0), as
-        :class:`~femodes.hbm.ForcedResponseProblem` has: the tangent's
-        ``x`` part is split into a phase rate ``alpha`` along
-        ``g = phase_generator(x)`` (scaled inner product) and the rest
-        ``r``, and the predictor is ``phase_shift(x + ds r, ds alpha)``
-        (the same to first order in ``ds``; harmonic ``k`` turns by
-        ``k ds alpha`` exactly instead of along its chord). The turn angle
-        of the step (``target_angle``, ``max_turn_angle``) is measured from
-        the previous tangent delayed by the same phase. Why: an impact's
-        contact force has harmonics of equal size up to ``H``; when the
-        impact moves in phase along the branch they turn ``k`` times faster
-        than the first one, so in these coordinates the branch is a helix
-        whose turning grows with ``H`` and the tangent predictor took a
-        number of points proportional to ``H``. Measured on the seed
-        contact case 1 (complementarity law, ``frequency_response``
-        defaults but ``max_step=2``): residual evaluations 795 -> 499 at
-        H = 20, 1393 -> 764 at H = 40 (``benchmarks/README_steps.md``).
-        Problems without the two methods (the optional hook
-        :class:`~femodes.solvers.protocols.SupportsPhaseShift`) get the
-        tangent predictor.
+    predictor : predictor strategy, default ``femodes.predictors.Phase()``
+        How a step is predicted (:mod:`femodes.solvers.predictors`):
+        ``Tangent()``, the Euler predictor ``y + ds t``; ``Phase()``, for a
+        problem with the optional hook
+        :class:`~femodes.solvers.protocols.SupportsPhaseShift` (as
+        :class:`~femodes.hbm.ForcedResponseProblem` has), the tangent with
+        its phase part applied as an exact delay, and the turn angle of the
+        step (``target_angle``, ``max_turn_angle``) measured from the previous
+        tangent delayed by the same phase; without the hook it is the tangent
+        predictor. The names ``"phase"`` and ``"tangent"`` are deprecated
+        spellings. Measured on the seed contact case 1 (``max_step=2``):
+        residual evaluations 795 -> 499 at H = 20, 1393 -> 764 at H = 40
+        (``benchmarks/README_steps.md``).
     target_norm_change : float or None, default None
         Step control by the size of the solution (> 0): the nominal relative
         change of the scaled norm of ``x`` per step; the step is divided by
@@ -226,7 +212,7 @@ class ContinuationOptions:
     target_angle: float | None = 10.0
     target_contraction: float | None = 0.25
     corrector_deadline: int | None = 3
-    predictor: str = "phase"
+    predictor: PredictorStrategy = field(default_factory=Phase)
     target_norm_change: float | None = None
 
     def __post_init__(self) -> None:
@@ -263,8 +249,8 @@ class ContinuationOptions:
             check_int("corrector_deadline", self.corrector_deadline, 1)
         if self.target_norm_change is not None:
             check_positive("target_norm_change", self.target_norm_change)
-        if self.predictor not in PREDICTORS:
-            raise ValueError(f"predictor must be one of {', '.join(map(repr, PREDICTORS))}, got {show(self.predictor)}")
+        with named_by("ContinuationOptions"):
+            object.__setattr__(self, "predictor", as_predictor(self.predictor))
 
 
 def _check_steps(step: Any, min_step: Any, max_step: Any) -> None:

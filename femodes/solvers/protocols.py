@@ -3,7 +3,7 @@
 A problem needs only ``residual(x, p)`` (:class:`ContinuationProblem`). Two optional hooks are
 used when present: ``initial_guess(p)`` (a start without ``x0=``) and, for a periodic motion that
 can be delayed in phase, the pair of :class:`SupportsPhaseShift` (the phase-following predictor,
-``ContinuationOptions.predictor="phase"``; :class:`~femodes.hbm.ForcedResponseProblem` has it).
+``ContinuationOptions(predictor=femodes.predictors.Phase())``; :class:`~femodes.hbm.ForcedResponseProblem` has it).
 The protocols are structural: a problem needs the methods, not the base class.
 """
 
@@ -30,7 +30,7 @@ class SupportsPhaseShift(Protocol):
 
     ``phase_shift(x, tau)`` is the unknowns of the motion delayed by the phase ``tau`` (radians of
     the fundamental) and ``phase_generator(x)`` its derivative ``d/dtau`` at ``tau = 0``. With both,
-    ``predictor="phase"`` applies the phase part of the tangent as an exact delay.
+    ``predictors.Phase()`` applies the phase part of the tangent as an exact delay.
     """
 
     def phase_shift(self, x: np.ndarray, tau: float) -> np.ndarray: ...

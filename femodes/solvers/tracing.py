@@ -32,7 +32,6 @@ from .continuation_types import (
 )
 from .folds import FoldLocator
 from .guard import BranchGuard
-from .predictors import Predictor
 from .span_ends import SpanEnds
 from .step_control import StepControl
 from .trace_record import BranchRecord, RetryStep, StopRun, TracePoint, contraction
@@ -61,7 +60,7 @@ class Tracer:
         self.record = BranchRecord(i0=start.index if start is not None else 0, skip=1 if start is not None else 0)
         self.x_scale: np.ndarray | None = None  # arclength scales, fixed for the whole run
         self.p_scale = math.nan
-        self.predictor = Predictor(system, options)
+        self.predictor = options.predictor.bind(system)
         self.steps = StepControl(system, options, self.record)
         self.guard = BranchGuard(system, options, self.record, self.steps)
         self.ends = SpanEnds(system, options, span, self.record, self.emit)
