@@ -82,8 +82,7 @@ def frequency_response(
 ) -> Branch:
     """Forced frequency-response curve by HBM and pseudo-arclength continuation.
 
-    ``M q'' + C q' + K q + f_nl(q) = f cos(w t) - w_c p`` for ``w`` from ``omega[0]`` to
-    ``omega[1]`` (rad/s), through folds.
+    Solves ``M q'' + C q' + K q + f_nl(q) = f cos(w t) - w_c p`` from ``omega[0]`` to ``omega[1]``, through folds.
 
     Parameters
     ----------
@@ -97,67 +96,29 @@ def frequency_response(
     x0 : ndarray, optional
         Initial guess at ``omega[0]`` (default: the linear response).
     projection : ExactProjection or SampledProjection, optional
-        How ``max(0, .)`` of the contact laws is projected on the harmonics: exactly (default,
-        ``femodes.hbm.ExactProjection()``) or sampled (``femodes.hbm.SampledProjection()``, only
-        for comparison).
+        How ``max(0, .)`` of the contact laws is projected on the harmonics: exactly (default) or
+        sampled (``femodes.hbm.SampledProjection()``, only for comparison).
     progress : bool or callable
-        ``True`` logs one INFO line per point; a callable is called with every accepted
-        :class:`~femodes.solvers.ContinuationPoint` (the command line passes its progress display,
-        :class:`femodes.app.progress.BranchProgress`).
+        ``True`` logs one INFO line per point; a callable gets every accepted ``ContinuationPoint``.
     checkpoint : str, PathLike or femodes.Checkpoint, optional
-        Final branch file (``.npz`` or ``.h5``), or :class:`femodes.Checkpoint` ``(path,
-        resume=...)``.  Every converged point is written to the journal ``<path>.points/`` as it
-        is found (one file per point, atomic, O(1) I/O per point); at the end the branch is saved
-        to ``path`` and the journal removed.  A plain path (or ``resume=False``) starts a new
-        run: an existing checkpoint is an error (``FileExistsError``), never overwritten.
-        ``femodes.Checkpoint(path, resume=True)`` continues the run from its last saved point,
-        or returns its branch if it finished (any status), or starts a new run if there is no
-        checkpoint yet.  The final branch holds every point exactly once and equals that of an
-        uninterrupted run.  The checkpoint must come from the same model, harmonics, span and
-        ``projection`` (``ValueError`` saying what differs otherwise); ``options`` may change
-        (step bounds, ``max_points``...), the arclength scaling of the run is kept.  Damaged
-        files or another format version give a ``ValueError`` naming the file.
-
+        Final branch file (``.npz`` or ``.h5``), journaled point by point; ``Checkpoint(path, resume=True)``
+        continues a run, a plain path never overwrites one (:doc:`/howto/checkpoints`).
     stability : bool, StabilityMethod or StabilityOptions
-        Floquet stability of every point and the bifurcations between points
-        (:mod:`femodes.floquet`): False (default) none, True the defaults of
-        :class:`~femodes.StabilityOptions`, a strategy of :mod:`femodes.stability_methods`
-        (``Hill()``, ``Shooting()``, ``Auto()``), or ``StabilityOptions(method, tol, locate)``;
-        ``locate=False`` brackets the bifurcations between points without locating them (no
-        solves beyond the points'). A method name (``"hill"``...) is a deprecated spelling.
+        Floquet stability of every point and the bifurcations between points: False (default) none, True
+        the defaults of :class:`~femodes.StabilityOptions`, or a strategy of :mod:`femodes.stability_methods`.
     rtol : float, optional
-        Requested relative accuracy of the frequency with respect to the converged (``H -> inf``)
-        answer (e.g. ``1e-3``). The branch then carries :attr:`~femodes.Branch.accuracy`: with
-        complementarity contacts, ``accuracy.omega_limit`` is the converged frequency: computed
-        by shooting on the exact flow with rigid stops (the default ``error_method``, linear models
-        with mass at the contact DOFs: exact folds, about 4x the plain curve on the seed cases),
-        or extrapolated in ``H`` (first order in ``1/H`` for rigid impacts) and refined by
-        further levels where its bracket is wider than ``rtol``; smooth systems are recomputed
-        with ``2 H`` until the estimate meets ``rtol``. ``accuracy.met`` says which points meet
-        it (those just above grazing may not: no counterpart on the exact curve, no bracket by
-        the levels). :mod:`femodes.accuracy`.
+        Requested relative accuracy of the frequency against the converged (``H -> inf``) answer; the
+        branch then carries :attr:`~femodes.Branch.accuracy` (:doc:`/guide/accuracy`).
     max_harmonics : int, optional
         Largest number of harmonics ``rtol`` may use (default ``8 H``).
-    error_method : ErrorMethod, optional
-        How ``rtol`` is met with complementarity contacts (:func:`femodes.estimate_error`), a
-        strategy of :mod:`femodes.error_methods`: ``Auto()`` (default) computes the converged
-        orbits themselves by shooting on the exact flow with rigid stops where the model is
-        linear with unilateral contacts only (mass at the contact DOFs), and uses the levels of
-        harmonics elsewhere. ``Shooting()`` and ``Levels()`` use that method only: one that
-        cannot apply (shooting on a penalty model, say) is a ValueError before anything runs, as
-        in :func:`femodes.estimate_error`; only ``Auto()`` picks. Without ``rtol`` it must be
-        left out. A method name (``"levels"``...) is a deprecated spelling.
-    error_options : AccuracyOptions, optional
-        Tuning of the error estimate of ``rtol`` (:class:`femodes.AccuracyOptions`; the default is
-        the measured one), including its time limit: ``rtol_budget`` times the plain branch's
-        own time, at least ``rtol_min_seconds``.
+    error_method, error_options : ErrorMethod, AccuracyOptions, optional
+        How ``rtol`` is met with complementarity contacts (a strategy of :mod:`femodes.error_methods`,
+        default ``Auto()``, as in :func:`femodes.estimate_error`) and its tuning; only with ``rtol``.
 
     Returns
     -------
     Branch
-        ``success`` False (with ``message``) if the continuation failed (start point, corrector
-        at the smallest step); ``status == 2`` if it stopped at ``options.max_points`` before the
-        end of the span (valid points, ``success`` True, a warning in the log).
+        ``success`` False (with ``message``) on failure; ``status == 2``: stopped at ``options.max_points``.
     """
     model = check_model(model)
     checkpoint = checkpoint_spec(checkpoint)

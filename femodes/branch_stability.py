@@ -8,42 +8,26 @@ points (:func:`solve_on_secant`), and classified by the crossing multiplier: ``+
 point, ``-1`` period doubling, a complex pair a Neimark-Sacker bifurcation; multipliers that jump
 across the circle instead of crossing it are ``"nonsmooth"`` (a change of the contact pattern).
 
-Location, by bracketing (``StabilityOptions(locate=True)``, the default). Each evaluation of
-``tau`` between the points costs a corrector solve (started from the polynomial through the
-known solutions nearest to it) and a Hill (or shooting) solve, about as much as a point of the
-branch, so at most :data:`LOCATE_SOLVES` = 2 are spent on a smooth crossing:
-
-1. the first at the root of the polynomial that interpolates ``tau`` through the two points and
-   their neighbours (the points before and after, projected on the secant; already computed);
-2. the second at the inverse quadratic interpolation of ``tau`` through the two points and the
-   first, moved past it by :data:`STRADDLE` of its distance from the first, so that the two solves
-   fall on either side of the crossing and close the bracket around it (at the middle of the
-   bracket when the first solve's ``|tau|`` exceeds :data:`SMOOTH_SHARE` of the change).
-
-The bifurcation is reported at the end of the final bracket on its unstable side (the
-multiplier outside the circle there is the one that crossed, and gives the kind), and
-``Bifurcation.bracket`` holds the frequencies of the two solutions the sign change lies between:
-the location's accuracy, stated, not estimated (an end where ``|tau| <=`` :data:`FTOL` is the
-crossing itself, and the bracket is that point). A first solve whose ``tau`` is still within
-:data:`FLAT` of the change from its side's end value looks like a jump: it is bisected while the
-profile stays flat, up to :data:`JUMP_SOLVES` solves, and a bracket of at most
-:data:`CHEAP_JUMP_BRACKET` of the segment, flat on both sides with ``|tau| >`` :data:`JUMP`, is a
-jump (``"nonsmooth"``; so is a flat profile across which the corrector finds no solution). A jump
-that cannot be told apart so is classified by its crossing multiplier, as a bracketed one is.
-Problems of at most :data:`PRECISE_MAX_UNKNOWNS` unknowns are refined to :data:`PRECISE_XTOL`
-instead (below).
-
-``StabilityOptions(locate=xtol)`` (a number) refines instead until the bracket is ``xtol`` of the
-segment (regula falsi, bisecting when the bracket does not halve; a jump is told apart once the
-bracket is :data:`JUMP_BRACKET` of the segment, about 6 solves, a smooth crossing 5-15).
-``locate=False`` only brackets, at no cost beyond the points' multipliers: the bifurcation is
-reported at the point of the bracket on its unstable side (``Bifurcation.located`` False).
+Location, by bracketing (``StabilityOptions(locate=True)``, the default): at most
+:data:`LOCATE_SOLVES` = 2 solves on a smooth crossing, the first at the root of the polynomial
+through ``tau`` at the two points and their neighbours, the second past the inverse quadratic
+interpolation by :data:`STRADDLE`, so that the two fall on either side of the crossing. The
+bifurcation is reported at the end of the final bracket on its unstable side, and
+``Bifurcation.bracket`` holds the frequencies of the two solutions the sign change lies between
+(an end where ``|tau| <=`` :data:`FTOL` is the crossing itself). A first solve within :data:`FLAT`
+of the change looks like a jump: it is bisected up to :data:`JUMP_SOLVES` solves, and a bracket of
+at most :data:`CHEAP_JUMP_BRACKET` of the segment, flat on both sides with ``|tau| >``
+:data:`JUMP`, is ``"nonsmooth"``. Problems of at most :data:`PRECISE_MAX_UNKNOWNS` unknowns are
+refined to :data:`PRECISE_XTOL` instead. ``locate=xtol`` (a number) refines by regula falsi until
+the bracket is ``xtol`` of the segment (a jump is told apart at :data:`JUMP_BRACKET`);
+``locate=False`` only brackets (``Bifurcation.located`` False). The costs:
+:doc:`/guide/stability` (Bifurcations along a branch).
 
 On a free (conservative) orbit a pair that collides at ``+-1`` and leaves the circle as a real pair
 is a branch point (period doubling at ``-1``) even when it is found on its still-complex side
-(:data:`COLLISION`); ``|mu| - 1`` is flat there, so a branch point of a backbone is then located
-by the sign change of ``det [r_x, r_p; c^T]`` (:func:`branch_point_test`, shared with
-:func:`femodes.switch_branch`), where the augmented Jacobian drops rank.
+(:data:`COLLISION`); a branch point of a backbone is then located by the sign change of
+``det [r_x, r_p; c^T]`` (:func:`branch_point_test`, shared with :func:`femodes.switch_branch`),
+where the augmented Jacobian drops rank.
 """
 
 from __future__ import annotations

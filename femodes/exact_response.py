@@ -89,20 +89,17 @@ def exact_frequency_response(model: StructuralModel, omega=None, *, x0=None, res
                              options=None, span=None) -> ExactBranch:
     """The forced response of a linear model with rigid stops, orbit by exact orbit.
 
-    Pseudo-arclength continuation (:func:`femodes.solvers.continuation`) of the periodic orbits
-    of :class:`~femodes.time.exact.LinearImpactFlow` in the forcing frequency: the unknowns are the start state at
-    ``t = 0`` (the forcing fixes the phase), the residual ``x(T) - x(0)`` with the monodromy
-    matrix (saltation at impacts) as its Jacobian. No harmonics and no time step: every point
-    is a periodic orbit of the semi-discrete model to round-off, which is what harmonic balance
-    converges to as H grows; folds are located as turning points. The orbits need not be
-    stable (:func:`femodes.stability` or a time integration says which are).
+    Pseudo-arclength continuation of the periodic orbits of :class:`~femodes.time.exact.LinearImpactFlow`
+    in the forcing frequency: unknowns the start state at ``t = 0``, residual ``x(T) - x(0)``, Jacobian
+    the monodromy matrix (saltation at impacts). Every point is a periodic orbit of the semi-discrete
+    model to round-off (what harmonic balance converges to as H grows); folds are located. The orbits
+    need not be stable (:func:`femodes.stability` says which are).
 
     Parameters
     ----------
     model : StructuralModel
-        Linear, with unilateral contacts (on DOFs with or without mass) and harmonic forcing;
-        no smooth nonlinear laws or penalty contacts (:func:`~femodes.time.exact.exact_flow_unsupported` says why
-        a model is refused).
+        Linear, with unilateral contacts (on DOFs with or without mass) and harmonic forcing; no smooth
+        laws or penalty contacts (:func:`~femodes.time.exact.exact_flow_unsupported` says why).
     omega : (float, float)
         Forcing frequencies ``(w_start, w_end)`` in rad/s, positive; may decrease (as
         :func:`femodes.frequency_response`).
@@ -121,8 +118,7 @@ def exact_frequency_response(model: StructuralModel, omega=None, *, x0=None, res
     Returns
     -------
     ExactBranch
-        ``success``/``message`` report how the continuation ended; never raises on numerical
-        failure.
+        ``success``/``message`` report how the continuation ended; never raises on numerical failure.
 
     Raises
     ------

@@ -86,63 +86,45 @@ def resolve_model(source: Any, model: Any) -> StructuralModel:
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class MeshFields:
-    """Nodal fields of a periodic motion sampled at times ``t`` on the FE mesh.
-
-    One class for every mesh: bars and beams (``dim == 1``: scalar nodal motion along the
-    axis, resp. across it) and meshed 2-D/3-D solids (``dim`` 2 or 3: displacement vectors).
+    """Nodal fields of a periodic motion sampled at times ``t`` on the FE mesh, for every mesh.
 
     Attributes
     ----------
     kind : str
-        ``"bar"`` (``displacement`` is the axial ``u``), ``"beam"`` (transverse ``w``) or
-        ``"solid"`` (the displacement vector).
-    x : ndarray (n_nodes,)
-        First coordinate of the nodes (the position along the axis of bars and beams).
-    cells : ndarray (n_cells, n_cell_nodes)
-        Connectivity in VTK node order, of type ``cell_type``. Bars and beams: the mesh vertices
-        (higher-order interior DOFs are not exported). Solids: every Lagrange node; order-2
-        meshes give quadratic cells (all nodes carry data, also the P2 mid-side contact nodes).
-    t : ndarray (n_t,)
-        Sample times.
-    period : float
-    omega : float
+        ``"bar"`` (``displacement`` is the axial ``u``), ``"beam"`` (transverse ``w``) or ``"solid"``.
+    dim : int
+        1 (bars, beams: scalar nodal motion), 2 or 3 (solids: displacement vectors).
+    x, coordinates : ndarray (n_nodes,), ndarray (n_nodes, 3)
+        First coordinate of the nodes (along the axis of bars and beams); undeformed coordinates.
+    cells, cell_type : ndarray (n_cells, n_cell_nodes), str
+        Connectivity in VTK node order and its meshio type (``"line"``, ``"triangle"``... or the order-2
+        ``"triangle6"``, ``"quad9"``, ``"tetra10"``, ``"hexahedron27"``). Bars and beams: the vertices;
+        solids: every Lagrange node (P2 mid-side contact nodes included).
+    t, period, omega : ndarray (n_t,), float, float
+        Sample times, period and angular frequency.
     displacement, velocity : ndarray
-        ``(n_t, n_nodes)`` for bars and beams (``u`` resp. ``w`` and its time derivative),
-        ``(n_t, n_nodes, 3)`` vectors for solids (zero third component in 2-D).
-        :meth:`displacement_vectors` gives vectors for every kind.
+        ``(n_t, n_nodes)`` for bars and beams, ``(n_t, n_nodes, 3)`` for solids (zero third component
+        in 2-D); :meth:`displacement_vectors` gives vectors for every kind.
     rotation : ndarray (n_t, n_nodes) or None
         Beam rotation ``theta`` (None otherwise).
-    contact_nodes : ndarray of int (n_contacts,)
-        Node of each contact (``-1`` if it cannot be located on the mesh).
-    contact_gaps : ndarray (n_contacts,)
-        Initial gap of each contact; the obstacle is at ``x_node + gap * direction``.
+    contact_nodes, contact_gaps : ndarray of int (n_contacts,), ndarray (n_contacts,)
+        Node of each contact (``-1`` if not on the mesh) and its initial gap; the obstacle is at
+        ``x_node + gap * direction``.
     contact_force : ndarray (n_t, n_contacts)
         Contact force ``p`` (compression positive; zeros for linear modes).
-    dim : int
-        1 (bars, beams), 2 or 3 (solids).
-    cell_type : str
-        meshio cell type of ``cells``: ``"line"``; ``"triangle"``, ``"quad"``, ``"tetra"``,
-        ``"hexahedron"`` (order 1) or ``"triangle6"``, ``"quad9"``, ``"tetra10"``,
-        ``"hexahedron27"`` (order 2).
-    coordinates : ndarray (n_nodes, 3)
-        Undeformed node coordinates (missing components zero).
     contact_direction : ndarray (n_contacts, 3)
-        Unit vector of each contact: the displacement component the contact acts on
-        (``g_N = gap - direction . u``), its normal for a rotated node of a solid (inclined or
-        negative normals, ``model.dofmap.frames``); ``e_x`` for bars, ``e_y`` for beams.
+        Unit vector of each contact (``g_N = gap - direction . u``): its normal for a rotated node of a
+        solid (``model.dofmap.frames``), ``e_x`` for bars, ``e_y`` for beams.
     contact_boundary : tuple of str
-        Named boundary of each contact (solids; ``""`` for a contact on a named point or a
-        1-D model): among the boundaries holding the node, the one holding the most contact
-        nodes with the same direction.
+        Named boundary of each contact (the one holding the most contact nodes with the same
+        direction); ``""`` for a contact on a named point or a 1-D model.
     contact_measure : ndarray (n_contacts,) or None
-        Tributary measure of each contact node on its boundary (length times thickness in
-        2-D, area in 3-D; :func:`tributary_measure`), zero for a contact on no named boundary;
-        None for bars and beams.
+        Tributary measure of each contact node on its boundary (:func:`tributary_measure`), zero off
+        named boundaries; None for bars and beams.
     boundaries : mapping str -> ndarray of int
         Nodes of every named boundary of a solid (every Lagrange node).
     boundary_facets : mapping str -> ndarray (n_facets, n_facet_vertices)
-        Vertex nodes of the facets of every named boundary (edges in 2-D, triangles or
-        quadrilaterals in cyclic order in 3-D).
+        Vertex nodes of the facets of every named boundary (edges in 2-D, cyclic polygons in 3-D).
     """
 
     kind: str

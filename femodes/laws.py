@@ -5,40 +5,23 @@ generalized derivative. This module is the only place where their formulas are w
 harmonic balance (``femodes.hbm``), time integration (``femodes.time``) and the results
 (``femodes.results``) call the methods below; nothing here knows about harmonics or meshes.
 
-Sign conventions (fixed once for the whole package)
----------------------------------------------------
-Equation of motion ``M q'' + C q' + K q + f_nl(q) = f(t) - w_c p``.
+Sign conventions (fixed once for the whole package; derivation: :doc:`/guide/contact`).
+Equation of motion ``M q'' + C q' + K q + f_nl(q) = f(t) - w_c p``. Contact at a DOF ``i``
+(``w_c = e_i``): normal gap ``g_N = g0 - q_i >= 0`` and contact force ``p >= 0`` (compression
+positive) acting on the structure along ``-w_c``. The Signorini conditions are written with the
+complementarity function of Shi & Legrand (2016), ``p - max(0, p - c g_N) = 0`` for any constant
+``c > 0`` (their ``lambda + max(0, c (u - g) - lambda) = 0`` with ``lambda = -p``,
+``u - g = -g_N``). The penalty law is ``p = k_p max(0, -g_N)``, the cubic spring ``f = k3 q_i^3``.
+``d max(0, s)/ds = 1 if s > 0 else 0``: at a kink the inactive side is taken (an element of
+Clarke's generalized gradient).
 
-Contact at a DOF ``i`` (direction vector ``w_c = e_i``): normal gap ``g_N = g0 - q_i >= 0`` and
-contact force ``p >= 0`` (compression positive) acting on the structure along ``-w_c``, i.e. the
-obstacle pushes the contact DOF back.
+A law declared on a boundary of a meshed solid (``at="right"``, a ``direction`` or a callable
+``gap``) is a template: ``StructuralModel.with_contact`` turns it into one law per boundary node,
+each on a single DOF (an inclined or negative normal is the normal DOF ``u_n = n . u`` of a nodal
+frame), so every formula below acts on one DOF.
 
-Signorini conditions ``g_N >= 0, p >= 0, g_N p = 0`` are written with the semismooth
-complementarity function of Shi & Legrand (2016)::
-
-    lambda + max(0, c (u - g) - lambda) = 0      (their variables: lambda = -p <= 0, u - g = -g_N)
-
-which, in ours, is ``p - max(0, p - c g_N) = 0`` for any constant ``c > 0``. (Check: if
-``p - c g_N <= 0`` the equation gives ``p = 0`` and then ``g_N >= 0``; otherwise it gives
-``c g_N = 0`` with ``p >= 0``.)
-
-The penalty law is ``p = k_p max(0, -g_N)`` and the cubic spring ``f = k3 q_i^3``.
-
-Contact on a boundary of a meshed solid: a law declared with a boundary name (``at="right"``), a
-``direction`` (the normal ``w_c``) or a callable ``gap`` is a template;
-``StructuralModel.with_contact`` turns it into one law per boundary node, each on a single DOF
-with a number as gap and no direction, so every formula below still acts on one DOF. A normal
-along +x, +y or +z selects that displacement DOF; an inclined or negative one is the normal DOF
-``u_n = n . u`` of a nodal frame (the model rotates the DOFs of the contact nodes).
-
-Generalized derivatives: ``d max(0, s)/ds = 1 if s > 0 else 0``, i.e. at a kink (``s = 0``)
-the inactive side is taken (Clarke's generalized gradient contains both one-sided values).
-
-Interface
----------
-Every method is vectorised: ``u`` and ``p`` are arrays of samples of any shape (time samples,
-or several laws at once, see ``stack``) and the results have their broadcast shape.
-
+Interface (vectorised: ``u`` and ``p`` are arrays of samples of any shape, results broadcast)
+---------------------------------------------------------------------------------------------
 ``UnilateralContact``
     ``gap_function(u)`` normal gap ``g_N``; ``residual(p, u, c)`` the complementarity function
     and its generalized partial derivatives; ``positive_part_form(c)`` what an exact Galerkin

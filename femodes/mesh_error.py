@@ -27,20 +27,8 @@ points (changes of opposite sign, growing, or an order outside the range) are *n
 their estimate is the larger change ``max(|d_1|, |d_2|)``, and the estimate's ``mesh_method`` says
 how many there are. With three meshes and ``order=`` the order is stated and only checked.
 
-Errors are relative to the fine branch's frequency. Verified (``tests/test_error_sources.py``):
-below grazing the bar's backbone is its linear mode; P1 with consistent mass at the contact node
-(``contact_mass=fm.ConsistentMass()``) converges at order 2 there, and 10, 20, 40 elements give
-the measured order 2.00 and the estimate of the 40-element error within 1 % of the true one
-(``pi / 2`` is the continuum's). With the mass
-redistributed at the contact node (the default) the linear frequency's error changes sign between
-20 and 40 elements (-2.0e-4, +6.6e-6): three meshes measure 3.47 and give 3.1x the true error.
-Past grazing the bar's first nonsmooth mode at 10-80 elements is not in the asymptotic range: its
-frequency error against the continuum (``tests/bar_stop_reference.py``) oscillates by about
-``3e-3`` with the energy next to internal-resonance tongues, and the truncation at H = 10-20 is
-of that size too. At 2 and 5 E_g (H = 10 and 20; pairs 10/20, 20/40, 40/80), pairs with order 2
-stated give 0.09x-2.8x the true error, 8 of 12 within a factor 3 (the misses: 20/10 at 2 E_g and
-three of 80/40, where the truncation dominates the true error); three meshes 0.18x-4.7x, 4 of 8
-within a factor 3 (two of the misses on the safe side).
+Errors are relative to the fine branch's frequency. How well the estimate does on the bar with a
+stop (measured): :doc:`/guide/accuracy` (The mesh's share).
 """
 
 from __future__ import annotations

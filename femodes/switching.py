@@ -1,66 +1,20 @@
 r"""Analyses layer: switching from a branch onto the branch born at one of its bifurcations.
 
-Period doubling (forced responses). A period-``T`` orbit ``x`` (harmonics of ``w / nu``) is also a
-period-``2T`` orbit: written on the harmonics of ``w / 2 nu`` it has only even harmonics. At a
-period-doubling point the harmonic balance Jacobian on that doubled basis, ``J2``, becomes
-singular, and because multiplication by a period-``T`` function couples harmonics ``m`` and
-``m +- 2k`` only, ``J2`` splits into an even block (the original Jacobian) and an *odd* block,
-which holds the singularity and whose null vector ``phi`` (odd harmonics only) is the
-period-doubled direction. The new branch is a pitchfork in the doubled space (``phi`` and
-``-phi`` are the same orbit shifted by ``T``).
+:func:`switch_branch` continues, from a bifurcation of a branch traced with ``stability``:
 
-:func:`switch_branch` (1) locates the period doubling of the HBM orbit itself near the reported
-bifurcation, by regula falsi on the sign of ``det`` of the odd block along the branch (the
-reported point may come from shooting, which refines the orbit: the HBM's own period doubling
-sits where its truncated series puts it); (2) takes ``phi`` from the smallest singular vector of
-the odd block there; (3) solves ``r2(x, w) = 0`` with ``phi . (x - x_pd) = a`` for a point at
-amplitude ``a`` on the new branch (Keller's method for a pitchfork); (4) continues it with
-:func:`~femodes.frequency_response` on the doubled harmonics, away from the bifurcation.
+- at a period doubling of a forced response, the period-doubled branch on the harmonics of
+  ``w / 2 nu``: it locates the HBM's own period doubling by regula falsi on the sign of ``det`` of
+  the odd block of the doubled Jacobian, takes its null vector ``phi`` and solves for a point at
+  amplitude ``a`` along ``phi`` (Keller's method for a pitchfork);
+- at a branch point (a real Floquet multiplier crossing ``+1`` away from a fold; on a backbone, a
+  k:1 internal-resonance tongue), the other branch through it: it locates the HBM's own branch
+  point by regula falsi on ``det [A; c^T]`` (``A = [r_x, r_p]``, ``c`` the secant), checks that
+  ``A`` drops rank there, takes the null vector orthogonal to the old tangent and continues the
+  new branch away from it (Keller 1977; Allgower and Georg 2003, sec. 8.1). An imperfect
+  connection (the backbone folds smoothly onto the tongue) is refused, not pretended.
 
-Branch points (forced responses and backbones). A real Floquet multiplier crossing ``+1`` away
-from a fold (:mod:`femodes.floquet`, kind ``"branch_point"``) is where another branch of orbits
-of the *same* period crosses this one: the ``n x (n+1)`` Jacobian ``A = [r_x, r_p]`` of the HBM
-problem ``r(x, p) = 0`` (parameter ``p = w`` for a forced response, ``log10 E`` for a nonlinear
-mode) drops rank there and has a two-dimensional null space (Keller 1977; Allgower and Georg
-2003, sec. 8.1). On a backbone this is how a k:1 internal-resonance tongue leaves it: a
-nontrivial pair of multipliers ``exp(+-i 2 pi w_2 / w)`` reaches ``+1`` when ``w_2 = k w``, and
-when a symmetry keeps the tongue's extra content out of the backbone orbits the tongue branches
-off at a genuine (pitchfork) branch point. Without such a symmetry the truncated HBM usually
-shows an *imperfect* connection instead (the backbone folds smoothly onto the tongue, no branch
-point): :func:`switch_branch` then says so rather than pretend.
-
-:func:`switch_branch` (1) locates the HBM branch's own branch point near the reported one by
-regula falsi on the test function ``det [A(z); c^T]`` with ``c`` the secant of the bracketing
-segment (``det [A; c^T] = c . a(z)`` with ``a`` the vector of signed maximal minors of ``A``,
-which spans its null space on a regular branch, vanishes at a simple branch point and changes
-sign there; at a fold ``A`` keeps full rank and the test function its sign), over solutions
-corrected on the secant (:func:`~femodes.floquet.solve_on_secant`); (2) checks the located point
-is genuine (the smallest singular value of ``A`` has dropped by orders of magnitude from the
-bracket's ends) and takes the two-dimensional null space of ``A`` there (dense SVD, in the
-scaled unknowns of the continuation); (3) takes the new direction ``phi`` as the null vector
-orthogonal to the old branch's tangent and solves ``r(z) = 0`` with ``<phi, z - z_bp> = a``
-(Keller's method: the old branch meets that hyperplane only at distance ``O(sqrt a)``);
-(4) continues the new branch from that point away from the branch point: a continuation
-(:func:`~femodes.solvers.continuation`) resumed from a state at that point whose tangent points
-along ``phi``, in ``w`` over the whole requested span for a forced response, in ``log10 E`` for a
-nonlinear mode, stopped when its frequency leaves the requested span. It also stops when the new
-branch comes back to the branch point: the symmetry-breaking orbits of a pitchfork often form a
-closed branch (an isola through the branch points of the symmetric branch, or a tongue that
-leaves the backbone and returns to it). The new branch starts with the branch point itself
-(point 0); with ``stability`` its bifurcations list that branch point first (index 0) and the
-branch points the test function finds along it (along the side branch of a pitchfork the
-critical multiplier only touches +1, so the Floquet multipliers do not show them):
-``switch_branch`` on the new branch at one of them leads back, e.g. off the tongue onto the
-backbone.
-
-On a backbone the pair that collides at ``+1`` and leaves the unit circle is located by
-:mod:`femodes.floquet` on the side where it is still complex (it classifies it as a branch point
-by its distance to ``+1``, ``floquet.COLLISION``): the reported frequency is only bracketed by
-that segment, and the HBM's own branch point is located here. Two branch points closer than one step of the branch (the two edges of a
-narrow tongue) change the test function's sign twice: the reported segment is then sampled at
-:data:`SUBDIVIDE` points. A third-order tongue (3:1 with the symmetry above) can be narrower
-than any step: the multipliers then never leave the circle, nothing is reported and there is
-nothing to switch at.
+The method, step by step, and its limits (narrow tongues, closed branches):
+:doc:`/guide/stability` (How switch_branch works).
 """
 
 from __future__ import annotations
@@ -174,57 +128,37 @@ def switch_branch(branch: Branch, bifurcation: Bifurcation, omega: tuple[float, 
         A forced response (:func:`~femodes.frequency_response`) or a nonlinear mode
         (:func:`~femodes.nonlinear_mode`) with its model, traced with ``stability=True``.
     bifurcation : Bifurcation
-        One of ``branch.bifurcations``: ``kind == "period_doubling"`` (forced responses) or
-        ``"branch_point"`` (both). A fold is no branch point (the
-        continuation passes it and no other branch is born there) and Neimark-Sacker or
-        nonsmooth points are not supported: ``NotImplementedError`` for those.
+        One of ``branch.bifurcations``: ``"period_doubling"`` (forced responses) or ``"branch_point"``
+        (both). Folds, Neimark-Sacker and nonsmooth points: ``NotImplementedError``.
     omega : (float, float)
-        Frequency span (rad/s) of the new branch; a branch point must lie inside it. Period
-        doubling: traced from the bifurcation towards the end of the span on the side where the
-        new branch exists. Branch point, forced response: traced away from the branch point
-        until it leaves the span at either end (or comes back to the branch point: a closed
-        branch). Branch point, nonlinear mode (a backbone; still a *frequency* span): the new
-        branch (e.g. an internal-resonance tongue) is continued in energy, upwards or downwards
-        as it leaves the branch point, until its frequency leaves this span, it comes back to
-        the branch point, or its energy leaves the backbone's energy span widened by three
-        decades each way.
+        Frequency span (rad/s) of the new branch, containing a branch point; traced away from the
+        bifurcation until it leaves the span or returns to the branch point (from a backbone: in
+        energy, within the backbone's energy span widened by three decades each way).
     amplitude : float, optional
-        Size of the first step along the new direction, in displacement coefficients (the
-        Euclidean norm of the step of ``Q``; default 1e-2 of the orbit's largest coefficient at
-        a period doubling, 2e-2 at a branch point). At a branch point its sign picks the side of
-        the new branch (the two sides of a symmetry-breaking pitchfork are mirror images).
+        First step along the new direction (norm of the step of ``Q``; default 1e-2, resp. 2e-2 at a
+        branch point, of the orbit's largest coefficient); at a branch point its sign picks the side.
     options : ContinuationOptions, optional
-        Continuation of the new branch (default :func:`~femodes.frequency_response_options`,
-        resp. :func:`~femodes.analyses.nonlinear_mode_options`); ``options.newton`` also
-        corrects the located points and the first point.
+        Continuation of the new branch (default :func:`~femodes.frequency_response_options`, resp.
+        :func:`~femodes.analyses.nonlinear_mode_options`); ``options.newton`` also corrects located points.
     stability : bool, str or StabilityOptions
-        Stability of the new branch, as in :func:`~femodes.frequency_response` (needed to switch
-        again from the new branch, e.g. back off a tongue).
+        Stability of the new branch, as in :func:`~femodes.frequency_response` (needed to switch again).
     window : int
-        Points of ``branch`` on each side of the bifurcation searched for the HBM's own
-        bifurcation.
+        Points of ``branch`` on each side of the bifurcation searched for the HBM's own bifurcation.
 
     Returns
     -------
     Branch
-        Period doubling: on the doubled harmonics ``Harmonics(2H, subharmonic=2 nu)``. Branch
-        point: on the harmonics of ``branch``, of the same kind, starting at the branch point
-        (point 0; with ``stability`` it is ``bifurcations[0]``, from which ``switch_branch``
-        leads back onto ``branch``). ``meta["switched_from"]`` says where it starts (the HBM's
-        own bifurcation ``omega_hbm``, the reported ``omega_reported``, the segment ``index`` of
-        ``branch``, and the singular values of the (scaled) matrix that show the singularity:
-        ``smallest_singular_value`` ~0, ``second_singular_value`` not, for a simple branch point).
+        On ``Harmonics(2H, subharmonic=2 nu)`` (period doubling) or the harmonics of ``branch``, from
+        the branch point (point 0; with ``stability`` its ``bifurcations[0]``). ``meta["switched_from"]``:
+        ``omega_hbm``, ``omega_reported``, ``index``, ``smallest_singular_value``, ``second_singular_value``.
 
     Raises
     ------
     NotImplementedError
-        Another kind of bifurcation; a period doubling of a nonlinear mode; a problem too
-        large for the dense factorisation (:data:`DENSE_LIMIT`: reduce the model with
-        :func:`~femodes.craig_bampton` or lower the harmonics).
+        Another kind of bifurcation; a period doubling of a nonlinear mode; a problem larger than
+        :data:`DENSE_LIMIT` (reduce with :func:`~femodes.craig_bampton` or lower the harmonics).
     RuntimeError
-        The HBM branch has no such bifurcation near the reported one (for a branch point: the
-        connection of the two families is imperfect in the truncated HBM, not a branch point),
-        or no point of the new branch was found at ``amplitude``.
+        No such bifurcation of the HBM near the reported one (imperfect connection), or no point at ``amplitude``.
     """
     if not isinstance(branch, Branch):
         raise TypeError(f"switch_branch: branch must be a femodes Branch, got {type(branch).__name__}")

@@ -35,28 +35,17 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
                    options: AccuracyOptions | None = None) -> Branch:
     """Attach the estimated error of every point of ``branch`` (``branch.error_estimate``).
 
-    Each point is solved again with ``H // 2`` and ``2 H`` harmonics on the hyperplane normal to
-    the branch (located folds: the fold of each level), and the error of the branch's level ``H``
-    is ``|X_2H - X_H| r / (r - 1)`` with the observed ratio ``r`` (docs/guide/accuracy.md); with
+    Each point is solved again with further harmonics (levels ``H, 2H, 4H``, or ``H, 2H + 1, 4H + 2``
+    for ``H < 4``: :func:`~femodes.accuracy.estimate_levels`) on the hyperplane normal to the branch,
+    and the error of level ``H`` is ``|X_2H - X_H| r / (r - 1)`` with the observed ratio ``r``; with
     complementarity contacts the frequency error is at least the distance to the far end of the
-    extrapolation bracket (:func:`~femodes.accuracy.extrapolation.bounded_by_bracket`). Odd
-    ``H >= 5`` uses the levels ``H, 2H, 4H``, ``H < 4`` the levels ``H, 2H + 1, 4H + 2``
-    (:func:`~femodes.accuracy.estimate_levels`; even ``H`` is cheaper). Cost: one corrector
-    solve per point and level, the finest dominating.
-
-    With ``rtol`` (branches with complementarity contacts), the frequency bracket of every
-    point whose half-width exceeds ``rtol`` (or that has none) is refined by a further level
-    ``4 H``, ``8 H``... up to ``max_harmonics``: the level is traced only over the part of the
-    branch that needs it, from the last point without contact before it (docs/guide/accuracy.md,
-    "Refinement to a tolerance"). Smooth branches have no extrapolation; their estimate is that
-    of the branch's own ``H`` (:func:`femodes.frequency_response` with ``rtol`` raises ``H``
-    instead).
+    extrapolation bracket. With ``rtol``, points whose bracket is wider are refined by levels ``4 H``,
+    ``8 H``... up to ``max_harmonics``. The method and its cost: :doc:`/guide/accuracy`.
 
     Parameters
     ----------
     branch : Branch
-        From :func:`femodes.frequency_response` or :func:`femodes.nonlinear_mode`, with its model
-        attached.
+        From :func:`femodes.frequency_response` or :func:`femodes.nonlinear_mode`, with its model attached.
     rtol : float, optional
         Requested relative accuracy of the frequency (``0 < rtol < 0.5``);
         :attr:`~femodes.results.ErrorEstimate.met` tells which points meet it.
@@ -66,40 +55,23 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
         The projection the branch was computed with (default exact).
     newton : NewtonOptions, optional
     method : ErrorMethod, optional
-        A strategy of :mod:`femodes.error_methods` (default
-        :class:`~femodes.error_methods.Auto`). ``Levels()``: harmonic balance at other H
-        (above). ``Shooting()``: the exact orbits of the flow with rigid stops
-        (docs/guide/accuracy.md, "Shooting"; forced branches of linear models with unilateral
-        contacts only, else ValueError), the levels for the points where no orbit is found.
-        ``Auto()``: shooting where it applies, else the levels. A method name (``"levels"``...)
-        is a deprecated spelling. :attr:`~femodes.results.ErrorEstimate.method` tells per point
-        which one answered.
+        A strategy of :mod:`femodes.error_methods`: ``Levels()`` (above), ``Shooting()`` (the exact orbits
+        of the flow with rigid stops; forced branches of linear models with unilateral contacts only,
+        else ``ValueError``) or ``Auto()`` (default: shooting where it applies, else the levels).
     time_limit : float, optional
-        Seconds after which the estimate stops (checked between the points of a level): the
-        points it has not estimated get none (method ``"failed"``) and a warning says so. The
-        analyses' ``rtol=`` gives ``options.rtol_budget`` times the plain branch's own time.
+        Seconds after which the estimate stops (checked between points); the points left get none
+        (method ``"failed"``) and a warning.
     options : AccuracyOptions, optional
-        Tuning of the estimators (default :class:`~femodes.AccuracyOptions`: the measured choices).
+        Tuning of the estimators (default :class:`~femodes.AccuracyOptions`).
 
     Returns
     -------
     Branch
-        The same branch, with :attr:`~femodes.Branch.accuracy` (an
-        :class:`~femodes.results.ErrorEstimate`) set.
-
-    Notes
-    -----
-    The estimate covers the harmonic truncation only (``accuracy.covers``); the mesh's share is
-    :func:`femodes.estimate_mesh_error`'s, which an estimate computed here keeps if the branch
-    had it. A backbone that is the energy continuation's grazing family past grazing
-    (:func:`femodes.nonsmooth_modes.family_caveat`) gets ``accuracy.caveat`` and meets ``rtol`` at
-    no point. The levels of a period-driven backbone (``meta["family"] == "contact phase"``) are
-    solved at each point from the branch's own orbit, neither continued in the energy nor walked
-    from the previous point: both followed the grazing family past grazing, and the estimate was
-    the distance between the two families (clamped bar, 20 elements, H = 10: 0.06 just past grazing
-    to 0.6 at 20 E_g, where the error against the continuum's mode is a few 1e-3; solved point by
-    point, 6e-4 to 1.6e-2 against true errors of 3e-4 to 7e-3). A point whose level has no orbit
-    near it (in a tongue of internal resonance) gets no estimate (method ``"failed"``).
+        The same branch, with :attr:`~femodes.Branch.accuracy` (an :class:`~femodes.results.ErrorEstimate`)
+        set. It covers the harmonic truncation only (``accuracy.covers``); a mesh share the branch had
+        is kept. A backbone past grazing (:func:`femodes.nonsmooth_modes.family_caveat`) gets
+        ``accuracy.caveat`` and meets ``rtol`` at no point; a point whose level has no orbit near it
+        gets no estimate (method ``"failed"``).
     """
     lad = ladder_for(branch, projection, newton)
     H = branch.harmonics.n_harmonics

@@ -21,54 +21,45 @@ ESTIMATE_METHODS = ("auto", "levels", "shooting")
 
 @dataclass(frozen=True, kw_only=True)
 class AccuracyOptions:
-    """Tuning of :func:`femodes.estimate_error` and of the analyses' ``rtol=``; the defaults are the
-    measured choices of ``benchmarks/README_accuracy.md`` (the comments in the source say which
-    measurement fixed each one). Change them with ``dataclasses.replace``.
+    """Tuning of :func:`femodes.estimate_error` and of the analyses' ``rtol=`` (``dataclasses.replace`` it).
+    The fields in the method: :doc:`/guide/accuracy`; their measurements: ``benchmarks/README_accuracy.md``.
 
     Parameters
     ----------
     rate_min, bracket_rate_max, same_point : float, default 1.5, 2.0, 1e-8
-        The levels' estimate: the smallest contraction ratio per doubling of H used (``r / (r -
-        1)`` at most 3), the largest ratio for which the frequency is bracketed (first order in
-        ``1/H``), and the relative change below which two levels are the same point.
+        Levels: the smallest contraction ratio per doubling of H used (``r / (r - 1)`` at most 3), the
+        largest ratio for which the frequency is bracketed, the relative change of the same point.
     rtol_budget, rtol_min_seconds : float, default 10.0, 60.0
-        The analyses' ``rtol=`` stops its estimate after ``rtol_budget`` times the plain branch's
-        own time, and not before ``rtol_min_seconds`` (:func:`rtol_time_limit`).
+        ``rtol=`` stops its estimate after ``rtol_budget`` times the plain branch's time, at least
+        ``rtol_min_seconds`` (:func:`rtol_time_limit`).
     min_fraction, walk_deadline : default 1/16, 3
-        Walking a level along the branch: the smallest fraction of a branch step (after halvings),
-        and the Newton iterations after which a step that has not halved its residual is given up.
+        Walking a level: the smallest fraction of a branch step, and the Newton iterations after which
+        a step that has not halved its residual is given up.
     split_gain, past_last, level_restarts, restart_min_points : default 0.75, 2, 4, 3
-        Tracing a level by continuation: two traces instead of one if they pass at most
-        ``split_gain`` of the points with contact; a trace stops ``past_last`` points after the
-        last point it is for; a trace that stopped short restarts (at most ``level_restarts``
-        times) from a walked point followed by ``restart_min_points`` unsolved ones.
+        Tracing a level: two traces if they pass at most ``split_gain`` of the contact points; stop
+        ``past_last`` points after the last needed one; restart at most ``level_restarts`` times from a
+        walked point followed by ``restart_min_points`` unsolved ones.
     level_points_per_point, level_points_slack : default 4, 100
-        A level's trace stops once it takes more continuation points than ``level_points_per_point``
-        per branch point passed plus ``level_points_slack`` (it follows loops the branch lacks).
+        A level's trace stops past this many continuation points per branch point passed, plus the slack.
     shooting_auto_max_dofs, shooting_auto_max_work, shooting_auto_max_events : default 120, 1e6, 8
-        ``fm.error_methods.Auto()`` shoots only models with at most that many DOFs with mass, whose probe
-        run evaluates at most that many modal terms and has at most that many events at a contact.
+        ``Auto()`` shoots only models with at most that many DOFs with mass, modal terms evaluated in
+        the probe run, and events at a contact.
     shooting_tol, shooting_step, shooting_max_iter : default 1e-11, 1e-7, 40
         A shooting solve stops at that residual, hyperplane value and relative frequency step, or
         after that many Newton iterations.
     shooting_stall, shooting_stall_alpha : default 3, 2^-8
         It gives up after that many successive steps cut below ``shooting_stall_alpha``.
     shooting_max_correction, shooting_floor : float, default 0.5, 1e-9
-        An orbit whose start state moved farther (relative) is another orbit; the floor of the
-        stated relative half-width of an exact limit.
+        A start state moved farther (relative) is another orbit; the floor of an exact limit's half-width.
     glancing_max, glancing_cos : float, default 3.0, 0.5
-        The exact orbit on a point's hyperplane is its counterpart if ``0 < kappa <=
-        glancing_max``, or if the exact curve crosses the plane at a cosine of at least
-        ``glancing_cos``.
+        The exact orbit on a point's hyperplane is its counterpart if ``0 < kappa <= glancing_max`` or
+        the exact curve crosses the plane at a cosine of at least ``glancing_cos``.
     shooting_exact_after, shooting_fold_slack : default 3, 1e-6
-        The exact branch is traced after that many points without an orbit; the relative slack
-        with which one of its folds is one a located fold already has.
+        Trace the exact branch after that many points without an orbit; relative slack of a fold match.
     shooting_fold_search : bool, default True
-        Locate the branch's folds on the exact curve (the extreme frequency of the exact orbits on
-        parallel planes); False leaves them to the folds of the exact branch over the span.
+        Locate the folds on the exact curve; False leaves them to the folds of the exact branch.
     grazing_points, fold_step_halvings : int, default 4, 4
-        A lower fold at most that many points from a point without contact may be a grazing; the
-        halvings of the failed steps of a fold search with massless contacts.
+        A lower fold that near a point without contact may be a grazing; halvings of a fold search step.
     """
 
     # -- the levels' estimate (estimate.PointLevels) --------------------------------------------

@@ -1,56 +1,31 @@
 """Models layer: the built-in meshes: line meshes for bars and beams, structured rectangles and boxes for solids.
 
-This module builds the 1-D meshes on which femodes assembles axial bars and
-Euler-Bernoulli beams (:func:`line_mesh`) and the structured 2-D/3-D meshes of
-solids (:func:`rectangle_mesh`, :func:`box_mesh`); reading meshes from files
-(:func:`load_mesh`) lives in :mod:`femodes.fe.mesh_io` and the named points both
-share in :mod:`femodes.fe.mesh_names`, re-exported here.  :func:`line_mesh` and
-:func:`load_mesh` return a ``skfem`` line mesh (an instance of
-``skfem.mesh.MeshLine1``; ``isinstance(m, skfem.MeshLine)`` is true) in the
-same *canonical form*:
+This module builds the 1-D meshes of axial bars and Euler-Bernoulli beams (:func:`line_mesh`) and
+the structured 2-D/3-D meshes of solids (:func:`rectangle_mesh`, :func:`box_mesh`); reading meshes
+from files (:func:`load_mesh`) lives in :mod:`femodes.fe.mesh_io` and the named points both share
+in :mod:`femodes.fe.mesh_names`, re-exported here. :func:`line_mesh` and :func:`load_mesh` return
+a ``skfem`` line mesh (``skfem.mesh.MeshLine1``) in the same *canonical form*:
 
 * ``m.p`` has shape ``(1, n + 1)`` and ``m.p[0]`` is strictly increasing;
-* ``m.t`` is ``[[0, 1, ..., n-1], [1, 2, ..., n]]``: element ``e`` joins
-  vertices ``e`` and ``e + 1``, elements are numbered from left to right;
+* ``m.t`` is ``[[0, 1, ..., n-1], [1, 2, ..., n]]``: element ``e`` joins vertices ``e`` and
+  ``e + 1``, elements are numbered from left to right;
 * every vertex is used by an element.
 
-Named points and named subdomains are stored with scikit-fem's public
-mechanisms (``Mesh.with_boundaries`` / ``Mesh.with_subdomains``) and read
-back through the public properties:
+Named points and subdomains use scikit-fem's public mechanisms (``Mesh.with_boundaries`` /
+``Mesh.with_subdomains``) and are read back through its public properties:
 
-* ``m.boundaries[name]`` -- ``numpy.int32`` array of *facet* indices of the
-  named point(s).  For a ``MeshLine`` the facets are the vertices and
-  scikit-fem numbers them as the sorted unique vertex indices found in
-  ``m.t`` (``Mesh.build_entities``), so because every vertex is used,
-  ``m.facets[0] == arange(n + 1)`` and a facet index *is* the vertex index:
-  ``m.p[0, m.boundaries["tip"]]`` is the coordinate of the point "tip".
-  Named points may be interior vertices (e.g. a contact point at mid span);
-  scikit-fem accepts those as facet sets.  The names can be passed directly
-  to scikit-fem, e.g. ``Basis(m, e).get_dofs("clamp")``.
-* ``m.subdomains[name]`` -- sorted ``numpy.int32`` array of element indices.
-  ``m.subdomains`` is always a ``dict`` (possibly empty), never ``None``.
+* ``m.boundaries[name]`` -- ``numpy.int32`` array of facet indices of the named point(s); a facet
+  index *is* the vertex index, so ``m.p[0, m.boundaries["tip"]]`` is the coordinate of "tip".
+  Named points may be interior vertices (a contact point at mid span), and the names can be
+  passed to scikit-fem, e.g. ``Basis(m, e).get_dofs("clamp")``.
+* ``m.subdomains[name]`` -- sorted ``numpy.int32`` array of element indices; ``m.subdomains`` is
+  always a ``dict`` (possibly empty), never ``None``.
 
-The names ``"left"`` and ``"right"`` are reserved: they are always present
-and denote the vertex with the smallest and the largest coordinate.  A user
-may name them explicitly only if they point at those ends.  Several names may
-refer to the same vertex (``"left"`` and ``"clamp"``, say).
-
-Subdomains may overlap and need not cover the mesh; deciding what an element
-in zero or several material subdomains means is left to the model layer.
-
-Notes
------
-scikit-fem 12 quirks relevant here (see also the tests):
-
-* ``skfem.MeshLine`` is a constructor *object* (``MeshLineConstructor``), not
-  a class; the class is ``skfem.mesh.MeshLine1``.
-* ``MeshLine1.with_defaults()`` raises ``AttributeError`` (it calls
-  ``self.params()`` which line meshes do not have), so the default
-  ``"left"``/``"right"`` tags are built here instead.
-* ``Mesh.refined()`` keeps named points (new vertices are appended) but
-  mislabels subdomains of a ``MeshLine``: it assumes child elements
-  ``i, i + N, ...`` while ``MeshLine1._uniform`` creates ``2 i, 2 i + 1``.
-  Rebuild the mesh with more elements instead of refining it.
+The names ``"left"`` and ``"right"`` are reserved: always present, they denote the vertex with the
+smallest and the largest coordinate, and a user may name them only if they point at those ends.
+Several names may refer to the same vertex. Subdomains may overlap and need not cover the mesh;
+what an element in zero or several material subdomains means is left to the model layer.
+The scikit-fem quirks this works around: :doc:`/guide/models` (Design notes).
 """
 from __future__ import annotations
 
@@ -153,43 +128,33 @@ def line_mesh(
     Parameters
     ----------
     length : float
-        Length of the line, finite and > 0.  The mesh covers
-        ``[start, start + length]``.
+        Length of the line, finite and > 0.  The mesh covers ``[start, start + length]``.
     n_elements : int
         Number of elements, an integer >= 1 (``bool`` is rejected).
     boundaries : dict of str to float, optional
-        Named points, ``name -> coordinate``.  Each coordinate must coincide
-        with a mesh vertex within ``POINT_RTOL * length``; otherwise a
-        ``ValueError`` names the point and the nearest vertex.  ``"left"``
-        (at ``start``) and ``"right"`` (at ``start + length``) are always
-        added; giving them explicitly is allowed only at those ends.
+        Named points, ``name -> coordinate``, each at a vertex within ``POINT_RTOL * length`` (else a
+        ``ValueError`` names the nearest vertex). ``"left"`` and ``"right"`` are always added at the ends.
     subdomains : dict of str to (float, float), optional
-        Named subdomains, ``name -> (x0, x1)`` with ``x0 < x1``.  An element
-        belongs to the subdomain if its midpoint lies in the closed interval
-        ``[x0, x1]``.  Every interval must contain at least one element.
-        Subdomains may overlap and need not cover the line.
+        Named subdomains, ``name -> (x0, x1)`` with ``x0 < x1``: the elements whose midpoint lies in
+        ``[x0, x1]``, at least one. Subdomains may overlap and need not cover the line.
     grading : float
-        Ratio ``last element length / first element length`` (> 0), element
-        lengths in geometric progression.  ``1`` gives a uniform mesh,
-        ``< 1`` refines towards ``start + length``.  Has no effect when
-        ``n_elements == 1``.
+        Ratio of the last to the first element length (> 0), lengths in geometric progression: ``1``
+        uniform, ``< 1`` refined towards ``start + length``.
     start : float
         Coordinate of the left end.
 
     Returns
     -------
     skfem.MeshLine
-        Canonical line mesh (see the module docstring): vertex ``k`` is the
-        ``k``-th from the left, ``mesh.boundaries[name]`` holds vertex (=
-        facet) indices and ``mesh.subdomains[name]`` element indices.
+        Canonical line mesh (module docstring): vertex ``k`` is the ``k``-th from the left,
+        ``boundaries[name]`` holds vertex (= facet) indices, ``subdomains[name]`` element indices.
 
     Raises
     ------
     TypeError
         If an argument has the wrong type; the message names the argument.
     ValueError
-        If an argument has an invalid value, a named point is not at a
-        vertex or a subdomain contains no element.
+        An invalid value, a named point not at a vertex or a subdomain without an element.
 
     Examples
     --------

@@ -136,23 +136,27 @@ def _is_line_type(cell_type: str) -> bool:
 def load_mesh(path) -> skfem.Mesh:
     """Read a straight 1-D mesh (bar or beam), or a 2-D/3-D solid mesh, from a file.
 
-    A file with triangle/quadrilateral (2-D) or tetrahedron/hexahedron (3-D) cells is read as
-    a solid mesh (see "Solid meshes" in the notes); any other file as a line mesh.
+    A file with triangle/quadrilateral (2-D) or tetrahedron/hexahedron (3-D) cells is read as a solid
+    mesh; any other file as a line mesh. ``line`` cells are the elements (higher-order ones by their
+    end vertices), ``vertex`` cells carry named points, and gmsh physical groups become names (unnamed
+    tags: ``"point_<tag>"``, ``"region_<tag>"``). The line must be one straight, unbranched chain; its
+    coordinate ``s`` is ``p . d`` along its unit direction ``d`` (for a line along an axis, that
+    coordinate). Quadratic solid cells are read by their corner nodes. The full rules (cells,
+    geometry, names, solids): :doc:`/howto/gmsh-mesh`.
 
     Parameters
     ----------
     path : str or os.PathLike
-        Mesh file in any format meshio reads (gmsh ``.msh`` v2/v4 ascii or
-        binary, ``.vtu``, ``.vtk``, ``.xdmf``, ...).
+        Mesh file in any format meshio reads (gmsh ``.msh`` v2/v4 ascii or binary, ``.vtu``, ``.vtk``,
+        ``.xdmf``, ...).
 
     Returns
     -------
     skfem.MeshLine, or skfem.MeshTri/MeshQuad/MeshTet/MeshHex
-        Canonical line mesh (see the module docstring) with the coordinate
-        ``s`` along the line; named points in ``mesh.boundaries`` and
-        subdomains in ``mesh.subdomains``.  For a solid mesh: named boundaries
-        (facet sets) in ``mesh.boundaries``, subdomains in ``mesh.subdomains``
-        and named points from :func:`named_points`.
+        Canonical line mesh (see the module docstring) with the coordinate ``s`` along the line; named
+        points in ``mesh.boundaries`` and subdomains in ``mesh.subdomains``. For a solid mesh: named
+        boundaries (facet sets) in ``mesh.boundaries``, subdomains in ``mesh.subdomains`` and named
+        points from :func:`named_points`.
 
     Raises
     ------
@@ -161,54 +165,8 @@ def load_mesh(path) -> skfem.Mesh:
     FileNotFoundError
         If the file does not exist.
     ValueError
-        If meshio cannot read the file, or the mesh is not a single straight
-        unbranched line; the message names the file and the problem.
-
-    Notes
-    -----
-    *Cells.*  ``line`` cells are the elements.  Higher-order line cells
-    (``line3``, ...) are accepted but only their two end vertices are used
-    (meshio stores them first), giving linear elements; the geometry must be
-    straight anyway.  ``vertex`` cells carry named points.  Cells of other
-    types (triangles, ...) are ignored.  Vertices not used by any line cell
-    (e.g. gmsh geometry points) are dropped, vertices and elements are
-    renumbered from left to right.  Nodes are *not* merged: two elements are
-    connected only if they share a node index.  An element listed twice
-    (gmsh 2.2 repeats elements that belong to two physical groups) is kept
-    once and belongs to both groups.
-
-    *Geometry.*  Points may have 1, 2 or 3 coordinates.  They must lie on one
-    straight line (max distance ``COLLINEAR_RTOL * length``) and form a
-    single connected chain without branches, loops, folds or zero-length
-    elements.  With ``d`` the unit direction of the line, oriented so that its
-    largest component (the first one on ties) is positive, the coordinate is
-    ``s = p . d``: its origin is the foot of the perpendicular from the
-    coordinate origin.  For a line along a coordinate axis ``s`` is that
-    coordinate (a mesh along x keeps its x values exactly); for a tilted line
-    through the origin ``s`` is the distance from the origin.
-
-    *Names.*  Region tags come from the first cell-data array among
-    ``"gmsh:physical"``, ``"region"``, ``"regions"``, ``"subdomain"``,
-    ``"subdomains"`` (case-insensitive).  Tags on ``vertex`` cells become
-    named points (``mesh.boundaries``), tags on line cells subdomains
-    (``mesh.subdomains``).  A tag is named through gmsh-style ``field_data``
-    (``name -> [tag, dim]``, i.e. gmsh ``$PhysicalNames``; matched on tag
-    *and* dimension); unnamed tags get the names ``"point_<tag>"`` (0-D) and
-    ``"region_<tag>"`` (1-D).  gmsh's physical tag ``0`` (element in no
-    physical group) is ignored.  ``.vtu``/``.xdmf`` files written by meshio
-    keep the tags but not the names, so they load with the fallback names.
-    ``"left"`` and ``"right"`` are always added, as in :func:`line_mesh`.
-
-    *Solid meshes.*  The cells of the highest dimension (``triangle``, ``quad``,
-    ``tetra``, ``hexahedron`` and their quadratic variants ``triangle6``, ``quad9``,
-    ``tetra10``, ``hexahedron27``) make a scikit-fem ``MeshTri``/``MeshQuad``/``MeshTet``/
-    ``MeshHex`` (``skfem.io.meshio.from_meshio``; a 2-D mesh must lie in a plane
-    ``z = const``).  Quadratic cells (``triangle6``, ``tetra10``, ...; gmsh
-    ``SetOrder 2``) are read by their corner nodes: the geometry becomes straight-sided and the
-    mid-side nodes are dropped (use ``femodes.solid(..., order=2)`` for quadratic fields).  Named physical groups of facets (lines in 2-D, triangles/quads in
-    3-D) become ``mesh.boundaries``, of cells ``mesh.subdomains`` and of points (``vertex``
-    cells) named points, read back with :func:`named_points`.  Nodes used by no cell are
-    dropped.  Unnamed tags (``.vtu`` files) are not turned into names for solid meshes.
+        If meshio cannot read the file, or the mesh is not a single straight unbranched line; the
+        message names the file and the problem.
     """
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(

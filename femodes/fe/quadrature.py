@@ -1,47 +1,23 @@
 """Models layer: the quadrature order of every element femodes assembles (mass and stiffness).
 
-scikit-fem's default rule integrates polynomials of degree ``2 * element.maxdeg`` exactly, where
-``maxdeg`` is the *total* degree of the shape functions. On quadrilaterals and hexahedra that is
-twice the degree per direction of the tensor-product (Q) shape functions: ``ElementHex2`` has
-``maxdeg = 6``, so the default rule is 7-point Gauss per direction, 343 points per element,
-where 27 are exact. This module states, per element, the polynomial degree of the mass and
-stiffness integrands on an *affine* element (a simplex, a parallelogram or a parallelepiped:
-constant Jacobian) and the lowest scikit-fem rule that integrates it exactly
-(``skfem.Basis(..., intorder=...)``; ``skfem.quadrature.get_quadrature`` builds the rule).
+This module states, per element, the polynomial degree of the mass and stiffness integrands on an
+*affine* element (a simplex, a parallelogram or a parallelepiped: constant Jacobian) and the
+lowest scikit-fem rule that integrates it exactly (``skfem.Basis(..., intorder=...)``;
+``skfem.quadrature.get_quadrature`` builds the rule), instead of scikit-fem's default rule, which
+is exact for twice the *total* degree and so far too fine on quadrilaterals and hexahedra.
 
 ``intorder`` is the degree scikit-fem's rule integrates exactly: the total degree on lines,
 triangles and tetrahedra, the degree *per direction* on quadrilaterals and hexahedra (tensor
-Gauss with ``ceil((intorder + 1) / 2)`` points per direction). Points per element, before
-(scikit-fem's default) -> after, mass / stiffness:
-
-=================  ====================  ====================
-element            mass                  stiffness
-=================  ====================  ====================
-P1 line (bar)      2 -> 2                2 -> 2 (1D rule has >= 2 points)
-P2 line (bar)      3 -> 3                3 -> 2
-Hermite (beam)     4 -> 4                4 -> 2
-P1 triangle        3 -> 3                3 -> 3 (no 1-point triangle rule in scikit-fem)
-P2 triangle        6 -> 6                6 -> 3
-Q1 quadrilateral   9 -> 4                9 -> 4
-Q2 quadrilateral   25 -> 9               25 -> 9
-P1 tetrahedron     4 -> 4                4 -> 1
-P2 tetrahedron     11 -> 11              11 -> 4
-Q1 hexahedron      64 -> 8               64 -> 8
-Q2 hexahedron      343 -> 27             343 -> 27
-=================  ====================  ====================
+Gauss with ``ceil((intorder + 1) / 2)`` points per direction).
 
 *Non-affine elements.* A quadrilateral or hexahedron whose vertices do not form a parallelogram
-or parallelepiped has a bilinear/trilinear geometry map with a varying Jacobian ``J``. The rule
-chosen here is then the standard *full integration* of Q_p elements, ``(p + 1)``-point Gauss per
+or parallelepiped has a bilinear/trilinear geometry map with a varying Jacobian. The rule chosen
+here is then the standard *full integration* of Q_p elements, ``(p + 1)``-point Gauss per
 direction (Hughes, *The Finite Element Method*, 2000, sec. 4.1 and table 3.I.1; Zienkiewicz,
-Taylor & Zhu, 7th ed., sec. 6.12): it integrates ``u v det J`` exactly on every quadrilateral
-(``det J`` of a bilinear map is of degree 1 per direction, so the mass integrand has degree
-``2p + 1``), but not on a distorted hexahedron (``det J`` of degree 2 per direction: ``2p + 2``)
-and not the stiffness of either (``J^-1`` makes it rational). Its error is of higher order than
-the discretisation error and it keeps the element stable (no hourglass modes); the test suite
-checks that the frequencies of a distorted mesh move far less than the discretisation error.
-Meshes with curved (quadratic) geometry (``skfem.MeshTri2``, ``MeshQuad2``, ``MeshTet2``,
-``MeshHex2``) keep scikit-fem's default rule (:func:`orders` returns None).
+Taylor & Zhu, 7th ed., sec. 6.12). Meshes with curved (quadratic) geometry (``skfem.MeshTri2``,
+``MeshQuad2``, ``MeshTet2``, ``MeshHex2``) keep scikit-fem's default rule (:func:`orders` returns
+None). The points per element before and after, and the accuracy on distorted cells:
+:doc:`/guide/solids` (Design notes).
 """
 
 from __future__ import annotations

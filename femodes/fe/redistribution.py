@@ -129,13 +129,9 @@ def redistribute_surface_mass(fe, M: sp.spmatrix, dofs) -> tuple[sp.csr_matrix, 
     * total mass and first moments (centre of mass) of every rigid translation are conserved:
       ``r^T (dm w w^T) r = dm`` and ``r^T (dm w w^T) x = ds``;
     * ``M_new`` is positive definite on the other DOFs without any check: ``D M D`` is (a
-      principal submatrix of ``M``) and every added term is positive semidefinite. (Moving the
-      mass to diagonal entries instead, as in 1-D, needs negative masses to keep the centre of
-      mass, which make the consistent P1/Q1 mass indefinite in 2-D and 3-D.)
+      principal submatrix of ``M``) and every added term is positive semidefinite.
 
-    Cost: ``O(nnz(M))`` plus ``O(t^2)`` per contact DOF (``t`` ~ 10-60 targets): near-linear in
-    the number of contact DOFs and of DOFs, no factorization and no dense ``n x n`` work. The
-    added blocks couple the two rings of each contact node (a little local fill).
+    Cost and why not diagonal lumps: :doc:`/guide/solids` (Design notes).
 
     Returns the new mass matrix and a report ``{"dofs", "mass_moved", "total_mass",
     "com_shift", "lumps"}`` (``com_shift``: largest change of a centre of mass, relative to the

@@ -199,14 +199,14 @@ def solid(
     ``sigma = lambda tr(eps) I + 2 mu eps``, ``eps = (grad u + grad u^T) / 2``, with
     ``mu = E / (2 (1 + nu))`` and ``lambda = E nu / ((1 + nu)(1 - 2 nu))`` in 3-D and plane
     strain, ``lambda = E nu / (1 - nu^2)`` in plane stress; ``t`` is the thickness of a 2-D
-    solid (1 in 3-D). Consistent mass.
+    solid (1 in 3-D). Consistent mass; each form takes the lowest Gauss rule exact on affine cells
+    (:mod:`femodes.fe.quadrature`; points per element: :doc:`/guide/solids`).
 
     Parameters
     ----------
     mesh : skfem.MeshTri, MeshQuad, MeshTet or MeshHex
-        From :func:`femodes.rectangle_mesh`, :func:`femodes.box_mesh` or :func:`femodes.load_mesh`;
-        its named boundaries (``mesh.boundaries``) are the locations of supports, contacts and
-        forces.
+        From :func:`femodes.rectangle_mesh`, :func:`femodes.box_mesh` or :func:`femodes.load_mesh`; its
+        named boundaries are the locations of supports, contacts and forces.
     material : Material or mapping {subdomain: Material}
         ``E``, ``rho`` and ``nu`` (one material, or one per named subdomain covering the mesh).
     clamped : str or list of str, optional
@@ -218,10 +218,9 @@ def solid(
         2-D only (default ``"stress"``); a 3-D mesh with ``plane`` or ``thickness`` is an error.
     thickness : float, optional
         2-D only (default 1): multiplies M and K.
-    order : {1, 2}
-        Lagrange order: P1/P2 on simplices, Q1/Q2 on quadrilaterals and hexahedra. P1
-        triangles and tetrahedra lock in bending (a slender strip needs many elements through
-        the height); prefer quadrilaterals or ``order=2`` for bending.
+    order : {1, 2}, default 1
+        Lagrange order: P1/P2 on simplices, Q1/Q2 on quadrilaterals and hexahedra. P1 simplices lock
+        in bending; prefer quadrilaterals or ``order=2`` there.
     points : mapping {name: coordinates}, optional
         Extra named points: each must be a node (a vertex, or a P2 node) within
         ``POINT_RTOL`` times the mesh extent. gmsh physical points of :func:`femodes.load_mesh`
@@ -234,18 +233,6 @@ def solid(
         ``at=("tip_top", "u_y")`` selects one DOF of a named point; ``at="right"`` names a
         boundary: contact laws expand to one contact per node and forces are distributed over it
         (see :meth:`femodes.StructuralModel.with_contact` and ``with_forcing``).
-
-    Notes
-    -----
-    Quadrature (:mod:`femodes.fe.quadrature`): each form takes the lowest Gauss rule exact on
-    affine cells (triangles, tetrahedra, parallelograms, parallelepipeds): mass ``u.v`` of degree
-    ``2p``, stiffness of degree ``2p - 2`` on simplices (P2 tetrahedra: 11 and 4 points) and ``2p``
-    per direction on quadrilaterals and hexahedra (Q2 hexahedra: 3 x 3 x 3 = 27 points, where
-    scikit-fem's default takes 343). On distorted quadrilaterals and hexahedra this
-    ``(p + 1)``-point Gauss rule per direction is the standard full integration: exact for the
-    mass of any quadrilateral, not for the mass of a distorted hexahedron nor for the (rational)
-    stiffness of either; its error is of higher order than the discretisation error. Meshes with
-    curved (quadratic) geometry keep scikit-fem's default rule.
     """
     if isinstance(order, (bool, np.bool_)) or not isinstance(order, (int, np.integer)) or order not in (1, 2):
         raise ValueError(f"solid: order must be 1 or 2, got {order!r}")

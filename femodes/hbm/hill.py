@@ -2,10 +2,9 @@ r"""Discretise layer: Floquet exponents of a harmonic balance solution by Hill's
 
 A perturbation ``y(t) = e^{s t} p(t)`` of a periodic solution, ``p`` periodic with the solution's
 period ``T = 2 pi nu / w``, solves the linearised equations of motion when ``s`` is a *Floquet
-exponent*; the Floquet multipliers are ``mu = exp(s T)``. Expanding ``p`` on the same harmonics
-as the solution, ``d/dt`` acts on the coefficients as ``w D1 + s``, so the harmonic balance
-Jacobian ``J0`` of the solution becomes the quadratic matrix polynomial (Hill's problem; Lazarus
-and Thomas, C. R. Mecanique 338 (2010) 510-517; Krack and Gross, *Harmonic Balance for
+exponent*; the multipliers are ``mu = exp(s T)``. Expanding ``p`` on the solution's harmonics,
+the harmonic balance Jacobian ``J0`` becomes the quadratic matrix polynomial (Hill's problem;
+Lazarus and Thomas, C. R. Mecanique 338 (2010) 510-517; Krack and Gross, *Harmonic Balance for
 Nonlinear Vibration Problems*, 2019, sec. 3.6)
 
 .. math::
@@ -14,51 +13,22 @@ Nonlinear Vibration Problems*, 2019, sec. 3.6)
     J_1 = I \otimes (C - \xi M) + 2\omega\,D_1 \otimes M, \qquad J_2 = I \otimes M,
 
 on the displacement unknowns (zero on the contact-force unknowns, whose equations are algebraic).
-The contact and nonlinear terms enter through ``J0`` only: the generalized Jacobian of the
-projected laws (for a complementarity contact, the linearised law holds the contact DOF on the
-obstacle during the contact phases and frees its force elsewhere).
+The contact and nonlinear terms enter through ``J0`` only (the generalized Jacobian of the laws).
 
-Selection of the meaningful exponents. The truncated Hill spectrum holds each exponent ``s``
-together with copies ``s + i m w / nu`` whose eigenvectors are the same motion written with the
-harmonics shifted by ``m``; all give the same multiplier, and the copies near the truncation edge
-are inaccurate. Each eigenvector's *harmonic centroid* (the mass-weighted mean of the harmonic
-index of its complex Fourier coefficients ``e^{i m w t / nu}``, ``m = -H .. H``) tells the copies
-apart: the central copy has the centroid nearest to 0 (the symmetric-eigenvector criterion of
-Guillot, Lazarus, Thomas, Vergez and Cochelin, J. Comput. Phys. 416 (2020) 109477, in a
-weighted form). Exponents are taken in order of increasing ``|centroid|``, a copy of an exponent
-already taken (``s`` differing by a nonzero multiple of ``i w / nu``, as the two members
-``+- i w / 2 nu`` of a period-doubling family do) is skipped, until ``2 n_m`` exponents are held
-(``n_m`` the DOFs with mass).
+Selection: of each family of copies ``s + i m w / nu``, the exponent whose eigenvector has the
+*harmonic centroid* (mass-weighted mean harmonic index) nearest 0 is kept (Guillot, Lazarus,
+Thomas, Vergez and Cochelin, J. Comput. Phys. 416 (2020) 109477, in a weighted form), copies
+already taken skipped, until ``2 n_m`` exponents are held (``n_m`` the DOFs with mass).
 
-Solvers. Small problems (up to :data:`DENSE_LIMIT` unknowns) solve the linearised pencil densely
-(one shift-and-invert of the whole spectrum). Larger ones use ARPACK in shift-invert mode with one
-sparse LU of the complex Hill matrix ``J(sigma)`` per shift, the shifts placed along the
-stability boundary (``Re s = 0``) in the central strip ``0 <= Im s <= w / 2 nu``, and every
-exponent found is followed to the central member of its family: the exponents nearest the
-boundary are found (not all ``2 n_m``: ``HillResult.complete`` is False); an exponent far to the
-right of the boundary, farther than the spacing of the spectrum near it, can be missed.
-
-Large models and many contacts: Hill's problem on a reduction. The contact and nonlinear terms
-act on a few DOFs only; the rest of the structure enters Hill's problem through its linear
-dynamics at the frequencies ``Im s + m w / nu``, ``|m| <= H``. When Hill's problem has more than
-:data:`DENSE_LIMIT` unknowns with mass or damping, the exponents are those of the model reduced
-to its free-interface modes up to a cut-off ``omega_c = ALPHA (H + 1/2) w / nu`` plus the residual
-flexibility of the DOFs the laws act on (:mod:`femodes.hbm.hill_reduction`): those DOFs carry no
-mass there, so their unknowns, like the contact forces', are eliminated exactly (a Schur
-complement, :func:`_dense`) and the dense eigenproblem has ``(2H + 1) m`` unknowns for ``m``
-modes, whatever the number of contacts. The families above the cut-off are not computed, nor the
-combination resonances between two of them; for them, a reduction that can resolve them needs
-harmonics up to their frequencies. The truncation error is estimated at every point from the
-exponents with the cut-off ``omega_c / r`` nearest to the leading ones, as ``|delta| / (r^2 - 1)``,
-and ``omega_c`` is raised until that estimate is below :data:`REDUCTION_TOL`
-(``HillResult.reduction_error``) or the reduction would hold half of the model's DOFs. The modes
-and the static solves are computed once per model, and the cut-off that sufficed is where the
-next point starts, so along a branch the cost per point is that of a small Hill problem and of
-one dense elimination of the algebraic unknowns. Measured: a clamped bar with one stop, the
-leading multiplier equal to the whole model's to 1e-13 from one mode on (a Craig-Bampton
-reduction needed cut-offs of 1.6 to 25 times ``(H + 1/2) w`` for 4.4e-4 to 1.2e-7); a
-Craig-Bampton blade with 27 contacts (37 DOFs, H = 5): 0.08 s a point, where the whole model's
-dense solve took 2 s and its shift-invert solve did not converge.
+Solvers: up to :data:`DENSE_LIMIT` unknowns a dense solve of the whole spectrum; larger ones
+ARPACK shift-invert with shifts along ``Re s = 0`` (the exponents nearest the boundary only,
+``HillResult.complete`` False). With more than :data:`DENSE_LIMIT` unknowns with mass or damping,
+the exponents are those of the model reduced to its free-interface modes up to a cut-off
+``omega_c = ALPHA (H + 1/2) w / nu`` plus the residual flexibility of the DOFs the laws act on
+(:mod:`femodes.hbm.hill_reduction`), whose unknowns are eliminated exactly (:func:`_dense`);
+``omega_c`` is raised until the estimated truncation error is below :data:`REDUCTION_TOL`
+(``HillResult.reduction_error``) or the reduction would hold half of the model's DOFs. Accuracy,
+cost and measurements: :doc:`/guide/stability` (Hill's method).
 """
 
 from __future__ import annotations

@@ -42,68 +42,23 @@ def positive_part(h, phi, *, roots=None):
         \mathrm{proj} = G\varphi, \qquad
         \frac{\partial\,\mathrm{proj}}{\partial\varphi} = G,
 
-    with basis ``b = [1, cos θ, sin θ, ...]`` and ``n`` the
-    :meth:`Harmonics.projection_norms`.  ``proj = G phi`` holds because
-    ``max(0, phi) = phi * 1{phi > 0}``; the derivative equals ``G``
-    because ``phi`` vanishes at the ends of the positive intervals, so the
-    boundary terms of the Leibniz rule cancel.  ``proj`` is therefore
-    continuously differentiable wherever the roots of ``phi`` are simple.
-
-    Algorithm (no quadrature):
-
-    1. Candidate sign changes. :class:`~femodes.hbm.trigroots.GridRoots` (default) samples
-       ``phi`` and ``phi'`` by FFT on 16 points per period of the highest harmonic and takes
-       the interpolated zeros of both (sign changes, and extrema that may dip across zero
-       between samples); ``O(H log H)``, 24x cheaper than the colleague matrix at H = 80
-       (0.8 vs 19.6 ms per signal) and equal to it to 3e-14 on 4800 random signals and on
-       tangencies down to depth 1e-8 (``tests/test_harmonics.py``). Or roots of a polynomial
-       whose zeros contain the real zeros of ``phi``:
-       :class:`~femodes.hbm.trigroots.ColleagueRoots` takes the even trigonometric polynomial
-       ``g(θ) = phi(α+θ) phi(α-θ)`` of degree ``2H``, whose cosine
-       coefficients are the Chebyshev coefficients of ``g`` in
-       ``x = cos θ``, and computes the eigenvalues of the (real) colleague
-       matrix (I. J. Good, Quart. J. Math. 12 (1961) 61-68); each root
-       ``x`` near ``[-1, 1]`` gives candidates ``α ± arccos x``.
-       :class:`~femodes.hbm.trigroots.CompanionRoots` uses the complex companion matrix of
-       ``z^H phi(z)``, ``z = exp(iθ)``, with ``a_k = (c_k - i s_k)/2``
-       (J. P. Boyd, J. Eng. Math. 56 (2006) 203-219), taking the
-       arguments of the roots near ``|z| = 1``.  Both are batched over
-       signals with :func:`numpy.linalg.eigvals` (LAPACK ``geev``, which
-       balances the matrix); the real colleague matrix is 2-3x cheaper
-       for ``H >= 20``.  Leading harmonics with
-       ``max(|c_k|, |s_k|) <= 1e-16 max|phi|`` are dropped (effective
-       degree).
-       With :class:`~femodes.hbm.trigroots.GridRoots` the sign changes are read off the grid
-       directly (:meth:`~femodes.hbm.trigroots.GridRoots.sign_changes`): a cell whose samples
-       change sign brackets a root, started from the cubic Hermite interpolant of the cell's
-       values and slopes; a cell where ``phi'`` changes sign is tested at its interpolated
-       extremum. Signals with a sample or a dip within rounding of zero take steps 2-3 below
-       (measured: 0 of the 795 signals of the seed's forced curve at H = 20; ``positive_gram`` on
-       them 660 -> 380 us, 845 -> 510 us at H = 40).
-    2. The candidates and the midpoints between them are sorted
-       cyclically and ``phi`` is evaluated there.  Values below the
-       rounding bound ``8 eps sum|phi_a|`` are "undetermined" and take the
-       sign of the previous point, so a near-tangent sign change of depth
-       at rounding level is ignored.  Spurious or duplicated candidates
-       only split an interval; sampling at the candidates themselves also
-       catches pairs of close roots whose eigenvalues came out as one
-       complex pair.
-    3. Every sign change between consecutive test points brackets a root,
-       which is polished by safeguarded Newton iteration (bisection
-       fallback) on the real trigonometric polynomial.
-    4. The integrals of ``cos mθ`` and ``sin mθ`` (``m <= 2H``) over the
-       positive set are differences of antiderivatives at the roots;
-       products of basis functions follow by product-to-sum formulas.
-
-    Special cases: ``phi`` positive everywhere gives ``G = I`` (exactly),
-    non-positive everywhere (including ``phi == 0``) gives ``G = 0``.
+    with basis ``b = [1, cos θ, sin θ, ...]`` and ``n`` the :meth:`Harmonics.projection_norms`.
+    ``proj = G phi`` holds because ``max(0, phi) = phi * 1{phi > 0}``; the derivative equals ``G``
+    because ``phi`` vanishes at the ends of the positive intervals, so ``proj`` is continuously
+    differentiable wherever the roots of ``phi`` are simple. No quadrature: candidate sign changes
+    from ``roots``, test points between them (values below the rounding bound ``8 eps sum|phi_a|``
+    take the previous sign), roots polished by safeguarded Newton, and closed-form integrals between
+    them. ``phi`` positive everywhere gives ``G = I`` exactly, non-positive everywhere ``G = 0``. The
+    algorithm step by step, with its measurements: :doc:`/guide/harmonic-balance`.
 
     Parameters
     ----------
     phi : array_like, shape ``(n_coef,)``
         Coefficients of one signal (many signals at once: :class:`ExactProjection`).
     roots : GridRoots, ColleagueRoots or CompanionRoots, optional
-        Candidate root finder (see above); default ``GridRoots()``.
+        Candidate root finder, default ``GridRoots()`` (FFT samples of ``phi`` and ``phi'``); the
+        others use the colleague matrix (I. J. Good, Quart. J. Math. 12 (1961) 61-68) or the companion
+        matrix (J. P. Boyd, J. Eng. Math. 56 (2006) 203-219).
 
     Returns
     -------
@@ -114,11 +69,9 @@ def positive_part(h, phi, *, roots=None):
 
     Notes
     -----
-    Accuracy: roots are accurate to ``~ eps |phi| / |phi'|``; ``proj`` and
-    ``G`` to a few ``eps`` relative to ``max|phi|`` for simple roots.  Near
-    a tangency (double root) of depth ``delta`` the interval length
-    ``~ sqrt(delta)`` is resolved as long as ``delta`` exceeds the
-    rounding bound above.
+    Accuracy: roots are accurate to ``~ eps |phi| / |phi'|``; ``proj`` and ``G`` to a few ``eps``
+    relative to ``max|phi|`` for simple roots. Near a tangency (double root) of depth ``delta`` the
+    interval length ``~ sqrt(delta)`` is resolved as long as ``delta`` exceeds the rounding bound.
     """
     phi = check_phi(h, phi, single=True)
     G = positive_gram(h, phi[None, :], roots)[0][0]

@@ -208,21 +208,18 @@ def write_animation(solution: PeriodicSolution, model: StructuralModel | None, p
     solution : PeriodicSolution
         E.g. ``branch[i]``.
     model : StructuralModel or None
-        The model the solution was solved on (None: ``solution.model``). A Craig-Bampton
-        :class:`~femodes.reduction.ReducedModel` is expanded to the full mesh of its parent.
+        The model of the solution (None: ``solution.model``); a reduced model is expanded to its mesh.
     path : str or os.PathLike
         File stem, e.g. ``"out/mode1"``: frames ``out/mode1_0000.vtu ...`` and the collection
         ``out/mode1.pvd`` (a trailing ``.pvd`` is accepted). Parent folders are created.
-    n_frames : int
+    n_frames : int, default 36
         Frames per period (>= 2), at times ``t_j = j T / n_frames``.
     scale : float, optional
-        If given, an extra point array ``"displacement_scaled"`` = ``scale * displacement`` is
-        written (for *Warp By Vector* without a scale factor) and ``scale`` stored as field data.
+        If given, an extra point array ``"displacement_scaled"`` = ``scale * displacement`` (for
+        *Warp By Vector* without a scale factor); ``scale`` is stored as field data.
     units : None, "SI" or dict, optional
-        Units stated in the field data: ``"SI"`` (:data:`SI_UNITS`), a dict ``{quantity: unit}``,
-        or None (default: a note that they are those of the model's inputs; femodes converts
-        nothing). Text is carried by the names of field data arrays of value 1 (``"unit
-        displacement: m"``): meshio cannot read VTK string arrays.
+        Units stated in the field data (names of arrays such as ``"unit displacement: m"``): ``"SI"``
+        (:data:`SI_UNITS`), a dict ``{quantity: unit}``, or None (a note: those of the model's inputs).
 
     Returns
     -------
@@ -231,39 +228,16 @@ def write_animation(solution: PeriodicSolution, model: StructuralModel | None, p
 
     Notes
     -----
-    Point data per frame: ``"displacement"`` and ``"velocity"`` (3-vectors: bars along ``x``,
-    beams along ``y``, solids ``u_x, u_y(, u_z)``), ``"rotation"`` (beams: ``theta``),
-    ``"contact_force"``: bars and beams the scalar ``p`` (nonzero only at contact nodes,
-    compression positive); solids the vector ``-p d`` (``d`` the contact direction): the force
-    of the obstacle on the structure, pointing into the body, of length ``p``;
-    ``"contact_pressure"`` (solids): ``p / a`` with ``a`` the tributary measure of the node on
-    its contact boundary (length times thickness in 2-D, area in 3-D;
-    :func:`femodes.fields.tributary_measure`), so that ``sum_k pressure_k a_k`` is the total
-    contact force; zero off the contact boundaries. Field data: ``"TimeValue"``, ``"period"``,
-    ``"omega"``, and with contacts ``"contact_node"`` and ``"contact_gap"`` (the obstacle is at
-    ``displacement = gap`` in the motion direction), for solids also ``"contact_direction"``
-    (one 3-vector per contact: the obstacle point is ``x_node + gap * direction``) and
-    ``"contact_measure"`` (``a`` per contact), ``"max_penetration"``, ``"max_tension"`` and
-    ``"harmonics"`` (the contact quality of the solution, and when it is not zero a field
-    data array whose name says that negative pressures and penetration are truncation
-    artefacts); the units (``units``); for a solution of a branch computed with
-    ``stability=True`` also ``"floquet_multipliers_real"``, ``"floquet_multipliers_imag"``
-    (largest modulus first) and ``"stable"`` (1 or 0).
-
-    ``"contact_force"`` is the truncated Fourier series of the contact force evaluated at the
-    frame's time, so it *leaks*: it is not exactly zero while the node is away from the obstacle
-    (Gibbs ripple of a force that is zero most of the period and peaks at the impacts), and the
-    displacement may pass the obstacle slightly (``solution.penetration``). Measured on the
-    1-DOF contact oscillator (``x'' + 0.1 x' + x = 0.2 cos(w t)``, gap 1, whole response curve):
-    where the node is more than 10 % of the gap away from the obstacle, ``|contact_force|``
-    reaches 33 %, 12 % and 4.6 % of the peak force for H = 10, 20 and 40 harmonics. Read the
-    force at the frames in contact, and raise H where the off-contact ripple matters.
+    Point data: ``"displacement"``, ``"velocity"``, ``"rotation"`` (beams), ``"contact_force"`` (its
+    truncated series leaks into frames away from contact), ``"contact_pressure"`` (solids). Field data:
+    time, period, frequency, contacts, contact quality, units, Floquet multipliers (``stability=True``).
+    Every array, and the measured leak: :doc:`/howto/paraview`.
 
     Raises
     ------
     ValueError
-        ``n_frames`` < 2 or not an integer; a discrete model without a mesh; a model that does
-        not match the solution; no model available.
+        ``n_frames`` < 2 or not an integer; a discrete model without a mesh; a model that does not
+        match the solution; no model available.
     TypeError
         Wrong types for ``solution``, ``model``, ``path`` or ``scale``.
     """

@@ -41,41 +41,34 @@ def contact_pressure(solution: PeriodicSolution, model: Any = None, *, boundary:
                      n_frames: int = 64, ax: Any = None, cmap: str = "YlOrRd"):
     """Space-time map of the contact pressure along a contact boundary over one period.
 
-    The nodal contact pressure ``p_k / a_k`` (contact force over the tributary measure of the
-    node, :meth:`femodes.fields.MeshFields.contact_pressure`) of the contacts on ``boundary``,
-    against the coordinate ``s`` along the boundary (x) and ``t / T`` (y, one full period: the
-    row at ``t/T = 1`` repeats ``t = 0``), with the total contact force of the boundary against
-    ``t / T`` in a narrow panel on the right.
+    The nodal contact pressure ``p_k / a_k`` (:meth:`femodes.fields.MeshFields.contact_pressure`)
+    on ``boundary`` against the coordinate ``s`` along it (x) and ``t / T`` (y, one full period),
+    with the boundary's total contact force against ``t / T`` in a narrow panel on the right.
 
     Parameters
     ----------
     solution : PeriodicSolution
-        A solution of a meshed solid (:func:`femodes.solid`) with contacts on a named boundary,
-        or of a Craig-Bampton reduction of one.
+        Of a meshed solid (:func:`femodes.solid`, or its reduction) with contacts on a named boundary.
     model : StructuralModel, optional
         The model the solution was solved on (default ``solution.model``).
     boundary : str, optional
         Named boundary of the mesh. Default: the boundary carrying the most contacts.
-    n_frames : int
+    n_frames : int, default 64
         Samples over the period (>= 2), at ``t_j = j T / n_frames``.
     ax : matplotlib Axes, optional
-        Axes of the map; it is narrowed to 64 % of its box and the force panel and the colour
-        bar fill the rest (as ``fig.colorbar(ax=...)`` takes room from its axes). Default: a
-        new figure.
-    cmap : str
-        Colormap (zero pressure pale). Colours start at zero; the small negative pressures a
-        truncated Fourier series leaks while a node is open are drawn as zero (the colour bar
-        then has a triangle at its lower end), and a line under the map says how low they go
-        and how far the motion penetrates the obstacle (truncation artefacts).
+        Axes of the map, narrowed to 64 % of its box for the force panel and the colour bar.
+        Default: a new figure.
+    cmap : str, default "YlOrRd"
+        Colormap (zero pressure pale). Negative pressures (truncation leaks) are drawn as zero; a
+        line under the map says how low they go and how far the motion penetrates the obstacle.
 
     Returns
     -------
     matplotlib Figure
-        ``fig.axes[0]``: the map (a QuadMesh, x ``s``, y ``t/T``); ``fig.axes[1]``: the total
-        force (line 0, x force, y ``t/T``; titled "total force"); ``fig.axes[2]``: the colour bar. 2-D: ``s`` is the
-        arc length along the boundary curve (P2 mid-side nodes included). 3-D (a surface has
-        no arc length): ``s`` is the distance along the boundary's principal axis and each
-        column shows the largest pressure across the width.
+        ``fig.axes[0]``: the map (a QuadMesh, x ``s``, y ``t/T``); ``fig.axes[1]``: the total force
+        (line 0, titled "total force"); ``fig.axes[2]``: the colour bar. 2-D: ``s`` is the arc length
+        along the boundary; 3-D: the distance along its principal axis, each column the largest
+        pressure across the width.
 
     Raises
     ------

@@ -1,58 +1,28 @@
 r"""Pseudo-arclength continuation of solution branches of :math:`r(x, p) = 0`.
 
-The branch :math:`\{y = (x, p) \in \mathbb{R}^{n+1} : r(x, p) = 0\}` is traced
-by a tangent predictor (or, for periodic motions that can be delayed in phase, one that follows
-the phase: ``ContinuationOptions.predictor``) and a corrector on the hyperplane orthogonal (in a
-scaled inner product) to the previous tangent, following Allgower & Georg
-[AG03]_ (chapters 2 and 6) and Keller's pseudo-arclength method [K77]_:
+The branch :math:`\{y = (x, p) \in \mathbb{R}^{n+1} : r(x, p) = 0\}` is traced by a predictor (the
+tangent, or for periodic motions that can be delayed in phase one that follows the phase:
+``ContinuationOptions.predictor``) and a corrector, solved by
+:func:`~femodes.solvers.newton.semismooth_newton`, on the hyperplane orthogonal to the previous
+tangent in the scaled inner product
+:math:`\langle u, v\rangle_S = \frac1n \sum_i u_i v_i / s_{x,i}^2 + u_p v_p / s_p^2`
+(Allgower & Georg [AG03]_, chapters 2 and 6; Keller [K77]_). The tangent comes from a bordered
+system, which carries the continuation through folds. The equations: :doc:`/guide/continuation`.
 
-.. math::
+Sparse bordered systems are solved by default with :func:`bordered_solver` (block elimination on
+the sparse LU of ``r_x`` plus iterative refinement, no fill-in from the dense last row);
+``NewtonOptions.linear_solver`` replaces it. ``problem`` is any object with a method
+``residual(x, p) -> (r, dr_dx, dr_dp)`` (:class:`~femodes.solvers.protocols.ContinuationProblem`).
 
-    y_{\mathrm{pred}} = y_k + \Delta s\, t_k, \qquad
-    \begin{bmatrix} r(x, p) \\ t_k^{\mathsf T} S\,(y - y_{\mathrm{pred}}) \end{bmatrix} = 0,
-
-solved by :func:`~femodes.solvers.newton.semismooth_newton`.  The tangent
-at a point is obtained from the bordered system
-
-.. math::
-
-    \begin{bmatrix} r_x & r_p \\ t_{\mathrm{prev}}^{\mathsf T} S \end{bmatrix} t
-    = \begin{bmatrix} 0 \\ 1 \end{bmatrix}, \qquad t \leftarrow t / \|t\|_S,
-
-which orients ``t`` so that :math:`t^{\mathsf T} S\, t_{\mathrm{prev}} > 0`;
-this is what carries the continuation through turning points (folds), where
-:math:`r_x` is singular but the bordered matrix is not.
-
-The scaled inner product is
-
-.. math::
-
-    \langle u, v\rangle_S = \frac1n \sum_{i=1}^n \frac{u_i v_i}{s_{x,i}^2}
-    + \frac{u_p v_p}{s_p^2},
-
-i.e. the unknowns enter through their root-mean-square, so that the step
-``ds`` measures *relative* changes independently of the number of unknowns.
-
-Sparse bordered systems are solved by default with :func:`bordered_solver`
-(block elimination on the sparse LU of ``r_x`` plus iterative refinement),
-which avoids the fill-in a direct LU of the bordered matrix can suffer from
-its dense last row; ``NewtonOptions.linear_solver`` replaces it.
-
-The module knows nothing about harmonic balance: ``problem`` is any object with
-a method ``residual(x, p) -> (r, dr_dx, dr_dp)``
-(:class:`~femodes.solvers.protocols.ContinuationProblem`).
-
-Layout: this module holds :func:`continuation` (checks its input and starts a
-:class:`~femodes.solvers.tracing.Tracer`). The tracer runs the steps with small collaborating
-parts: the predictor (:mod:`~femodes.solvers.predictors`), the step size
-(:mod:`~femodes.solvers.step_control`), the branch-jumping guard (:mod:`~femodes.solvers.guard`),
-the folds (:mod:`~femodes.solvers.folds`) and the exact end on the span boundary
-(:mod:`~femodes.solvers.span_ends`), which share the run's record
-(:mod:`~femodes.solvers.trace_record`). What a problem provides, including the optional hook of
-the phase predictor, is stated by the protocols of :mod:`femodes.solvers.protocols`. The options
-and result types are in :mod:`femodes.solvers.continuation_types`, the bordered linear algebra in
-:mod:`femodes.solvers.bordered`, the problem's evaluation and scaled geometry in
-:mod:`femodes.solvers.arclength`; all public names are importable from here.
+Layout: :func:`continuation` checks its input and starts a
+:class:`~femodes.solvers.tracing.Tracer`, which runs the steps with the predictor
+(:mod:`~femodes.solvers.predictors`), the step size (:mod:`~femodes.solvers.step_control`), the
+branch-jumping guard (:mod:`~femodes.solvers.guard`), the folds (:mod:`~femodes.solvers.folds`) and
+the exact end on the span boundary (:mod:`~femodes.solvers.span_ends`), sharing the run's record
+(:mod:`~femodes.solvers.trace_record`). Problem protocols: :mod:`femodes.solvers.protocols`; types:
+:mod:`femodes.solvers.continuation_types`; bordered algebra: :mod:`femodes.solvers.bordered`;
+evaluation and scaled geometry: :mod:`femodes.solvers.arclength`. All public names are importable
+from here.
 
 References
 ----------
@@ -131,82 +101,42 @@ def continuation(
 ) -> ContinuationResult:
     r"""Trace the solution branch of :math:`r(x, p) = 0` from ``p_span[0]`` to ``p_span[1]``.
 
-    Pseudo-arclength predictor-corrector continuation (Keller 1977; Allgower
-    & Georg 2003, ch. 2):
-
-    1. ``x0`` is corrected at ``p = p_span[0]`` by semismooth Newton with
-       ``p`` fixed.
-    2. Tangent ``t`` from ``[[r_x, r_p], [c^T]] t = [0; 1]`` (``c = e_p`` for
-       the first tangent, whose sign of ``dp`` is set by ``direction``;
-       ``c = S t_prev`` afterwards, which keeps ``<t, t_prev>_S > 0`` and
-       passes folds), normalised in the scaled norm.
-    3. Predictor ``y + ds t`` (``predictor=Phase()`` with a problem that has
-       the optional hook :class:`~femodes.solvers.protocols.SupportsPhaseShift`,
-       ``phase_shift``/``phase_generator``: the phase part of ``t`` applied
-       as an exact delay, see :class:`ContinuationOptions`); corrector:
-       semismooth Newton on the bordered
-       system ``[r(x, p); t^T S (y - y_pred)] = 0`` (sparse ``bmat`` if
-       ``r_x`` is sparse, dense otherwise).
-    4. Step control from the geometry of the branch (turn of the tangent)
-       and the corrector (contraction of its first iteration, iteration
-       count), see ``target_angle`` in :class:`ContinuationOptions`; on
-       corrector failure (or a corrector abandoned at ``corrector_deadline``)
-       the step is halved and retried from the same point.  A converged
-       point farther than ``max_corrector_distance * ds`` from the predictor,
-       or whose tangent turns by more than ``max_turn_angle``, or that lands
-       on the part of the branch already traced going the same way
-       (:meth:`~femodes.solvers.guard.BranchGuard.retraced`), is also rejected (branch-jumping guard)
-       unless the step is already minimal.
-    5. Folds: a sign change of ``dp/ds`` between consecutive points; with
-       ``locate_folds`` the fold is located and inserted as a point.
-    6. End: when a predictor or a converged point passes ``p_span[1]`` (or
-       ``p_span[0]`` after turning back), the final point is computed
-       exactly at that ``p`` by Newton in ``x`` from a linear interpolation,
-       appended, and the run stops (status 0, resp. 1).
-
-    Resuming: ``start=point.state`` (a :class:`ContinuationState` received
-    by the callback, possibly saved and rebuilt) skips steps 1-2 and
-    continues from that point with its tangent, step size, fold record and
-    arclength scales, so that the run computes exactly the points the
-    original run computed after it.  Pass the same ``problem``, ``p_span``
-    and options; the scales of ``start`` replace ``options.x_scale`` and
-    ``options.p_scale``.
+    ``x0`` is corrected at ``p_span[0]``; then each step predicts along the tangent (or the phase),
+    corrects on the bordered system, adapts the step and rejects branch jumps (:class:`ContinuationOptions`),
+    detects and locates folds (sign change of ``dp/ds``), and ends with a point computed exactly at
+    ``p_span[1]`` (status 0) or ``p_span[0]`` after turning back (status 1). The algorithm, step by
+    step: :doc:`/guide/continuation`.
 
     Parameters
     ----------
     problem : object
-        Has ``residual(x, p) -> (r, dr_dx, dr_dp)`` with ``r`` of shape
-        ``(n,)``, ``dr_dx`` of shape ``(n, n)`` (dense ``ndarray`` or
-        ``scipy.sparse``) and ``dr_dp`` of shape ``(n,)``.  ``dr_dx`` may be
-        a generalized Jacobian (semismooth ``r``).
+        Has ``residual(x, p) -> (r, dr_dx, dr_dp)``, shapes ``(n,)``, ``(n, n)`` (dense or
+        ``scipy.sparse``, possibly a generalized Jacobian) and ``(n,)``.
     p_span : (float, float)
         Start and end parameter values; may be decreasing.
     x0 : array_like, shape (n,), optional
-        Initial guess of the solution at ``p_span[0]``. If omitted, the problem
-        must provide ``initial_guess(p)`` (the HBM problems do).
+        Initial guess at ``p_span[0]``. If omitted, the problem must provide ``initial_guess(p)``.
     options : ContinuationOptions, optional
     start : ContinuationState, optional
-        Continue a run from this state instead of starting at ``p_span[0]``
-        (then ``x0`` must be omitted).  The returned arrays hold only the
-        points after ``start`` (``first_index = start.index + 1``); point
-        indices, ``folds``, ``max_points`` and the counters count the whole
-        branch.
+        Continue from this state (``point.state`` from the callback, possibly saved and rebuilt)
+        instead of starting at ``p_span[0]``; ``x0`` must be omitted. The run computes exactly the
+        points the original run computed after it, given the same ``problem``, ``p_span`` and options;
+        the scales of ``start`` replace ``options.x_scale``/``p_scale``. The arrays hold only the points
+        after ``start``; indices, ``folds``, ``max_points`` and the counters count the whole branch.
 
     Returns
     -------
     ContinuationResult
-        Never raises on numerical failure; ``success``, ``status`` and
-        ``message`` report the outcome (see :data:`STATUS_MESSAGES`).
+        Never raises on numerical failure; ``success``, ``status`` and ``message`` report the outcome
+        (see :data:`STATUS_MESSAGES`).
 
     Raises
     ------
     ValueError
-        Invalid ``p_span``, ``x0`` or ``x_scale`` length, ``x0`` together
-        with ``start``, ``start.p`` outside ``p_span``, or wrongly shaped
-        arrays returned by ``problem.residual``.
+        Invalid ``p_span``, ``x0`` or ``x_scale`` length, ``x0`` together with ``start``, ``start.p``
+        outside ``p_span``, or wrongly shaped arrays returned by ``problem.residual``.
     TypeError
-        ``problem`` has no callable ``residual``, or ``options`` or ``start``
-        has the wrong type.
+        ``problem`` has no callable ``residual``, or ``options`` or ``start`` has the wrong type.
     """
     if options is None:
         options = ContinuationOptions()

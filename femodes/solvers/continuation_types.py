@@ -42,156 +42,55 @@ def _default_newton() -> NewtonOptions:
 
 @dataclass(frozen=True, kw_only=True)
 class ContinuationOptions:
-    """Options of :func:`continuation`.
+    """Options of :func:`continuation` (defaults and their measurements: :doc:`/guide/continuation`).
 
     Parameters
     ----------
     step : float, default 0.05
-        Initial pseudo-arclength step in the scaled norm (see module docstring).
+        Initial pseudo-arclength step in the scaled norm (see the module docstring).
     min_step, max_step : float, default 1e-6, 0.5
-        Bounds of the step; ``min_step <= step <= max_step``.  The run stops
-        (status 4, failure) when repeated rejections halve the step below
-        ``min_step``.
+        Bounds of the step. The run stops (status 4, failure) when rejections halve it below ``min_step``.
     max_points : int, default 2000
-        Maximum number of points of the branch, *including* the start point
-        and inserted fold points (>= 2).  Reaching it stops the run with
-        ``success=True``, ``status=2``.
+        Maximum number of points (>= 2), start and fold points included; reaching it gives status 2.
     target_iterations : int, default 4
-        Step control by the corrector iterations: after an accepted step with
-        ``nit`` iterations the step is divided by ``nit/target_iterations``.
-        With ``target_contraction`` set, only ``nit > target_iterations``
-        acts (a brake); without it (and ``target_angle=None``) this is the
-        whole step control: ``ds * target/max(nit, 1)`` clipped to
-        ``[0.5, max_growth]``, the rule of femodes before issue 16.
+        The step is divided by ``nit/target_iterations`` after ``nit`` corrector iterations; with
+        ``target_contraction`` set, only when ``nit > target_iterations`` (a brake).
     max_growth : float, default 2.0
-        Maximal step growth factor per step (>= 1).  The step never grows
-        right after a rejection, and never shrinks by more than 2 per
-        accepted step.
+        Largest step growth per step (>= 1); no growth right after a rejection.
     target_angle : float or None, default 10.0
-        Step control by the geometry of the branch (degrees, in (0,
-        ``max_turn_angle``)): the nominal angle between the tangents of two
-        successive points.  The angle of a smooth branch grows like ``ds``
-        (curvature times ``ds``), so the step is divided by
-        ``angle/target_angle`` (Allgower & Georg 2003, sec. 6.1).  ``None``:
-        not used.  10 degrees, not more: with 15 or 20 degrees the forced
-        pair of Duffing oscillators of tests/test_switching_branch_point.py
-        has too few points near its lower fold for the stability analysis to
-        see the branch point next to it (measured: found with 10, missed
-        with 15 and 20; 43 points instead of 67 with the old control).
+        Nominal turn of the tangent per step (degrees, in (0, ``max_turn_angle``)); the step is divided
+        by ``angle/target_angle`` (Allgower & Georg 2003, sec. 6.1). ``None``: not used.
     target_contraction : float or None, default 0.25
-        Step control by the corrector (in (0, 1)): the nominal contraction
-        ``theta = |r_1| / |r_0|`` of the first corrector iteration (inf-norms
-        of the residual at the predictor and after one Newton step).  With
-        the tangent predictor ``theta`` grows like ``ds**2``, so the step is
-        divided by ``sqrt(theta/target_contraction)`` (Deuflhard, *Newton
-        Methods for Nonlinear Problems*, Springer 2004, sec. 5.1; the
-        residual-based contraction replaces his simplified Newton correction,
-        which would cost an extra solve).  ``None``: not used.  The step
-        control takes the smallest of the steps that ``target_iterations``,
-        ``target_angle`` and ``target_contraction`` ask for, then clips it to
-        ``[min_step, max_step]``; it depends only on the last accepted step,
-        so runs are deterministic and resumable.  On the seed contact case
-        (1 DOF, H = 20, exact complementarity) it takes 179 points instead of
-        305 with ``max_step=2`` and the tangent predictor, 91 with the phase
-        predictor and ``max_step=3`` (benchmarks/README_steps.md); with
-        ``max_step=0.5`` most steps sit at ``max_step`` either way.
+        Nominal contraction ``|r_1|/|r_0|`` of the first corrector iteration, in (0, 1); the step is
+        divided by ``sqrt(theta/target_contraction)`` (Deuflhard 2004, sec. 5.1). ``None``: not used.
+        The step control takes the smallest of the three steps, clipped to ``[min_step, max_step]``.
     corrector_deadline : int or None, default 3
-        Rejection of a corrector that does not contract: the corrector is
-        abandoned (the step rejected and halved) when after this many
-        iterations, or more, its residual is still above half its value at
-        the predictor.  Measured on the seed contact case at H = 20: the
-        four correctors that failed near the grazing frequency took 16-20
-        iterations and 83-158 residual evaluations each (31 % of the run)
-        before failing; abandoned at iteration 3 they cost 4 iterations.
-        Three is the watchdog budget of the default
-        :class:`~femodes.solvers.newton.NewtonOptions` (three unchecked full
-        steps before the line search).  ``None``: the corrector runs to
-        ``newton.max_iter``.
+        Abandon the corrector (reject and halve the step) when its residual is still above half its
+        predictor value after this many iterations. ``None``: run to ``newton.max_iter``.
     direction : {+1, -1}, default +1
-        Initial direction of travel *relative to the span*: ``+1`` starts
-        from ``p_span[0]`` towards ``p_span[1]`` (i.e. increasing ``p`` for an
-        increasing span, decreasing ``p`` for a decreasing one); ``-1`` starts
-        the other way, which leaves the span immediately through
-        ``p_span[0]`` unless the branch turns back at once; it is kept for
-        symmetry and yields a 1-point result with status 1 otherwise.
-    x_scale : float or ndarray of shape (n,) or None
-        Scale ``s_x`` of the unknowns in the arclength norm.  ``None``: the
-        root-mean-square of the corrected start point ``x0``, or 1.0 if that
-        is zero (pass ``x_scale`` explicitly when starting from the trivial
-        solution).  The scale is fixed for the whole run.
-    p_scale : float or None
-        Scale ``s_p`` of the parameter.  ``None``: ``|p_span[1] - p_span[0]|``.
-    newton : NewtonOptions
-        Corrector options (default ``NewtonOptions(atol=1e-9, max_iter=12)``).
-        The initial correction of ``x0`` uses the same options with
-        ``max_iter`` raised to at least 50.  ``newton.linear_solver``, if
-        given, receives the ``(n+1) x (n+1)`` bordered matrices of the
-        corrector and tangent systems (sparse CSC if ``dr_dx`` is sparse) as
-        well as the ``n x n`` ``dr_dx`` of the fixed-``p`` solves (start and
-        end points); if ``None``, bordered systems use
-        :func:`bordered_solver` and fixed-``p`` systems
-        :func:`~femodes.solvers.newton.default_linear_solver`.  ``atol``
-        applies to the inf-norm of ``r(x, p)`` (and of the arclength
-        equation).
+        Initial direction relative to the span: ``+1`` from ``p_span[0]`` towards ``p_span[1]``.
+    x_scale, p_scale : float or ndarray of shape (n,) or None; float or None
+        Scales of ``x`` and ``p`` in the arclength norm, fixed for the run. ``None``: the RMS of the
+        corrected ``x0`` (1.0 if zero); ``|p_span[1] - p_span[0]|``.
+    newton : NewtonOptions, default ``NewtonOptions(atol=1e-9, max_iter=12)``
+        Corrector options; the initial correction raises ``max_iter`` to at least 50. Its
+        ``linear_solver`` also gets the ``(n+1) x (n+1)`` bordered systems (default :func:`bordered_solver`).
     callback : callable or None
-        ``callback(point: ContinuationPoint)`` called for every accepted point
-        (start, regular, fold and end points).  If it returns ``False`` (the
-        object ``False``, not merely falsy), the run stops cleanly after that
-        point with ``status=3`` and ``success=True``.  ``point.state`` holds
-        what :func:`continuation` needs to continue the run from that point
-        later (``start=point.state``), e.g. after saving it to a file.
+        ``callback(point)`` for every accepted point; returning ``False`` stops the run (status 3).
     locate_folds : bool, default True
-        When a fold is detected between two points, locate it by regula falsi
-        (Illinois variant) on the p-component of the tangent along the
-        corrector hyperplane family of the step, and insert the located point
-        (``is_fold=True``) into the branch.
+        Locate a detected fold by regula falsi (Illinois) and insert it (``is_fold=True``).
     store_tangents : bool, default False
-        Keep the tangents of all points in :attr:`ContinuationResult.tangents`
-        (memory ``n_points * (n+1)``).
-    max_corrector_distance : float, default 1.0
-        Branch-jumping guard: a converged corrector point farther than
-        ``max_corrector_distance * ds`` (scaled norm) from the predictor is
-        rejected and the step halved.  For a smooth branch the distance is
-        ``O(curvature * ds**2)``.
-    max_turn_angle : float, default 60.0
-        Branch-jumping guard (degrees): a step whose tangent turns by more
-        than this angle (scaled inner product) is rejected and halved.
-        Kinks of a semismooth branch (e.g. contact onset), where the tangent
-        jumps by a fixed angle however small the step, are recognised and
-        accepted: after a geometric rejection, the halved step is accepted if
-        its turn angle is still >= 75 % of the previous one while its
-        predictor distance shrank to <= 75 % (and is <= 2 ds); a jump to a
-        different branch does not show this distance scaling.  Both guards
-        are also waived once halving would take the step below ``min_step``.
+        Keep all tangents in :attr:`ContinuationResult.tangents`.
+    max_corrector_distance, max_turn_angle : float, default 1.0, 60.0
+        Reject and halve a step whose corrector lands farther than ``max_corrector_distance * ds`` from
+        the predictor, or whose tangent turns by more than ``max_turn_angle`` degrees. Kinks of a
+        semismooth branch (contact onset) are accepted; both guards are waived at ``min_step``.
     predictor : predictor strategy, default ``femodes.predictors.Phase()``
-        How a step is predicted (:mod:`femodes.solvers.predictors`):
-        ``Tangent()``, the Euler predictor ``y + ds t``; ``Phase()``, for a
-        problem with the optional hook
-        :class:`~femodes.solvers.protocols.SupportsPhaseShift` (as
-        :class:`~femodes.hbm.ForcedResponseProblem` has), the tangent with
-        its phase part applied as an exact delay, and the turn angle of the
-        step (``target_angle``, ``max_turn_angle``) measured from the previous
-        tangent delayed by the same phase; without the hook it is the tangent
-        predictor. The names ``"phase"`` and ``"tangent"`` are deprecated
-        spellings. Measured on the seed contact case 1 (``max_step=2``):
-        residual evaluations 795 -> 499 at H = 20, 1393 -> 764 at H = 40
-        (``benchmarks/README_steps.md``).
+        ``Tangent()``: Euler ``y + ds t``. ``Phase()``: also delays the motion by the predicted phase, for
+        problems with :class:`~femodes.solvers.protocols.SupportsPhaseShift`; others get ``Tangent()``.
     target_norm_change : float or None, default None
-        Step control by the size of the solution (> 0): the nominal relative
-        change of the scaled norm of ``x`` per step; the step is divided by
-        ``|ln(|x_b| / |x_a|)| / ln(1 + target_norm_change)``. The turn angle
-        does not see a response that shrinks or grows smoothly (a forced
-        response away from resonance: its phase barely moves and the
-        tangent barely turns), where lines drawn between the points cut the
-        curve: with the phase predictor the seed contact curve took one step
-        from w = 1.21 to 1.83, amplitude 0.42 -> 0.09, whose chord is 65 %
-        off the true amplitude at mid-step. With 0.3 (seed case 1, H = 20:
-        91 -> 94 points, the longest step 0.62 -> 0.17 in w) every chord
-        between two points without contact is within 3.5 % of the response
-        at mid-step. :func:`femodes.frequency_response` uses 0.3 (with it,
-        the penalty seed case's grazing fold at H = 40 with the tangent
-        predictor is met at a short step and needed the fold retries down
-        to 1/64 of the initial step to be located). ``None``: not used.
+        Nominal relative change of the scaled norm of ``x`` per step (> 0); the step is divided by
+        ``|ln(|x_b|/|x_a|)| / ln(1 + target_norm_change)``. ``None``: not used.
     """
 
     step: float = 0.05
@@ -427,8 +326,8 @@ class ContinuationResult:
 
     Attributes
     ----------
-    x : ndarray, shape (n_points, n)
-    p : ndarray, shape (n_points,)
+    x, p : ndarray, shape (n_points, n) and (n_points,)
+        Unknowns and parameter of the points.
     nit : ndarray of int, shape (n_points,)
         Newton iterations per point (start point: initial correction).
     residual_norm : ndarray, shape (n_points,)
@@ -440,32 +339,26 @@ class ContinuationResult:
     tangents : ndarray of shape (n_points, n+1) or None
         Only with ``store_tangents=True``.
     success : bool
-        ``True`` for statuses 0-3 (all returned points are valid solutions;
-        the run ended at the span boundary, at ``max_points`` or by the
-        callback), ``False`` for 4-6.
+        ``True`` for statuses 0-3 (all returned points are valid solutions), ``False`` for 4-6.
     status : int
-        See :data:`STATUS_MESSAGES`: 0 reached ``p_span[1]``; 1 left through
-        ``p_span[0]``; 2 ``max_points`` reached; 3 stopped by callback;
-        4 step below ``min_step``; 5 initial correction failed; 6 initial
-        tangent failed.
+        See :data:`STATUS_MESSAGES`: 0 reached ``p_span[1]``; 1 left through ``p_span[0]``;
+        2 ``max_points`` reached; 3 stopped by callback; 4 step below ``min_step``; 5 initial
+        correction failed; 6 initial tangent failed.
     message : str
     n_newton : int
-        Total Newton iterations, including rejected steps, the initial
-        correction, fold localisation and the end point.
+        Total Newton iterations, including rejected steps, the initial correction, fold localisation
+        and the end point.
     n_rejected : int
         Number of rejected steps.
-    x_scale : ndarray, shape (n,)
-        Scales of the unknowns used in the arclength norm.
-    p_scale : float
-        Scale of the parameter used in the arclength norm.
+    x_scale, p_scale : ndarray of shape (n,), float
+        Scales of the unknowns and of the parameter used in the arclength norm.
     first_index : int
-        Branch index of the first returned point: 0, or ``start.index + 1``
-        for a run resumed with ``start=`` (whose arrays hold only the new
-        points, while ``folds`` and the counters cover the whole branch).
+        Branch index of the first returned point: 0, or ``start.index + 1`` for a run resumed with
+        ``start=`` (whose arrays hold only the new points; ``folds`` and the counters cover the whole branch).
     located : tuple of int
-        The folds of this run (after ``start``) that were located as turning points (inserted
-        points where ``dp/ds`` vanishes, ``locate_folds``); the other folds were only detected:
-        the point nearer to the sign change of ``dp/ds``.
+        The folds of this run (after ``start``) located as turning points (inserted points where
+        ``dp/ds`` vanishes, ``locate_folds``); the other folds were only detected: the point nearer to
+        the sign change of ``dp/ds``.
     """
 
     x: np.ndarray

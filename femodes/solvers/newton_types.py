@@ -21,120 +21,45 @@ __all__ = ["NewtonOptions", "NewtonResult"]
 
 @dataclass(frozen=True, kw_only=True)
 class NewtonOptions:
-    """Options of :func:`semismooth_newton`.
+    """Options of :func:`semismooth_newton` (defaults and their measurements: :doc:`/guide/contact`).
 
     Parameters
     ----------
     atol : float, default 1e-10
-        Convergence when ``norm(r, inf) <= atol``.  The test is absolute: the
-        residual is assumed to be scaled by the caller (e.g. nondimensional or
-        divided by a reference force) so that ``atol`` is meaningful.
+        Converged when ``norm(r, inf) <= atol``; absolute, so the caller scales the residual.
     rtol : float, default 1e-14
-        Relative (backward-error) convergence: also converged when
-        ``norm(r, inf) <= rtol * norm(|J| |x|, inf)``, i.e. the residual is
-        round-off compared with the terms that make it up. Large, badly
-        conditioned FE systems (a 1e4-DOF Hermite beam has stiffness entries
-        ~1e11) cannot reach an absolute ``atol``; this test (Oettli-Prager style
-        componentwise backward error, bounded by its max norm) lets them
-        converge at the precision the data allow. 0 disables it. The product
-        ``|J| |x|`` costs about a residual's linear part; within one solve it
-        is formed again only when ``norm(r, inf)`` is within
-        :data:`TOLERANCE_RECHECK` times the last tolerance computed or
-        ``norm(x, inf)`` has more than doubled since.
+        Also converged when ``norm(r, inf) <= rtol * norm(|J| |x|, inf)`` (componentwise backward
+        error, Oettli-Prager style), for badly conditioned FE systems. 0 disables it.
     rtol_x : float, default 0.0
-        Relative-to-the-iterate convergence: also converged when
-        ``norm(r, inf) <= rtol_x * norm(x, inf)``, for residuals in the units
-        of ``x`` (e.g. the impulse balance of a time step, whose unknowns are
-        the impulses: :mod:`femodes.time` uses 1e-13).  Cheaper than the
-        ``rtol`` backward-error test (no ``|J| |x|`` product), which matters
-        for thousands of tiny systems.  0 disables it.
+        Also converged when ``norm(r, inf) <= rtol_x * norm(x, inf)`` (:mod:`femodes.time`: 1e-13). 0: off.
     xtol : float, default 1e-12
-        Secondary, round-off-floor convergence test: the iteration also stops
-        with success when a *full* step (``alpha == 1``) was accepted with
-        ``norm(dx, inf) <= xtol * (1 + norm(x, inf))`` **and** the new residual
-        satisfies ``norm(r, inf) <= sqrt(atol)``.  This catches problems whose
-        attainable residual is limited by round-off (large, badly conditioned
-        systems) while still requiring a reasonably small residual.  A
-        negligible step with a residual above ``sqrt(atol)`` counts as "no
-        progress" (see ``max_stall``).
+        Round-off floor: also converged after a full step with ``norm(dx, inf) <= xtol * (1 + norm(x,
+        inf))`` and ``norm(r, inf) <= sqrt(atol)``; a negligible step above that counts as a stall.
     max_iter : int, default 30
-        Maximum number of iterations; each iteration performs one linear
-        solve (a relaxed watchdog step that is later discarded counts).
+        Maximum number of iterations, one linear solve each (discarded watchdog steps count).
     line_search : bool, default True
-        Globalisation by non-monotone backtracking (Armijo) on the merit
-        ``phi = 0.5 * ||r||_2^2`` [GLL86]_ with watchdog stabilisation
-        (see ``watchdog``): a trial step ``alpha`` is accepted if
-        ``phi(x + alpha dx) <= max(phi of the last nonmonotone_memory watch
-        points) - 1e-4 * alpha * ||r(x)||_2^2`` (Armijo constant from
-        [DS96]_).  The reference value is a maximum over recent iterates, so steps
-        that cross a kink of a semismooth residual (where the merit may
-        increase temporarily) are not rejected needlessly.  Trial steps are
-        ``1, 1/2, 1/4, ...`` down to ``min_alpha`` (the last trial is exactly
-        ``min_alpha``; a non-finite trial residual cuts the step by 10).
-        Quadratic interpolation [DS96]_ is deliberately not used: the kinks
-        of a semismooth merit mislead it (measured: up to 3x more iterations
-        on a contact law).
-        If no trial down to ``min_alpha`` satisfies the test, the trial with
-        the *smallest merit* among those tried is accepted anyway and the
-        iteration continues (at kinks, the generalized Newton direction need
-        not be a descent direction, and a small step to the next smooth piece
-        usually restores progress); this is counted as a stall.  With
-        ``line_search=False`` the full step is always taken.
+        Armijo backtracking (constant 1e-4 [DS96]_, non-monotone [GLL86]_) on ``0.5 ||r||_2^2``, trials
+        ``1, 1/2, ...`` down to ``min_alpha``; if none passes, the smallest merit is taken (a stall).
+        ``False``: always the full step.
     min_alpha : float, default 1e-4
         Smallest trial step length, ``0 < min_alpha <= 1``.
-    nonmonotone_memory : int, default 1 (monotone Armijo: with memory 5 the forced Duffing start at w = 0.5, H = 9, cycled; tests/test_hbm.py::test_monotone_line_search_default_starts_forced_duffing)
-        Number of previous merit values over which the non-monotone reference
-        is taken (1 gives the classical monotone Armijo rule).
+    nonmonotone_memory : int, default 1
+        Number of previous merit values over which the reference is taken (1: monotone Armijo).
     watchdog : int, default 3
-        Non-monotone stabilisation by the watchdog technique (Chamberlain et
-        al. 1982, combined with the non-monotone line search as in Grippo,
-        Lampariello & Lucidi 1991): from a "watch point" (an iterate that
-        passed the sufficient-decrease test) up to ``watchdog`` full Newton
-        steps are taken without testing; the first iterate that satisfies the
-        non-monotone Armijo test relative to the watch point becomes the new
-        watch point.  If none does, the iteration returns to the watch point
-        and backtracks along its Newton direction (from ``alpha = 1/2``);
-        relaxed steps are then suspended until a full step passes the
-        ordinary line search again.  Rationale: for contact laws the
-        undamped semismooth Newton iteration is an active-set method that
-        usually converges in a few steps, while the merit function
-        ``0.5 ||r||^2`` (dominated by ``c * gap`` terms when the penalty-like
-        constant ``c`` is large) can force tiny steps; measured on a spring
-        chain with obstacles and ``c`` up to 1e3: 21/300 failures and up to
-        30 iterations with ``watchdog=0``, 0/300 and at most 5 with
-        ``watchdog=3``.  ``0`` gives the plain non-monotone line search.
+        Untested full steps from a watch point (Chamberlain et al. 1982); if none passes the test
+        relative to it, the iteration returns there and backtracks. ``0``: plain line search.
     max_stall : int, default 3
-        Number of *consecutive* stalled iterations (failed line search, or a
-        negligible step without convergence) after which the iteration stops
-        with status 2.
+        Stop with status 2 after this many consecutive stalls (failed line search or negligible step).
     stagnation_window : int, default 10
-        The iteration also stops with status 2 when the smallest residual norm
-        seen has not decreased by at least 1 % during this many iterations
-        (e.g. convergence to a non-zero local minimum of ``||r||``, or
-        cycling).  ``0`` disables the test (globalisation from far away on a
-        very flat merit, e.g. ``arctan`` from ``x0 = 100``, may need it off).
+        Stop with status 2 when the smallest residual norm has not dropped by 1 % in this many steps. 0: off.
     accept_factor : float, default 0.0
-        Tolerance of last resort: when the iteration stops without convergence
-        (status 1, ``max_iter`` reached, or 2, no progress), the returned
-        iterate still counts as converged (status 0; the message says so and
-        why the iteration stopped) if ``norm(r, inf) <= accept_factor * tol``
-        with the convergence tolerance ``tol = max(atol, rtol_x * norm(x,
-        inf), rtol * norm(|J| |x|, inf))``.  For callers whose tight
-        tolerance sits near the round-off floor of some of their problems and
-        who accept a looser residual there rather than a failure (the local
-        problems of :mod:`femodes.time`, 1e4: converged to 1e-13, accepted at
-        1e-9).  ``0`` disables it.
+        On status 1 or 2, still return status 0 (the message says why) if ``norm(r, inf) <=
+        accept_factor * tol``, ``tol`` the convergence tolerance. ``0`` disables it.
     linear_solver : callable or None
-        Strategy ``linear_solver(A, b) -> y`` returning the solution of
-        ``A y = b`` for a dense ``ndarray`` or ``scipy.sparse`` ``A``.  Newton
-        calls it as ``dx = -linear_solver(J, r)``.  It may raise
-        ``numpy.linalg.LinAlgError``, ``RuntimeError`` or ``ArithmeticError``
-        (or return non-finite values) to signal a singular matrix; this is
-        reported as status 3.  ``None`` selects :func:`default_linear_solver`.
+        ``linear_solver(A, b) -> y`` for a dense or sparse ``A``; raising ``LinAlgError``, ``RuntimeError``
+        or ``ArithmeticError`` (or non-finite values) gives status 3. ``None``: :func:`default_linear_solver`.
     callback : callable or None
-        ``callback(iteration, x, residual_norm)`` called after the initial
-        evaluation (``iteration == 0``) and after every Newton step; its
-        return value is ignored.  ``x`` is a copy.
+        ``callback(iteration, x, residual_norm)`` after the start and every step (return value ignored).
     """
 
     atol: float = 1e-10

@@ -203,36 +203,33 @@ def simulate(
     .. math::
 
         M \Delta v = h\,\Theta F_{k+1} + h (I - \Theta) F_k - \sum_c e_c P_c, \quad
-        0 \le U_{c,k+1} + e\,U_{c,k} \perp P_c \ge 0 \ \text{(predicted gap} \le 0),
+        0 \le U_{c,k+1} + e\,U_{c,k} \perp P_c \ge 0 \ \text{(predicted gap} \le 0)
 
-    see :mod:`femodes.time.moreau` and Acary & Brogliato (2008), chapter 10.
+    (:mod:`femodes.time.moreau`; Acary & Brogliato 2008, chapter 10).
 
     Parameters
     ----------
     model : StructuralModel or ReducedModel
-        Linear structure with UnilateralContact / PenaltyContact / CubicSpring declarations and
-        optional harmonic forcing ``Re sum_k F_k e^{i k omega t}``.
+        Linear structure with contact and cubic-spring laws and optional harmonic forcing.
     t_end : float
         Final time (``> t0``).
     dt : float
-        Time step (``0 < dt < t_end - t0``); reduced so that an integer number of steps fits.
-        With forcing, at most ``2 pi / omega / MIN_STEPS_PER_PERIOD`` (20 steps per period).
+        Time step (``0 < dt < t_end - t0``), reduced to fit an integer number of steps; with forcing at
+        most ``2 pi / omega / MIN_STEPS_PER_PERIOD`` (20 steps per period).
     u0, v0 : array_like (n_dofs,), optional
         Initial displacement and velocity (zero by default).
     omega : float, optional
         Forcing frequency (rad/s): required if the model has harmonic forcing, refused otherwise.
-    restitution : float
-        Newton restitution coefficient ``e`` in ``[0, 1]`` (massive contact DOFs; a contact on a
-        massless DOF is quasi-static and uses the position-level Signorini law).
+    restitution : float, default 1.0
+        Newton restitution coefficient ``e`` in ``[0, 1]`` (a massless contact DOF uses the
+        position-level Signorini law).
     options : TimeSteppingOptions, optional
-        ``theta`` (theta-method, default 1/2), ``newton`` (local solves), ``t0`` (initial time),
-        ``store_every`` (stored steps).
+        ``theta`` (default 1/2), ``newton`` (local solves), ``t0`` (initial time), ``store_every``.
 
     Returns
     -------
     TimeHistory
-        With ``success``/``status``/``message``: a step whose local problem was not solved is
-        reported there (the run goes on from the solver's best iterate), never raised.
+        ``success``/``status``/``message`` report an unsolved local step (the run goes on from its best iterate).
 
     Raises
     ------

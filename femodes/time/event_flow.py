@@ -27,12 +27,10 @@ Events (``solve_ivp`` terminal events; the integration stops at each one and res
 
   with ``f^-``, ``f^+`` the vector field just before and after the impact.
 * *Kink* of a :class:`~femodes.laws.PenaltyContact` (``q_c`` crosses ``gap``): the vector field
-  is continuous there, so the saltation matrix is the identity (``f^+ = f^-`` and ``R = I`` in
-  the formula above), but its derivative jumps; stopping at the kink keeps
-  DOP853's error estimate honest (it assumes a smooth right-hand side within a step).
+  is continuous there (saltation matrix the identity) but its derivative jumps; stopping at the
+  kink keeps DOP853's error estimate honest (it assumes a smooth right-hand side within a step).
 
-What event-driven integration cannot do, and is refused with a ``ValueError`` that points to
-Hill's method on the harmonic balance Jacobian (``fm.stability(solution, fm.stability_methods.Hill())``): a
+Refused with a ``ValueError`` pointing to Hill's method (``fm.stability_methods.Hill()``): a
 unilateral contact on a DOF without mass (mass redistribution; the impact law needs a mass to
 act on), a singular mass matrix, and, with ``restitution < 1``, accumulating impacts (chattering:
 more than :data:`MAX_IMPACTS` impacts in one run, or an impact slower than

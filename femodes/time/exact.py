@@ -32,12 +32,9 @@ root tolerance of the event times (4 eps). Restitution below 1 is accepted, but 
 events (chattering) is refused after :data:`~femodes.time.shooting.MAX_IMPACTS` of them.
 
 A run (:class:`~femodes.time.exact_run.FlowRun`) also gives the Fourier coefficients of the orbit
-in closed form (:mod:`.exact_fourier`), which is what :mod:`femodes.accuracy` compares harmonic
-balance solutions with.
-
-Used by :mod:`femodes.accuracy` (shooting refinement of error-controlled branches) and
-:func:`femodes.exact_frequency_response` (the exact branch, an analysis); the general
-event-driven integration with smooth laws is :mod:`femodes.time.shooting`.
+in closed form (:mod:`.exact_fourier`). Used by :mod:`femodes.accuracy` (shooting refinement of
+error-controlled branches) and :func:`femodes.exact_frequency_response` (the exact branch); the
+general event-driven integration with smooth laws is :mod:`femodes.time.shooting`.
 """
 
 from __future__ import annotations

@@ -265,7 +265,7 @@ def monodromy(
         integer ``nu`` (``nu > 1``: sub-harmonic orbits).
     restitution : float, default 1
         Newton's coefficient ``e`` in ``[0, 1]`` of the UnilateralContact impacts.
-    rtol, atol : float
+    rtol, atol : float, default 1e-11, 1e-12
         Tolerances of ``solve_ivp`` (DOP853), applied to the state and to the variations.
 
     Returns
@@ -276,10 +276,8 @@ def monodromy(
     Raises
     ------
     TypeError, ValueError
-        Invalid arguments (the message names the argument and quotes the value); what the
-        event-driven integration cannot do (massless contact DOF, singular M, chattering or
-        sticking with ``restitution < 1``, ``x0`` inside an obstacle), with a pointer to
-        Hill's method.
+        Invalid arguments (named, value quoted); what the event-driven integration cannot do (massless
+        contact DOF, singular M, chattering or sticking with ``restitution < 1``, ``x0`` in an obstacle).
     """
     flow, x0 = _setup(model, omega, x0, restitution, rtol, atol)
     t0 = check_finite("t0", t0)
@@ -414,33 +412,20 @@ def shoot(
 ) -> ShootingResult:
     r"""Periodic orbit by Newton shooting, ``x(t0 + T; x0) - x0 = 0``, and its Floquet multipliers.
 
-    Solved by :func:`femodes.solvers.semismooth_newton` (monotone Armijo search down to a step
-    of ``2^-12``, least-squares steps at a singular matrix). Forced model (harmonic forcing): the
-    unknown is ``x0``; the Newton matrix is ``Phi - I`` (``Phi`` the monodromy matrix,
-    :func:`monodromy`).
-
-    Autonomous model (no harmonic forcing: free orbits, nonlinear modes): the period ``T`` is
-    unknown too. Free periodic orbits of the models femodes builds exist only without
-    dissipation and then come in one-parameter families (energy), so ``Phi`` has the multiplier
-    +1 twice and a phase condition alone leaves the bordered system singular. The orbit is
-    therefore pinned at a turning point of DOF ``j = phase_dof``: ``v_j(t0) = 0`` (phase) and
-    ``q_j(t0) = x0[j]`` (amplitude, the member of the family), and the remaining ``2n - 2``
-    states and ``T`` solve the ``2n - 1`` periodicity equations other than that of ``q_j``
-    (redundant by energy conservation; see ``_ShootingEquations``). The columns are ``Phi - I``
-    for the states and the vector field ``f(x(t0 + T))`` for ``T``.
+    Newton (:func:`femodes.solvers.semismooth_newton`) on ``x0`` with the matrix ``Phi - I`` (``Phi`` the
+    monodromy matrix, :func:`monodromy`). Autonomous model (no forcing): ``T`` is unknown too and the orbit
+    pinned at a turning point of ``phase_dof`` (``v_j(t0) = 0``): :doc:`/guide/stability` (Shooting).
 
     Parameters
     ----------
     model : StructuralModel or ReducedModel
         As in :func:`monodromy`.
     omega : float
-        Forcing frequency (rad/s); for an autonomous model the first guess of the orbit's
-        angular frequency (``T = 2 pi / omega`` unless ``period`` is given).
+        Forcing frequency (rad/s); autonomous: first guess of the orbit's (``T = 2 pi / omega``).
     x0 : array_like (2 n_dofs,)
         First guess of ``x(t0) = [q; v]``.
     period : float, optional
-        Forced: ``nu 2 pi / omega`` for a period-``nu`` (sub-harmonic) orbit, default ``nu = 1``.
-        Autonomous: first guess of the period.
+        Forced: ``nu 2 pi / omega`` for a period-``nu`` orbit (default ``nu = 1``); autonomous: first guess.
     restitution : float, default 1
         Newton's impact coefficient.
     tol : float, default 1e-10
@@ -450,25 +435,20 @@ def shoot(
     t0 : float, default 0
         Time of the state ``x0`` (phase of the forcing).
     phase_dof : int, optional
-        Autonomous models: DOF pinned at its turning point; default the DOF with the largest
-        ``|q|`` in ``x0``. Refused for forced models.
-    rtol, atol : float
+        Autonomous models only: DOF pinned at its turning point (default: largest ``|q|`` in ``x0``).
+    rtol, atol : float, default 1e-11, 1e-12
         Tolerances of ``solve_ivp``.
 
     Returns
     -------
     ShootingResult
-        ``x, success, status, message, nit, residual_norm, multipliers, monodromy, impacts,
-        period, omega``; non-convergence is reported there, not raised. The multipliers are
-        those of the returned ``x``; the trivial multipliers near +1 of an autonomous orbit are
-        kept as computed (their distance from 1, of the order of the square root of the
-        integration error for a conservative family's Jordan block, is not a stability verdict).
+        ``x, success, status, message, nit, residual_norm, multipliers, monodromy, impacts, period,
+        omega``; non-convergence is reported there, not raised. Multipliers of the returned ``x``.
 
     Raises
     ------
     TypeError, ValueError
-        Invalid arguments, or a first guess the event-driven integration cannot follow (as in
-        :func:`monodromy`).
+        Invalid arguments, or a first guess the event-driven integration cannot follow.
     """
     flow, x = _setup(model, omega, x0, restitution, rtol, atol)
     t0 = check_finite("t0", t0)

@@ -86,19 +86,16 @@ def animate(solution: Any, model: Any, path: Any, n_frames: int = 36, scale: flo
     path : str or os.PathLike
         Output file ending in ``.gif`` (imageio + pillow) or ``.mp4`` (needs imageio-ffmpeg;
         the window is rounded up to multiples of 16 pixels). Parent folders are created.
-    n_frames : int
+    n_frames : int, default 36
         Frames per period (>= 2), at ``t_j = j T / n_frames``; the animation loops.
     scale : float, optional
-        Displacement magnification. Default: the largest displacement over the period is drawn
-        as 15 % of the structure's length (solids: of the largest side of the mesh's bounding
-        box, and ``|u|`` is the length of the displacement vector); the value is logged and
-        shown in the caption. The obstacle is drawn at ``scale * gap`` (solids: at
-        ``x_node + scale * gap * direction`` for every contact node), so contact is shown where
-        it happens.
+        Displacement magnification. Default: the largest displacement is drawn as 15 % of the
+        structure's length (solids: largest side of the bounding box); logged and in the caption.
+        The obstacle is drawn at ``scale * gap``, so contact is shown where it happens.
     mode : int, optional
         Mode number (1 = the first mode) for ``LinearModes``.
     style : AnimationStyle, optional
-        Window size, frame rate, colours, what colours a solid, tube radius, contact overlay, unit and title
+        Window size, frame rate, colours, scalars, tube radius, contact overlay, unit and title
         (default ``AnimationStyle()``: 640 x 360 pixels, 12 frames per second).
 
     Returns

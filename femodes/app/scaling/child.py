@@ -11,30 +11,21 @@ What is measured in the child process of one ``(N, H)`` case
    reduced size is reported too).
 2. ``per point``: the case's analysis as ``femodes run`` runs it
    (:func:`femodes.frequency_response` or :func:`femodes.nonlinear_mode` with their default
-   continuation options), capped at ``points`` continuation points
-   (``ContinuationOptions.max_points``). Wall time (``time.perf_counter``) of the whole call --
-   problem setup, start point, continuation -- divided by the number of points of the branch.
+   continuation options), capped at ``points`` continuation points. Wall time of the whole call
+   (problem setup, start point, continuation) divided by the number of points of the branch.
 3. ``per iteration``: at a representative state ``(x, p)``, ``repeat`` times
-   ``r, J, _ = problem.residual(x, p)`` followed by
-   ``femodes.solvers.newton.default_linear_solver(J, r)`` (looked up at call time, so the
-   timing follows whatever that solver dispatches to); median and minimum are reported, with
-   the medians of the two parts. Repeat ``i`` is at the frequency of the state times
-   ``1 + (i + 1) 1e-9`` (:data:`_SHIFT`): the per-harmonic factorisations are cached on the
-   system per frequency, and at one frequency every repeat after the first (and the first too,
-   at a branch point just computed) would only reuse them; inside a continuation the frequency
-   changes at every corrector iteration, so an iteration costs the factorisations. The state is the branch point of step 2 with the largest
-   contact force if there is one; otherwise the linear guess (``problem.initial_guess``) of
-   largest amplitude over 5 parameter values of the span, moved by one Newton step so that the
-   contacts it violates become active (``contact_active`` in the record says whether the state
-   has nonzero complementarity contact forces).
-   With ``stability`` in the case's ``[analysis]`` (true or a method), the stability of the
-   branch of step 2 is timed apart (``stability per point``: :func:`femodes.floquet.annotate_branch`
-   with that method, multipliers at every point and bifurcations located between them, divided
-   by the points; ``stability_method`` says which methods it used).
-4. ``peak MiB``: ``resource.getrusage(RUSAGE_SELF).ru_maxrss`` of the child at the end, i.e. the
-   peak resident memory of the whole case (interpreter and imports included; their share,
-   measured before the model is built, is ``baseline MiB``). Every case has its own process, so
-   the peaks do not mix.
+   ``r, J, _ = problem.residual(x, p)`` followed by ``default_linear_solver(J, r)``; median and
+   minimum, with the medians of the two parts. Repeat ``i`` is at the frequency of the state
+   times ``1 + (i + 1) 1e-9`` (:data:`_SHIFT`), so that it costs the factorisations as a
+   corrector iteration does (:doc:`/howto/scaling-and-sweeps`). The state is the branch point of
+   step 2 with the largest contact force if there is one; otherwise the linear guess of largest
+   amplitude over 5 parameter values of the span, moved by one Newton step (``contact_active``
+   says whether the state has nonzero complementarity contact forces). With ``stability`` in the
+   case's ``[analysis]``, the stability of the branch of step 2 is timed apart (``stability per
+   point``: :func:`femodes.floquet.annotate_branch` divided by the points; ``stability_method``).
+4. ``peak MiB``: ``ru_maxrss`` of the child at the end, the peak resident memory of the whole
+   case (interpreter and imports included; their share, measured before the model is built, is
+   ``baseline MiB``).
 
 A failing case comes back as ``{"error": ...}``: an exception in the child, the child killed
 (by the out-of-memory killer, say) or stopped after ``timeout`` seconds.

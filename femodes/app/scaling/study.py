@@ -51,47 +51,41 @@ def scaling_study(
 ) -> ScalingResult:
     """Time per Newton iteration and per continuation point, and peak memory, against N and H.
 
-    For every pair of ``elements`` x ``harmonics`` the case is measured in a fresh process (see
-    :mod:`femodes.app.scaling.child` for what is timed and how); ``scaling.csv`` and
-    ``scaling.json`` in ``out`` are rewritten after every case and ``scaling.png`` is drawn at
-    the end.
+    Every pair of ``elements`` x ``harmonics`` is measured in a fresh process (:mod:`~femodes.app.scaling.child`);
+    ``out/scaling.csv`` and ``.json`` are rewritten after every case, ``scaling.png`` drawn at the end.
 
     Parameters
     ----------
     case : Case, str or Path
         A case file (:func:`femodes.app.cases.load_case`) or its path.
     elements : sequence of int, optional
-        Values of ``[mesh] n_elements``; only for a line mesh (``[mesh] length/n_elements``).
-        Default: the case's own mesh (only H varies).
+        Values of ``[mesh] n_elements`` (line meshes only). Default: the case's own mesh (only H varies).
     refine : sequence of float, optional
-        Refinement factors of the case's own generated mesh (instead of ``elements``): every
-        element division (``n_elements`` of a line mesh; ``nx, ny`` and ``nz`` of a solid's
-        rectangle or box) is multiplied by the factor and rounded (at least 1), so the elements
-        keep their aspect; 1 is the case's mesh. :func:`refined_divisions` gives the divisions.
+        Refinement factors of the case's own generated mesh (instead of ``elements``): every element
+        division is multiplied by the factor and rounded (at least 1; :func:`refined_divisions`).
     harmonics : sequence of int, optional
         Values of ``[analysis] harmonics``. Default: the case's own (10 if not given).
-    repeat : int
+    repeat : int, default 3
         Repetitions of the timed Newton iteration (median and minimum reported), >= 1.
-    points : int
+    points : int, default 5
         Cap on the continuation points of the timed analysis (>= 2), or 0 to skip it.
-    out : str or Path
+    out : str or Path, default "out/scaling"
         Output folder.
     timeout : float, optional
         Seconds after which one case is stopped and recorded as failed.
-    progress : bool
+    progress : bool, default False
         Show a progress bar over the cases on stderr.
 
     Returns
     -------
     ScalingResult
-        ``interrupted`` is True if Ctrl-C stopped the study: the cases measured until then are
-        kept (and written).
+        ``interrupted`` is True if Ctrl-C stopped the study; the cases measured until then are kept.
 
     Raises
     ------
     ValueError, TypeError
-        Bad arguments, naming the argument; ``elements`` or ``refine`` for a case whose mesh
-        cannot be refined, ``elements`` for a solid (use ``refine``), both given.
+        Bad arguments, naming the argument: ``elements`` or ``refine`` for a mesh that cannot be
+        refined, ``elements`` for a solid (use ``refine``), both given.
     CaseError
         Mistakes in the case file.
     """

@@ -223,10 +223,8 @@ def run_sweep(case, parameters, *, out, executor=None, n_workers: int = 2, study
     study : str
         Study file name in ``out``: ``*.npz`` or ``*.h5`` (needs h5py).
     progress : bool or callable
-        ``True`` logs one INFO line per finished case (logger ``femodes.app.sweep.run``); a
-        callable is called as ``progress(record, n_done, n_total)`` after each finished case, in
-        the calling process (an exception it raises stops the sweep; the study file keeps the
-        finished cases).
+        ``True`` logs one INFO line per finished case; a callable gets ``progress(record, n_done,
+        n_total)`` in the calling process (an exception it raises stops the sweep, keeping the study).
 
     An ``out`` that holds the study of the same sweep (same base case text, same cases) is
     resumed: its finished cases (``"ok"``, ``"incomplete"``, branch file present) are kept and
@@ -236,8 +234,7 @@ def run_sweep(case, parameters, *, out, executor=None, n_workers: int = 2, study
     Returns
     -------
     SweepResult
-        Records in case order; ``result.study`` is the study file (read with
-        :func:`~femodes.app.sweep.load_study`).
+        Records in case order; ``result.study`` is the study file (:func:`~femodes.app.sweep.load_study`).
     """
     t_start = time.perf_counter()
     _check_arguments(out=out, study=study, progress=progress, executor=executor, n_workers=n_workers)

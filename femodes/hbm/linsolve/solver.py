@@ -50,12 +50,8 @@ class BlockSolver:
         refinement would need more passes than a factorisation costs. Band-LU blocks (line
         meshes) iterate ``x <- x + P^-1 (b - J x)`` (:mod:`~femodes.hbm.linsolve.reuse`);
         sparse-direct blocks (2-D/3-D meshes) run GMRES with ``P^-1`` as preconditioner, its
-        budget the measured cost of the factors (:mod:`~femodes.hbm.linsolve.krylov`). Off by
-        default: on the bars of ``benchmarks/README_corrector.md`` (1e4-1e5 DOFs, H = 10) it
-        saved 2-33 % of the factorisations but no time (+2 % to +11 % per point against
-        ``False``); on 3-D P2 boxes it saved 11-27 % of a Newton iteration at 1 % frequency
-        steps (1.9e4-6.1e4 DOFs, ``benchmarks/README_solids_scale.md``), results within the
-        refinement tolerance.
+        budget the measured cost of the factors (:mod:`~femodes.hbm.linsolve.krylov`). Why it is
+        off by default: :doc:`/guide/performance` (Why these defaults).
     reuse_window : float, default 0.05
         Largest ``|w - w0| / |w0|`` tried.
     max_passes : int, optional
