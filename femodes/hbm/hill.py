@@ -290,7 +290,7 @@ def _hill(system: HBMSystem, x: np.ndarray, omega: float, xi: float, n_shifts: i
           k_per_shift: int | None) -> HillResult:
     """Hill's problem of ``system`` itself (dense or shift-invert)."""
     base = omega / system.h.subharmonic          # spacing of the copies, w / nu
-    T = system.h.period(omega)
+    T = system.h.grid.period(omega)
     N = system.size
     J0, J1, J2 = hill_matrices(system, x, omega, xi, dense=N <= SMALL)
     n_keep = 2 * _n_dynamic(system)

@@ -161,7 +161,7 @@ class NonlinearModeProblem:
                           "after them", UserWarning, stacklevel=3)
         self.shape = modes.shapes[:, -1]
         s = self.system
-        self._phase_idx = s.h.global_index(s.h.sin_index(1), np.arange(s.n), s.n)
+        self._phase_idx = s.h.layout.global_index(s.h.layout.sin_index(1), np.arange(s.n), s.n)
         self._Mphi = np.asarray(model.M @ self.shape).ravel()
         self.size = s.size + 2
         # Equations are divided by the elastic force of the unit-mass-normalised mode times the
@@ -230,7 +230,7 @@ class NonlinearModeProblem:
         s = self.system
         a = math.sqrt(2.0 * energy) / self.omega0
         Q = np.zeros((s.h.n_coef, s.n))
-        Q[s.h.cos_index(1)] = a * self.shape
+        Q[s.h.layout.cos_index(1)] = a * self.shape
         return np.concatenate([s.join(Q), [self.omega0, 0.0]])
 
     def unpack(self, x: np.ndarray, p: float) -> HBMUnknowns:

@@ -16,7 +16,7 @@ assembled checks and Hill's method use the assembled matrix), and the
 nonlinear terms living only on the rows/columns of the nonlinear DOFs
 (:mod:`femodes.hbm.nonlinear_forces`). The positive part is
 projected *exactly* (integration between the sign changes of the trigonometric polynomial,
-:meth:`Harmonics.positive_part`): sampling it makes the map piecewise linear with jumps and
+``h.galerkin.positive_part``): sampling it makes the map piecewise linear with jumps and
 semismooth Newton cycles (a sampled continuation of the 1-DOF contact case of Shi & Legrand
 stalls near its resonance, where the exact one runs through both folds). Cubic springs use alias-free sampling
 (``N >= 4H + 1``).
@@ -104,8 +104,8 @@ def _forcing_coefficients(h: Harmonics, model: StructuralModel) -> np.ndarray:
         if kk == 0:
             F[0] += vec.real
         else:
-            F[h.cos_index(kk)] += vec.real
-            F[h.sin_index(kk)] -= vec.imag  # cos(kwt + phi) = cos phi cos - sin phi sin
+            F[h.layout.cos_index(kk)] += vec.real
+            F[h.layout.sin_index(kk)] -= vec.imag  # cos(kwt + phi) = cos phi cos - sin phi sin
     return F
 
 
@@ -198,7 +198,7 @@ class HBMSystem:
         nonlinear = {ct.dof for ct in self.unilateral} | {d for _, d in self.penalty} | {d for _, d in self.cubic}
         _check_memory(harmonics, len(nonlinear), self.n_uc, 3 * self.n_uc + len(self.penalty) + len(self.cubic),
                       int(lr.rank) if lr is not None and lr.rank else 0, isinstance(self.solver, BlockSolver))
-        self.D1 = sp.csr_matrix(np.asarray(harmonics.derivative_domega()))
+        self.D1 = sp.csr_matrix(np.asarray(harmonics.operators.derivative_domega()))
         self.M, self.K, self.C = model.M.tocsr(), model.K.tocsr(), model.C.tocsr()
         # modal damping: the low-rank part U diag(d) U^T of the damping, never assembled on the
         # fast paths (residual, Jacobian products, block solver); C above is the sparse part
@@ -208,9 +208,9 @@ class HBMSystem:
         self.stiffness = CoefficientStiffness(DynamicStiffness(self.K, self.M, self.C, self.C_lr), self.D1,
                                               damping_matrix=model.damping_matrix)
         # period-average weights for energies: <u.v> = sum_a w_a U_a V_a
-        self.w = np.asarray(harmonics.norm_weights())
-        self.E = np.asarray(harmonics.synthesis())
-        self.Pa = np.asarray(harmonics.analysis())
+        self.w = np.asarray(harmonics.galerkin.norm_weights())
+        self.E = np.asarray(harmonics.grid.synthesis())
+        self.Pa = np.asarray(harmonics.grid.analysis())
         self._F = None
         self.threads = threads
         # DOFs where the contact and nonlinear terms act: they couple the harmonics; all other
@@ -301,15 +301,15 @@ class HBMSystem:
     # -- layout -----------------------------------------------------------------------------
     def q_index(self, dof: int) -> np.ndarray:
         """Global indices of the Fourier coefficients of model DOF ``dof``."""
-        return self.h.global_index(np.arange(self.h.n_coef), dof, self.n)
+        return self.h.layout.global_index(np.arange(self.h.n_coef), dof, self.n)
 
     def p_index(self, slot: int) -> np.ndarray:
         """Global indices of the contact-force coefficients of complementarity contact ``slot``."""
-        return self.nq + self.h.global_index(np.arange(self.h.n_coef), slot, self.n_uc)
+        return self.nq + self.h.layout.global_index(np.arange(self.h.n_coef), slot, self.n_uc)
 
     def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``x -> (Q, P)`` with shapes ``(n_coef, n_dofs)`` and ``(n_coef, n_uc)``."""
-        Q = self.h.reshape(x[: self.nq], self.n)
+        Q = self.h.layout.reshape(x[: self.nq], self.n)
         P = x[self.nq : self.size].reshape(self.h.n_coef, self.n_uc)
         return Q, P
 
@@ -320,13 +320,13 @@ class HBMSystem:
 
     def time_shift(self, y: np.ndarray, tau: float) -> np.ndarray:
         """The unknowns ``[Q; P]`` of the motion delayed by the phase ``tau`` (every displacement
-        and contact force ``f(theta) -> f(theta - tau)``, :meth:`Harmonics.time_shift`)."""
+        and contact force ``f(theta) -> f(theta - tau)``, ``h.operators.time_shift``)."""
         Q, P = self.split(y)
-        return self.join(self.h.time_shift(Q, tau), self.h.time_shift(P, tau))
+        return self.join(self.h.operators.time_shift(Q, tau), self.h.operators.time_shift(P, tau))
 
     def shift_generator(self, y: np.ndarray) -> np.ndarray:
         """``d/dtau`` of :meth:`time_shift` at ``tau = 0``: ``-nu D1`` on every signal (the sparse
-        derivative operator of the residual, :meth:`Harmonics.shift_generator`)."""
+        derivative operator of the residual, ``h.operators.shift_generator``)."""
         Q, P = self.split(y)
         minus_nu = -float(self.h.subharmonic)
         return self.join(minus_nu * (self.D1 @ Q), minus_nu * (self.D1 @ P))
@@ -370,7 +370,7 @@ class HBMSystem:
             out[0] = BlockLU(pat, 0.0, superlu_options=superlu).solve(R[0][:, None]).real[:, 0]
             for k in range(1, h.n_harmonics + 1):
                 f = k * omega / h.subharmonic
-                c, si = h.cos_index(k), h.sin_index(k)
+                c, si = h.layout.cos_index(k), h.layout.sin_index(k)
                 lu = BlockLU(pat, f, superlu_options=superlu)
                 rhs = (R[c] - 1j * R[si])[:, None]
                 if self.C_lr is None:
