@@ -198,7 +198,7 @@ def get_state(pr, N: int, H: int, workdir: str) -> tuple:
         res = fm.semismooth_newton(lambda x: pr.residual(x, w)[:2], x0,
                                    options=fm.NewtonOptions(atol=NEWTON_ATOL, max_iter=40))
         info["t_state_newton"] = time.perf_counter() - t
-        s._cache.pop("factors", None)
+        s.linear._cache.pop("factors", None)
         info.update(state_nit=int(res.nit), state_success=bool(res.success), state_message=str(res.message)[:200])
         x = res.x
         if not res.success:
@@ -560,7 +560,7 @@ def case_floor(args) -> dict:
                            "diff", "relres_floor")}
     def femodes_it(wi, tag, threads):
         s.threads = threads
-        s._cache.pop("factors", None)
+        s.linear._cache.pop("factors", None)
         t0 = time.perf_counter()
         r, J, _ = pr.residual(x, wi)
         t1 = time.perf_counter()
@@ -601,7 +601,7 @@ def case_floor(args) -> dict:
         out["relres_floor"].append(float(np.max(np.abs(J @ dxf - r)) / np.max(np.abs(r))))
         # sanity: the floor's linear residual equals femodes' (without forcing and contact)
         if i == 0:
-            lin = s.apply_linear(x[: s.nq], wi)
+            lin = s.linear.apply(x[: s.nq], wi)
             rec["floor_residual_check"] = float(np.max(np.abs(Sq.ravel() - lin)) / np.max(np.abs(lin)))
         del J
     rec.update(out)

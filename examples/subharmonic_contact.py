@@ -186,7 +186,7 @@ def hbm_from_orbit(y0, omega, n_harmonics, c_contact=C_CONTACT):
     pr = fm.ForcedResponseProblem(make_model(c_contact), h)
     s = pr.system
     Q0 = h.grid.from_time(orbit(y0, omega, h.grid.times(omega))[:, None])
-    P0 = (s.force() - s.linear_operator(omega) @ Q0.ravel()).reshape(-1, 1)  # equilibrium: impulses
+    P0 = (s.linear.force() - s.stiffness.operator(omega) @ Q0.ravel()).reshape(-1, 1)  # equilibrium: impulses
     res = fm.semismooth_newton(lambda x: pr.residual(x, omega)[:2], s.join(Q0, P0),
                                options=fm.NewtonOptions(max_iter=50))
     return res, pr

@@ -113,5 +113,5 @@ def test_linear_response_and_hbm_system_use_it():
     assert np.abs(Z.harmonic(w) @ q - F).max() <= 1e3 * EPS * np.abs(F).max()
     s = fm.hbm.HBMSystem(model, fm.Harmonics(3))
     x = np.random.default_rng(3).standard_normal(s.nq)
-    np.testing.assert_array_equal(s.apply_linear(x, w), s.stiffness.apply(x.reshape(s.h.n_coef, s.n), w).ravel())
+    np.testing.assert_array_equal(s.linear.apply(x, w), s.stiffness.apply(x.reshape(s.h.n_coef, s.n), w).ravel())
     assert s.stiffness.Z.K is s.K

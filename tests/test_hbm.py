@@ -195,7 +195,7 @@ def test_system_jacobian_matches_central_differences(harmonics, exact):
     np.testing.assert_allclose(dr_dxi, fd_xi, rtol=0, atol=1e-6 * np.abs(fd_xi).max())
     # the unforced residual differs exactly by the force vector
     r0 = s.residual(x, w, xi=xi, forced=False)[0]
-    np.testing.assert_allclose(r - r0, -np.r_[s.force(), np.zeros(s.np)], atol=1e-14)
+    np.testing.assert_allclose(r - r0, -np.r_[s.linear.force(), np.zeros(s.np)], atol=1e-14)
 
 
 def test_small_systems_take_the_dense_linear_residual(monkeypatch):
@@ -878,14 +878,14 @@ def test_forcing_harmonic_beyond_truncation():
     with pytest.raises(ValueError, match="harmonic 2"):
         fm.frequency_response(m, (0.5, 2.0), fm.Harmonics(1))
     with pytest.raises(ValueError, match="n_harmonics >= 3"):
-        HBMSystem(forced_duffing(), fm.Harmonics(2, subharmonic=3)).force()
+        HBMSystem(forced_duffing(), fm.Harmonics(2, subharmonic=3)).linear.force()
     with pytest.raises(TypeError, match="model"):
         fm.frequency_response("model", (0.5, 2.0), 3)
 
 
 def test_force_placement_subharmonic_and_phase():
     h = fm.Harmonics(6, subharmonic=3)
-    F = HBMSystem(forced_duffing(F=1.7), h).force().reshape(h.n_coef, 1)[:, 0]
+    F = HBMSystem(forced_duffing(F=1.7), h).linear.force().reshape(h.n_coef, 1)[:, 0]
     expected = np.zeros(h.n_coef)
     expected[h.layout.cos_index(3)] = 1.7  # forcing at w is harmonic 3 of the base frequency w/3
     assert h.layout.cos_index(3) == 5
@@ -895,7 +895,7 @@ def test_force_placement_subharmonic_and_phase():
                                fm.HarmonicForce(at=0, amplitude=0.3, harmonic=2, phase=-1.1),
                                fm.HarmonicForce(at=0, amplitude=0.25, harmonic=0))
     h = fm.Harmonics(4, subharmonic=2)
-    F = HBMSystem(m, h).force()
+    F = HBMSystem(m, h).linear.force()
     th = 2 * np.pi * np.arange(64) / 64  # base phase; w t = 2 theta
     f = 0.8 * np.cos(2 * th + 0.4) + 0.3 * np.cos(4 * th - 1.1) + 0.25
     E = h.grid.synthesis(th)

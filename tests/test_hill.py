@@ -44,8 +44,6 @@ class MathieuSystem:
         self.M = sp.identity(1, format="csr")
         self.C = sp.csr_matrix((1, 1))
         self.D1 = sp.csr_matrix(np.asarray(self.h.operators.derivative_domega()))
-        eye = sp.identity(self.h.n_coef, format="csr")
-        self.IM, self.IC, self.AM = sp.kron(eye, self.M), sp.kron(eye, self.C), sp.kron(self.D1, self.M)
         self.stiffness = CoefficientStiffness(DynamicStiffness(sp.csr_matrix((1, 1)), self.M, self.C), self.D1)
         self.nonlinear_dofs = np.array([0])
         E, Pa = np.asarray(self.h.grid.synthesis()), np.asarray(self.h.grid.analysis())

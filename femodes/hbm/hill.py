@@ -317,8 +317,9 @@ def _hill(system: HBMSystem, x: np.ndarray, omega: float, xi: float, n_shifts: i
 
 def _n_dynamic_unknowns(system: HBMSystem) -> int:
     """Unknowns of Hill's problem that carry mass or damping (the dense solve's size)."""
-    # (IC holds the whole damping, a modal low-rank part included: HBMSystem.C_full)
-    dyn = np.asarray(abs(system.IM).sum(axis=1)).ravel() + np.asarray(abs(system.IC).sum(axis=1)).ravel()
+    # (IC holds the whole damping, a modal low-rank part included: stiffness.C_full)
+    term = system.stiffness.term
+    dyn = np.asarray(abs(term("IM")).sum(axis=1)).ravel() + np.asarray(abs(term("IC")).sum(axis=1)).ravel()
     return int(np.count_nonzero(dyn))
 
 

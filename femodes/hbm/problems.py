@@ -72,7 +72,7 @@ class ForcedResponseProblem:
             raise ValueError(
                 "ForcedResponseProblem: the model has no forcing; add model.with_forcing(HarmonicForce(at=..., amplitude=...))"
             )
-        F = self.system.force()  # validates the harmonic count against the forcing
+        F = self.system.linear.force()  # validates the harmonic count against the forcing
         # Equations are divided by the forcing amplitude so that Newton tolerances are relative.
         self.force_scale = float(np.max(np.abs(F))) or 1.0
 
@@ -92,7 +92,7 @@ class ForcedResponseProblem:
     def linear_guess(self, omega: float) -> np.ndarray:
         """Linear response (contacts and nonlinear springs ignored) as a starting point."""
         s = self.system
-        q = s.solve_linear(s.force(), omega)
+        q = s.linear.solve(s.linear.force(), omega)
         return s.join(q.reshape(s.h.n_coef, s.n))
 
     def phase_shift(self, x: np.ndarray, tau: float) -> np.ndarray:
@@ -107,7 +107,7 @@ class ForcedResponseProblem:
     def forcing(self) -> np.ndarray:
         """The forcing's part of the residual (in the residual's scaling): ``r(x, w) = A(w) x + g(x) - forcing()``."""
         s = self.system
-        return s.join(s.force().reshape(s.h.n_coef, s.n)) / self.force_scale
+        return s.join(s.linear.force().reshape(s.h.n_coef, s.n)) / self.force_scale
 
     def unpack(self, x: np.ndarray, p: float) -> HBMUnknowns:
         x = np.asarray(x, dtype=float)

@@ -61,7 +61,7 @@ class LinearFactors:
     """Per-harmonic interior LUs and condensed stiffnesses at one ``(w, xi)`` (cached on the system).
 
     ``structure`` provides ``h`` (the harmonics), ``block_pattern()`` and ``solver_options``
-    (:class:`~femodes.hbm.linsolve.BlockStructure`).
+    (:class:`~femodes.hbm.linear_part.LinearPart`, ``HBMSystem.linear``).
     """
 
     def __init__(self, structure, omega: float, xi: float, threads: int | None = None):
