@@ -209,7 +209,7 @@ def micro(N: int, case: str, H: int, points: int) -> None:
 
     pr = ForcedResponseProblem(build_model(N, case), fm.Harmonics(H), solver=ls.BlockSolver())
     s = pr.system
-    pat = s.block_pattern()
+    pat = s.linear.block_pattern()
     f = H * 1.55
     lu = ls.BlockLU(pat, f)
     one = np.ones((pat.perm.size, 1), dtype=complex)
@@ -217,7 +217,7 @@ def micro(N: int, case: str, H: int, points: int) -> None:
     t_lu = med(lambda: ls.BlockLU(pat, f))
     t_1 = med(lambda: lu.solve(one))
     t_nb = med(lambda: lu.solve(many))
-    t_lf = med(lambda: ls.LinearFactors(s, 1.55, 0.0), R=5)
+    t_lf = med(lambda: ls.LinearFactors(s.linear, 1.55, 0.0), R=5)
     print(f"N={N} {case}: per harmonic block (n_I = {pat.perm.size}, band {pat.kl}): band LU with assembly "
           f"{t_lu:.2f} ms, one-column solve {t_1:.2f} ms ({t_lu / t_1:.1f} solves), {many.shape[1]} columns "
           f"{t_nb:.2f} ms; all {H + 1} harmonics with condensation (LinearFactors) {t_lf:.1f} ms")
@@ -235,7 +235,7 @@ def micro(N: int, case: str, H: int, points: int) -> None:
     print(f"  contraction at the last of {points} points, w = {w:.5f}: forward error of pass 1, 2, ... "
           f"(relative to max |x|) and q = |d_j| / |d_(j-1)|")
     for dw in (1e-7, 1e-6, 1e-5, 1e-4, 1e-3):
-        P = ls.StructuredFactorization(Jb, None, ls.LinearFactors(s, w * (1 - dw), 0.0))
+        P = ls.StructuredFactorization(Jb, None, ls.LinearFactors(s.linear, w * (1 - dw), 0.0))
         xr = P._solve(e[:, None])[:, 0]
         errs, qs, d_prev = [float(np.max(np.abs(xr - xe)) / np.max(np.abs(xe)))], [], float(np.max(np.abs(xr)))
         for _ in range(7):

@@ -137,7 +137,7 @@ def _active(system, x) -> dict:
     import numpy as np
 
     _, P = system.split(x)
-    E = np.asarray(system.h.synthesis())
+    E = np.asarray(system.h.grid.synthesis())
     f = E @ P  # (n_time, n_contacts)
     fmax = float(np.max(f)) if f.size else 0.0
     act = int(np.sum(np.max(f, axis=0) > 1e-6 * max(fmax, 1e-300))) if fmax > 0 else 0
@@ -163,7 +163,7 @@ def _guess_from_ref(system, ref) -> np.ndarray:  # noqa: F821 (numpy is imported
     Q[0] = np.interp(xn, xr, np.concatenate([[0.0], Qr[0]]))
     P[0] = Pr[0]
     for k in range(1, min(Hr, h.n_harmonics) + 1):
-        for dst, src in ((h.cos_index(k), 2 * k - 1), (h.sin_index(k), 2 * k)):
+        for dst, src in ((h.layout.cos_index(k), 2 * k - 1), (h.layout.sin_index(k), 2 * k)):
             Q[dst] = np.interp(xn, xr, np.concatenate([[0.0], Qr[src]]))
             P[dst] = Pr[src]
     return system.join(Q, P)
@@ -174,7 +174,7 @@ def _ref_layout_check():
     import femodes as fm
 
     h = fm.Harmonics(3)
-    assert [h.cos_index(k) for k in (1, 2, 3)] == [1, 3, 5] and [h.sin_index(k) for k in (1, 2, 3)] == [2, 4, 6]
+    assert [h.layout.cos_index(k) for k in (1, 2, 3)] == [1, 3, 5] and [h.layout.sin_index(k) for k in (1, 2, 3)] == [2, 4, 6]
 
 
 def get_state(pr, N: int, H: int, workdir: str) -> tuple:
@@ -198,7 +198,7 @@ def get_state(pr, N: int, H: int, workdir: str) -> tuple:
         res = fm.semismooth_newton(lambda x: pr.residual(x, w)[:2], x0,
                                    options=fm.NewtonOptions(atol=NEWTON_ATOL, max_iter=40))
         info["t_state_newton"] = time.perf_counter() - t
-        s._cache.pop("factors", None)
+        s.linear._cache.pop("factors", None)
         info.update(state_nit=int(res.nit), state_success=bool(res.success), state_message=str(res.message)[:200])
         x = res.x
         if not res.success:
@@ -542,15 +542,15 @@ def case_floor(args) -> dict:
     model, pr, x, w = _full_state(rec, N, H, args.workdir)
     s = pr.system
     h = s.h
-    rc = [0] + [int(h.cos_index(k)) for k in range(1, H + 1)]
-    rsn = [None] + [int(h.sin_index(k)) for k in range(1, H + 1)]
+    rc = [0] + [int(h.layout.cos_index(k)) for k in range(1, H + 1)]
+    rsn = [None] + [int(h.layout.sin_index(k)) for k in range(1, H + 1)]
     t = time.perf_counter()
     bd = s.nonlinear_dofs
     fd = FloorData(s.K, s.M, s.C, bd, rc, rsn, s.np)
     rec["t_floor_setup"] = time.perf_counter() - t
     # boundary unknowns in the floor's order: q of the boundary DOFs (coefficient-major), then p
     gB = np.concatenate([(np.arange(h.n_coef)[:, None] * s.n + bd[None, :]).ravel(), s.nq + np.arange(s.np)])
-    D1 = sp.csr_matrix(np.asarray(h.derivative_domega()))
+    D1 = sp.csr_matrix(np.asarray(h.operators.derivative_domega()))
     Qs = x[: s.nq].reshape(h.n_coef, s.n)
 
     def ws(i):
@@ -560,7 +560,7 @@ def case_floor(args) -> dict:
                            "diff", "relres_floor")}
     def femodes_it(wi, tag, threads):
         s.threads = threads
-        s._cache.pop("factors", None)
+        s.linear._cache.pop("factors", None)
         t0 = time.perf_counter()
         r, J, _ = pr.residual(x, wi)
         t1 = time.perf_counter()
@@ -601,7 +601,7 @@ def case_floor(args) -> dict:
         out["relres_floor"].append(float(np.max(np.abs(J @ dxf - r)) / np.max(np.abs(r))))
         # sanity: the floor's linear residual equals femodes' (without forcing and contact)
         if i == 0:
-            lin = s.apply_linear(x[: s.nq], wi)
+            lin = s.linear.apply(x[: s.nq], wi)
             rec["floor_residual_check"] = float(np.max(np.abs(Sq.ravel() - lin)) / np.max(np.abs(lin)))
         del J
     rec.update(out)

@@ -399,7 +399,7 @@ class StructuredShift:
         interior = np.flatnonzero(mask)
         groups = [0 * n + interior]
         for k in range(1, h.n_harmonics + 1):
-            c, s = h.cos_index(k), h.sin_index(k)
+            c, s = h.layout.cos_index(k), h.layout.sin_index(k)
             g = np.empty(2 * interior.size, dtype=int)
             g[0::2], g[1::2] = c * n + interior, s * n + interior
             groups.append(g)
@@ -613,7 +613,7 @@ def sparse_variant(system, J0, J1, J2, base, *, n_shifts=None, im=None, k=12, to
         idx, cen = hm._select(system, s, V, base, 2 * hm._n_dynamic(system))
         idx = idx[np.abs(cen[idx]) <= hm.CENTRAL]
         s_sel, c_sel = s[idx], cen[idx]
-    mu = np.exp(hm._fold(s_sel, base) * system.h.period(base))
+    mu = np.exp(hm._fold(s_sel, base) * system.h.grid.period(base))
     order = np.argsort(-np.abs(mu), kind="stable")
     st["t_total"] = time.perf_counter() - t_all
     st["t_arpack_internal"] = st["t_eigs"] - st["t_solve"] - st["t_matvec_other"]

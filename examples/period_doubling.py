@@ -51,7 +51,7 @@ def _state(sol, t):
 def _open_time(sol):
     """The instant of the orbit farthest from the stop (shooting starts away from impacts)."""
     theta = 2 * np.pi * np.arange(512) / 512
-    return theta[np.argmin(sol.harmonics.synthesis(theta) @ sol.Q[:, 0])] / (2 * np.pi) * sol.period
+    return theta[np.argmin(sol.harmonics.grid.synthesis(theta) @ sol.Q[:, 0])] / (2 * np.pi) * sol.period
 
 
 # 3. time-domain confirmation of a period-2 orbit

@@ -19,7 +19,7 @@ What it shows
    ``t = k 2 pi / w`` repeats every 2 periods and not every period, and it is refined by a
    Newton shooting on the 2-period map, whose Floquet multipliers (finite differences) lie
    inside the unit circle (attracting).
-2. Sample one period (two forcing periods) on the HBM grid, ``Q0 = h.from_time(u)``, start the
+2. Sample one period (two forcing periods) on the HBM grid, ``Q0 = h.grid.from_time(u)``, start the
    contact force from the dynamic equilibrium ``P0 = F - S(w) Q0`` (the truncated Fourier
    series of the impulses; ``P0 = 0`` makes Newton fall onto the non-impacting 1-periodic
    solution at once) and correct with ``semismooth_newton``.
@@ -169,7 +169,7 @@ _FINE = fm.Harmonics(1, n_time=4096, subharmonic=NU)
 
 def subharmonic_amplitude_td(y0, omega):
     """Amplitude ``sqrt(c1^2 + s1^2)`` of the ``w/NU`` component of a time-domain orbit (4096 samples)."""
-    c = _FINE.from_time(orbit(y0, omega, _FINE.times(omega)))
+    c = _FINE.grid.from_time(orbit(y0, omega, _FINE.grid.times(omega)))
     return float(np.hypot(c[1], c[2]))
 
 
@@ -185,8 +185,8 @@ def hbm_from_orbit(y0, omega, n_harmonics, c_contact=C_CONTACT):
     h = fm.Harmonics(n_harmonics, subharmonic=NU)
     pr = fm.ForcedResponseProblem(make_model(c_contact), h)
     s = pr.system
-    Q0 = h.from_time(orbit(y0, omega, h.times(omega))[:, None])
-    P0 = (s.force() - s.linear_operator(omega) @ Q0.ravel()).reshape(-1, 1)  # equilibrium: impulses
+    Q0 = h.grid.from_time(orbit(y0, omega, h.grid.times(omega))[:, None])
+    P0 = (s.linear.force() - s.stiffness.operator(omega) @ Q0.ravel()).reshape(-1, 1)  # equilibrium: impulses
     res = fm.semismooth_newton(lambda x: pr.residual(x, omega)[:2], s.join(Q0, P0),
                                options=fm.NewtonOptions(max_iter=50))
     return res, pr
@@ -213,8 +213,8 @@ def contact_phase(sol):
 def contact_work_ratio(sol):
     """Period-averaged contact power ``<p u'>`` over the damping dissipation ``<c u'^2>`` (Parseval)."""
     h = sol.harmonics
-    V = h.derivative(sol.omega) @ sol.Q[:, 0]
-    wts = h.norm_weights()
+    V = h.operators.derivative(sol.omega) @ sol.Q[:, 0]
+    wts = h.galerkin.norm_weights()
     return float(np.sum(wts * sol.P[:, 0] * V) / (DAMPING * np.sum(wts * V * V)))
 
 

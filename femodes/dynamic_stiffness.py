@@ -14,7 +14,7 @@ It is evaluated in two forms, each written once here:
 * one harmonic ``e^{i f t}`` (``s = i f``): ``Z = K - f^2 M + i f (C_s - xi M) + i f U d U^T``
   (:class:`DynamicStiffness`: linear responses, the per-harmonic blocks of the HBM block solver);
 * the coefficient rows ``Q`` (``n_coef x n``) of a Galerkin basis of periodic functions whose
-  time derivative is ``w D`` (``D`` at unit frequency, e.g. ``Harmonics.derivative_domega()``):
+  time derivative is ``w D`` (``D`` at unit frequency, e.g. ``h.operators.derivative_domega()``):
   ``S(w) = I x K + w D x (C - xi M) + w^2 D^2 x M`` (:class:`CoefficientStiffness`: the harmonic
   balance residual, Jacobian products, the assembled operators, Hill's matrices).
 

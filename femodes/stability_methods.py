@@ -247,8 +247,8 @@ def _start_time(system: HBMSystem, Q: np.ndarray, omega: float) -> float:
     """The most open instant of the orbit (largest smallest gap): the shooting starts there, away
     from the HBM's contact phases and slight penetrations."""
     h = system.h
-    theta = h.most_open_phase(Q, [ct.dof for ct in system.unilateral], [ct.law.gap for ct in system.unilateral])
-    return float(theta / (2.0 * np.pi) * h.period(omega))
+    theta = h.grid.most_open_phase(Q, [ct.dof for ct in system.unilateral], [ct.law.gap for ct in system.unilateral])
+    return float(theta / (2.0 * np.pi) * h.grid.period(omega))
 
 
 def shooting_multipliers(orbit: Orbit, tol: float) -> StabilityResult:
@@ -258,13 +258,13 @@ def shooting_multipliers(orbit: Orbit, tol: float) -> StabilityResult:
     free = not orbit.forced
     h = system.h
     t0 = _start_time(system, Q, omega)
-    theta = np.array([2.0 * np.pi * t0 / h.period(omega)])
-    E = h.synthesis(theta)
+    theta = np.array([2.0 * np.pi * t0 / h.grid.period(omega)])
+    E = h.grid.synthesis(theta)
     q0 = (E @ Q)[0]
     v0 = (E @ (omega * (system.D1 @ Q)))[0]
     x0 = np.concatenate([q0, v0])
     # a free orbit is shot on the free model (its period an unknown); a forced one with its forcing
-    res = shoot(model.without_forcing() if free else model, omega, x0, period=h.period(omega), t0=t0)
+    res = shoot(model.without_forcing() if free else model, omega, x0, period=h.grid.period(omega), t0=t0)
     if not res.success:
         raise ShootingFailed(res.message)
     mu = np.asarray(res.multipliers)

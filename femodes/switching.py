@@ -47,8 +47,8 @@ def _embed(C: np.ndarray, h: Harmonics, h2: Harmonics) -> np.ndarray:
     out = np.zeros((h2.n_coef,) + C.shape[1:])
     out[0] = C[0]
     k = np.arange(1, h.n_harmonics + 1)
-    out[h2.cos_rows(2 * k)] = C[h.cos_rows(k)]
-    out[h2.sin_rows(2 * k)] = C[h.sin_rows(k)]
+    out[h2.layout.cos_rows(2 * k)] = C[h.layout.cos_rows(k)]
+    out[h2.layout.sin_rows(2 * k)] = C[h.layout.sin_rows(k)]
     return out
 
 
@@ -59,7 +59,7 @@ class _Doubled:
         self.h, self.h2 = h, _doubled(h)
         self.problem = ForcedResponseProblem(model, self.h2)
         s = self.problem.system
-        rows = np.flatnonzero(self.h2.harmonic_of % 2 == 1)
+        rows = np.flatnonzero(self.h2.layout.harmonic_of % 2 == 1)
         # the odd-harmonic unknowns, by the system's own index maps (a symmetric permutation of
         # the block: its determinant's sign and its null vector are unaffected)
         self.odd = np.concatenate([s.q_index(d)[rows] for d in range(s.n)]

@@ -163,13 +163,13 @@ def test_bad_input():
 def test_harmonics_convert_roundtrip():
     h5, h9 = fm.Harmonics(5), fm.Harmonics(9)
     Q = np.random.default_rng(1).standard_normal((h5.n_coef, 3))
-    up = h5.convert(Q, h9)
+    up = h5.layout.convert(Q, h9)
     assert up.shape == (h9.n_coef, 3) and np.all(up[h5.n_coef:] == 0)
-    np.testing.assert_array_equal(h9.convert(up, h5), Q)
+    np.testing.assert_array_equal(h9.layout.convert(up, h5), Q)
     t = np.linspace(0, 7, 11)
-    np.testing.assert_allclose(h9.evaluate(up, 1.3, t), h5.evaluate(Q, 1.3, t), atol=1e-13)
+    np.testing.assert_allclose(h9.grid.evaluate(up, 1.3, t), h5.grid.evaluate(Q, 1.3, t), atol=1e-13)
     with pytest.raises(ValueError, match="subharmonic"):
-        h5.convert(Q, fm.Harmonics(5, subharmonic=2))
+        h5.layout.convert(Q, fm.Harmonics(5, subharmonic=2))
 
 
 # ---------------------------------------------------------------------------------------------

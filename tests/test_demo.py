@@ -73,7 +73,7 @@ def forced(run):
 def tip_harmonics(sol):
     """Amplitudes of harmonics 0..H of the contact (tip) DOF, computed here from the coefficients."""
     h, q = sol.harmonics, sol.Q[:, sol.contacts.dofs[0]]
-    return np.array([abs(q[0])] + [np.hypot(q[h.cos_index(k)], q[h.sin_index(k)]) for k in range(1, h.n_harmonics + 1)])
+    return np.array([abs(q[0])] + [np.hypot(q[h.layout.cos_index(k)], q[h.layout.sin_index(k)]) for k in range(1, h.n_harmonics + 1)])
 
 
 def animated_frames(run):

@@ -61,7 +61,7 @@ def test_one_harmonic_is_the_formula(xi):
 def test_coefficient_form_is_the_harmonic_form_block_by_block(lowrank, xi):
     K, M, C, lr = matrices()
     h = fm.Harmonics(4, subharmonic=2)
-    D = sp.csr_matrix(np.asarray(h.derivative_domega()))
+    D = sp.csr_matrix(np.asarray(h.operators.derivative_domega()))
     Z = DynamicStiffness(K, M, C, lr if lowrank else None)
     S = CoefficientStiffness(Z, D)
     w = 1.3
@@ -72,7 +72,7 @@ def test_coefficient_form_is_the_harmonic_form_block_by_block(lowrank, xi):
     close(SQ[0], K @ Q[0], scale)
     for k in range(1, h.n_harmonics + 1):
         f = k * w / h.subharmonic
-        c, s = h.cos_index(k), h.sin_index(k)
+        c, s = h.layout.cos_index(k), h.layout.sin_index(k)
         z = Z.harmonic(f, xi) @ (Q[c] - 1j * Q[s])
         if lowrank:
             z = z + lr.U @ (Z.lowrank_gain(f) * (lr.U.T @ (Q[c] - 1j * Q[s])))
@@ -113,5 +113,5 @@ def test_linear_response_and_hbm_system_use_it():
     assert np.abs(Z.harmonic(w) @ q - F).max() <= 1e3 * EPS * np.abs(F).max()
     s = fm.hbm.HBMSystem(model, fm.Harmonics(3))
     x = np.random.default_rng(3).standard_normal(s.nq)
-    np.testing.assert_array_equal(s.apply_linear(x, w), s.stiffness.apply(x.reshape(s.h.n_coef, s.n), w).ravel())
+    np.testing.assert_array_equal(s.linear.apply(x, w), s.stiffness.apply(x.reshape(s.h.n_coef, s.n), w).ravel())
     assert s.stiffness.Z.K is s.K

@@ -401,7 +401,7 @@ def test_points_just_above_grazing_get_the_exact_orbit_at_their_frequency(case, 
             x = x + a * d
             run, F = r1, r1.x_end - x
         assert np.max(np.abs(F)) < 1e-12 and run.impacts
-        dQ = fm.Harmonics(20).convert(b.Q[i], hk) - run.coefficients(160)[0]
+        dQ = fm.Harmonics(20).layout.convert(b.Q[i], hk) - run.coefficients(160)[0]
         ref = np.linalg.norm(dQ) / np.linalg.norm(b.Q[i])
         assert abs(acc.amplitude[i] - ref) <= 1e-6 and low <= ref <= 0.05
 

@@ -106,7 +106,7 @@ def root_gram_tol(phi, roots):
     """Round-off allowed in G computed from the roots of phi (sharp near tangency).
 
     The module accepts a root once |phi| <= 8 eps sum|phi_k| (its rounding
-    bound, see Harmonics.positive_part), i.e. within 8 eps sum|phi_k| / |phi'|
+    bound, see h.galerkin.positive_part), i.e. within 8 eps sum|phi_k| / |phi'|
     of the exact root; a second evaluation (the brentq reference on ``series``,
     evaluated to a few eps sum|phi_k|, or the module with another summation
     order) is held to the same bound, so the two roots differ by
@@ -165,7 +165,7 @@ def test_immutable_hashable_picklable():
     with pytest.raises(AttributeError):
         h._H = 5
     with pytest.raises(ValueError):
-        h.synthesis()[0, 0] = 1.0  # cached operators are read-only
+        h.grid.synthesis()[0, 0] = 1.0  # cached operators are read-only
     assert h == Harmonics(4, subharmonic=2) and hash(h) == hash(Harmonics(4, subharmonic=2))
     assert h != Harmonics(4) and h != Harmonics(4, n_time=31, subharmonic=2)
     assert pickle.loads(pickle.dumps(h)) == h
@@ -186,36 +186,36 @@ def test_default_n_time_is_alias_free_for_cubic_and_fast(H):
 def test_layout_indices_and_global_vector():
     H, n = 3, 4
     h = Harmonics(H)
-    assert h.cos_index(0) == 0
-    assert [h.cos_index(k) for k in range(1, H + 1)] == [1, 3, 5]
-    assert [h.sin_index(k) for k in range(1, H + 1)] == [2, 4, 6]
-    np.testing.assert_array_equal(h.cos_rows(np.arange(1, H + 1)), [1, 3, 5])
-    np.testing.assert_array_equal(h.sin_rows(np.arange(1, H + 1)), [2, 4, 6])
+    assert h.layout.cos_index(0) == 0
+    assert [h.layout.cos_index(k) for k in range(1, H + 1)] == [1, 3, 5]
+    assert [h.layout.sin_index(k) for k in range(1, H + 1)] == [2, 4, 6]
+    np.testing.assert_array_equal(h.layout.cos_rows(np.arange(1, H + 1)), [1, 3, 5])
+    np.testing.assert_array_equal(h.layout.sin_rows(np.arange(1, H + 1)), [2, 4, 6])
     with pytest.raises(TypeError, match="k must be an integer"):
-        h.cos_index(np.arange(1, H + 1))  # one harmonic, one row (several: cos_rows)
-    np.testing.assert_array_equal(h.harmonic_of, [0, 1, 1, 2, 2, 3, 3])
-    np.testing.assert_array_equal(h.is_sine, [0, 0, 1, 0, 1, 0, 1])
+        h.layout.cos_index(np.arange(1, H + 1))  # one harmonic, one row (several: cos_rows)
+    np.testing.assert_array_equal(h.layout.harmonic_of, [0, 1, 1, 2, 2, 3, 3])
+    np.testing.assert_array_equal(h.layout.is_sine, [0, 0, 1, 0, 1, 0, 1])
     for bad in (-1, H + 1):
         with pytest.raises(ValueError):
-            h.cos_index(bad)
+            h.layout.cos_index(bad)
     with pytest.raises(ValueError):
-        h.sin_index(0)
+        h.layout.sin_index(0)
 
     Q = np.arange(h.n_coef * n, dtype=float).reshape(h.n_coef, n)
-    x = h.flatten(Q)
+    x = h.layout.flatten(Q)
     for j in range(h.n_coef):
         for i in range(n):
-            assert x[h.global_index(j, i, n)] == Q[j, i]
+            assert x[h.layout.global_index(j, i, n)] == Q[j, i]
     dofs = np.array([3, 1])
-    idx = h.global_index(np.arange(h.n_coef)[:, None], dofs, n)
+    idx = h.layout.global_index(np.arange(h.n_coef)[:, None], dofs, n)
     assert idx.shape == (h.n_coef, 2)
     np.testing.assert_array_equal(x[idx], Q[:, dofs])
-    np.testing.assert_array_equal(h.reshape(x, n), Q)
-    assert h.size(n) == x.size
+    np.testing.assert_array_equal(h.layout.reshape(x, n), Q)
+    assert h.layout.size(n) == x.size
     with pytest.raises(ValueError):
-        h.global_index(0, n, n)
+        h.layout.global_index(0, n, n)
     with pytest.raises(ValueError):
-        h.reshape(x[:-1], n)
+        h.layout.reshape(x[:-1], n)
 
 
 def test_kron_convention_matches_harmonic_major_layout():
@@ -225,18 +225,18 @@ def test_kron_convention_matches_harmonic_major_layout():
     A = rng.standard_normal((h.n_coef, h.n_coef))
     B = rng.standard_normal((n, n))
     Q = rng.standard_normal((h.n_coef, n))
-    np.testing.assert_allclose(np.kron(A, B) @ h.flatten(Q), h.flatten(A @ Q @ B.T), atol=1e-13)
+    np.testing.assert_allclose(np.kron(A, B) @ h.layout.flatten(Q), h.layout.flatten(A @ Q @ B.T), atol=1e-13)
 
 
 # --------------------------------------------------------- grids, operators
 @pytest.mark.parametrize("H, N", [(1, None), (5, None), (5, 11), (5, 12), (20, None)])
 def test_analysis_inverts_synthesis(H, N):
     h = Harmonics(H, n_time=N)
-    E, P = h.synthesis(), h.analysis()
+    E, P = h.grid.synthesis(), h.grid.analysis()
     assert E.shape == (h.n_time, h.n_coef) and P.shape == (h.n_coef, h.n_time)
     np.testing.assert_allclose(P @ E, np.eye(h.n_coef), atol=1e-13)
-    np.testing.assert_allclose(E, basis(H, h.phases()), atol=1e-14)
-    np.testing.assert_allclose(h.synthesis([0.3, 1.2]), basis(H, [0.3, 1.2]), atol=1e-14)
+    np.testing.assert_allclose(E, basis(H, h.grid.phases()), atol=1e-14)
+    np.testing.assert_allclose(h.grid.synthesis([0.3, 1.2]), basis(H, [0.3, 1.2]), atol=1e-14)
 
 
 @settings(max_examples=60, deadline=None)
@@ -250,10 +250,10 @@ def test_time_round_trip(H, n, extra, seed):
     rng = np.random.default_rng(seed)
     h = Harmonics(H, n_time=2 * H + 1 + extra)
     Q = rng.standard_normal((h.n_coef, n))
-    U = h.to_time(Q)
+    U = h.grid.to_time(Q)
     assert U.shape == (h.n_time, n)
-    np.testing.assert_allclose(h.from_time(U), Q, atol=1e-12 * (1 + np.abs(Q).max()))
-    np.testing.assert_allclose(h.from_time(h.to_time(Q[:, 0])), Q[:, 0], atol=1e-12 * (1 + np.abs(Q).max()))
+    np.testing.assert_allclose(h.grid.from_time(U), Q, atol=1e-12 * (1 + np.abs(Q).max()))
+    np.testing.assert_allclose(h.grid.from_time(h.grid.to_time(Q[:, 0])), Q[:, 0], atol=1e-12 * (1 + np.abs(Q).max()))
     np.testing.assert_allclose(U, fine_samples(Q, h.n_time), atol=1e-12 * (1 + np.abs(Q).max()))
 
 
@@ -262,23 +262,23 @@ def test_times_period_frequencies_and_evaluate(nu):
     rng = np.random.default_rng(nu)
     h = Harmonics(4, subharmonic=nu)
     omega = 2.7
-    assert h.period(omega) == pytest.approx(TWO_PI * nu / omega, rel=1e-15)
-    np.testing.assert_allclose(h.times(omega), h.period(omega) * np.arange(h.n_time) / h.n_time)
-    np.testing.assert_allclose(h.frequencies(omega), h.harmonic_of * omega / nu)
+    assert h.grid.period(omega) == pytest.approx(TWO_PI * nu / omega, rel=1e-15)
+    np.testing.assert_allclose(h.grid.times(omega), h.grid.period(omega) * np.arange(h.n_time) / h.n_time)
+    np.testing.assert_allclose(h.grid.frequencies(omega), h.layout.harmonic_of * omega / nu)
     Q = rng.standard_normal((h.n_coef, 2))
-    np.testing.assert_allclose(h.evaluate(Q, omega, h.times(omega)), h.to_time(Q), atol=1e-13)
+    np.testing.assert_allclose(h.grid.evaluate(Q, omega, h.grid.times(omega)), h.grid.to_time(Q), atol=1e-13)
     t = rng.uniform(0, 10, 7)
     np.testing.assert_allclose(
-        h.evaluate(Q, omega, t + h.period(omega)), h.evaluate(Q, omega, t), atol=1e-12
+        h.grid.evaluate(Q, omega, t + h.grid.period(omega)), h.grid.evaluate(Q, omega, t), atol=1e-12
     )
     # explicit formula: u(t) = sum_k c_k cos(k omega t/nu) + s_k sin(...)
     u = Q[0, 0] + sum(
         Q[2 * k - 1, 0] * np.cos(k * omega * t / nu) + Q[2 * k, 0] * np.sin(k * omega * t / nu)
         for k in range(1, 5)
     )
-    np.testing.assert_allclose(h.evaluate(Q[:, 0], omega, t), u, atol=1e-13)
+    np.testing.assert_allclose(h.grid.evaluate(Q[:, 0], omega, t), u, atol=1e-13)
     with pytest.raises(ValueError):
-        h.period(0.0)
+        h.grid.period(0.0)
 
 
 @pytest.mark.parametrize("nu", [1, 3])
@@ -286,24 +286,24 @@ def test_derivative_operator(nu):
     rng = np.random.default_rng(7)
     h = Harmonics(6, subharmonic=nu)
     omega = 1.9
-    D = h.derivative(omega)
+    D = h.operators.derivative(omega)
     np.testing.assert_allclose(D, -D.T)
     # analytic: u = 3 cos(2Wt) - 0.5 sin(Wt) + 0.2, W = omega/nu
     W = omega / nu
     q = np.zeros(h.n_coef)
-    q[0], q[h.cos_index(2)], q[h.sin_index(1)] = 0.2, 3.0, -0.5
+    q[0], q[h.layout.cos_index(2)], q[h.layout.sin_index(1)] = 0.2, 3.0, -0.5
     t = np.linspace(0, 5, 13)
     du = -6 * W * np.sin(2 * W * t) - 0.5 * W * np.cos(W * t)
-    np.testing.assert_allclose(h.evaluate(D @ q, omega, t), du, atol=1e-12)
+    np.testing.assert_allclose(h.grid.evaluate(D @ q, omega, t), du, atol=1e-12)
     # central finite differences in time, random multi-signal coefficients
     Q = rng.standard_normal((h.n_coef, 3))
     dt = 1e-5
-    fd = (h.evaluate(Q, omega, t + dt) - h.evaluate(Q, omega, t - dt)) / (2 * dt)
-    np.testing.assert_allclose(h.evaluate(D @ Q, omega, t), fd, rtol=1e-7, atol=1e-7 * np.abs(fd).max())
+    fd = (h.grid.evaluate(Q, omega, t + dt) - h.grid.evaluate(Q, omega, t - dt)) / (2 * dt)
+    np.testing.assert_allclose(h.grid.evaluate(D @ Q, omega, t), fd, rtol=1e-7, atol=1e-7 * np.abs(fd).max())
     # dD/domega (D is linear in omega)
     dw = 1e-6
     np.testing.assert_allclose(
-        h.derivative_domega(), (h.derivative(omega + dw) - h.derivative(omega - dw)) / (2 * dw), atol=1e-8
+        h.operators.derivative_domega(), (h.operators.derivative(omega + dw) - h.operators.derivative(omega - dw)) / (2 * dw), atol=1e-8
     )
 
 
@@ -313,10 +313,10 @@ def test_norm_weights_give_period_average_of_products():
     U, V = rng.standard_normal((2, h.n_coef))
     N = 64
     average = np.mean(fine_samples(U, N) * fine_samples(V, N))
-    assert np.sum(h.norm_weights() * U * V) == pytest.approx(average, rel=1e-13)
+    assert np.sum(h.galerkin.norm_weights() * U * V) == pytest.approx(average, rel=1e-13)
     # projection normalisation: coefficient = norm * int f b over a period
-    np.testing.assert_allclose(h.projection_norms(), norms(5))
-    np.testing.assert_allclose(h.analysis(), (TWO_PI / h.n_time) * norms(5)[:, None] * h.synthesis().T)
+    np.testing.assert_allclose(h.galerkin.projection_norms(), norms(5))
+    np.testing.assert_allclose(h.grid.analysis(), (TWO_PI / h.n_time) * norms(5)[:, None] * h.grid.synthesis().T)
 
 
 @pytest.mark.parametrize("H", [1, 3, 8, 15])
@@ -325,11 +325,11 @@ def test_cubic_galerkin_is_alias_free_with_default_n_time(H):
     h = Harmonics(H)
     Q = rng.standard_normal((h.n_coef, 2))
     exact = fine_coefficients(fine_samples(Q, 32 * h.n_coef) ** 3, H)
-    aft = h.from_time(h.to_time(Q) ** 3)
+    aft = h.grid.from_time(h.grid.to_time(Q) ** 3)
     np.testing.assert_allclose(aft, exact, atol=1e-12 * np.abs(exact).max())
     # N = 2H + 1 is enough to represent u but aliases u^3
     h_min = Harmonics(H, n_time=2 * H + 1)
-    aliased = h_min.from_time(h_min.to_time(Q) ** 3)
+    aliased = h_min.grid.from_time(h_min.grid.to_time(Q) ** 3)
     assert np.abs(aliased - exact).max() > 1e-2 * np.abs(exact).max()
 
 
@@ -343,7 +343,7 @@ def test_positive_part_against_brute_force_grid(H):
     h = Harmonics(H)
     for trial in range(3):
         phi = random_phi(rng, H, offset=0.3 * trial)
-        proj, G = h.positive_part(phi)
+        proj, G = h.galerkin.positive_part(phi)
         ref = brute_force_positive(phi)
         assert np.abs(proj - ref).max() <= 2e-8 * np.abs(phi).max()
         assert proj.shape == phi.shape and G.shape == (h.n_coef, h.n_coef)
@@ -358,7 +358,7 @@ def test_positive_part_and_jacobian_against_quadrature_reference(H, method):
         phi = random_phi(rng, H, offset=0.5 * trial)
         iv = reference_intervals(phi)
         G_ref = reference_gram(H, iv)
-        proj, G = h.positive_part(phi, roots=ROOTS[method])
+        proj, G = h.galerkin.positive_part(phi, roots=ROOTS[method])
         # 1e-13: quadrature and brentq (xtol 1e-15) of the reference; root_gram_tol: the roots'
         # conditioning and G's sums over up to 2H roots (<= 3e-14 here; measured |G - G_ref| <= 2.6e-15)
         roots = [r for ab in iv for r in ab if 0.0 < r < TWO_PI]
@@ -374,18 +374,18 @@ def test_positive_part_structure(H, seed, offset, scale):
     rng = np.random.default_rng(seed)
     h = Harmonics(H)
     phi = scale * random_phi(rng, H, offset=offset)
-    proj, G = h.positive_part(phi)
+    proj, G = h.galerkin.positive_part(phi)
     np.testing.assert_allclose(proj, G @ phi, rtol=0, atol=1e-14 * np.abs(phi).max() * h.n_coef)
     M = G / norms(H)[:, None]
     np.testing.assert_allclose(M, M.T, atol=1e-13)
     s = np.sqrt(norms(H))
     eig = np.linalg.eigvalsh(s[:, None] * M * s[None, :])
     assert eig.min() >= -1e-12 and eig.max() <= 1 + 1e-12
-    iv = h.positive_intervals(phi)
+    iv = h.galerkin.positive_intervals(phi)
     assert G[0, 0] == pytest.approx(np.sum(iv[:, 1] - iv[:, 0]) / TWO_PI, abs=1e-13)
     # positive homogeneity: G(a phi) = G(phi) for a > 0; 7.5 phi is rounded, so its roots move
     # by ~eps sum|phi_k| / |phi'| (large near tangency: 0.8e-13 seen in 2e4 random draws)
-    np.testing.assert_allclose(h.positive_part(7.5 * phi)[1], G, atol=1e-13 + root_gram_tol(phi, interval_roots(iv)))
+    np.testing.assert_allclose(h.galerkin.positive_part(7.5 * phi)[1], G, atol=1e-13 + root_gram_tol(phi, interval_roots(iv)))
 
 
 @pytest.mark.parametrize("H", [1, 4, 20])
@@ -394,17 +394,17 @@ def test_positive_part_one_signed_and_zero(H):
     rng = np.random.default_rng(H)
     phi = 0.01 * random_phi(rng, H)
     phi[0] = 1.0 + np.abs(phi[1:]).sum()  # positive everywhere
-    proj, G = h.positive_part(phi)
+    proj, G = h.galerkin.positive_part(phi)
     np.testing.assert_array_equal(G, np.eye(h.n_coef))
     np.testing.assert_array_equal(proj, phi)
-    proj, G = h.positive_part(-phi)
+    proj, G = h.galerkin.positive_part(-phi)
     np.testing.assert_array_equal(G, 0.0)
     np.testing.assert_array_equal(proj, 0.0)
-    proj, G = h.positive_part(np.zeros(h.n_coef))
+    proj, G = h.galerkin.positive_part(np.zeros(h.n_coef))
     np.testing.assert_array_equal(G, 0.0)
     np.testing.assert_array_equal(proj, 0.0)
-    assert h.positive_intervals(phi).tolist() == [[0.0, TWO_PI]]
-    assert h.positive_intervals(-phi).shape == (0, 2)
+    assert h.galerkin.positive_intervals(phi).tolist() == [[0.0, TWO_PI]]
+    assert h.galerkin.positive_intervals(-phi).shape == (0, 2)
 
 
 @pytest.mark.parametrize("method", ["colleague", "companion"])
@@ -421,7 +421,7 @@ def test_positive_part_near_tangency(theta0, delta, method):
     h = Harmonics(5)
     phi = np.zeros(h.n_coef)
     phi[0], phi[1], phi[2] = 1.0 + delta, -np.cos(theta0), -np.sin(theta0)
-    proj, G = h.positive_part(phi, roots=ROOTS[method])
+    proj, G = h.galerkin.positive_part(phi, roots=ROOTS[method])
     if delta >= 0:
         np.testing.assert_array_equal(G, np.eye(h.n_coef))
         return
@@ -458,7 +458,7 @@ def test_positive_part_higher_degree_tangency():
     # the tolerance still resolves a root error of 1e-8
     assert np.abs(reference_gram(6, [(a + 1e-8, b)]) - reference_gram(6, [(a, b)])).max() > 10 * tol
     for method in ("colleague", "companion"):
-        proj, G = h.positive_part(phi, roots=ROOTS[method])
+        proj, G = h.galerkin.positive_part(phi, roots=ROOTS[method])
         np.testing.assert_allclose(G, G_ref, rtol=0, atol=tol)
 
 
@@ -469,13 +469,13 @@ def test_positive_part_jacobian_matches_finite_differences(H):
     rng = np.random.default_rng(11 + H)
     h = Harmonics(H)
     phi = random_phi(rng, H, offset=0.2)
-    proj, G = h.positive_part(phi)
+    proj, G = h.galerkin.positive_part(phi)
     step = 1e-6 * np.abs(phi).max()
     J = np.empty_like(G)
     for b in range(h.n_coef):
         e = np.zeros(h.n_coef)
         e[b] = step
-        J[:, b] = (h.positive_part(phi + e)[0] - h.positive_part(phi - e)[0]) / (2 * step)
+        J[:, b] = (h.galerkin.positive_part(phi + e)[0] - h.galerkin.positive_part(phi - e)[0]) / (2 * step)
     np.testing.assert_allclose(J, G, rtol=0, atol=1e-6 * np.abs(G).max())
 
 
@@ -494,9 +494,9 @@ def test_positive_part_batched_equals_loop(method):
     phi[:, 7] *= 1e-9  # small scale
     proj, G = ExactProjection(roots=ROOTS[method])(h, phi)
     assert proj.shape == phi.shape and G.shape == (9, h.n_coef, h.n_coef)
-    intervals = [h.positive_intervals(phi[:, i], roots=ROOTS[method]) for i in range(phi.shape[1])]
+    intervals = [h.galerkin.positive_intervals(phi[:, i], roots=ROOTS[method]) for i in range(phi.shape[1])]
     for i in range(phi.shape[1]):
-        p_i, G_i = h.positive_part(phi[:, i], roots=ROOTS[method])
+        p_i, G_i = h.galerkin.positive_part(phi[:, i], roots=ROOTS[method])
         # batched and single calls sum in a different order (BLAS), so their roots differ at the
         # root conditioning and G by root_gram_tol, proj = G phi by that times sum|phi| (one-signed
         # and zero signals: no roots, tol = 0, G exactly I or 0); measured <= 9e-16 (was atol 1e-15)
@@ -505,9 +505,9 @@ def test_positive_part_batched_equals_loop(method):
         np.testing.assert_allclose(proj[:, i], p_i, rtol=0, atol=tol * np.abs(phi[:, i]).sum())
     # one signal at a time is the single-signal API; a batch there is refused with the way to it
     with pytest.raises(ValueError, match="ExactProjection"):
-        h.positive_part(phi)
+        h.galerkin.positive_part(phi)
     with pytest.raises(ValueError, match="ExactProjection"):
-        h.positive_intervals(phi)
+        h.galerkin.positive_intervals(phi)
 
 
 def test_positive_part_root_methods_agree_and_trailing_zeros_embed():
@@ -548,13 +548,13 @@ def test_positive_part_special_signals():
     for phi, tol in cases:
         G_ref = reference_gram(10, reference_intervals(phi))
         for method in ("colleague", "companion"):
-            np.testing.assert_allclose(h.positive_part(phi, roots=ROOTS[method])[1], G_ref, atol=tol)
+            np.testing.assert_allclose(h.galerkin.positive_part(phi, roots=ROOTS[method])[1], G_ref, atol=tol)
     # sin^3: triple roots at 0 and pi are located to ~eps^(1/3)
     sin3 = np.zeros(h.n_coef)
     sin3[2], sin3[6] = 0.75, -0.25
     G_ref = reference_gram(10, [(0.0, np.pi)])
     for method in ("colleague", "companion"):
-        np.testing.assert_allclose(h.positive_part(sin3, roots=ROOTS[method])[1], G_ref, atol=1e-5)
+        np.testing.assert_allclose(h.galerkin.positive_part(sin3, roots=ROOTS[method])[1], G_ref, atol=1e-5)
 
 
 @pytest.mark.parametrize("top", [1e-15, 1e-12, 1e-9, 1e-6])
@@ -596,8 +596,8 @@ def test_sampled_positive_part_is_inaccurate_for_short_contact(depth):
     G_ref = reference_gram(H, iv)
     p_ref = G_ref @ phi
     scale = np.abs(phi).max()
-    proj, G = h.positive_part(phi)
-    proj_s, G_s = h.positive_part_sampled(phi, 256)
+    proj, G = h.galerkin.positive_part(phi)
+    proj_s, G_s = h.galerkin.positive_part_sampled(phi, 256)
     assert np.abs(proj - p_ref).max() < 1e-13 * scale
     assert np.abs(G - G_ref).max() < 1e-13
     assert np.abs(proj_s - p_ref).max() > 1e-5 * scale
@@ -618,8 +618,8 @@ def test_sampled_jacobian_jumps_exact_jacobian_is_continuous():
     phi[0] -= series(phi, theta_s) + 1e-10  # phi(theta_s) = -1e-10
     phi2 = phi.copy()
     phi2[0] += 2e-10  # phi2(theta_s) = +1e-10
-    d_sampled = np.abs(h.positive_part_sampled(phi2, N)[1] - h.positive_part_sampled(phi, N)[1]).max()
-    d_exact = np.abs(h.positive_part(phi2)[1] - h.positive_part(phi)[1]).max()
+    d_sampled = np.abs(h.galerkin.positive_part_sampled(phi2, N)[1] - h.galerkin.positive_part_sampled(phi, N)[1]).max()
+    d_exact = np.abs(h.galerkin.positive_part(phi2)[1] - h.galerkin.positive_part(phi)[1]).max()
     assert d_sampled > 1.0 / N
     assert d_exact < 1e-9
 
@@ -635,13 +635,13 @@ def test_positive_part_sampled_shapes_and_convergence():
         assert ps.shape == phi.shape and Gs.shape == G.shape
         errs.append(np.abs(ps - proj).max())
     assert errs[0] > errs[1] > errs[2]
-    p1, G1 = h.positive_part_sampled(phi[:, 0])
+    p1, G1 = h.galerkin.positive_part_sampled(phi[:, 0])
     assert p1.shape == (h.n_coef,) and G1.shape == (h.n_coef, h.n_coef)
     # the same numbers batched or one at a time, to the rounding of the matrix products
     np.testing.assert_allclose(p1, SampledProjection()(h, phi)[0][:, 0], rtol=0,
                                atol=8 * np.finfo(float).eps * h.n_time * np.abs(phi[:, 0]).sum())
     with pytest.raises(ValueError):
-        h.positive_part_sampled(phi[:, 0], 5)
+        h.galerkin.positive_part_sampled(phi[:, 0], 5)
 
 
 def test_positive_intervals_match_reference():
@@ -649,7 +649,7 @@ def test_positive_intervals_match_reference():
     h = Harmonics(7)
     for _ in range(5):
         phi = random_phi(rng, 7)
-        iv = h.positive_intervals(phi)
+        iv = h.galerkin.positive_intervals(phi)
         ref = reference_intervals(phi)
         # merge the reference interval crossing 2 pi
         if len(ref) > 1 and ref[0][0] == 0.0 and ref[-1][1] == TWO_PI:
@@ -663,13 +663,13 @@ def test_positive_intervals_match_reference():
 def test_input_validation_of_phi():
     h = Harmonics(3)
     with pytest.raises(ValueError):
-        h.positive_part(np.zeros(5))
+        h.galerkin.positive_part(np.zeros(5))
     with pytest.raises(ValueError):
-        h.positive_part(np.full(7, np.nan))
+        h.galerkin.positive_part(np.full(7, np.nan))
     with pytest.raises(ValueError):
-        h.to_time(np.zeros((6, 2)))
+        h.grid.to_time(np.zeros((6, 2)))
     with pytest.raises(ValueError):
-        h.from_time(np.zeros(h.n_time + 1))
+        h.grid.from_time(np.zeros(h.n_time + 1))
 
 
 def test_grid_roots_equal_colleague_roots():
@@ -681,7 +681,7 @@ def test_grid_roots_equal_colleague_roots():
     rng = np.random.default_rng(0)
     for H in (1, 2, 3, 5, 10, 20, 40, 80):
         h = Harmonics(H)
-        k = np.maximum(h.harmonic_of, 1)
+        k = np.maximum(h.layout.harmonic_of, 1)
         for decay in (0, 1, 2):
             Phi = rng.standard_normal((100, h.n_coef)) / k ** decay
             Phi[:, 0] += rng.uniform(-2, 2, 100) * np.abs(Phi).max(axis=1)
@@ -719,7 +719,7 @@ def test_grid_sign_changes_equal_the_general_path():
     rng = np.random.default_rng(1)
     for H in (1, 3, 10, 20, 40):
         h = Harmonics(H)
-        k = np.maximum(h.harmonic_of, 1)
+        k = np.maximum(h.layout.harmonic_of, 1)
         for decay in (0, 1, 2):
             A = rng.standard_normal((200, h.n_coef)) / k ** decay
             A[:, 0] += rng.uniform(-2, 2, 200) * np.abs(A).max(axis=1)
@@ -761,7 +761,7 @@ def test_grid_sign_changes_leave_what_they_cannot_decide():
     G = positive_gram(h, A, GridRoots())[0]
     np.testing.assert_allclose(G, positive_gram(h, A, ColleagueRoots())[0], atol=1e-12)
     # the dip's positive interval: 2 sqrt(2e-6) wide around t = 0.3
-    iv = h.positive_intervals(dip)
+    iv = h.galerkin.positive_intervals(dip)
     np.testing.assert_allclose(iv, [[0.3 - np.arccos(1 - 1e-6), 0.3 + np.arccos(1 - 1e-6)]], atol=1e-9)
 
 

@@ -43,13 +43,11 @@ class MathieuSystem:
         self.nq = self.size = self.h.n_coef
         self.M = sp.identity(1, format="csr")
         self.C = sp.csr_matrix((1, 1))
-        self.D1 = sp.csr_matrix(np.asarray(self.h.derivative_domega()))
-        eye = sp.identity(self.h.n_coef, format="csr")
-        self.IM, self.IC, self.AM = sp.kron(eye, self.M), sp.kron(eye, self.C), sp.kron(self.D1, self.M)
+        self.D1 = sp.csr_matrix(np.asarray(self.h.operators.derivative_domega()))
         self.stiffness = CoefficientStiffness(DynamicStiffness(sp.csr_matrix((1, 1)), self.M, self.C), self.D1)
         self.nonlinear_dofs = np.array([0])
-        E, Pa = np.asarray(self.h.synthesis()), np.asarray(self.h.analysis())
-        self.cos = Pa @ (np.cos(self.h.phases())[:, None] * E)
+        E, Pa = np.asarray(self.h.grid.synthesis()), np.asarray(self.h.grid.analysis())
+        self.cos = Pa @ (np.cos(self.h.grid.phases())[:, None] * E)
         self.delta, self.eps = delta, eps
 
     def residual(self, x, omega, *, xi=0.0, forced=True):

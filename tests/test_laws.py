@@ -192,11 +192,11 @@ def test_hbm_penalty_term_is_the_projection_of_the_law():
 
     s = HBMSystem(model, h)
     Q = np.zeros((h.n_coef, 1))
-    Q[0, 0], Q[h.cos_index(1), 0], Q[h.sin_index(1), 0] = 0.1, 0.8, 0.3
-    r_nl = s.residual(s.join(Q), 1.0, forced=False)[0] - s.apply_linear(Q.ravel(), 1.0)
+    Q[0, 0], Q[h.layout.cos_index(1), 0], Q[h.layout.sin_index(1), 0] = 0.1, 0.8, 0.3
+    r_nl = s.residual(s.join(Q), 1.0, forced=False)[0] - s.linear.apply(Q.ravel(), 1.0)
     N = 2**16
-    E = h.synthesis(2 * np.pi * np.arange(N) / N)
-    weights = np.where(h.harmonic_of == 0, 1.0 / N, 2.0 / N)
+    E = h.grid.synthesis(2 * np.pi * np.arange(N) / N)
+    weights = np.where(h.layout.harmonic_of == 0, 1.0 / N, 2.0 / N)
     ref = weights * (E.T @ law.force(E @ Q[:, 0])[0])
     np.testing.assert_allclose(r_nl, ref, atol=1e-7)  # midpoint-type quadrature of a kinked integrand
 

@@ -227,16 +227,16 @@ def test_factorisations_are_reused_at_the_same_frequency():
     model, h = CASES["bar"]()
     pr = forced(model, h)
     s = pr.system
-    F1 = s.linear_factors(1.3)
-    assert s.linear_factors(1.3) is F1
-    assert s.linear_factors(1.31) is not F1
+    F1 = s.linear.factors(1.3)
+    assert s.linear.factors(1.3) is F1
+    assert s.linear.factors(1.31) is not F1
     # a Newton iteration at fixed w after another x: same factors object
     _, J, _ = pr.residual(state(pr, 1, 1e-3), 1.31)
     J.factorize()
-    F2 = s.linear_factors(1.31)
+    F2 = s.linear.factors(1.31)
     _, J, _ = pr.residual(state(pr, 2, 1e-3), 1.31)
     J.factorize()
-    assert s.linear_factors(1.31) is F2
+    assert s.linear.factors(1.31) is F2
 
 
 def test_threads_give_identical_results():
@@ -248,7 +248,7 @@ def test_threads_give_identical_results():
         pr.system.threads = threads
         _, J, _ = pr.residual(state(pr, 1, 1e-3), 1.2)
         out.append(J.factorize().solve(b))
-        assert pr.system.linear_factors(1.2).threads == threads
+        assert pr.system.linear.factors(1.2).threads == threads
     np.testing.assert_array_equal(out[0], out[1])
 
 
@@ -257,7 +257,7 @@ def test_superlu_interior_path():
     model, h = CASES["beam-mixed-laws"]()
     pr = forced(model, h, structured(options=dict(band_max_fill=0.0)))  # no band is narrow enough
     _, J, _ = pr.residual(state(pr, 1, 1e-3), 1.3)
-    assert not pr.system.block_pattern().banded
+    assert not pr.system.linear.block_pattern().banded
     b = np.random.default_rng(11).standard_normal(pr.size)
     assert backward_error(J, J.factorize().solve(b), b) < 1e-13
 
@@ -313,7 +313,7 @@ def test_superlu_interior_of_solids_matches_band_and_assembled(dim):
         x = state(pr, 1, 1e-3)
         _, J, _ = pr.residual(x, w)
         assert isinstance(J, HarmonicBlockJacobian)
-        assert pr.system.block_pattern().banded == band
+        assert pr.system.linear.block_pattern().banded == band
         b = np.random.default_rng(2).standard_normal(pr.size)
         out.append(J.factorize().solve(b))
         assert backward_error(J, out[-1], b) < 1e-13
@@ -402,7 +402,7 @@ def test_reuse_refactorises_across_an_interior_eigenfrequency(caplog):
              .with_forcing(fm.HarmonicForce(at="tip", amplitude=1.0))
              .with_contact(fm.UnilateralContact(at="tip", gap=1e-3)))
     h = fm.Harmonics(3)
-    pat = forced(model, h).system.block_pattern()
+    pat = forced(model, h).system.linear.block_pattern()
     M, K = model.M.tocsr(), model.K.tocsr()
     I = pat.interior
     lam1 = sla.eigh(K[I][:, I].toarray(), M[I][:, I].toarray(), eigvals_only=True, subset_by_index=[0, 0])[0]
@@ -616,7 +616,7 @@ def test_module_constants_are_deprecated_names_of_the_options():
             assert getattr(ls, name) == getattr(defaults, option)
     assert len(ls._DEPRECATED_CONSTANTS) == 15
     model, h = CASES["beam-mixed-laws"]()
-    pat = forced(model, h).system.block_pattern()
+    pat = forced(model, h).system.linear.block_pattern()
     R = np.random.default_rng(7).standard_normal((pat.perm.size, 2)) + 0j
     with pytest.warns(DeprecationWarning, match="BlockLU"):
         old = ls.BlockLU(pat, 1.5 ** 2, 1.5, 0.02)

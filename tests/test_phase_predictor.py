@@ -45,13 +45,13 @@ def test_time_shift_delays_the_signals():
     Q = np.random.default_rng(3).standard_normal((h.n_coef, 4))
     theta = np.linspace(0.0, 2 * np.pi, 17)
     for tau in (0.3, -1.1, 2.5):
-        assert h.synthesis(theta) @ h.time_shift(Q, tau) == pytest.approx(h.synthesis(theta - tau) @ Q, abs=1e-13)
+        assert h.grid.synthesis(theta) @ h.operators.time_shift(Q, tau) == pytest.approx(h.grid.synthesis(theta - tau) @ Q, abs=1e-13)
     e = 1e-5
-    fd = (h.time_shift(Q, e) - h.time_shift(Q, -e)) / (2 * e)
-    assert h.shift_generator(Q) == pytest.approx(fd, abs=1e-7)
-    assert h.time_shift(Q, 2 * np.pi) == pytest.approx(Q, abs=1e-13)
+    fd = (h.operators.time_shift(Q, e) - h.operators.time_shift(Q, -e)) / (2 * e)
+    assert h.operators.shift_generator(Q) == pytest.approx(fd, abs=1e-7)
+    assert h.operators.time_shift(Q, 2 * np.pi) == pytest.approx(Q, abs=1e-13)
     with pytest.raises(ValueError):
-        h.time_shift(Q[:-1], 0.1)
+        h.operators.time_shift(Q[:-1], 0.1)
 
 
 def test_forced_problem_shifts_displacements_and_contact_forces():
@@ -61,9 +61,9 @@ def test_forced_problem_shifts_displacements_and_contact_forces():
     u = pr.unpack(x, 1.0)
     v = pr.unpack(pr.phase_shift(x, 0.7), 1.0)
     h = pr.system.h
-    assert v.Q == pytest.approx(h.time_shift(u.Q, 0.7), abs=1e-15)
-    assert v.P == pytest.approx(h.time_shift(u.P, 0.7), abs=1e-15)
-    assert pr.unpack(pr.phase_generator(x), 1.0).P == pytest.approx(h.shift_generator(u.P), abs=1e-15)
+    assert v.Q == pytest.approx(h.operators.time_shift(u.Q, 0.7), abs=1e-15)
+    assert v.P == pytest.approx(h.operators.time_shift(u.P, 0.7), abs=1e-15)
+    assert pr.unpack(pr.phase_generator(x), 1.0).P == pytest.approx(h.operators.shift_generator(u.P), abs=1e-15)
 
 
 def test_phase_predictor_takes_fewer_points_for_the_same_curve(monkeypatch):

@@ -1,7 +1,7 @@
 """Tests of femodes.results: PeriodicSolution, Branch and the .npz / .h5 persistence.
 
 The Fourier series are re-evaluated here with an explicit basis (independent of
-Harmonics.evaluate); velocities are checked against finite differences of displacements;
+h.grid.evaluate); velocities are checked against finite differences of displacements;
 penalty contact forces against k max(0, u - gap) computed from the displacement.
 """
 

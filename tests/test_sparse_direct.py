@@ -286,13 +286,13 @@ def test_hbm_steps_with_shared_analysis_and_harmonic_zero(forced_box, name):
         r0, J0, _ = fresh.residual(x, w)
         dx0 = J0.factorize().solve(r0)
         assert np.abs(dx - dx0).max() <= tol * np.abs(dx0).max()
-        pat = pr.system.block_pattern()
+        pat = pr.system.linear.block_pattern()
         assert not pat.banded
-        blk0 = pr.system.linear_factors(w).blocks[0]
+        blk0 = pr.system.linear.factors(w).blocks[0]
         assert static is None or blk0 is static  # harmonic 0 (Z = K) shared by the frequencies
         static = blk0
     # Z(0) = K at any xi too (the nonlinear-mode continuation's unknown): one entry, shared
-    assert pr.system.linear_factors(1.54, 0.3).blocks[0] is static and len(pat.static) == 1
+    assert pr.system.linear.factors(1.54, 0.3).blocks[0] is static and len(pat.static) == 1
     if name == "mumps":
         assert pat.factorizer.reused > 0
 

@@ -232,7 +232,7 @@ def test_switch_onto_the_period_doubled_branch_confirmed_by_shooting():
     s = new[len(new) // 2]
     n = 512
     theta = 2 * np.pi * np.arange(n) / n
-    t0 = theta[np.argmin(s.harmonics.synthesis(theta) @ s.Q[:, 0])] / (2 * np.pi) * s.period  # away from the stop
+    t0 = theta[np.argmin(s.harmonics.grid.synthesis(theta) @ s.Q[:, 0])] / (2 * np.pi) * s.period  # away from the stop
     x0 = np.array([s.displacement([t0])[0, 0], s.velocity([t0])[0, 0]])
     half = np.array([s.displacement([t0 + s.period / 2])[0, 0], s.velocity([t0 + s.period / 2])[0, 0]])
     assert np.max(np.abs(half - x0)) > 0.1                      # the HBM orbit is period 2, not period 1

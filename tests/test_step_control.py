@@ -126,7 +126,7 @@ def test_curve_between_points_follows_the_response_off_contact():
     linear one, F / |1 - w^2 + i c w|, exactly); without it one step spans w = 1.21 -> 1.83 and its
     chord is 65 % off at mid-step."""
     def worst_chord(branch):
-        w, A = branch.omega, np.abs(branch.Q[:, :, 0] @ fm.Harmonics(20).synthesis(np.linspace(0, 2 * np.pi, 256, endpoint=False)).T).max(axis=1)
+        w, A = branch.omega, np.abs(branch.Q[:, :, 0] @ fm.Harmonics(20).grid.synthesis(np.linspace(0, 2 * np.pi, 256, endpoint=False)).T).max(axis=1)
         mid, chord = 0.5 * (w[1:] + w[:-1]), 0.5 * (A[1:] + A[:-1])
         lin = 0.2 / np.abs(1 - mid ** 2 + 0.1j * mid)
         off = (lin < 0.98) & (A[1:] < 0.98) & (A[:-1] < 0.98)  # gap 1

@@ -163,7 +163,7 @@ def _mode2_h2(br):
     """Out-of-phase (mode 2) content of the displacement at harmonic 2."""
     h = br.harmonics
     d = (br.Q[:, :, 0] - br.Q[:, :, 1]) / math.sqrt(2.0)
-    return np.hypot(d[:, h.cos_index(2)], d[:, h.sin_index(2)])
+    return np.hypot(d[:, h.layout.cos_index(2)], d[:, h.layout.sin_index(2)])
 
 
 def _tongue_point(b):

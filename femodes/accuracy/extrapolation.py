@@ -32,7 +32,7 @@ class PointLevels:
         """Relative changes (frequency, displacement) from level ``j - 1`` to level ``j``."""
         a, b = self.states[j - 1], self.states[j]
         h = Harmonics(max(a.H, b.H))
-        dQ = Harmonics(b.H).convert(b.Q, h) - Harmonics(a.H).convert(a.Q, h) if a.H != b.H else b.Q - a.Q
+        dQ = Harmonics(b.H).layout.convert(b.Q, h) - Harmonics(a.H).layout.convert(a.Q, h) if a.H != b.H else b.Q - a.Q
         return abs(b.omega - a.omega) / self.omega_ref, float(np.linalg.norm(dQ)) / self.Q_norm
 
     def distance(self, j: int) -> float:

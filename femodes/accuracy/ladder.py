@@ -102,7 +102,7 @@ class Ladder:
         A = np.asarray(A, dtype=float)
         n_coef = A.shape[0]
         H = (n_coef - 1) // 2
-        return self.harmonics(H).convert(A, h) if H != h.n_harmonics else A
+        return self.harmonics(H).layout.convert(A, h) if H != h.n_harmonics else A
 
     def padded(self, H: int, i: int) -> State:
         """Point ``i`` of the branch on level ``H`` as it is (zero harmonics added, or dropped)."""

@@ -76,7 +76,7 @@ class PointErrors:
             if amplitude_error is None or not math.isfinite(amplitude_error):
                 amplitude_error = math.sqrt(half) if i in branch.folds else half
             self.amplitude_limit_error[i] = max(amplitude_error, AMPLITUDE_SAMPLING)
-        dQ = Q - lad.harmonics(branch.harmonics.n_harmonics).convert(branch.Q[i], hk)
+        dQ = Q - lad.harmonics(branch.harmonics.n_harmonics).layout.convert(branch.Q[i], hk)
         self.omega_limit[i], self.omega_limit_error[i] = w, half
         self.omega[i] = abs(branch.omega_truncated[i] - w) / lad.omega_ref(i) + half
         self.amplitude[i] = float(np.linalg.norm(dQ)) / lad.Q_norm(i)

@@ -41,9 +41,9 @@ class Shooter:
         """State of point ``i`` at its most open phase (largest smallest gap) and that phase."""
         b, h = self.branch, self.lad.h0
         Q = b.Q[i]
-        theta = h.most_open_phase(Q, self.flow.dofs, self.flow.gaps)
-        e = h.synthesis(np.array([theta]))[0]
-        return np.concatenate([e @ Q, e @ (h.derivative(float(b.omega_truncated[i])) @ Q)]), theta
+        theta = h.grid.most_open_phase(Q, self.flow.dofs, self.flow.gaps)
+        e = h.grid.synthesis(np.array([theta]))[0]
+        return np.concatenate([e @ Q, e @ (h.operators.derivative(float(b.omega_truncated[i])) @ Q)]), theta
 
     def evaluate(self, x0: np.ndarray, omega: float, theta0: float, plane, jac: bool):
         """Periodicity residual, hyperplane value and (with ``jac``) their Jacobian in ``(x0, w)``,
@@ -127,9 +127,10 @@ class Shooter:
         neighbour ``j``: moved by the branch's change from ``j`` to ``i`` at the same phase."""
         x0, omega, theta0, j = prev[:4]
         b, h = self.branch, self.lad.h0
-        e = h.synthesis(np.array([theta0]))[0]
+        e = h.grid.synthesis(np.array([theta0]))[0]
         dQ = b.Q[i] - b.Q[j]
-        dv = e @ (h.derivative(float(b.omega_truncated[i])) @ b.Q[i]) - e @ (h.derivative(float(b.omega_truncated[j])) @ b.Q[j])
+        D = h.operators.derivative
+        dv = e @ (D(float(b.omega_truncated[i])) @ b.Q[i]) - e @ (D(float(b.omega_truncated[j])) @ b.Q[j])
         return x0 + np.concatenate([e @ dQ, dv]), omega + float(b.omega_truncated[i] - b.omega_truncated[j]), theta0
 
     def linear(self, i: int, offset: float = 0.0):

@@ -65,7 +65,7 @@ def harmonic_amplitudes(sol, dof: int) -> np.ndarray:
     h = sol.harmonics
     q = np.asarray(sol.Q)[:, dof]
     k = np.arange(1, h.n_harmonics + 1)
-    return np.concatenate([[abs(q[h.cos_index(0)])], np.hypot(q[h.cos_rows(k)], q[h.sin_rows(k)])])
+    return np.concatenate([[abs(q[h.layout.cos_index(0)])], np.hypot(q[h.layout.cos_rows(k)], q[h.layout.sin_rows(k)])])
 
 
 def frames_for(sol, dof: int, *, share: float = FRAME_SHARE, per_period: int = FRAMES_PER_PERIOD,

@@ -260,7 +260,7 @@ def _hill(system: HBMSystem, x: np.ndarray, omega: float, xi: float, n_shifts: i
           k_per_shift: int | None) -> HillResult:
     """Hill's problem of ``system`` itself (dense or shift-invert)."""
     base = omega / system.h.subharmonic          # spacing of the copies, w / nu
-    T = system.h.period(omega)
+    T = system.h.grid.period(omega)
     N = system.size
     J0, J1, J2 = hill_matrices(system, x, omega, xi, dense=N <= SMALL)
     n_keep = 2 * _n_dynamic(system)
@@ -287,8 +287,9 @@ def _hill(system: HBMSystem, x: np.ndarray, omega: float, xi: float, n_shifts: i
 
 def _n_dynamic_unknowns(system: HBMSystem) -> int:
     """Unknowns of Hill's problem that carry mass or damping (the dense solve's size)."""
-    # (IC holds the whole damping, a modal low-rank part included: HBMSystem.C_full)
-    dyn = np.asarray(abs(system.IM).sum(axis=1)).ravel() + np.asarray(abs(system.IC).sum(axis=1)).ravel()
+    # (IC holds the whole damping, a modal low-rank part included: stiffness.C_full)
+    term = system.stiffness.term
+    dyn = np.asarray(abs(term("IM")).sum(axis=1)).ravel() + np.asarray(abs(term("IC")).sum(axis=1)).ravel()
     return int(np.count_nonzero(dyn))
 
 

@@ -89,7 +89,7 @@ class NonlinearForces:
         self.h, self.n = harmonics, n
         self.unilateral, self.penalty, self.cubic = unilateral, penalty, cubic
         self.projection, self.E, self.Pa = projection, E, Pa
-        self.w = np.asarray(harmonics.norm_weights())
+        self.w = np.asarray(harmonics.galerkin.norm_weights())
         self.n_uc = len(unilateral)
         self.nq = harmonics.n_coef * n
         self.size = self.nq + harmonics.n_coef * self.n_uc
@@ -97,7 +97,7 @@ class NonlinearForces:
 
     def q_index(self, dof: int) -> np.ndarray:
         """Global indices of the Fourier coefficients of model DOF ``dof``."""
-        return self.h.global_index(np.arange(self.h.n_coef), dof, self.n)
+        return self.h.layout.global_index(np.arange(self.h.n_coef), dof, self.n)
 
     def add(self, x: np.ndarray, Q: np.ndarray, r: np.ndarray, jac: Triplets) -> None:
         """Add every nonlinear term at ``x`` (``Q`` its displacement coefficients) to the residual
@@ -157,8 +157,8 @@ class NonlinearForces:
             forms = [ct.law.positive_part_form(ct.c) for ct in order]
             dofs = np.array([ct.dof for ct in order], dtype=np.intp)
             rows = np.arange(self.h.n_coef)[:, None]
-            Qi = self.h.global_index(rows, dofs, self.n)
-            Pi = self.nq + self.h.global_index(rows, np.arange(self.n_uc), self.n_uc)
+            Qi = self.h.layout.global_index(rows, dofs, self.n)
+            Pi = self.nq + self.h.layout.global_index(rows, np.arange(self.n_uc), self.n_uc)
             return (dofs, np.array([f[0] for f in forms], dtype=float), np.array([f[1] for f in forms], dtype=float),
                     Qi, Pi)
         if self._tables is None:

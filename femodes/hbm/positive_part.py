@@ -3,8 +3,8 @@ r"""Discretise layer: the exact Galerkin projection of ``max(0, phi)`` for a tru
 :func:`positive_part` returns the Galerkin coefficients of :math:`\max(0, \varphi(\theta))` and its
 Jacobian in closed form from the sign changes of :math:`\varphi` (no sampling,
 :mod:`femodes.hbm.trigroots`); :func:`positive_part_sampled` is the alternating frequency/time
-(AFT) approximation kept for comparison. The :class:`~femodes.hbm.Harmonics` methods of the same
-names call these functions.
+(AFT) approximation kept for comparison. The methods of the same names of ``h.galerkin``
+(:class:`~femodes.hbm.galerkin.GalerkinProjection`) call these functions.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ def check_phi(h, phi, *, single: bool):
     if phi.ndim != want or phi.shape[0] != h.n_coef:
         shape = "(n_coef,)" if single else "(n_coef, m)"
         hint = ("; for several signals at once use femodes.hbm.ExactProjection()(h, Phi)" if single
-                else "; for one signal use Harmonics.positive_part(phi)")
+                else "; for one signal use h.galerkin.positive_part(phi)")
         raise ValueError(f"phi must have shape {shape} with n_coef = {h.n_coef}, got {phi.shape}{hint}")
     if not np.all(np.isfinite(phi)):
         raise ValueError("phi must be finite")
@@ -42,7 +42,7 @@ def positive_part(h, phi, *, roots=None):
         \mathrm{proj} = G\varphi, \qquad
         \frac{\partial\,\mathrm{proj}}{\partial\varphi} = G,
 
-    with basis ``b = [1, cos θ, sin θ, ...]`` and ``n`` the :meth:`Harmonics.projection_norms`.
+    with basis ``b = [1, cos θ, sin θ, ...]`` and ``n`` the ``h.galerkin.projection_norms()``.
     ``proj = G phi`` holds because ``max(0, phi) = phi * 1{phi > 0}``; the derivative equals ``G``
     because ``phi`` vanishes at the ends of the positive intervals, so ``proj`` is continuously
     differentiable wherever the roots of ``phi`` are simple. No quadrature: candidate sign changes
@@ -130,7 +130,7 @@ def positive_part_sampled(h, phi, n_time: int | None = None):
 
 def _sampled(h, Phi, n_time):
     N = h.n_time if n_time is None else check_int("n_time", n_time, 2 * h.n_harmonics + 1)
-    E, P = h.memo(("grid", N), lambda: h.grid_operators(N))
+    E, P = h.memo(("grid", N), lambda: h.grid.grid_operators(N))
     U = E @ Phi
     ind = (U > 0.0).astype(float)
     return P @ (U * ind), (P[None, :, :] * ind.T[:, None, :]) @ E
@@ -187,8 +187,8 @@ def gram_tables(h):
     """
     def build():
         L = 2 * h.n_harmonics + 1
-        k = h.harmonic_of
-        sin = h.is_sine
+        k = h.layout.harmonic_of
+        sin = h.layout.is_sine
         ka, kb = k[:, None], k[None, :]
         sa, sb = sin[:, None], sin[None, :]
         diff = np.where(sa == sb, ka - kb, np.where(sa, ka - kb, kb - ka))
@@ -251,7 +251,7 @@ def positive_gram(h, Phi, roots=None):
         V[:, 0] += np.where(wrap, _TWO_PI, 0.0)
         idx1, w1, idx2, w2 = gram_tables(h)
         M = w1 * V[:, idx1] + w2 * V[:, idx2]
-        G = h.projection_norms()[:, None] * M
+        G = h.galerkin.projection_norms()[:, None] * M
         G[~changed] = 0.0
     G[full] = np.eye(L)
     return G, (rows, rho, w, wrap & changed, full)

@@ -72,7 +72,7 @@ class ForcedResponseProblem:
             raise ValueError(
                 "ForcedResponseProblem: the model has no forcing; add model.with_forcing(HarmonicForce(at=..., amplitude=...))"
             )
-        F = self.system.force()  # validates the harmonic count against the forcing
+        F = self.system.linear.force()  # validates the harmonic count against the forcing
         # Equations are divided by the forcing amplitude so that Newton tolerances are relative.
         self.force_scale = float(np.max(np.abs(F))) or 1.0
 
@@ -92,7 +92,7 @@ class ForcedResponseProblem:
     def linear_guess(self, omega: float) -> np.ndarray:
         """Linear response (contacts and nonlinear springs ignored) as a starting point."""
         s = self.system
-        q = s.solve_linear(s.force(), omega)
+        q = s.linear.solve(s.linear.force(), omega)
         return s.join(q.reshape(s.h.n_coef, s.n))
 
     def phase_shift(self, x: np.ndarray, tau: float) -> np.ndarray:
@@ -107,7 +107,7 @@ class ForcedResponseProblem:
     def forcing(self) -> np.ndarray:
         """The forcing's part of the residual (in the residual's scaling): ``r(x, w) = A(w) x + g(x) - forcing()``."""
         s = self.system
-        return s.join(s.force().reshape(s.h.n_coef, s.n)) / self.force_scale
+        return s.join(s.linear.force().reshape(s.h.n_coef, s.n)) / self.force_scale
 
     def unpack(self, x: np.ndarray, p: float) -> HBMUnknowns:
         x = np.asarray(x, dtype=float)
@@ -161,7 +161,7 @@ class NonlinearModeProblem:
                           "after them", UserWarning, stacklevel=3)
         self.shape = modes.shapes[:, -1]
         s = self.system
-        self._phase_idx = s.h.global_index(s.h.sin_index(1), np.arange(s.n), s.n)
+        self._phase_idx = s.h.layout.global_index(s.h.layout.sin_index(1), np.arange(s.n), s.n)
         self._Mphi = np.asarray(model.M @ self.shape).ravel()
         self.size = s.size + 2
         # Equations are divided by the elastic force of the unit-mass-normalised mode times the
@@ -230,7 +230,7 @@ class NonlinearModeProblem:
         s = self.system
         a = math.sqrt(2.0 * energy) / self.omega0
         Q = np.zeros((s.h.n_coef, s.n))
-        Q[s.h.cos_index(1)] = a * self.shape
+        Q[s.h.layout.cos_index(1)] = a * self.shape
         return np.concatenate([s.join(Q), [self.omega0, 0.0]])
 
     def unpack(self, x: np.ndarray, p: float) -> HBMUnknowns:

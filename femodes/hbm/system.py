@@ -16,7 +16,7 @@ assembled checks and Hill's method use the assembled matrix), and the
 nonlinear terms living only on the rows/columns of the nonlinear DOFs
 (:mod:`femodes.hbm.nonlinear_forces`). The positive part is
 projected *exactly* (integration between the sign changes of the trigonometric polynomial,
-:meth:`Harmonics.positive_part`): sampling it makes the map piecewise linear with jumps and
+``h.galerkin.positive_part``): sampling it makes the map piecewise linear with jumps and
 semismooth Newton cycles (a sampled continuation of the 1-DOF contact case of Shi & Legrand
 stalls near its resonance, where the exact one runs through both folds). Cubic springs use alias-free sampling
 (``N >= 4H + 1``).
@@ -28,17 +28,16 @@ import logging
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..dynamic_stiffness import CoefficientStiffness, DynamicStiffness, mul_rows
 from ..laws import CubicSpring, PenaltyContact, UnilateralContact
-from ..model import StructuralModel, low_rank_solver
+from ..model import StructuralModel
 from ..sparse_direct import factorize
+from .deprecated import moved_attribute
 from .harmonics import Harmonics
 from ..solvers.checks import check_memory
-from .linsolve import (DEFAULT_OPTIONS, BlockLU, BlockSolver, HarmonicBlockJacobian, LinearFactors, StructureFailure,
-                       build_pattern, solver_memory)
-from .linsolve.lowrank import split_lowrank
+from .linsolve import DEFAULT_OPTIONS, BlockSolver, HarmonicBlockJacobian, solver_memory
+from .linear_part import LinearPart
 from .nonlinear_forces import ComplementarityContact, NonlinearForces, Triplets
 from .positive_part import ExactProjection
 
@@ -52,6 +51,19 @@ log = logging.getLogger(__name__)
 DENSE_MAX_SIZE = DEFAULT_OPTIONS.dense_max_size
 
 _mul = mul_rows
+
+#: The methods that moved to the collaborators of an HBMSystem, by their old names (deprecated; found
+#: by ``HBMSystem.__getattr__`` with a DeprecationWarning until the next release): the linear
+#: structure's to ``linear`` (:class:`~femodes.hbm.linear_part.LinearPart`), the forwarders of the
+#: dynamic stiffness to ``stiffness`` itself (:class:`~femodes.dynamic_stiffness.CoefficientStiffness`).
+_MOVED = {
+    "force": "linear.force", "apply_linear": "linear.apply", "solve_linear": "linear.solve",
+    "block_pattern": "linear.block_pattern", "linear_factors": "linear.factors",
+    "linear_operator": "stiffness.operator", "dense_linear_operator": "stiffness.dense_operator",
+    "lowrank_border": "stiffness.lowrank_border", "lowrank_modes": "stiffness.Z.lowrank_modes",
+    "abs_row_sums": "stiffness.abs_row_sums", "C_full": "stiffness.C_full",
+    **{name: f'stiffness.term("{name}")' for name in ("A2", "A1", "A0", "AM", "IM", "IC")},
+}
 
 
 def default_contact_parameter(model: StructuralModel, dof: int) -> float:
@@ -90,25 +102,6 @@ def default_contact_parameters(model: StructuralModel, dofs) -> np.ndarray:
     return out
 
 
-def _forcing_coefficients(h: Harmonics, model: StructuralModel) -> np.ndarray:
-    """Galerkin coefficients ``(n_coef, n_dofs)`` of the forcing of ``model``; the forcing harmonic
-    ``k`` sits at Fourier row ``k nu``."""
-    F = np.zeros((h.n_coef, model.n_dofs))
-    nu, H = h.subharmonic, h.n_harmonics
-    for k, vec in model.force_vectors().items():
-        kk = k * nu
-        if kk > H:
-            raise ValueError(
-                f"forcing at harmonic {k} needs n_harmonics >= {kk} (subharmonic={nu}), got {H}"
-            )
-        if kk == 0:
-            F[0] += vec.real
-        else:
-            F[h.cos_index(kk)] += vec.real
-            F[h.sin_index(kk)] -= vec.imag  # cos(kwt + phi) = cos phi cos - sin phi sin
-    return F
-
-
 def _check_memory(harmonics: Harmonics, n_nonlinear: int, n_uc: int, n_aft: int, rank: int, block: bool) -> None:
     """Refuse, before anything large is allocated, a problem whose dense Schur complement and
     Fourier operators (:func:`~femodes.hbm.linsolve.solver_memory`) exceed the memory available:
@@ -124,20 +117,6 @@ def _check_memory(harmonics: Harmonics, n_nonlinear: int, n_uc: int, n_aft: int,
                  "use fewer harmonics (it grows as H^2) or fewer contact nodes (a coarser mesh along the contact "
                  "boundary)" + (", and Rayleigh instead of modal damping (its modes join the complement)" if rank
                                 else ""))
-
-
-def _solve_linear_lsqr(stiffness: CoefficientStiffness, R: np.ndarray, omega: float) -> np.ndarray:
-    """Least-squares ``S(w) q = R`` (a singular harmonic block): on the assembled operator, or
-    with a low-rank damping on ``[[S_sparse, B], [I x U^T, -I]] [q; y] = [R; 0]``."""
-    border = stiffness.lowrank_border(omega)
-    if border is None:
-        return spla.lsqr(stiffness.operator(omega), R.ravel())[0].reshape(R.shape)
-    B, Ur = border
-    S = stiffness.operator(omega, lowrank=False)
-    m = Ur.shape[0]
-    A = sp.bmat([[S, B], [Ur, -sp.identity(m)]], format="csr")
-    rhs = np.concatenate([R.ravel(), np.zeros(m)])
-    return spla.lsqr(A, rhs, atol=1e-14, btol=1e-14)[0][: R.size].reshape(R.shape)
 
 
 class HBMSystem:
@@ -198,7 +177,7 @@ class HBMSystem:
         nonlinear = {ct.dof for ct in self.unilateral} | {d for _, d in self.penalty} | {d for _, d in self.cubic}
         _check_memory(harmonics, len(nonlinear), self.n_uc, 3 * self.n_uc + len(self.penalty) + len(self.cubic),
                       int(lr.rank) if lr is not None and lr.rank else 0, isinstance(self.solver, BlockSolver))
-        self.D1 = sp.csr_matrix(np.asarray(harmonics.derivative_domega()))
+        self.D1 = sp.csr_matrix(np.asarray(harmonics.operators.derivative_domega()))
         self.M, self.K, self.C = model.M.tocsr(), model.K.tocsr(), model.C.tocsr()
         # modal damping: the low-rank part U diag(d) U^T of the damping, never assembled on the
         # fast paths (residual, Jacobian products, block solver); C above is the sparse part
@@ -208,11 +187,9 @@ class HBMSystem:
         self.stiffness = CoefficientStiffness(DynamicStiffness(self.K, self.M, self.C, self.C_lr), self.D1,
                                               damping_matrix=model.damping_matrix)
         # period-average weights for energies: <u.v> = sum_a w_a U_a V_a
-        self.w = np.asarray(harmonics.norm_weights())
-        self.E = np.asarray(harmonics.synthesis())
-        self.Pa = np.asarray(harmonics.analysis())
-        self._F = None
-        self.threads = threads
+        self.w = np.asarray(harmonics.galerkin.norm_weights())
+        self.E = np.asarray(harmonics.grid.synthesis())
+        self.Pa = np.asarray(harmonics.grid.analysis())
         # DOFs where the contact and nonlinear terms act: they couple the harmonics; all other
         # DOFs see the block-diagonal linear operator only (see femodes.hbm.linsolve)
         self.nonlinear_dofs = np.unique(np.array(
@@ -220,96 +197,36 @@ class HBMSystem:
         #: the contact and nonlinear terms of the residual, the Jacobian and the energy
         self.nonlinear = NonlinearForces(harmonics, n, self.unilateral, self.penalty, self.cubic, self.projection,
                                          self.E, self.Pa)
+        #: the linear structure: forcing, S(w) applied and solved, the block solver's pattern and factors
+        self.linear = LinearPart(model, harmonics, self.stiffness, self.nonlinear_dofs,
+                                 solver_options=self.solver_options, threads=threads)
         self._cache: dict = {}
 
-    # Kronecker-product operators (n_coef n x n_coef n) of the dynamic stiffness: built only on
-    # demand (assembled Jacobian, comparisons, Hill's method); the residual and the structured
-    # solver work on (n_coef, n) arrays instead (CoefficientStiffness).
-    @property
-    def A2(self):
-        return self.stiffness.term("A2")
+    def __getattr__(self, name):
+        # only for names an HBMSystem does not have: the methods that moved to its collaborators
+        return moved_attribute(self, name, _MOVED)
 
     @property
-    def C_full(self):
-        """The whole damping matrix, assembled (``C`` itself without a low-rank part; dense with
-        one: only the assembled operators use it, for small systems and checks)."""
-        return self.stiffness.C_full
+    def threads(self) -> int | None:
+        """Threads of the per-harmonic factorisations (the ``threads`` argument; settable)."""
+        return self.linear.threads
 
-    @property
-    def A1(self):
-        return self.stiffness.term("A1")
-
-    @property
-    def A0(self):
-        return self.stiffness.term("A0")
-
-    @property
-    def AM(self):
-        return self.stiffness.term("AM")  # for the artificial damping of EPMC and Hill's method
-
-    @property
-    def IM(self):
-        return self.stiffness.term("IM")  # Hill's method: s^2 term
-
-    @property
-    def IC(self):
-        return self.stiffness.term("IC")  # Hill's method: s term
-
-    def apply_linear(self, q: np.ndarray, omega: float, xi: float = 0.0, *, absolute: bool = False) -> np.ndarray:
-        """``S(w) q - xi w (D1 x M) q`` without forming the Kronecker products (``absolute``: an
-        upper bound of ``|S| |q|`` for tolerances)."""
-        Q = np.asarray(q, dtype=float).reshape(self.h.n_coef, self.n)
-        return self.stiffness.apply(Q, omega, xi, absolute=absolute).ravel()
-
-    def abs_row_sums(self) -> tuple[float, float, float]:
-        """``max_i sum_j |A_ij|`` of ``K, M, C`` (for norm bounds of the Jacobian)."""
-        return self.stiffness.abs_row_sums()
-
-    def lowrank_modes(self):
-        """``(Phi, w^2, rows, E_rows)`` if the low-rank damping comes from modes of this system's
-        matrices, else None (:meth:`~femodes.dynamic_stiffness.DynamicStiffness.lowrank_modes`)."""
-        return self.stiffness.Z.lowrank_modes()
-
-    def lowrank_border(self, omega: float):
-        """The low-rank damping of ``S(w)`` as a border, for the assembled solvers
-        (:meth:`~femodes.dynamic_stiffness.CoefficientStiffness.lowrank_border`)."""
-        return self.stiffness.lowrank_border(omega)
-
-    def block_pattern(self):
-        """Interior/boundary split and sparsity pattern for the structured solver (cached), with
-        the split of the modal damping's low-rank part."""
-        if "pattern" not in self._cache:
-            pat = build_pattern(self.M, self.K, self.C, self.nonlinear_dofs, band_max_fill=self.solver_options.band_max_fill)
-            pat.lowrank = split_lowrank(pat, self.stiffness.Z)
-            self._cache["pattern"] = pat
-        return self._cache["pattern"]
-
-    def linear_factors(self, omega: float, xi: float = 0.0, threads: int | None = None):
-        """Per-harmonic interior factorisations at ``(w, xi)``; the last one is cached and reused."""
-        key = (float(omega), float(xi))
-        hit = self._cache.get("factors")
-        if hit is not None and hit[0] == key:
-            return hit[1]
-        # the last factors go before the new ones are built (unless a caller holds them): one set
-        # of per-harmonic factors alive at a time, not two (3-D blocks: ~1 GiB each at 6e4 DOFs)
-        self._cache.pop("factors", None)
-        hit = None
-        F = LinearFactors(self, omega, xi, self.threads if threads is None else threads)
-        self._cache["factors"] = (key, F)
-        return F
+    @threads.setter
+    def threads(self, value: int | None) -> None:
+        self.linear.threads = value
 
     # -- layout -----------------------------------------------------------------------------
     def q_index(self, dof: int) -> np.ndarray:
         """Global indices of the Fourier coefficients of model DOF ``dof``."""
-        return self.h.global_index(np.arange(self.h.n_coef), dof, self.n)
+        return self.h.layout.global_index(np.arange(self.h.n_coef), dof, self.n)
 
     def p_index(self, slot: int) -> np.ndarray:
         """Global indices of the contact-force coefficients of complementarity contact ``slot``."""
-        return self.nq + self.h.global_index(np.arange(self.h.n_coef), slot, self.n_uc)
+        return self.nq + self.h.layout.global_index(np.arange(self.h.n_coef), slot, self.n_uc)
 
     def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``x -> (Q, P)`` with shapes ``(n_coef, n_dofs)`` and ``(n_coef, n_uc)``."""
-        Q = self.h.reshape(x[: self.nq], self.n)
+        Q = self.h.layout.reshape(x[: self.nq], self.n)
         P = x[self.nq : self.size].reshape(self.h.n_coef, self.n_uc)
         return Q, P
 
@@ -320,68 +237,16 @@ class HBMSystem:
 
     def time_shift(self, y: np.ndarray, tau: float) -> np.ndarray:
         """The unknowns ``[Q; P]`` of the motion delayed by the phase ``tau`` (every displacement
-        and contact force ``f(theta) -> f(theta - tau)``, :meth:`Harmonics.time_shift`)."""
+        and contact force ``f(theta) -> f(theta - tau)``, ``h.operators.time_shift``)."""
         Q, P = self.split(y)
-        return self.join(self.h.time_shift(Q, tau), self.h.time_shift(P, tau))
+        return self.join(self.h.operators.time_shift(Q, tau), self.h.operators.time_shift(P, tau))
 
     def shift_generator(self, y: np.ndarray) -> np.ndarray:
         """``d/dtau`` of :meth:`time_shift` at ``tau = 0``: ``-nu D1`` on every signal (the sparse
-        derivative operator of the residual, :meth:`Harmonics.shift_generator`)."""
+        derivative operator of the residual, ``h.operators.shift_generator``)."""
         Q, P = self.split(y)
         minus_nu = -float(self.h.subharmonic)
         return self.join(minus_nu * (self.D1 @ Q), minus_nu * (self.D1 @ P))
-
-    # -- forcing ----------------------------------------------------------------------------
-    def force(self) -> np.ndarray:
-        """Galerkin coefficients of the forcing ``sum f cos(k w t + phase)`` (length nq).
-
-        With ``subharmonic = nu`` the forcing harmonic ``k`` sits at Fourier row ``k nu``.
-        """
-        if self._F is None:
-            self._F = _forcing_coefficients(self.h, self.model).ravel()
-        return self._F
-
-    # -- residual ---------------------------------------------------------------------------
-    def linear_operator(self, omega: float) -> sp.csr_matrix:
-        """``S(w)`` (sparse, block diagonal over harmonics; with modal damping its blocks are
-        dense: assembled checks and small systems only, the solvers use :meth:`lowrank_border`)."""
-        return self.stiffness.operator(omega)
-
-    def dense_linear_operator(self, omega: float, xi: float = 0.0) -> np.ndarray:
-        """``S(w) - xi w (D1 x M)`` as a dense array (small systems; the dense operators are
-        cached on first use)."""
-        return self.stiffness.dense_operator(omega, xi)
-
-    def solve_linear(self, rhs: np.ndarray, omega: float) -> np.ndarray:
-        """Solve ``S(w) q = rhs`` (the linear structure, no contact) harmonic by harmonic.
-
-        Falls back to a least-squares solution of the assembled operator if a harmonic block is
-        singular (a rigid-body mode at harmonic 0, ``k w`` exactly at an eigenfrequency).
-        """
-        h, n = self.h, self.n
-        R = np.asarray(rhs, dtype=float).reshape(h.n_coef, n)
-        if "pattern_all" not in self._cache:
-            self._cache["pattern_all"] = build_pattern(self.M, self.K, self.C, np.zeros(0, dtype=int),
-                                                       band_max_fill=self.solver_options.band_max_fill)
-        pat = self._cache["pattern_all"]
-        superlu = self.solver_options.superlu_options
-        out = np.empty_like(R)
-        try:
-            out[0] = BlockLU(pat, 0.0, superlu_options=superlu).solve(R[0][:, None]).real[:, 0]
-            for k in range(1, h.n_harmonics + 1):
-                f = k * omega / h.subharmonic
-                c, si = h.cos_index(k), h.sin_index(k)
-                lu = BlockLU(pat, f, superlu_options=superlu)
-                rhs = (R[c] - 1j * R[si])[:, None]
-                if self.C_lr is None:
-                    z = lu.solve(rhs)[:, 0]
-                else:  # Z = Z_sparse + U diag(i f d) U^T: Woodbury on the harmonic block
-                    U = self.C_lr.U
-                    z = low_rank_solver(lu.solve, U, self.stiffness.Z.lowrank_gain(f), U)(rhs)[:, 0]
-                out[c], out[si] = z.real, -z.imag
-        except StructureFailure:
-            out = _solve_linear_lsqr(self.stiffness, R, omega)
-        return out.ravel()
 
     def residual(self, x: np.ndarray, omega: float, *, xi: float = 0.0, forced: bool = True):
         """Residual, Jacobian, ``dr/dw`` and ``dr/dxi`` (artificial damping ``-xi M q'``).
@@ -412,7 +277,7 @@ class HBMSystem:
         r, dr_domega, dr_dxi = np.zeros(self.size), np.zeros(self.size), np.zeros(self.size)
         r[:nq], dr_domega[:nq], dr_dxi[:nq] = terms
         if forced:
-            r[:nq] -= self.force()
+            r[:nq] -= self.linear.force()
         return r, dr_domega, dr_dxi
 
     # -- energy -----------------------------------------------------------------------------

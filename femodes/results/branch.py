@@ -195,7 +195,7 @@ class Branch:
                              f"(valid: 0 .. {len(self) - 1}, or negative from the end)") from None
         h = self.point_harmonics(i)
         Q, P = (self.Q[i], self.P[i]) if h is self.harmonics else (
-            self.harmonics.convert(self.Q[i], h), self.harmonics.convert(self.P[i], h))
+            self.harmonics.layout.convert(self.Q[i], h), self.harmonics.layout.convert(self.P[i], h))
         acc = self.accuracy
         sol = PeriodicSolution(
             omega=float(self.omega[i]), Q=Q, P=P, harmonics=h, contacts=self.contacts,
@@ -222,7 +222,7 @@ class Branch:
         harmonics, e.g. ``branch.Q`` itself or its bifurcations'), that series' amplitude."""
         series = self.Q if Q is None else np.asarray(Q, dtype=float)
         n = max(512, 16 * self.harmonics.n_coef)
-        E = self.harmonics.synthesis(2 * np.pi * np.arange(n) / n)
+        E = self.harmonics.grid.synthesis(2 * np.pi * np.arange(n) / n)
         amp = np.max(np.abs(E @ series[:, :, dof].T), axis=0)
         acc = self.accuracy
         if Q is not None or acc is None or acc.amplitude_limit is None:

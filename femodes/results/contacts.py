@@ -104,7 +104,7 @@ def contact_quality(harmonics: Harmonics, contacts: ContactInfo, Q: np.ndarray, 
         return out
     out[3] = -np.inf
     n = fine_points(harmonics)
-    E = harmonics.synthesis(2 * np.pi * np.arange(n) / n)
+    E = harmonics.grid.synthesis(2 * np.pi * np.arange(n) / n)
     for kind, law, dof, slot in zip(contacts.kinds, contacts.laws, contacts.dofs, contacts.slots):
         u = E @ Q[:, :, dof].T  # (n, m)
         f = E @ P[:, :, slot].T if kind == "complementarity" else law.force(u)[0]

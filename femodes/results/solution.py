@@ -101,7 +101,7 @@ class PeriodicSolution:
     @property
     def period(self) -> float:
         """The period of the truncated series (``2 pi nu / omega_truncated``)."""
-        return self.harmonics.period(self.omega_truncated)
+        return self.harmonics.grid.period(self.omega_truncated)
 
     @property
     def n_dofs(self) -> int:
@@ -112,12 +112,12 @@ class PeriodicSolution:
 
     def displacement(self, t) -> np.ndarray:
         """``q(t)``, shape ``(len(t), n_dofs)`` (DOFs of the model it was solved on)."""
-        return self.harmonics.evaluate(self.Q, self.omega_truncated, self._t(t))
+        return self.harmonics.grid.evaluate(self.Q, self.omega_truncated, self._t(t))
 
     def velocity(self, t) -> np.ndarray:
         """``q'(t)``, shape ``(len(t), n_dofs)``."""
-        D = self.harmonics.derivative(self.omega_truncated)
-        return self.harmonics.evaluate(D @ self.Q, self.omega_truncated, self._t(t))
+        D = self.harmonics.operators.derivative(self.omega_truncated)
+        return self.harmonics.grid.evaluate(D @ self.Q, self.omega_truncated, self._t(t))
 
     def contact_force(self, t) -> np.ndarray:
         """Contact forces ``p(t) >= 0`` (compression positive), shape ``(len(t), n_contacts)``."""
@@ -129,7 +129,7 @@ class PeriodicSolution:
         u = None
         for j, kind in enumerate(ci.kinds):
             if kind == "complementarity":
-                out[:, j] = self.harmonics.evaluate(self.P[:, ci.slots[j]], self.omega_truncated, t)
+                out[:, j] = self.harmonics.grid.evaluate(self.P[:, ci.slots[j]], self.omega_truncated, t)
             else:
                 if u is None:
                     u = self.displacement(t)

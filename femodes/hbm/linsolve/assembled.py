@@ -121,7 +121,7 @@ class ForceSchur:
             return None
         H = h.n_harmonics
         k = np.arange(1, H + 1)
-        rows = np.stack([h.cos_rows(k), h.sin_rows(k)], axis=1)             # (H, 2)
+        rows = np.stack([h.layout.cos_rows(k), h.layout.sin_rows(k)], axis=1)  # (H, 2)
         G = (rows[:, :, None] * n + np.arange(n)).reshape(H, 2 * n)          # q positions
         P = (rows[:, :, None] * n_uc + np.arange(n_uc)).reshape(H, 2 * n_uc)  # force positions (- nq)
         G0, P0 = np.arange(n), np.arange(n_uc)

@@ -53,7 +53,7 @@ class StructuredFactorization:
     def __init__(self, J: HarmonicBlockJacobian, threads: int | None = None, F: LinearFactors | None = None):
         self.J = J
         self.threads = threads
-        self.F = F = J.system.linear_factors(J.omega, J.xi, threads) if F is None else F
+        self.F = F = J.system.linear.factors(J.omega, J.xi, threads) if F is None else F
         self.exact = F.omega == J.omega and F.xi == J.xi
         self.refactored = None  # the exact factorisation, once a reused solve's safeguard built it
         self.layout = layout = SchurLayout.of(J, F)

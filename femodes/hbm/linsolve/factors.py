@@ -61,7 +61,7 @@ class LinearFactors:
     """Per-harmonic interior LUs and condensed stiffnesses at one ``(w, xi)`` (cached on the system).
 
     ``structure`` provides ``h`` (the harmonics), ``block_pattern()`` and ``solver_options``
-    (:class:`~femodes.hbm.linsolve.BlockStructure`).
+    (:class:`~femodes.hbm.linear_part.LinearPart`, ``HBMSystem.linear``).
     """
 
     def __init__(self, structure, omega: float, xi: float, threads: int | None = None):
@@ -78,7 +78,7 @@ class LinearFactors:
         jobs = [(0, None, 0.0)]
         for k in range(1, h.n_harmonics + 1):
             f = k * self.omega / h.subharmonic
-            jobs.append((int(h.cos_index(k)), int(h.sin_index(k)), f))
+            jobs.append((int(h.layout.cos_index(k)), int(h.layout.sin_index(k)), f))
         # keep the condensation columns W = Z_II^-1 Z_Ib (computed anyway): the back substitution
         # and the border rows then cost a product instead of a band solve (keep_w_max_bytes).
         # With modal damping through the modes of the structure, W and the few columns that make

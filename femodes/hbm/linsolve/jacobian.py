@@ -31,7 +31,7 @@ __all__ = ["BlockStructure", "HarmonicBlockJacobian"]
 class BlockStructure(Protocol):
     """What the Jacobian operator and its factorisations need from the harmonic balance system
     (:class:`~femodes.hbm.HBMSystem` provides it): sizes, the dynamic stiffness on the
-    coefficients, the per-harmonic factors, the solver strategy and its options. Nothing else of
+    coefficients, the linear part (its per-harmonic factors), the solver strategy and its options. Nothing else of
     the system is read by the block solver.
     """
 
@@ -45,8 +45,7 @@ class BlockStructure(Protocol):
     solver_options: Any  # BlockSolverOptions of the pattern and factors
     stiffness: Any    # CoefficientStiffness S(w) (femodes.dynamic_stiffness)
 
-    def block_pattern(self): ...
-    def linear_factors(self, omega: float, xi: float = 0.0, threads: int | None = None): ...
+    linear: Any       # LinearPart: block_pattern(), factors(omega, xi, threads) (cached)
 
 
 def _assemble(J: HarmonicBlockJacobian, lowrank: bool = True) -> sp.csr_matrix:

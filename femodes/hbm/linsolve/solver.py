@@ -146,7 +146,7 @@ class BlockSolver:
         if (not self.reuse and state is not None and state.F is not None
                 and (state.F.omega, state.F.xi) != (float(J.omega), float(J.xi))):
             state.F = None
-        F = J.system.linear_factors(J.omega, J.xi, threads)
+        F = J.system.linear.factors(J.omega, J.xi, threads)
         if state is not None and F is not state.F:
             self.stats["factorizations"] += 1
             state.F = F
@@ -158,7 +158,7 @@ class BlockSolver:
         if not self.reuse or state is None or state.F is None:
             return None
         F0 = state.F
-        if F0.xi != J.xi or F0.pat is not J.system.block_pattern():
+        if F0.xi != J.xi or F0.pat is not J.system.linear.block_pattern():
             return None
         if F0.omega == J.omega:
             return F0
