@@ -23,38 +23,20 @@ Series.  With :math:`H` harmonics
 Coefficient order of one signal: ``[c0, c1, s1, c2, s2, ..., cH, sH]``,
 ``n_coef = 2H + 1``; ``c_k`` sits at row ``2k - 1`` and ``s_k`` at row ``2k``.
 
-Several signals (the ``n`` DOFs of a model, or ``m`` contact gaps) are stored
-*harmonic-major* as an array ``Q`` of shape ``(n_coef, n)``; the global
-unknown vector is ``Q.ravel()`` (C order), so coefficient row ``j`` of signal
-``i`` is entry ``j*n + i``.  With this layout a linear operator acting on the
-harmonic index (``A``, ``n_coef x n_coef``) and one acting on the DOF index
-(``B``, ``n x n``) combine as ``np.kron(A, B) @ Q.ravel() == (A @ Q @ B.T).ravel()``.
+Several signals (``n`` DOFs, or ``m`` contact gaps) are stored *harmonic-major* as ``Q`` of shape
+``(n_coef, n)``; the unknowns are ``Q.ravel()`` (C order): row ``j`` of signal ``i`` is entry
+``j*n + i``. An operator on the harmonic index (``A``) and one on the DOF index (``B``) combine as
+``np.kron(A, B) @ Q.ravel() == (A @ Q @ B.T).ravel()``.
 
-Time grid.  ``N = n_time`` equidistant phases :math:`\theta_j = 2\pi j/N`,
-physical times :math:`t_j = 2\pi\nu j/(\omega N)`.
+Time grid: ``N = n_time`` phases :math:`\theta_j = 2\pi j/N`, times :math:`t_j = 2\pi\nu j/(\omega N)`.
 
-Projection.  The Galerkin (Fourier) projection of a periodic function
-:math:`f(\theta)` is
-
-.. math::
-
-    c_0 = \frac{1}{2\pi}\int_0^{2\pi} f\,d\theta,\qquad
-    c_k = \frac{1}{\pi}\int_0^{2\pi} f\cos k\theta\,d\theta,\qquad
-    s_k = \frac{1}{\pi}\int_0^{2\pi} f\sin k\theta\,d\theta,
-
-i.e. coefficient ``a`` is ``norm_a * int f b_a`` with basis functions
-``b = [1, cos θ, sin θ, ...]`` and ``norm = [1/2π, 1/π, 1/π, ...]``
-(``h.galerkin.projection_norms()``).  Period averages of products use the
-weights ``[1, 1/2, 1/2, ...]`` (``h.galerkin.norm_weights()``).
-
-Exact positive part (:mod:`femodes.hbm.positive_part`).  ``h.galerkin.positive_part(phi)`` returns the Galerkin
-coefficients of :math:`\max(0, \varphi(\theta))` for a trigonometric
-polynomial :math:`\varphi`, computed in closed form from the sign changes of
-:math:`\varphi` (no sampling), together with its Jacobian.  This makes the
-projected contact law continuously differentiable wherever the roots of
-:math:`\varphi` are simple, unlike alternating frequency/time (AFT) sampling
-(``h.galerkin.positive_part_sampled(phi)``), which is piecewise linear with
-jumps in its Jacobian.
+Projection.  Coefficient ``a`` of a periodic ``f`` is ``norm_a * int_0^{2 pi} f b_a dθ`` with the
+basis ``b = [1, cos θ, sin θ, ...]`` and ``norm = [1/2π, 1/π, 1/π, ...]``
+(``h.galerkin.projection_norms()``); period averages of products use the weights
+``[1, 1/2, 1/2, ...]`` (``h.galerkin.norm_weights()``). ``h.galerkin.positive_part(phi)`` is the
+exact projection of ``max(0, phi)`` and its Jacobian, from the sign changes of ``phi``
+(:mod:`femodes.hbm.positive_part`; the sampled alternative is ``positive_part_sampled``). The
+equations: :doc:`/guide/harmonic-balance`.
 """
 
 from __future__ import annotations
