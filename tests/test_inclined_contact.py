@@ -378,7 +378,7 @@ def test_craig_bampton_of_a_rotated_model():
     is invariant under orthogonal changes of the interior and kept DOFs): equal to HBM_TOL
     (measured 7e-13); each reduced answer is within the Craig-Bampton error of its full model
     (measured on the contact forces: 1.9e-1, 1.9e-2, 1.4e-3, 9e-5 with 6, 8, 12, 20 modes; 12
-    here), and full_field of the reduced model is physical."""
+    here), and mesh_map.full_field of the reduced model is physical."""
     R = rotation_2d(np.pi / 6)
     mid = np.array([0.5, 0.05])
 

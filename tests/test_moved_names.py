@@ -2,6 +2,8 @@
 with a DeprecationWarning that names the new spelling and points at the caller's line, and gives
 what the new spelling gives."""
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -64,3 +66,73 @@ def test_probe_with_owner_still_names_the_error(models):
         model.probe("nowhere", "mean", "mine")
     with pytest.raises(ValueError, match=r"^probe: "):
         model.mesh_map.probe("nowhere")
+
+
+# ----------------------------------------------------------------------------- the branch
+@pytest.fixture(scope="module")
+def branches():
+    model = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]]).with_forcing(fm.HarmonicForce(at=0, amplitude=0.2))
+             .with_contact(fm.UnilateralContact(at=0, gap=1.0)))
+    plain = fm.frequency_response(model, omega=(0.8, 1.6), harmonics=6)
+    both = fm.frequency_response(model, omega=(0.8, 1.6), harmonics=6, rtol=1e-2, stability=True)
+    return plain, both
+
+
+def _stability(b):
+    return dict(stable=b.stable, multipliers=b.multipliers, bifurcations=b.bifurcations, methods=b.stability_method,
+                tol=b.meta["stability_tol"])
+
+
+def _same_branch(a, b):
+    for name in ("omega", "omega_truncated", "omega_error", "amplitude_error", "error_estimate", "stable", "multipliers",
+                 "stability_method", "converged"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert (x is None) == (y is None), name
+        if x is not None:
+            np.testing.assert_array_equal(x, y)
+    assert [(z.kind, z.index, z.omega, z.omega_truncated) for z in a.bifurcations] == \
+           [(z.kind, z.index, z.omega, z.omega_truncated) for z in b.bifurcations]
+    assert a.accuracy is b.accuracy and a.meta == b.meta
+
+
+def test_with_accuracy_and_with_stability_leave_the_branch_as_it_is(branches):
+    plain, both = branches
+    new = plain.with_accuracy(both.accuracy).with_stability(**_stability(both))
+    assert new is not plain and plain.accuracy is None and plain.stable is None and plain.error_estimate is None
+    assert "stability_tol" not in plain.meta and not plain.bifurcations
+    _same_branch(new, both)
+    with pytest.raises(TypeError, match="^with_accuracy: expected an ErrorEstimate"):
+        plain.with_accuracy("estimate")
+    with pytest.raises(ValueError, match=r"^with_stability: one value per point"):
+        plain.with_stability(**{**_stability(both), "stable": both.stable[:-1]})
+
+
+def test_set_accuracy_and_set_stability_still_fill_the_branch_with_a_warning(branches):
+    plain, both = branches
+    old = copy.copy(plain)
+    with pytest.warns(DeprecationWarning, match=r"Branch\.set_accuracy is deprecated .*with_accuracy") as rec:
+        assert old.set_accuracy(both.accuracy) is old
+    assert rec[0].filename == __file__
+    with pytest.warns(DeprecationWarning, match=r"Branch\.set_stability is deprecated .*with_stability"):
+        assert old.set_stability(**_stability(both)) is old
+    _same_branch(old, both)
+    assert plain.accuracy is None  # the copy was filled, not the branch it was copied from
+    with pytest.warns(DeprecationWarning), pytest.raises(TypeError, match="^set_accuracy: expected an ErrorEstimate"):
+        old.set_accuracy("estimate")
+
+
+def test_point_harmonics_is_the_solutions(branches):
+    _, both = branches
+    with pytest.warns(DeprecationWarning, match=r"Branch\.point_harmonics is deprecated .* branch\[i\]\.harmonics"):
+        h = both.point_harmonics(3)
+    assert h is both[3].harmonics or h.n_harmonics == both[3].harmonics.n_harmonics
+    with pytest.raises(AttributeError, match="has no attribute 'nowhere'"):
+        both.nowhere  # noqa: B018
+
+
+def test_estimate_error_returns_a_new_branch_and_fills_the_given_one_this_release(branches):
+    plain, _ = branches
+    given = copy.copy(plain)
+    new = fm.estimate_error(given)
+    assert new is not given and new.accuracy is not None and plain.accuracy is None
+    _same_branch(given, new)  # the legacy of this release

@@ -1,4 +1,4 @@
-"""Responses at a boundary without rebuilding the model: StructuralModel.probe and the plots that
+"""Responses at a boundary without rebuilding the model: model.mesh_map.probe and the plots that
 read it (mean or max over the boundary's nodes; a Craig-Bampton model reads its parent's
 boundaries through its basis, kept or not)."""
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..nonsmooth_modes import family_caveat
 from ..results import Branch, ErrorEstimate
+from ..results.branch import fill_in_place
 from ..solvers import NewtonOptions
 from ..solvers.checks import entry_point
 from ..solvers.threads import limit_blas_threads
@@ -84,8 +85,10 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     Returns
     -------
     Branch
-        The same branch, with :attr:`~femodes.Branch.accuracy` (an
-        :class:`~femodes.results.ErrorEstimate`) set.
+        A new branch: ``branch`` with :attr:`~femodes.Branch.accuracy` (an
+        :class:`~femodes.results.ErrorEstimate`). For this release ``branch`` itself is filled
+        too, as before (:func:`~femodes.results.branch.fill_in_place`); use the branch returned: a
+        later release leaves ``branch`` unchanged.
 
     Notes
     -----
@@ -129,13 +132,14 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     # a mesh estimate already attached (femodes.estimate_mesh_error) does not depend on H: kept
     old = branch.accuracy
     mesh = {} if old is None or old.mesh is None else {"mesh": old.mesh, "mesh_method": old.mesh_method}
-    branch.set_accuracy(ErrorEstimate(omega=errors.omega, amplitude=errors.amplitude, penetration=pen, tension=ten,
+    new = branch.with_accuracy(ErrorEstimate(omega=errors.omega, amplitude=errors.amplitude, penetration=pen, tension=ten,
                                       harmonics=np.full(n, H), rate=errors.rate, method=kind.astype(str), rtol=rtol,
                                       omega_limit=errors.omega_limit, omega_limit_error=errors.omega_limit_error,
                                       finest=errors.finest, caveat=family_caveat(branch),
                                       amplitude_limit=errors.amplitude_limit,
                                       amplitude_limit_error=errors.amplitude_limit_error, **mesh))
-    return branch
+    fill_in_place(branch, new)  # the legacy of this release: the branch given is filled too
+    return new
 
 
 def _warn_out_of_time(lad: Ladder, errors: PointErrors, time_limit: float, elapsed: float,

@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import scipy.sparse as sp
@@ -223,9 +223,10 @@ class StructuralModel:
         """Model DOFs -> model DOFs (identity; a reduced model maps to its parent's DOFs)."""
         return np.asarray(q)
 
-    def __getattr__(self, name: str) -> Any:
-        # the names moved to collaborators (model/deprecations.py): they still work, with a DeprecationWarning
-        return moved_attribute(self, name)
+    if not TYPE_CHECKING:  # the type checker sees no moved name
+        def __getattr__(self, name: str) -> Any:
+            # the names moved to collaborators (model/deprecations.py): they still work, with a DeprecationWarning
+            return moved_attribute(self, name)
 
     def __repr__(self) -> str:
         kind = "discrete" if self.fe is None else self.fe.kind
