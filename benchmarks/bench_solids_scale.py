@@ -228,7 +228,7 @@ def _models(geometry: str, size: int, rec: dict):
     plain = cases._add_damping(case, api, solid)
     model = cases._add_forces(case, api, cases._add_contacts(case, api, plain))
     rec["assembly_contact_s"] = time.perf_counter() - t
-    rec.update(N=int(model.n_dofs), nnz_K=int(model.K.nnz), n_contacts=int(model.n_contacts))
+    rec.update(N=int(model.n_dofs), nnz_K=int(model.K.nnz), n_contacts=len(model.contacts))
     return plain, model
 
 
@@ -671,7 +671,7 @@ def pipeline(size: int, rec: dict, geometry: str = "box3d") -> None:
     stage("assembly", assembly)
     stage("contact", contact)
     model = state["model"]
-    rec.update(N=int(model.n_dofs), nnz_K=int(model.K.nnz), n_contacts=int(model.n_contacts),
+    rec.update(N=int(model.n_dofs), nnz_K=int(model.K.nnz), n_contacts=len(model.contacts),
                backend=fm.sparse_backend_info().positive_definite)
     stage("cb", cb)
     rom = state["rom"]

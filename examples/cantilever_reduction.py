@@ -37,8 +37,8 @@ def main(out: Path = Path("out")) -> Path:
     x = model.fe.coordinates
     fig, ax = plt.subplots(figsize=(7, 4))
     for j in range(3):
-        w_full = model.full_field(full.shapes[:, j])[model.fe.nodal[0]]
-        w_rom = rom.full_field(reduced.shapes[:, j])[model.fe.nodal[0]]
+        w_full = model.mesh_map.full_field(full.shapes[:, j])[model.fe.nodal[0]]
+        w_rom = rom.mesh_map.full_field(reduced.shapes[:, j])[model.fe.nodal[0]]
         s = np.sign(w_full[-1]) * np.sign(w_rom[-1])
         ax.plot(x, w_full, "-", lw=2, label=f"mode {j + 1} full: {full.omega[j]:.4f} rad/s")
         ax.plot(x, s * w_rom, "k--", lw=1, label=f"mode {j + 1} CB(10): {reduced.omega[j]:.4f} rad/s")

@@ -68,7 +68,7 @@ def warn_rigid_body(model: StructuralModel) -> None:
 def warn_undamped(model: StructuralModel) -> None:
     """A forced model without damping has no finite resonance peak: each resonance is a pole the
     curve runs to infinity on, with no folds (a user's blade: 9 points, no fold)."""
-    if model.forces and not model.has_damping:
+    if model.forces and not model.damping.nonzero:
         warnings.warn("frequency_response: the model has no damping, so its forced response has no finite resonance "
                       "peak (the curve runs to infinity at each resonance); add damping, e.g. "
                       "model.with_damping(modal=0.01) or model.with_damping(beta=...)", UserWarning, stacklevel=2)

@@ -226,9 +226,9 @@ def switch_at_branch_point(branch: Branch, bif: Bifurcation, span: tuple[float, 
     if not new.success:
         log.warning("switch_branch: %s", new.message)
     if stab is not None:
-        annotate_branch(new, aug.problem, branch.model, method=stab.method, tol=stab.tol, newton=newton,
-                        locate=stab.locate)
-        _add_branch_points(new, newton)
+        new = annotate_branch(new, aug.problem, branch.model, method=stab.method, tol=stab.tol, newton=newton,
+                              locate=stab.locate)
+        new = _with_branch_points(new, newton)
     new.meta["switched_from"] = {
         "kind": "branch_point", "reported_kind": bif.kind, "omega_hbm": float(u_bp.omega), "omega_reported": float(bif.omega), "index": int(i),
         "parameter_hbm": float(z_bp[-1]), "smallest_singular_value": float(svals[-1] / svals[0]),
@@ -236,8 +236,8 @@ def switch_at_branch_point(branch: Branch, bif: Bifurcation, span: tuple[float, 
     return new
 
 
-def _add_branch_points(new: Branch, newton: NewtonOptions) -> None:
-    """Add the branch points of a switched branch to its bifurcations: the one it starts at (point
+def _with_branch_points(new: Branch, newton: NewtonOptions) -> Branch:
+    """A switched branch with its branch points added to its bifurcations: the one it starts at (point
     0) and those the test function finds along it. Floquet multipliers miss them: along the side
     branch of a pitchfork the critical multiplier touches +1 without crossing."""
     aug = Augmented(new)
@@ -257,8 +257,8 @@ def _add_branch_points(new: Branch, newton: NewtonOptions) -> None:
     others = [b for b in new.bifurcations
               if not (b.kind == "branch_point" and any(abs(b.index - j) <= 1 for j in mine))]
     bifs = sorted(found + others, key=lambda b: (b.index, b.parameter))
-    new.set_stability(stable=new.stable, multipliers=new.multipliers, bifurcations=bifs,
-                      methods=new.stability_method, tol=float(new.meta["stability_tol"]))
+    return new.with_stability(stable=new.stable, multipliers=new.multipliers, bifurcations=bifs,
+                              methods=new.stability_method, tol=float(new.meta["stability_tol"]))
 
 
 def _keller_point(problem, z_bp: np.ndarray, phi: np.ndarray, g: np.ndarray, step: float, newton: NewtonOptions):

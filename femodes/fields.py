@@ -345,7 +345,7 @@ def sample_fields(source: Any, model: Any, t: Any = None, *, n_frames: int = 36,
     the plots): its errors are left for the function called to name."""
     source, j = periodic_source(source, mode)
     model = resolve_model(source, model)
-    mesh_model = model.mesh_owner
+    mesh_model = model.mesh_map.owner
     if mesh_model is None:
         raise InputValueError(
             "the model has no mesh (a discrete StructuralModel); only FE models built with femodes.bar, "
@@ -376,11 +376,11 @@ def sample_fields(source: Any, model: Any, t: Any = None, *, n_frames: int = 36,
         dofs = [a.dof for a in model.contacts]
         gaps = [float(a.item.gap) for a in model.contacts]
         force = np.zeros((t.size, len(dofs)))
-    uq, uv = model.full_field(q), model.full_field(v)
+    uq, uv = model.mesh_map.full_field(q), model.mesh_map.full_field(v)
     nodal = np.asarray(fe.nodal)
     nodes, comps = [], []
     for d in dofs:
-        full = model.fe_dof(int(d))
+        full = model.mesh_map.fe_dof(int(d))
         hit = np.argwhere(nodal == full) if full is not None else np.zeros((0, 2))
         nodes.append(int(hit[0, 1]) if hit.size else -1)
         comps.append(int(hit[0, 0]) if hit.size else 0)

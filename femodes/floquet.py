@@ -30,6 +30,7 @@ from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .hbm.system import HBMSystem
 from .model import StructuralModel
 from .results import Branch, PeriodicSolution
+from .results.branch import fill_in_place
 from .solvers import NewtonOptions
 from .solvers.checks import InputTypeError, InputValueError, entry_point
 from .solvers.threads import limit_blas_threads
@@ -160,8 +161,8 @@ def stability(solution: PeriodicSolution, method: StabilityMethod | None = None,
 def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: StabilityMethod | None = None,
                     tol: float = TOL,
                     newton: NewtonOptions | None = None, locate: bool | float = True) -> Branch:
-    """Fill ``branch.stable``, ``branch.multipliers``, ``branch.bifurcations``: the multipliers of
-    every point (module docstring), then the bifurcations between them
+    """``branch`` with ``stable``, ``multipliers``, ``bifurcations`` (a new branch; for this release
+    ``branch`` is filled too, :func:`~femodes.results.branch.fill_in_place`): the multipliers of every point (module docstring), then the bifurcations between them
     (:func:`femodes.branch_stability.find_bifurcations`).
 
     ``problem`` is the :class:`ForcedResponseProblem` or :class:`NonlinearModeProblem` the
@@ -204,13 +205,14 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
     mult = np.full((len(branch), m), np.nan + 0j)
     for i, r in enumerate(results):
         mult[i, : r.multipliers.size] = r.multipliers
-    branch.set_stability(stable=[is_stable(r.multipliers, tol, not forced) for r in results], multipliers=mult,
-                         bifurcations=bifs, methods=[r.method for r in results], tol=tol)
+    annotated = branch.with_stability(stable=[is_stable(r.multipliers, tol, not forced) for r in results],
+                                      multipliers=mult, bifurcations=bifs, methods=[r.method for r in results], tol=tol)
     _warn_uncertain(results, tol, forced)
     n_fb = sum(r.message != "" for r in results)
     if n_fb:
         log.info("stability: shooting failed at %d of %d points; Hill's method used there", n_fb, len(results))
-    return branch
+    fill_in_place(branch, annotated)  # the legacy of this release: the branch given is filled too
+    return annotated
 
 
 def _warn_uncertain(results, tol: float, forced: bool) -> None:

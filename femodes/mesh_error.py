@@ -40,6 +40,7 @@ import numpy as np
 
 from .nonsmooth_modes import family_caveat
 from .results import Branch, ErrorEstimate
+from .results.branch import fill_in_place
 
 __all__ = ["estimate_mesh_error", "ORDER_RANGE"]
 
@@ -79,9 +80,10 @@ def estimate_mesh_error(fine: Branch, coarse: Branch, *, coarser: Branch | None 
     Returns
     -------
     Branch
-        ``fine``, with :attr:`~femodes.Branch.accuracy` carrying the ``"mesh"`` source;
-        ``fine.meta["mesh_error"]`` holds the sizes, the order and whether it was measured, and
-        the number of points extrapolated.
+        A new branch: ``fine`` with :attr:`~femodes.Branch.accuracy` carrying the ``"mesh"``
+        source; its ``meta["mesh_error"]`` holds the sizes, the order and whether it was measured,
+        and the number of points extrapolated. For this release ``fine`` itself is filled too, as
+        before (:func:`~femodes.results.branch.fill_in_place`); use the branch returned.
     """
     branches = [fine, coarse] + ([coarser] if coarser is not None else [])
     _check_branches(branches)
@@ -129,10 +131,11 @@ def estimate_mesh_error(fine: Branch, coarse: Branch, *, coarser: Branch | None 
                         "estimate is the larger change between meshes, not an extrapolation", int(both.sum()) - n_ok,
                         int(both.sum()))
     rel = err / np.abs(w)
-    _attach(fine, rel, how)
-    fine.meta["mesh_error"] = {"sizes": [float(v) for v in h], "order": float(p_used), "order_measured": bool(measured),
-                               "extrapolated": n_ok, "compared": int(np.sum(np.isfinite(rel)))}
-    return fine
+    new = _with_mesh(fine, rel, how)
+    new.meta["mesh_error"] = {"sizes": [float(v) for v in h], "order": float(p_used), "order_measured": bool(measured),
+                              "extrapolated": n_ok, "compared": int(np.sum(np.isfinite(rel)))}
+    fill_in_place(fine, new)  # the legacy of this release: the branch given is filled too
+    return new
 
 
 def _check_branches(branches: list) -> None:
@@ -232,15 +235,14 @@ def _frequency_at_energy(branch: Branch, energy: np.ndarray, near: np.ndarray) -
     return out
 
 
-def _attach(branch: Branch, rel: np.ndarray, how: str) -> None:
-    """The mesh source joins the branch's estimate, or makes one of its own."""
+def _with_mesh(branch: Branch, rel: np.ndarray, how: str) -> Branch:
+    """The branch with the mesh source joining its estimate, or making one of its own."""
     if branch.accuracy is not None:
-        branch.set_accuracy(branch.accuracy.with_mesh(rel, how))
-        return
+        return branch.with_accuracy(branch.accuracy.with_mesh(rel, how))
     n = len(branch)
     pen, ten = branch.contact_quality()
     nan = np.full(n, np.nan)
-    branch.set_accuracy(ErrorEstimate(omega=nan, amplitude=nan, penetration=pen, tension=ten,
+    return branch.with_accuracy(ErrorEstimate(omega=nan, amplitude=nan, penetration=pen, tension=ten,
                                       harmonics=np.full(n, branch.harmonics.n_harmonics), rate=nan,
                                       method=np.full(n, "none"), mesh=rel, mesh_method=how,
                                       caveat=family_caveat(branch)))

@@ -13,7 +13,7 @@ import logging
 import warnings
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 from collections.abc import Sequence
 
 import numpy as np
@@ -22,12 +22,12 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from .eigen import IllConditionedWarning, check_conditioning, normal_modes
-from .model import Attached, StructuralModel
+from .model import Attached, MeshMap, StructuralModel
 from .sparse_direct import factorize
 from .model.dofs import node_dof_list
 from .solvers.checks import InputValueError, check_int, check_memory, entry_point, named_by
 
-__all__ = ["ReducedModel", "craig_bampton"]
+__all__ = ["ReducedModel", "ReducedMeshMap", "craig_bampton"]
 
 log = logging.getLogger(__name__)
 
@@ -56,9 +56,7 @@ class ReducedModel(StructuralModel):
     kept: Any = None
     interface_omega: Any = None
 
-    @property
-    def is_reduced(self) -> bool:
-        return True
+    is_reduced: ClassVar[bool] = True
 
     @property
     def n_kept(self) -> int:
@@ -90,32 +88,42 @@ class ReducedModel(StructuralModel):
             raise ValueError(f"expand: expected last axis of length {self.n_dofs} (reduced DOFs), got shape {q.shape}")
         return q @ self.basis.T
 
-    def probe(self, at, how: str = "mean", owner: str | None = None) -> np.ndarray:
-        """:meth:`StructuralModel.probe` of the parent, through the basis: any boundary or DOF
-        of the full model, kept or not (``owner`` deprecated, as there)."""
-        return self.parent.probe(at, how, owner) @ self.basis
-
-    def full_field(self, q: np.ndarray) -> np.ndarray:
-        """Reduced coordinates -> the parent's full FE field (constrained DOFs zero)."""
-        return self.parent.full_field(self.expand(q))
-
     @property
-    def mesh_owner(self) -> StructuralModel | None:
-        return self.parent.mesh_owner
-
-    def to_owner(self, q: np.ndarray) -> np.ndarray:
-        return self.parent.to_owner(self.expand(q))
-
-    def fe_dof(self, dof: int) -> int | None:
-        if dof >= self.n_kept:
-            return None  # a modal coordinate
-        return self.parent.fe_dof(int(np.asarray(self.kept)[dof]))
+    def mesh_map(self) -> ReducedMeshMap:
+        """The map to the parent's FE mesh, through the basis (:class:`ReducedMeshMap`)."""
+        return ReducedMeshMap(self)
 
     def __repr__(self) -> str:
         return (
             f"ReducedModel(n_dofs={self.n_dofs} = {self.n_kept} kept + {self.n_modes} modes, "
             f"parent n_dofs={self.parent.n_dofs}, contacts={len(self.contacts)}, forces={len(self.forces)})"
         )
+
+
+class ReducedMeshMap(MeshMap):
+    """:class:`~femodes.model.MeshMap` of a reduced model: the parent's, through the basis
+    ``q_parent = T r`` (every reduction level down to the model that owns the mesh)."""
+
+    @property
+    def owner(self) -> StructuralModel | None:
+        return self.model.parent.mesh_map.owner
+
+    def to_owner(self, q: np.ndarray) -> np.ndarray:
+        return self.model.parent.mesh_map.to_owner(self.model.expand(q))
+
+    def fe_dof(self, dof: int) -> int | None:
+        if dof >= self.model.n_kept:
+            return None  # a modal coordinate
+        return self.model.parent.mesh_map.fe_dof(int(np.asarray(self.model.kept)[dof]))
+
+    def full_field(self, q: np.ndarray) -> np.ndarray:
+        """Reduced coordinates -> the parent's full FE field (constrained DOFs zero)."""
+        return self.model.parent.mesh_map.full_field(self.model.expand(q))
+
+    def weights(self, at, how: str = "mean") -> np.ndarray:
+        """The parent's probe weights through the basis: any boundary or DOF of the full model,
+        kept or not."""
+        return self.model.parent.mesh_map.weights(at, how) @ self.model.basis
 
 
 def _check_n_modes(n_modes, n_interior: int) -> int:

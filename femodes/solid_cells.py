@@ -180,7 +180,8 @@ def tributary_measure(model: StructuralModel, boundary: str) -> tuple[np.ndarray
     ValueError
         Not a meshed solid; unknown ``boundary`` (the message lists the mesh's boundaries).
     """
-    owner = getattr(model, "mesh_owner", None)
+    mesh_map = getattr(model, "mesh_map", None)
+    owner = None if mesh_map is None else mesh_map.owner
     if owner is None or owner.fe.kind != "solid":
         raise ValueError("tributary_measure: model must be a meshed solid (femodes.solid) or a reduction of one")
     fe = owner.fe

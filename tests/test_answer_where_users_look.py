@@ -159,8 +159,8 @@ def test_bifurcations_are_reported_at_the_converged_frequency(tmp_path):
     mid = 0.5 * (b.omega_truncated[i] + b.omega_truncated[i + 1])
     pd = fm.Bifurcation(kind="period_doubling", index=i, omega=mid, energy=1.0, parameter=mid, multiplier=-1.0,
                         Q=b.Q[i], P=b.P[i], bracket=(b.omega_truncated[i], b.omega_truncated[i + 1]))
-    b.set_stability(stable=b.stable, multipliers=b.multipliers, bifurcations=list(b.bifurcations) + [pd],
-                    methods=b.stability_method, tol=b.meta["stability_tol"])
+    b = b.with_stability(stable=b.stable, multipliers=b.multipliers, bifurcations=list(b.bifurcations) + [pd],
+                         methods=b.stability_method, tol=b.meta["stability_tol"])
     moved = next(x for x in b.bifurcations if x.kind == "period_doubling" and x.omega_truncated == mid)
     c = b.omega - b.omega_truncated
     assert moved.omega == pytest.approx(mid + 0.5 * (c[i] + c[i + 1]), rel=4 * np.finfo(float).eps)

@@ -26,7 +26,7 @@ def test_mode_numbers_are_one_based_everywhere(cantilever, tmp_path):
     modes = fm.linear_modes(cantilever, 3)
     # mode=2 is the second mode (column 1) in the fields every output uses...
     f = mesh_fields(modes, cantilever, n_frames=4, mode=2)
-    phi = cantilever.full_field(modes.shapes[:, 1])[cantilever.fe.nodal[0]]
+    phi = cantilever.mesh_map.full_field(modes.shapes[:, 1])[cantilever.fe.nodal[0]]
     np.testing.assert_allclose(f.displacement[0], phi, rtol=0, atol=1e-14 * np.abs(phi).max())
     assert f.omega == modes.omega[1]
     # ... in the ParaView writer (same argument order as write_animation) and in the plots
@@ -86,13 +86,13 @@ def test_reduced_models_answer_mesh_questions(cantilever):
     model = cantilever.with_contact(fm.UnilateralContact(at="tip", gap=0.01))
     rom = fm.craig_bampton(model, 4)
     rr = fm.craig_bampton(rom, 2)
-    assert rom.mesh_owner is model and rr.mesh_owner is model
+    assert rom.mesh_map.owner is model and rr.mesh_map.owner is model
     tip = model.dof("tip")
-    assert rr.fe_dof(rr.dof("tip")) == model.fe_dof(tip) == int(model.fe.free[tip])
-    assert rr.fe_dof(rr.n_dofs - 1) is None  # a modal coordinate
+    assert rr.mesh_map.fe_dof(rr.dof("tip")) == model.mesh_map.fe_dof(tip) == int(model.fe.free[tip])
+    assert rr.mesh_map.fe_dof(rr.n_dofs - 1) is None  # a modal coordinate
     q = np.random.default_rng(0).standard_normal((3, rr.n_dofs))
-    np.testing.assert_allclose(rr.to_owner(q), rom.expand(rr.expand(q)))
-    assert fm.StructuralModel(M=[[1.0]], K=[[1.0]]).mesh_owner is None
+    np.testing.assert_allclose(rr.mesh_map.to_owner(q), rom.expand(rr.expand(q)))
+    assert fm.StructuralModel(M=[[1.0]], K=[[1.0]]).mesh_map.owner is None
 
 
 def test_contact_mass_is_a_strategy(cantilever):

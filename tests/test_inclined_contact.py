@@ -99,7 +99,7 @@ def hbm_solve(model, omega):
 
 def nodal_vectors(model, q):
     """Physical displacement vectors ``(..., dim, n_nodes)`` of model coordinates ``q``."""
-    return model.full_field(q)[..., model.mesh_owner.fe.nodal]
+    return model.mesh_map.full_field(q)[..., model.mesh_map.owner.fe.nodal]
 
 
 def relative(a, b):
@@ -186,8 +186,8 @@ def test_rotated_strip_harmonic_balance():
     rot = (strip(R, quad=True).with_damping(beta=1e-3)
            .with_forcing(*physical_forces("right", AMPLITUDE * R[:, 0]))
            .with_contact(fm.UnilateralContact(at="right", gap=GAP, direction=tuple(R[:, 0]))))
-    f_ref = ref.full_field(ref.force_vectors()[1].real)[ref.fe.nodal]
-    f_rot = rot.full_field(rot.force_vectors()[1].real)[rot.fe.nodal]
+    f_ref = ref.mesh_map.full_field(ref.force_vectors()[1].real)[ref.fe.nodal]
+    f_rot = rot.mesh_map.full_field(rot.force_vectors()[1].real)[rot.fe.nodal]
     assert np.abs(R.T @ f_rot - f_ref).max() < 1e-17  # the physical load is the rotated one
     # forcing after the contact: the same model
     late = (strip(R, quad=True).with_damping(beta=1e-3)
@@ -313,7 +313,7 @@ def test_errors():
         roller.with_contact(fm.UnilateralContact(at="right", gap=GAP, direction=n))
     # a node fully clamped is skipped, as for axis-aligned normals
     clamped = strip(clamped=["left", "bottom"]).with_contact(fm.UnilateralContact(at="right", gap=GAP, direction=n))
-    assert clamped.n_contacts == 2
+    assert len(clamped.contacts) == 2
     model = strip()
     # two normals on the corner node (1, 0.1), in one call or in two, in either order
     with pytest.raises(ValueError, match=r"node \d+ at \(1, 0.1\) would get two contact normals"):
@@ -362,7 +362,7 @@ def test_named_points_of_rotated_nodes():
     forced = model.with_forcing(fm.HarmonicForce(at=("tip", "u_y"), amplitude=2.0))
     F = forced.force_vectors()[1].real
     assert F[d_t] == pytest.approx(2.0 * frame.rotation[1, 0]) and F[d_n] == pytest.approx(2.0 * 0.8)
-    assert np.abs(forced.full_field(F)[model.fe.nodal[:, node]] - [0.0, 2.0]).max() < 1e-15
+    assert np.abs(forced.mesh_map.full_field(F)[model.fe.nodal[:, node]] - [0.0, 2.0]).max() < 1e-15
     # a tangential contact on the same node is fine (another DOF of the same frame)
     both = model.with_contact(fm.UnilateralContact(at=("tip", "u_t"), gap=GAP))
     assert [a.dof for a in both.contacts] == [d_n, d_t]
@@ -378,7 +378,7 @@ def test_craig_bampton_of_a_rotated_model():
     is invariant under orthogonal changes of the interior and kept DOFs): equal to HBM_TOL
     (measured 7e-13); each reduced answer is within the Craig-Bampton error of its full model
     (measured on the contact forces: 1.9e-1, 1.9e-2, 1.4e-3, 9e-5 with 6, 8, 12, 20 modes; 12
-    here), and full_field of the reduced model is physical."""
+    here), and mesh_map.full_field of the reduced model is physical."""
     R = rotation_2d(np.pi / 6)
     mid = np.array([0.5, 0.05])
 

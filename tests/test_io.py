@@ -51,8 +51,8 @@ def test_nonlinear_mode_series(cantilever_nnm, tmp_path):
         assert np.all(m.points[:, 1:] == 0)
         np.testing.assert_array_equal(m.cells_dict["line"], fe.mesh.t.T)
         assert set(m.point_data) == {"displacement", "velocity", "rotation", "contact_force"}
-        full = red.full_field(sol.displacement([t]))[0]
-        vfull = red.full_field(sol.velocity([t]))[0]
+        full = red.mesh_map.full_field(sol.displacement([t]))[0]
+        vfull = red.mesh_map.full_field(sol.velocity([t]))[0]
         d = m.point_data["displacement"]
         assert d.shape == (n_nodes, 3)
         np.testing.assert_allclose(d[:, 1], full[fe.nodal[0]], rtol=0, atol=1e-12)
@@ -91,7 +91,7 @@ def test_full_model_solution(tmp_path):
     pvd = write_animation(sol, model, tmp_path / "full", n_frames=3)
     t, name = read_pvd(pvd)[1]
     m = meshio.read(tmp_path / name)
-    full = model.full_field(sol.displacement([t]))[0]
+    full = model.mesh_map.full_field(sol.displacement([t]))[0]
     np.testing.assert_allclose(m.point_data["displacement"][:, 1], full[beam.fe.nodal[0]], atol=1e-12, rtol=0)
 
 
@@ -106,7 +106,7 @@ def test_bar_displacement_along_x(tmp_path):
     m = meshio.read(tmp_path / entries[0][1])
     assert "rotation" not in m.point_data
     d = m.point_data["displacement"]
-    phi = bar.full_field(modes.shapes[:, 0])[bar.fe.nodal[0]]
+    phi = bar.mesh_map.full_field(modes.shapes[:, 0])[bar.fe.nodal[0]]
     np.testing.assert_allclose(d[:, 0], phi, atol=1e-12, rtol=0)
     assert np.all(d[:, 1:] == 0)
     assert np.all(m.point_data["contact_force"] == 0)
@@ -123,7 +123,7 @@ def test_linear_mode_of_reduced_model(cantilever_nnm, tmp_path):
     entries = read_pvd(pvd)
     assert len(entries) == 5
     m = meshio.read(pvd.parent / entries[0][1])
-    phi = red.full_field(modes.shapes[:, 1])
+    phi = red.mesh_map.full_field(modes.shapes[:, 1])
     np.testing.assert_allclose(m.point_data["displacement"][:, 1], phi[beam.fe.nodal[0]], atol=1e-12, rtol=0)
     assert m.field_data["contact_gap"].tolist() == [GAP]
 

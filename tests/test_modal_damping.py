@@ -70,14 +70,14 @@ def rel(a, b):
 def test_representation_and_api():
     model = bar_case(100, zeta=[0.01, 0.02, 0.03])
     lr = model.C_lowrank
-    assert model.C.nnz == 0 and lr.U.shape == (100, 3) and lr.rank == 3 and model.has_damping
+    assert model.C.nnz == 0 and lr.U.shape == (100, 3) and lr.rank == 3 and model.damping.nonzero
     modes = fm.linear_modes(model, n=3)
     # Phi^T C Phi = diag(2 zeta w) on the damped modes
     phi = modes.shapes
     Cm = phi.T @ model.damping_matrix().toarray() @ phi
     np.testing.assert_allclose(np.diag(Cm), 2 * np.array([0.01, 0.02, 0.03]) * modes.omega, rtol=1e-8)
     v = np.random.default_rng(1).standard_normal((100, 2))
-    np.testing.assert_allclose(model.apply_damping(v), model.damping_matrix() @ v, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(model.damping.apply(v), model.damping_matrix() @ v, rtol=1e-12, atol=1e-15)
     # Rayleigh damping replaces the modal part (and the other way round)
     ray = model.with_damping(alpha=0.1)
     assert ray.C_lowrank is None and ray.C.nnz == model.M.nnz

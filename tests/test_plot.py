@@ -146,7 +146,7 @@ def test_mode_shape_reduced_solution(study, tmp_path):
     x = beam.fe.mesh.p[0]
     for k in range(5):
         t = k * sol.period / 5
-        w = red.full_field(sol.displacement([t]))[0][beam.fe.nodal[0]]
+        w = red.mesh_map.full_field(sol.displacement([t]))[0][beam.fe.nodal[0]]
         np.testing.assert_array_equal(lines[k].get_xdata(), x)
         np.testing.assert_allclose(lines[k].get_ydata(), w, atol=1e-14)
     assert lines[5].get_xdata()[0] == 1.0 and lines[5].get_ydata()[0] == GAP
@@ -157,7 +157,7 @@ def test_mode_shape_linear_and_discrete(study, tmp_path):
     beam, _, _, _, _ = study
     modes = fm.linear_modes(beam, 3)
     ax = plot.mode_shape(modes, beam, mode=3, n_snapshots=1)
-    phi = beam.full_field(modes.shapes[:, 2])[beam.fe.nodal[0]]
+    phi = beam.mesh_map.full_field(modes.shapes[:, 2])[beam.fe.nodal[0]]
     np.testing.assert_allclose(ax.get_lines()[0].get_ydata(), phi)
     with pytest.raises(ValueError, match="model"):
         plot.mode_shape(modes)

@@ -1,4 +1,4 @@
-"""Responses at a boundary without rebuilding the model: StructuralModel.probe and the plots that
+"""Responses at a boundary without rebuilding the model: model.mesh_map.probe and the plots that
 read it (mean or max over the boundary's nodes; a Craig-Bampton model reads its parent's
 boundaries through its basis, kept or not)."""
 
@@ -33,11 +33,11 @@ def test_probe_reads_a_boundary_mean_and_max(blade):
     q = np.random.default_rng(0).standard_normal(model.n_dofs)
     # the mean: the consistent weights (a uniform traction's shares), none of the tip is supported
     assert (dofs >= 0).all()
-    assert model.probe(("tip", "u_z")) @ q == pytest.approx(float(wts @ q[dofs] / wts.sum()), rel=1e-12)
-    W = model.probe(("tip", "u_z"), how="max")
+    assert model.mesh_map.probe(("tip", "u_z")) @ q == pytest.approx(float(wts @ q[dofs] / wts.sum()), rel=1e-12)
+    W = model.mesh_map.probe(("tip", "u_z"), how="max")
     assert W.shape == (nodes.size, model.n_dofs) and sorted(np.flatnonzero(W.sum(axis=0))) == sorted(dofs)
     with pytest.raises(ValueError, match="how must be"):
-        model.probe("tip", how="median")
+        model.mesh_map.probe("tip", how="median")
 
 
 def test_reduced_model_reads_boundaries_it_does_not_keep(blade):
@@ -48,7 +48,7 @@ def test_reduced_model_reads_boundaries_it_does_not_keep(blade):
         rom.dof(("tip", "u_z"))
     r = np.random.default_rng(1).standard_normal(rom.n_dofs)
     full = rom.expand(r)
-    assert rom.probe(("tip", "u_z")) @ r == pytest.approx(model.probe(("tip", "u_z")) @ full, rel=1e-12)
+    assert rom.mesh_map.probe(("tip", "u_z")) @ r == pytest.approx(model.mesh_map.probe(("tip", "u_z")) @ full, rel=1e-12)
 
 
 def test_plots_at_a_boundary_of_a_reduced_model(blade):
@@ -57,7 +57,7 @@ def test_plots_at_a_boundary_of_a_reduced_model(blade):
     b = fm.frequency_response(rom, (0.9 * w1, 0.95 * w1), 3, options=fm.ContinuationOptions(max_points=4))
     ax = fm.plot.frequency_amplitude(b, ("tip", "u_z"))
     amp = ax.lines[0].get_ydata()
-    tip = rom.probe(("tip", "u_z"))
+    tip = rom.mesh_map.probe(("tip", "u_z"))
     expected = [np.max(np.abs(b[i].displacement(np.linspace(0, b[i].period, 513)) @ tip)) for i in range(len(b))]
     np.testing.assert_allclose(amp, expected, rtol=1e-3)  # 512 vs 513 samples of a smooth 3-harmonic signal
     ax_max = fm.plot.frequency_amplitude(b, ("tip", "u_z"), how="max")

@@ -264,8 +264,8 @@ def test_errors_say_what_is_wrong(forced, backbone, monkeypatch):
     fake = dataclasses.replace(bp, index=i, omega=float(b.omega[i]), parameter=float(b.parameter[i]), Q=b.Q[i], P=b.P[i])
     with pytest.raises(ValueError, match="not one of branch.bifurcations"):  # issue 37: only the branch's own
         fm.switch_branch(b, fake, omega=(0.9, 1.7), window=2)
-    listed = copy.copy(b)
-    listed.bifurcations = b.bifurcations + (fake,)
+    listed = b.with_stability(stable=b.stable, multipliers=b.multipliers, bifurcations=b.bifurcations + (fake,),
+                              methods=b.stability_method, tol=b.meta["stability_tol"])
     with pytest.raises(RuntimeError, match="not a crossing of two branches"):
         fm.switch_branch(listed, fake, omega=(0.9, 1.7), window=2)
     _, bb = backbone

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..nonsmooth_modes import family_caveat
 from ..results import Branch, ErrorEstimate
+from ..results.branch import fill_in_place
 from ..solvers import NewtonOptions
 from ..solvers.checks import entry_point
 from ..solvers.threads import limit_blas_threads
@@ -51,9 +52,8 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
         :attr:`~femodes.results.ErrorEstimate.met` tells which points meet it.
     max_harmonics : int, optional
         Largest level ``rtol`` may add (default ``8 H``; at least ``2 H``).
-    projection : ExactProjection or SampledProjection, optional
-        The projection the branch was computed with (default exact).
-    newton : NewtonOptions, optional
+    projection, newton : optional
+        The projection the branch was computed with (default exact); the corrector's NewtonOptions.
     method : ErrorMethod, optional
         A strategy of :mod:`femodes.error_methods`: ``Levels()`` (above), ``Shooting()`` (the exact orbits
         of the flow with rigid stops; forced branches of linear models with unilateral contacts only,
@@ -67,11 +67,12 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     Returns
     -------
     Branch
-        The same branch, with :attr:`~femodes.Branch.accuracy` (an :class:`~femodes.results.ErrorEstimate`)
-        set. It covers the harmonic truncation only (``accuracy.covers``); a mesh share the branch had
-        is kept. A backbone past grazing (:func:`femodes.nonsmooth_modes.family_caveat`) gets
-        ``accuracy.caveat`` and meets ``rtol`` at no point; a point whose level has no orbit near it
-        gets no estimate (method ``"failed"``).
+        A new branch: ``branch`` with :attr:`~femodes.Branch.accuracy` (an
+        :class:`~femodes.results.ErrorEstimate`); for this release ``branch`` itself is filled too
+        (:func:`~femodes.results.branch.fill_in_place`). It covers the harmonic truncation only
+        (``accuracy.covers``); a mesh share the branch had is kept. A backbone past grazing
+        (:func:`femodes.nonsmooth_modes.family_caveat`) gets ``accuracy.caveat`` and meets ``rtol`` at
+        no point; a point whose level has no orbit near it gets no estimate (method ``"failed"``).
     """
     lad = ladder_for(branch, projection, newton)
     H = branch.harmonics.n_harmonics
@@ -101,13 +102,14 @@ def estimate_error(branch: Branch, *, rtol: float | None = None, max_harmonics: 
     # a mesh estimate already attached (femodes.estimate_mesh_error) does not depend on H: kept
     old = branch.accuracy
     mesh = {} if old is None or old.mesh is None else {"mesh": old.mesh, "mesh_method": old.mesh_method}
-    branch.set_accuracy(ErrorEstimate(omega=errors.omega, amplitude=errors.amplitude, penetration=pen, tension=ten,
+    new = branch.with_accuracy(ErrorEstimate(omega=errors.omega, amplitude=errors.amplitude, penetration=pen, tension=ten,
                                       harmonics=np.full(n, H), rate=errors.rate, method=kind.astype(str), rtol=rtol,
                                       omega_limit=errors.omega_limit, omega_limit_error=errors.omega_limit_error,
                                       finest=errors.finest, caveat=family_caveat(branch),
                                       amplitude_limit=errors.amplitude_limit,
                                       amplitude_limit_error=errors.amplitude_limit_error, **mesh))
-    return branch
+    fill_in_place(branch, new)  # the legacy of this release: the branch given is filled too
+    return new
 
 
 def _warn_out_of_time(lad: Ladder, errors: PointErrors, time_limit: float, elapsed: float,

@@ -58,13 +58,13 @@ def meet_tolerance(branch: Branch, rtol: float, max_harmonics: int | None, rerun
         return None if deadline is None else max(deadline - time.perf_counter(), 1e-3)
 
     if "complementarity" in branch.contacts.kinds:
-        estimate_error(branch, rtol=rtol, max_harmonics=max_harmonics, projection=projection, newton=newton,
-                       method=method, time_limit=left(), options=options)
+        branch = estimate_error(branch, rtol=rtol, max_harmonics=max_harmonics, projection=projection,
+                                newton=newton, method=method, time_limit=left(), options=options)
         _warn_unmet(branch, max_harmonics)
         return branch
     while True:
-        estimate_error(branch, rtol=rtol, projection=projection, newton=newton, method=method, time_limit=left(),
-                       options=options)
+        branch = estimate_error(branch, rtol=rtol, projection=projection, newton=newton, method=method,
+                                time_limit=left(), options=options)
         H = branch.harmonics.n_harmonics
         # the estimate of 2 H needs level 4 H; a branch with a caveat (not the family asked for) meets rtol at no H
         if branch.accuracy.met.all() or branch.accuracy.caveat or 4 * H > max_harmonics:

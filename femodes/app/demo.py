@@ -130,8 +130,8 @@ def _modes_figure(plt, model, rom, full, red, png: Path) -> None:
     x = model.fe.coordinates
     fig, ax = plt.subplots(figsize=(9.5, 4))
     for j in range(3):
-        wf = model.full_field(full.shapes[:, j])[model.fe.nodal[0]]
-        wr = rom.full_field(red.shapes[:, j])[model.fe.nodal[0]]
+        wf = model.mesh_map.full_field(full.shapes[:, j])[model.fe.nodal[0]]
+        wr = rom.mesh_map.full_field(red.shapes[:, j])[model.fe.nodal[0]]
         ax.plot(x, wf, lw=2, label=f"mode {j + 1}: {full.omega[j]:.4f} rad/s (full)")
         ax.plot(x, np.sign(wf[-1] * wr[-1]) * wr, "k--", lw=1, label=f"CB: {red.omega[j]:.4f} rad/s")
     ax.plot([1.0], [0.0], "rs", label="tip contact node (the stop is 0.01 L above it)")

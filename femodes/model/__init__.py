@@ -9,15 +9,17 @@ Modules: ``structural`` (the model, thin methods), ``dofs`` (``DofMap``), ``decl
 (``HarmonicForce``, ``Attached``), ``checks`` (matrices and fields), ``damping`` (Rayleigh and
 modal, ``LowRankDamping``), ``forcing`` (forces on DOFs, boundaries, rotated nodes), ``contact``
 (contact laws on DOFs and boundaries, normals), ``frames`` (nodal frames of inclined normals),
-``contact_mass`` (the mass of contact DOFs), ``probes`` (responses at a location).
+``contact_mass`` (the mass of contact DOFs), ``probes`` (responses at a location), ``mesh_map``
+(``model.mesh_map``: where the DOFs sit on the mesh), ``deprecations`` (the model's moved names).
 """
 
 from .checks import as_sparse_matrix
-from .damping import DENSE_DAMPING_MAX_DOFS, LowRankDamping, low_rank_solver
-from .declarations import CONTACT_LAWS, SMOOTH_LAWS, Attached, HarmonicForce
+from .damping import DENSE_DAMPING_MAX_DOFS, Damping, LowRankDamping, low_rank_solver
+from .declarations import CONTACT_LAWS, SMOOTH_LAWS, Attached, HarmonicForce, nonlinear_dofs
 from .dofs import DofMap
 from .frames import AXIS_TOL, NodalFrame, nodal_frame
+from .mesh_map import MeshMap
 from .structural import StructuralModel
 
 __all__ = ["DofMap", "NodalFrame", "HarmonicForce", "Attached", "StructuralModel", "LowRankDamping", "as_sparse_matrix",
-           "low_rank_solver", "nodal_frame", "DENSE_DAMPING_MAX_DOFS", "AXIS_TOL", "CONTACT_LAWS", "SMOOTH_LAWS"]
+           "Damping", "MeshMap", "nonlinear_dofs", "low_rank_solver", "nodal_frame", "DENSE_DAMPING_MAX_DOFS", "AXIS_TOL", "CONTACT_LAWS", "SMOOTH_LAWS"]

@@ -1,5 +1,6 @@
 r"""Damping of a model: Rayleigh ``C = alpha M + beta K`` (sparse) or modal damping kept as a
-low-rank part ``U diag(d) U^T`` (:class:`LowRankDamping`), and its Woodbury solver.
+low-rank part ``U diag(d) U^T`` (:class:`LowRankDamping`), and its Woodbury solver;
+:class:`Damping` (``model.damping``) is the damping of a model as one operator.
 
 :func:`damped` is :meth:`~femodes.StructuralModel.with_damping`. The arguments are kept on the
 model (``damping_spec``) with a fingerprint of the matrices they made, so that a later contact
@@ -21,13 +22,13 @@ import scipy.sparse as sp
 from ..solvers.checks import named_by
 from ..eigen import normal_modes
 
-__all__ = ["DENSE_DAMPING_MAX_DOFS", "LowRankDamping", "low_rank_solver", "damped", "damping_fingerprint",
+__all__ = ["DENSE_DAMPING_MAX_DOFS", "Damping", "LowRankDamping", "low_rank_solver", "damped", "damping_fingerprint",
            "damping_spec_fresh", "fingerprinted", "redamped_after_contact"]
 
 log = logging.getLogger(__name__)
 
 #: Models above this many DOFs refuse to assemble a damping matrix that has a low-rank part
-#: (:meth:`StructuralModel.damping_matrix`): its n^2 entries are what the low-rank form avoids.
+#: (:meth:`Damping.matrix`): its n^2 entries are what the low-rank form avoids.
 DENSE_DAMPING_MAX_DOFS = 20000
 
 
@@ -115,6 +116,47 @@ class LowRankDamping:
     def project(self, T: np.ndarray) -> LowRankDamping:
         """``T^T (U diag(d) U^T) T`` as a low-rank part: ``(T^T U, d)``."""
         return LowRankDamping(np.asarray(T).T @ self.U, self.d)
+
+
+class Damping:
+    """The damping matrix of a model as one operator, ``C + U diag(d) U^T`` (``model.damping``):
+    its sparse part ``model.C`` and its low-rank part ``model.C_lowrank`` (modal damping)."""
+
+    def __init__(self, C: Any, lowrank: LowRankDamping | None):
+        self.C = C
+        self.lowrank = lowrank
+
+    @property
+    def nonzero(self) -> bool:
+        """True if the damping (sparse or low-rank part) is not zero (stored zeros do not count)."""
+        return bool(self.C.count_nonzero()) or (self.lowrank is not None and bool(np.any(self.lowrank.d)))
+
+    def apply(self, V: np.ndarray) -> np.ndarray:
+        """The damping matrix times ``V`` (shape ``(n,)`` or ``(n, k)``): ``C V + U diag(d) U^T V``."""
+        out = self.C @ V
+        if self.lowrank is not None:
+            out = out + self.lowrank.matmul(V)
+        return out
+
+    def matrix(self) -> sp.csr_matrix:
+        """The assembled damping matrix ``C + U diag(d) U^T`` (``C`` itself without a low-rank part).
+
+        With a low-rank part the matrix is dense: for small models and checks only; refused
+        above :data:`DENSE_DAMPING_MAX_DOFS` DOFs.
+        """
+        lr, n = self.lowrank, self.C.shape[0]
+        if lr is None:
+            return self.C
+        if n > DENSE_DAMPING_MAX_DOFS:
+            raise ValueError(
+                f"damping_matrix: the modal damping of this {n}-DOF model is kept as a low-rank part; "
+                f"assembling it would store {n}^2 entries (use damping.apply, or C and C_lowrank)"
+            )
+        return sp.csr_matrix(self.C.toarray() + lr.toarray())
+
+    def __repr__(self) -> str:
+        low = "none" if self.lowrank is None else f"rank {self.lowrank.rank}"
+        return f"Damping(sparse nnz={self.C.nnz}, low-rank part {low})"
 
 
 def low_rank_solver(solve, L: np.ndarray, g: np.ndarray, R: np.ndarray, *, matvec=None, refine: int = 2):

@@ -12,7 +12,8 @@ import numpy as np
 from ..laws import CubicSpring, Location, PenaltyContact, UnilateralContact, check_location
 from ..solvers.checks import InputValueError, entry_point, named_by
 
-__all__ = ["HarmonicForce", "Attached", "CONTACT_LAWS", "SMOOTH_LAWS", "show_vector", "bind_nonlinearities"]
+__all__ = ["HarmonicForce", "Attached", "CONTACT_LAWS", "SMOOTH_LAWS", "show_vector", "bind_nonlinearities",
+           "nonlinear_dofs"]
 
 #: The laws of :meth:`~femodes.StructuralModel.with_contact`.
 CONTACT_LAWS = (UnilateralContact, PenaltyContact)
@@ -73,3 +74,9 @@ def bind_nonlinearities(model, laws) -> list[Attached]:
         with named_by("with_nonlinearity: CubicSpring"):
             new.append(Attached(law, model.dofmap.find(law.at)))
     return new
+
+
+def nonlinear_dofs(model) -> np.ndarray:
+    """Sorted unique DOFs of ``model`` that carry contact or nonlinear laws."""
+    d = [a.dof for a in model.contacts] + [a.dof for a in model.nonlinearities]
+    return np.unique(np.asarray(d, dtype=int))

@@ -1,5 +1,5 @@
 """Reading a response at a location: the weights ``w`` with ``w @ q`` the displacement of a DOF,
-or the mean (or each node) of a named boundary of a meshed solid (:meth:`~femodes.StructuralModel.probe`)."""
+or the mean (or each node) of a named boundary of a meshed solid (:meth:`~femodes.model.MeshMap.probe`, ``model.mesh_map.probe``)."""
 
 from __future__ import annotations
 

@@ -1,13 +1,14 @@
 """The model: :class:`StructuralModel`, ``M q'' + C q' + K q + f_nl(q) = f(t) - w_c p`` on the free
 DOFs, with its declarations. A frozen value: every ``with_*`` returns a new model; the work is done
-by the modules of :mod:`femodes.model` (damping, forcing, contact, probes, checks)."""
+by the modules of :mod:`femodes.model` (damping, forcing, contact, probes, checks) and by its two
+collaborators: ``model.damping`` (:class:`Damping`) and ``model.mesh_map`` (:class:`MeshMap`)."""
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import scipy.sparse as sp
@@ -16,11 +17,12 @@ from ..laws import Location
 from ..solvers.checks import entry_point, named_by
 from .checks import check_fields
 from .contact import add_contacts
-from .damping import DENSE_DAMPING_MAX_DOFS, LowRankDamping, damped
+from .damping import Damping, LowRankDamping, damped
 from .declarations import HarmonicForce, bind_nonlinearities
 from .dofs import DofMap, deprecated_owner
 from .forcing import bind_forces
-from .probes import probe_weights
+from .mesh_map import MeshMap
+from .deprecations import moved_attribute
 
 __all__ = ["StructuralModel"]
 
@@ -42,9 +44,9 @@ class StructuralModel:
         Names of the DOFs of a discrete system (then ``at="x1"`` works).
     C_lowrank : LowRankDamping, optional
         Low-rank part of the damping, set by ``with_damping(modal=...)``: the damping matrix is
-        ``C + U diag(d) U^T`` (see :class:`LowRankDamping`). Use :meth:`apply_damping` for
-        products and :meth:`damping_matrix` for the assembled matrix (small models, checks);
-        ``C`` alone is only the sparse part (zero for modal damping).
+        ``C + U diag(d) U^T`` (see :class:`LowRankDamping`). Use ``damping.apply`` for
+        products and ``damping.matrix()`` (or :meth:`damping_matrix`) for the assembled matrix
+        (small models, checks); ``C`` alone is only the sparse part (zero for modal damping).
     frame : scipy.sparse matrix, optional
         Nodal rotations of a meshed solid (set by ``with_contact`` for inclined or negative
         contact normals): the physical displacement on the free DOFs of the FE field is
@@ -86,41 +88,25 @@ class StructuralModel:
     def n_dofs(self) -> int:
         return self.M.shape[0]
 
-    @property
-    def n_contacts(self) -> int:
-        return len(self.contacts)
+    #: False: a Craig-Bampton model (:class:`femodes.ReducedModel`) says True
+    is_reduced: ClassVar[bool] = False
 
     @property
-    def is_reduced(self) -> bool:
-        return False
-
-    @property
-    def has_damping(self) -> bool:
-        """True if the damping (sparse or low-rank part) is not zero (stored zeros do not count)."""
-        return bool(self.C.count_nonzero()) or (self.C_lowrank is not None and bool(np.any(self.C_lowrank.d)))
-
-    def apply_damping(self, V: np.ndarray) -> np.ndarray:
-        """The damping matrix times ``V`` (shape ``(n,)`` or ``(n, k)``): ``C V + U diag(d) U^T V``."""
-        out = self.C @ V
-        if self.C_lowrank is not None:
-            out = out + self.C_lowrank.matmul(V)
-        return out
+    def damping(self) -> Damping:
+        """The damping matrix ``C + U diag(d) U^T`` as one operator (:class:`Damping`):
+        ``damping.nonzero``, ``damping.apply(V)``, ``damping.matrix()``."""
+        return Damping(self.C, self.C_lowrank)
 
     def damping_matrix(self) -> sp.csr_matrix:
-        """The assembled damping matrix ``C + U diag(d) U^T`` (``C`` itself without a low-rank part).
+        """The assembled damping matrix, :meth:`Damping.matrix` of :attr:`damping`."""
+        return self.damping.matrix()
 
-        With a low-rank part the matrix is dense: for small models and checks only; refused
-        above :data:`DENSE_DAMPING_MAX_DOFS` DOFs.
-        """
-        lr = self.C_lowrank
-        if lr is None:
-            return self.C
-        if self.n_dofs > DENSE_DAMPING_MAX_DOFS:
-            raise ValueError(
-                f"damping_matrix: the modal damping of this {self.n_dofs}-DOF model is kept as a low-rank part; "
-                f"assembling it would store {self.n_dofs}^2 entries (use apply_damping, or C and C_lowrank)"
-            )
-        return sp.csr_matrix(self.C.toarray() + lr.toarray())
+    @property
+    def mesh_map(self) -> MeshMap:
+        """Where the model's DOFs sit on the FE mesh (:class:`MeshMap`): ``mesh_map.owner``,
+        ``mesh_map.full_field(q)``, ``mesh_map.to_owner(q)``, ``mesh_map.fe_dof(i)``,
+        ``mesh_map.probe(at)``; a reduced model's goes through its parent."""
+        return MeshMap(self)
 
     @entry_point("dof")
     def dof(self, at: Location, owner: str | None = None) -> int:
@@ -128,21 +114,6 @@ class StructuralModel:
         the errors, which start with ``"dof: "``)."""
         with named_by(deprecated_owner(owner, "StructuralModel.dof")):
             return self.dofmap.find(at)
-
-    @entry_point("probe")
-    def probe(self, at: Location, how: str = "mean", owner: str | None = None) -> np.ndarray:
-        """Weights ``w`` that read a response at ``at`` from the model's DOFs: ``w @ q``.
-
-        A DOF location gives its unit vector (shape ``(n_dofs,)``). A named boundary of a meshed
-        solid (``"tip"`` or ``("tip", "u_z")``; first component by default) gives, with
-        ``how="mean"``, its average displacement in that component (the consistent weights of
-        :attr:`DofMap.group_weights`, supported nodes counting as zero; shape ``(n_dofs,)``),
-        and with ``how="max"`` one row per free node (shape ``(k, n_dofs)``: take the largest).
-        A Craig-Bampton model reads boundaries of its parent, kept or not (``w_parent @ T``), so
-        responses anywhere need no new model.
-        """
-        with named_by(deprecated_owner(owner, "StructuralModel.probe")):
-            return probe_weights(self.dofmap, at, how)
 
     def force_vectors(self) -> dict:
         """Complex force amplitude per harmonic: ``{k: F_k}`` with ``f(t) = Re sum F_k e^{i k w t}``."""
@@ -214,7 +185,7 @@ class StructuralModel:
         ``u = T q``: ``K``, ``M``, ``C`` (and a modal low-rank part) become ``T^T A T`` and the
         forces already attached ``T^T f``, before the contact mass is redistributed, so the
         redistribution acts on ``u_n``. ``model.frame`` holds ``T`` (composed over calls) and
-        ``dofmap.frames`` the rotation of each node: :meth:`full_field` (hence every mesh output)
+        ``dofmap.frames`` the rotation of each node: ``mesh_map.full_field`` (hence every mesh output)
         is physical, :meth:`with_forcing` rotates forces given in ``u_x, u_y(, u_z)``, and the
         rotated DOFs are named ``"u_n"``, ``"u_t"`` (2-D) or ``"u_t1"``, ``"u_t2"`` (3-D)
         (``at=(point, "u_n")``; ``at=(point, "u_x")`` of a rotated node is an error). A node
@@ -248,49 +219,14 @@ class StructuralModel:
         return dataclasses.replace(self, nonlinearities=tuple(self.nonlinearities) + tuple(new))
 
     # -- fields ---------------------------------------------------------------------------------
-    def nonlinear_dofs(self) -> np.ndarray:
-        """Sorted unique DOFs that carry contact or nonlinear laws."""
-        d = [a.dof for a in self.contacts] + [a.dof for a in self.nonlinearities]
-        return np.unique(np.asarray(d, dtype=int))
-
     def expand(self, q: np.ndarray) -> np.ndarray:
         """Model DOFs -> model DOFs (identity; a reduced model maps to its parent's DOFs)."""
         return np.asarray(q)
 
-    @property
-    def mesh_owner(self) -> StructuralModel | None:
-        """The model that owns the FE mesh: this one for FE models, None for discrete ones
-        (a reduced model answers with its parent's owner)."""
-        return self if self.fe is not None else None
-
-    def to_owner(self, q: np.ndarray) -> np.ndarray:
-        """Coordinates ``(..., n_dofs)`` on the DOFs of :attr:`mesh_owner` (identity here; a
-        reduced model expands through every reduction level). These are the owner's model DOFs,
-        nodal-frame components at rotated nodes; :meth:`full_field` gives the physical field."""
-        return np.asarray(q)
-
-    def fe_dof(self, dof: int) -> int | None:
-        """Index in the full FE field of a DOF of this model; None for a discrete model (and for
-        the modal coordinates of a reduced one). A DOF of a rotated node (``dofmap.frames``)
-        occupies the FE DOF of its component slot; its physical direction is
-        ``dofmap.axis(node, slot)``."""
-        return None if self.fe is None else int(np.asarray(self.fe.free)[dof])
-
-    def full_field(self, q: np.ndarray) -> np.ndarray:
-        """FE field with constrained DOFs set to zero, ``(..., n_fe_dofs)``; identity for discrete models.
-
-        The field is physical: the DOFs of rotated nodes (:attr:`frame`) are turned back into
-        their components along x, y(, z).
-        """
-        q = np.asarray(q)
-        if self.fe is None:
-            return q
-        if self.frame is not None:
-            flat = q.reshape(-1, q.shape[-1])
-            q = np.asarray(self.frame @ flat.T).T.reshape(q.shape)
-        out = np.zeros(q.shape[:-1] + (self.fe.n_full,), dtype=q.dtype)
-        out[..., self.fe.free] = q
-        return out
+    if not TYPE_CHECKING:  # the type checker sees no moved name
+        def __getattr__(self, name: str) -> Any:
+            # the names moved to collaborators (model/deprecations.py): they still work, with a DeprecationWarning
+            return moved_attribute(self, name)
 
     def __repr__(self) -> str:
         kind = "discrete" if self.fe is None else self.fe.kind

@@ -97,7 +97,7 @@ def frequency_amplitude(branch: Branch, dof: Any, *, ax: Any = None, label: str 
         Model DOF index, or a location name (``"tip"``, ``("tip", "theta")``) when the branch
         carries its model; a named boundary of a solid (``("pad", "u_z")``) reads its mean or
         max (``how``), also on a Craig-Bampton model that does not keep it
-        (:meth:`femodes.StructuralModel.probe`).
+        (:meth:`femodes.model.MeshMap.probe`).
     ax : matplotlib Axes, optional
     label : str, optional
         Legend label of the curve.

@@ -94,12 +94,12 @@ def dof_index(obj: Any, dof: Any, n_dofs: int) -> tuple[int, str]:
 
 def reader(obj: Any, dof: Any, n_dofs: int, how: str) -> tuple[np.ndarray, str]:
     """Weights ``W`` (rows: responses, the largest amplitude taken) and a label: a DOF, or a
-    named boundary read through :meth:`femodes.StructuralModel.probe` (mean or max over its
+    named boundary read through :meth:`femodes.model.MeshMap.probe` (mean or max over its
     nodes; for a reduced model also boundaries it does not keep)."""
     model = getattr(obj, "model", None)
     if isinstance(dof, (str, tuple)) and model is not None:
         try:
-            W = np.atleast_2d(model.probe(dof, how))
+            W = np.atleast_2d(model.mesh_map.probe(dof, how))
         except ValueError:
             W = None
         if W is not None and not (W.shape[0] == 1 and np.count_nonzero(W) == 1):

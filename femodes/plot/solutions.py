@@ -159,7 +159,7 @@ def mode_shape(source: Any, model: Any = None, *, ax: Any = None, n_snapshots: i
     ax = axes(ax)
     plt = pyplot()
     colors = plt.get_cmap(cmap)(np.linspace(0.0, 0.9, n_snapshots))
-    if model.mesh_owner is None:
+    if model.mesh_map.owner is None:
         # Discrete model: no geometry; plot the DOF values against the DOF index.
         if j is None:
             T = src.period

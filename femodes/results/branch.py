@@ -3,21 +3,43 @@ and error estimate, and its file (:meth:`Branch.save`; :func:`~femodes.results.l
 
 from __future__ import annotations
 
+import copy
+import functools
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..hbm.harmonics import Harmonics
 from ..store import RECORD_SUFFIXES, model_signature, signature_differences, write_record
-from .bifurcation import Bifurcation
+from ..solvers.checks import user_stacklevel
+from .branch_annotations import answer, checked_accuracy, checked_stability, point_harmonics
 from .branch_record import FORMAT_VERSION, branch_arrays, branch_header
 from .contacts import ContactInfo, contact_differences, contact_quality
 from .error_estimate import ErrorEstimate
 from .solution import PeriodicSolution
 
-__all__ = ["Branch", "FORMAT_VERSION"]
+__all__ = ["Branch", "FORMAT_VERSION", "fill_in_place"]
 
+
+
+class _Bifurcations:
+    """``Branch.bifurcations``, read from the branch. Assigning it was the way to replace the
+    bifurcations before branches became values (issue 39): for this release the assignment still
+    replaces them, as it did (the file :meth:`Branch.save` writes included), with a
+    DeprecationWarning; :meth:`Branch.with_stability` builds a branch with others."""
+
+    def __get__(self, branch: Any, owner: Any = None) -> Any:
+        return self if branch is None else vars(branch).get("bifurcations", ())
+
+    def __set__(self, branch: Any, value: Any) -> None:
+        warnings.warn("Branch.bifurcations: assigning the bifurcations is deprecated and will be removed in the "
+                      "next release; use branch.with_stability(...), which returns a new branch",
+                      DeprecationWarning, stacklevel=user_stacklevel())
+        branch._bifurcations = tuple(b.series() for b in value)
+        _settle(branch)
 
 class Branch:
     """A branch of periodic solutions from continuation.
@@ -37,7 +59,42 @@ class Branch:
     first, NaN-padded), ``stability_method`` (``"hill"`` or ``"shooting"`` per point) and
     ``bifurcations`` (:class:`Bifurcation` objects in branch order). Without it ``stable``,
     ``multipliers`` and ``stability_method`` are ``None`` and ``bifurcations`` is empty.
+
+    A branch is a value: the analyses build it with its error estimate and stability
+    (:meth:`with_accuracy` and :meth:`with_stability` return a new branch and leave this one as
+    it is), and the answer they give (``omega``, ``omega_error``, ``amplitude_error``,
+    ``error_estimate``, ``bifurcations``) is computed once, when it is built
+    (:mod:`femodes.results.branch_annotations`). :meth:`attach` sets the model (of a loaded
+    branch), which changes no number.
     """
+
+    #: The frequency of every point: the answer. With an error estimate whose harmonic
+    #: extrapolation or exact orbit gives a converged frequency (``rtol=`` of the analyses,
+    #: :func:`femodes.estimate_error` on branches with complementarity contacts), that frequency
+    #: (``accuracy.omega_limit``), with the relative error bar :attr:`omega_error`; elsewhere the
+    #: harmonic balance's own, :attr:`omega_truncated`. The coefficients ``Q, P`` are the
+    #: truncated series at :attr:`omega_truncated`.
+    omega: np.ndarray
+    #: Relative error bar of :attr:`omega` per point, every source estimated
+    #: (:attr:`ErrorEstimate.frequency_error`; what ``rtol`` controls and :attr:`ErrorEstimate.met`
+    #: judges); NaN: unknown; ``None`` without an error estimate.
+    omega_error: np.ndarray | None
+    #: Relative error bar of the amplitudes :meth:`amplitude` gives per point
+    #: (:attr:`ErrorEstimate.amplitude_error`): the exact orbit's where shooting answered (its
+    #: amplitudes are then those of the exact orbit), else the truncated series' (which ``rtol``
+    #: does not control); ``None`` without an error estimate.
+    amplitude_error: np.ndarray | None
+    #: Estimated relative error of every point with respect to the converged answer of the sources
+    #: estimated: the harmonic truncation (``H -> inf``; ``rtol=`` of the analyses, or
+    #: :func:`femodes.estimate_error`) and the mesh if :func:`femodes.estimate_mesh_error` was run;
+    #: the larger of :attr:`omega_error` and :attr:`amplitude_error`; ``None`` unless computed.
+    #: Which sources the numbers cover: ``branch.accuracy.covers``; details: :attr:`accuracy`.
+    error_estimate: np.ndarray | None
+    #: The :class:`Bifurcation` objects in branch order, at the frequency the branch reports
+    #: (:attr:`omega`): on an error-controlled branch each is moved by its points' correction
+    #: ``omega - omega_truncated``, so that it sits on the converged curve; ``b.omega_truncated``,
+    #: ``b.Q`` and ``b.P`` stay the truncated series'. (Assigning them is deprecated.)
+    bifurcations: tuple = _Bifurcations()  # type: ignore[assignment]
 
     @property
     def internal_resonances(self) -> list[dict]:
@@ -75,112 +132,21 @@ class Branch:
         #: :func:`~femodes.store.model_signature` of the model the branch was solved on, as read
         #: from its file (None: not stored, a file of an older femodes; or computed from ``model``)
         self.model_signature: dict | None = None
+        #: True for every stored point (only converged points are stored)
+        self.converged = np.isfinite(self.residual_norm)
+        _settle(self)
 
-    def set_accuracy(self, accuracy: ErrorEstimate) -> Branch:
-        """Attach the error estimate of every point (used by :mod:`femodes.accuracy`)."""
-        if not isinstance(accuracy, ErrorEstimate):
-            raise TypeError(f"set_accuracy: expected an ErrorEstimate, got {type(accuracy).__name__}")
-        if np.asarray(accuracy.omega).shape != (len(self),):
-            raise ValueError(f"set_accuracy: one value per point ({len(self)}) expected")
-        if np.any(np.asarray(accuracy.harmonics) > self.harmonics.n_harmonics):
-            raise ValueError("set_accuracy: a point uses more harmonics than the branch stores")
-        self.accuracy = accuracy
-        return self
+    def with_accuracy(self, accuracy: ErrorEstimate) -> Branch:
+        """This branch with the error estimate of every point (built so by :mod:`femodes.accuracy`
+        and :func:`femodes.estimate_mesh_error`): a new branch; this one is unchanged."""
+        return _annotated(self, accuracy=checked_accuracy(accuracy, len(self), self.harmonics.n_harmonics,
+                                                          "with_accuracy"))
 
-    @property
-    def omega(self) -> np.ndarray:
-        """The frequency of every point: the answer. With an error estimate whose harmonic
-        extrapolation or exact orbit gives a converged frequency (``rtol=`` of the analyses,
-        :func:`femodes.estimate_error` on branches with complementarity contacts), that frequency
-        (``accuracy.omega_limit``), with the relative error bar :attr:`omega_error`; elsewhere the
-        harmonic balance's own, :attr:`omega_truncated`. The coefficients ``Q, P`` are the
-        truncated series at :attr:`omega_truncated`."""
-        acc = self.accuracy
-        if acc is None or acc.omega_limit is None:
-            return self.omega_truncated
-        limit = np.asarray(acc.omega_limit, float)
-        return np.where(np.isfinite(limit), limit, self.omega_truncated)
-
-    @property
-    def omega_error(self) -> np.ndarray | None:
-        """Relative error bar of :attr:`omega` per point, every source estimated
-        (:attr:`ErrorEstimate.frequency_error`; what ``rtol`` controls and
-        :attr:`ErrorEstimate.met` judges); NaN: unknown; ``None`` without an error estimate."""
-        return None if self.accuracy is None else self.accuracy.frequency_error
-
-    @property
-    def amplitude_error(self) -> np.ndarray | None:
-        """Relative error bar of the amplitudes :meth:`amplitude` gives per point
-        (:attr:`ErrorEstimate.amplitude_error`): the exact orbit's where shooting answered (its
-        amplitudes are then those of the exact orbit), else the truncated series' (which ``rtol``
-        does not control); ``None`` without an error estimate."""
-        return None if self.accuracy is None else self.accuracy.amplitude_error
-
-    @property
-    def error_estimate(self) -> np.ndarray | None:
-        """Estimated relative error of every point with respect to the converged answer of the
-        sources estimated: the harmonic truncation (``H -> inf``; ``rtol=`` of the analyses, or
-        :func:`femodes.estimate_error`) and the mesh if :func:`femodes.estimate_mesh_error` was
-        run; the larger of :attr:`omega_error` (of :attr:`omega`) and :attr:`amplitude_error`;
-        ``None`` unless computed. Which sources the numbers cover: ``branch.accuracy.covers``;
-        details: :attr:`accuracy`."""
-        return None if self.accuracy is None else self.accuracy.value
-
-    def point_harmonics(self, i: int) -> Harmonics:
-        """The harmonics of point ``i`` (error control may refine some points more than others;
-        the branch stores every point on its largest ``harmonics``, zero-padded)."""
-        if self.accuracy is None:
-            return self.harmonics
-        H = int(self.accuracy.harmonics[i])
-        if H == self.harmonics.n_harmonics:
-            return self.harmonics
-        return Harmonics(H, subharmonic=self.harmonics.subharmonic)
-
-    def set_stability(self, *, stable, multipliers, bifurcations, methods, tol: float) -> Branch:
-        """Attach the stability of every point (used by :mod:`femodes.floquet`)."""
-        n = len(self)
-        stable = np.asarray(stable, dtype=bool)
-        multipliers = np.asarray(multipliers, dtype=complex).reshape(n, -1)
-        methods = np.asarray(methods, dtype=str)
-        if stable.shape != (n,) or methods.shape != (n,):
-            raise ValueError(f"set_stability: one value per point ({n}) expected")
-        for b in bifurcations:
-            if not isinstance(b, Bifurcation):
-                raise TypeError(f"set_stability: bifurcations must be Bifurcation objects, got {type(b).__name__}")
-        self.stable, self.multipliers, self.stability_method = stable, multipliers, methods
-        self._bifurcations = tuple(b.series() for b in bifurcations)
-        self.meta["stability_tol"] = float(tol)
-        return self
-
-    @property
-    def bifurcations(self) -> tuple:
-        """The :class:`Bifurcation` objects in branch order, at the frequency the branch reports
-        (:attr:`omega`): on an error-controlled branch each is moved by its points' correction
-        ``omega - omega_truncated`` (a fold by its own point's; one between two points by the
-        correction interpolated in the truncated frequency), so that it sits on the converged
-        curve; ``b.omega_truncated``, ``b.Q`` and ``b.P`` stay the truncated series'."""
-        bifs = self._bifurcations
-        if not bifs or self.accuracy is None or self.accuracy.omega_limit is None:
-            return bifs
-        wt, c = self.omega_truncated, self.omega - self.omega_truncated
-        out = []
-        for b in bifs:
-            i = min(int(b.index), len(self) - 1)
-            shift = c[i]
-            if b.kind != "fold" and i + 1 < len(self) and wt[i + 1] != wt[i]:
-                theta = min(max((b.omega_truncated - wt[i]) / (wt[i + 1] - wt[i]), 0.0), 1.0)
-                shift = (1.0 - theta) * c[i] + theta * c[i + 1]
-            out.append(b.at_frequency(b.omega_truncated + shift) if shift else b)
-        return tuple(out)
-
-    @bifurcations.setter
-    def bifurcations(self, value) -> None:
-        self._bifurcations = tuple(b.series() for b in value)
-
-    @property
-    def converged(self) -> np.ndarray:
-        """True for every stored point (only converged points are stored)."""
-        return np.isfinite(self.residual_norm)
+    def with_stability(self, *, stable, multipliers, bifurcations, methods, tol: float) -> Branch:
+        """This branch with the stability of every point (built so by :mod:`femodes.floquet`): the
+        verdicts, the multipliers (``(n_points, m)``, NaN-padded), the method of each point and the
+        :class:`Bifurcation` objects; a new branch, this one unchanged."""
+        return _with_stability(self, "with_stability", stable, multipliers, bifurcations, methods, tol)
 
     def __len__(self) -> int:
         return self.omega_truncated.size
@@ -193,7 +159,7 @@ class Branch:
         except IndexError:
             raise IndexError(f"branch index {i} is out of range for a branch of {len(self)} points "
                              f"(valid: 0 .. {len(self) - 1}, or negative from the end)") from None
-        h = self.point_harmonics(i)
+        h = point_harmonics(self.harmonics, self.accuracy, i)
         Q, P = (self.Q[i], self.P[i]) if h is self.harmonics else (
             self.harmonics.layout.convert(self.Q[i], h), self.harmonics.layout.convert(self.P[i], h))
         acc = self.accuracy
@@ -285,6 +251,16 @@ class Branch:
         self.model = model
         return self
 
+    if not TYPE_CHECKING:  # the type checker sees no moved name
+        def __getattr__(self, name: str) -> Any:
+            # names that moved (the table MOVED below): they still work, with a DeprecationWarning
+            if name not in MOVED:
+                raise AttributeError(f"'Branch' object has no attribute {name!r}")
+            new, value = MOVED[name]
+            warnings.warn(f"Branch.{name} is deprecated and will be removed; use {new}", DeprecationWarning,
+                          stacklevel=user_stacklevel())
+            return value(self)
+
     def __repr__(self) -> str:
         return (f"Branch({self.kind}, {len(self)} points, omega in [{self.omega.min() if len(self) else np.nan:.6g}, "
                 f"{self.omega.max() if len(self) else np.nan:.6g}], folds={list(self.folds)}, success={self.success})")
@@ -299,3 +275,62 @@ class Branch:
         # atomic: never a half-written file under `path`; the bifurcations at their series' frequencies
         write_record(path, branch_header(self), branch_arrays(self, self._bifurcations))
         return path
+
+
+def _settle(branch: Branch) -> None:
+    """Compute the answer of ``branch`` from its series, error estimate and bifurcations."""
+    a = answer(branch.omega_truncated, branch.accuracy, branch._bifurcations)
+    branch.omega, branch.omega_error, branch.amplitude_error = a.omega, a.omega_error, a.amplitude_error
+    branch.error_estimate = a.error_estimate
+    vars(branch)["bifurcations"] = a.bifurcations  # past the deprecated assignment (_Bifurcations)
+
+
+def _annotated(branch: Branch, **attributes: Any) -> Branch:
+    """A copy of ``branch`` (arrays shared: nobody writes them; ``meta`` copied) with
+    ``attributes`` replaced and its answer computed again."""
+    new = copy.copy(branch)
+    new.meta = dict(branch.meta)
+    for name, value in attributes.items():
+        setattr(new, name, value)
+    _settle(new)
+    return new
+
+
+def _with_stability(branch: Branch, name: str, stable, multipliers, bifurcations, methods, tol: float) -> Branch:
+    stable, multipliers, methods, series = checked_stability(len(branch), stable, multipliers, bifurcations, methods,
+                                                             name)
+    new = _annotated(branch, stable=stable, multipliers=multipliers, stability_method=methods, _bifurcations=series)
+    new.meta["stability_tol"] = float(tol)
+    return new
+
+
+def fill_in_place(branch: Branch, new: Branch) -> Branch:
+    """Legacy of this release: ``branch`` reads as ``new`` (its model, error estimate, stability,
+    ``meta``), and is returned. :func:`femodes.estimate_error`, :func:`femodes.estimate_mesh_error`
+    and :func:`femodes.floquet.annotate_branch` return a new branch and still fill the one they are
+    given so, as they did; so do the deprecated ``set_accuracy``/``set_stability``. A later release
+    leaves the given branch unchanged."""
+    vars(branch).update(vars(new))
+    branch.meta = dict(new.meta)
+    return branch
+
+
+def _set_accuracy(branch: Branch, accuracy: ErrorEstimate) -> Branch:
+    checked_accuracy(accuracy, len(branch), branch.harmonics.n_harmonics, "set_accuracy")
+    return fill_in_place(branch, _annotated(branch, accuracy=accuracy))
+
+
+def _set_stability(branch: Branch, *, stable, multipliers, bifurcations, methods, tol: float) -> Branch:
+    return fill_in_place(branch, _with_stability(branch, "set_stability", stable, multipliers, bifurcations, methods, tol))
+
+
+#: Names of :class:`Branch` that moved (issue 39), read by its ``__getattr__``: old name -> (new
+#: spelling, for the DeprecationWarning; what the old name gives on the branch). They are removed in
+#: a later release.
+MOVED: dict[str, tuple[str, Callable[[Branch], Any]]] = {
+    "set_accuracy": ("branch.with_accuracy(estimate), which returns a new branch",
+                     lambda b: functools.partial(_set_accuracy, b)),
+    "set_stability": ("branch.with_stability(...), which returns a new branch",
+                      lambda b: functools.partial(_set_stability, b)),
+    "point_harmonics": ("branch[i].harmonics", lambda b: functools.partial(point_harmonics, b.harmonics, b.accuracy)),
+}

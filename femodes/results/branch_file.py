@@ -124,14 +124,14 @@ def load_branch(path, model=None) -> Branch:
     br.model_signature = sig
     acc = header.get("accuracy")
     if acc is not None:
-        br.set_accuracy(ErrorEstimate(**{k: arrays[f"accuracy_{k}"] for k in ("omega", "amplitude", "penetration",
+        br = br.with_accuracy(ErrorEstimate(**{k: arrays[f"accuracy_{k}"] for k in ("omega", "amplitude", "penetration",
                                                                                 "tension", "harmonics", "rate")},
-                                      method=np.asarray(acc["method"], dtype=str), rtol=acc["rtol"],
-                                      mesh_method=acc.get("mesh_method"), caveat=acc.get("caveat"),
-                                      **{k: arrays[f"accuracy_{k}"] for k in ("omega_limit", "omega_limit_error",
-                                                                              "finest", "mesh", "amplitude_limit",
-                                                                              "amplitude_limit_error")
-                                         if f"accuracy_{k}" in arrays}))
+                                           method=np.asarray(acc["method"], dtype=str), rtol=acc["rtol"],
+                                           mesh_method=acc.get("mesh_method"), caveat=acc.get("caveat"),
+                                           **{k: arrays[f"accuracy_{k}"] for k in ("omega_limit", "omega_limit_error",
+                                                                                   "finest", "mesh", "amplitude_limit",
+                                                                                   "amplitude_limit_error")
+                                              if f"accuracy_{k}" in arrays}))
     stab = header.get("stability")
     if stab is not None:
         located = stab.get("located", [True] * len(stab["kinds"]))  # older files: every bifurcation located
@@ -141,9 +141,9 @@ def load_branch(path, model=None) -> Branch:
                             bracket=(float(w[0]), float(w[1])))
                 for k, i, r, q, p, loc, w in zip(stab["kinds"], arrays["bif_index"], arrays["bif_real"],
                                                  arrays["bif_Q"], arrays["bif_P"], located, brackets)]
-        br.set_stability(stable=arrays["stable"].astype(bool),
-                         multipliers=arrays["multipliers_re"] + 1j * arrays["multipliers_im"], bifurcations=bifs,
-                         methods=stab["methods"], tol=float(br.meta.get("stability_tol", 1e-4)))
+        br = br.with_stability(stable=arrays["stable"].astype(bool),
+                               multipliers=arrays["multipliers_re"] + 1j * arrays["multipliers_im"], bifurcations=bifs,
+                               methods=stab["methods"], tol=float(br.meta.get("stability_tol", 1e-4)))
     if model is not None:
         br.attach(model)
     return br

@@ -26,7 +26,7 @@ def branch_arrays(branch, bifurcations: tuple) -> dict:
     }
     if branch.accuracy is not None:
         out.update({f"accuracy_{k}": v for k, v in branch.accuracy.arrays().items()})
-    if branch.stable is not None and branch.multipliers is not None:  # set together (set_stability)
+    if branch.stable is not None and branch.multipliers is not None:  # set together (Branch.with_stability)
         bifs = bifurcations
         out.update({
             "stable": branch.stable.astype(np.int8), "multipliers_re": branch.multipliers.real,

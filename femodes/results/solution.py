@@ -170,4 +170,4 @@ class PeriodicSolution:
         """Displacement expanded to the full model (Craig-Bampton parents) DOFs."""
         if self.model is None:
             raise ValueError("full_displacement needs the model: this solution was loaded from a file; use Branch.attach(model)")
-        return self.model.to_owner(self.displacement(t))
+        return self.model.mesh_map.to_owner(self.displacement(t))

@@ -361,7 +361,7 @@ def undamped(model: StructuralModel, restitution: float = 1.0) -> bool:
     """True when nothing in ``model`` dissipates energy: no damping matrix entry, no modal damping,
     and elastic impacts (``restitution >= 1``); :func:`femodes.exact_frequency_response` refuses such a
     model (its forced orbits are unbounded at the resonances)."""
-    return not model.has_damping and restitution >= 1.0
+    return not model.damping.nonzero and restitution >= 1.0
 
 
 # ------------------------------------------------------------------ names that moved up (issue 39)

@@ -235,9 +235,9 @@ def _time_stability(setup: _Setup, branch: fm.Branch, rec: dict) -> None:
     strategy = by_name("auto" if method is True else str(method))  # case files name the strategy
     try:
         t = time.perf_counter()
-        annotate_branch(branch, setup.problem(), setup.model, method=strategy)
+        annotated = annotate_branch(branch, setup.problem(), setup.model, method=strategy)
         rec["stability_s"] = (time.perf_counter() - t) / len(branch)
-        rec["stability_method"] = "+".join(sorted(set(branch.stability_method)))
+        rec["stability_method"] = "+".join(sorted(set(annotated.stability_method)))
     except Exception as exc:  # reported; the rest of the case is still measured
         rec["stability_method"] = f"failed: {type(exc).__name__}: {exc}"
 
