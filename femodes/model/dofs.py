@@ -43,14 +43,10 @@ class DofMap:
         Names of individual DOFs for discrete models (``StructuralModel(dof_names=...)``).
     labels : tuple of str
         Human-readable label per DOF (for messages and plots).
-    groups : mapping str -> ndarray of int
-        Named boundaries of meshed solids -> their nodes (every Lagrange node on the boundary).
-        A group is not one DOF: contacts expand to one law per node
-        (:meth:`StructuralModel.with_contact`), a force is distributed over it
-        (:meth:`StructuralModel.with_forcing`); anything else asks for a named point.
-    group_weights : mapping str -> ndarray of float
-        Consistent weight of each node of a group, ``int_boundary N_k ds / int_boundary ds`` (sums
-        to 1): how a resultant force on the boundary is shared by its nodes.
+    groups, group_weights : mapping str -> ndarray
+        Named boundaries of meshed solids -> their (Lagrange) nodes, and each node's consistent
+        weight ``int N_k ds / int ds`` (sums to 1). A group is not one DOF: contacts expand to one law
+        per node, a force is shared by the weights; anything else asks for a named point.
     node_coordinates : ndarray, shape (dim, n_nodes), optional
         Coordinates of the nodes (FE models).
     displacement : tuple of str
@@ -58,10 +54,8 @@ class DofMap:
         empty for bars, beams and discrete models): what a contact ``direction`` selects.
     frames : mapping int -> NodalFrame
         Nodes of a meshed solid whose DOFs are rotated into a nodal frame (contacts with an
-        inclined or negative normal, :meth:`StructuralModel.with_contact`). Their DOFs are named
-        ``"u_n"`` (along the normal) and ``"u_t"`` (2-D) or ``"u_t1"``, ``"u_t2"`` (3-D): ``at=``
-        with a physical component (``"u_x"``...) of such a node is an error for :meth:`index`
-        (``with_forcing`` rotates forces given in physical components itself).
+        inclined or negative normal): DOFs ``"u_n"``, ``"u_t"`` (2-D) or ``"u_t1"``, ``"u_t2"`` (3-D);
+        ``at=`` with a physical component of such a node is an error (``with_forcing`` rotates).
     """
 
     n_dofs: int

@@ -178,21 +178,12 @@ class StructuralModel:
         every law acts on one model DOF with ``g_N = gap - q_dof``.
 
         Inclined or negative normals (``direction=(0.8, 0.6)``, ``(-1.0, 0.0)``): the DOFs of each
-        contact node are rotated into a nodal frame (:func:`nodal_frame`, a proper rotation ``R``
-        whose column ``slot`` is the normal ``n``; ``slot`` is the axis nearest to ``n``), so that
-        the model DOF in that slot is ``u_n = n . u`` and the law acts on it. With the sparse
-        orthogonal ``T`` of these rotations (identity elsewhere) the physical displacement is
-        ``u = T q``: ``K``, ``M``, ``C`` (and a modal low-rank part) become ``T^T A T`` and the
-        forces already attached ``T^T f``, before the contact mass is redistributed, so the
-        redistribution acts on ``u_n``. ``model.frame`` holds ``T`` (composed over calls) and
-        ``dofmap.frames`` the rotation of each node: ``mesh_map.full_field`` (hence every mesh output)
-        is physical, :meth:`with_forcing` rotates forces given in ``u_x, u_y(, u_z)``, and the
-        rotated DOFs are named ``"u_n"``, ``"u_t"`` (2-D) or ``"u_t1"``, ``"u_t2"`` (3-D)
-        (``at=(point, "u_n")``; ``at=(point, "u_x")`` of a rotated node is an error). A node
-        constrained in some components only, a node that would carry two different normals,
-        and an inclined normal on a reduced model (rotate before ``craig_bampton``) are errors;
-        nodes supported in every component are skipped. Positive-axis directions rotate nothing
-        (``frame`` stays None).
+        contact node are rotated into a nodal frame whose DOF ``u_n = n . u`` the law acts on
+        (``"u_t"`` or ``"u_t1"``, ``"u_t2"`` tangent); ``model.frame`` holds the rotation ``T``
+        (``u = T q``; ``K``, ``M``, ``C`` become ``T^T A T``), mesh outputs stay physical and
+        :meth:`with_forcing` rotates forces given in ``u_x, u_y(, u_z)``. A partly constrained
+        node, two normals on one node, and an inclined normal on a reduced model (rotate before
+        ``craig_bampton``) are errors. Details: :doc:`/guide/solids`.
 
         Parameters
         ----------
@@ -204,12 +195,8 @@ class StructuralModel:
             keeps it. Default: ``RedistributeMass()`` for complementarity contacts of FE models,
             where a massful contact node makes the nonsmooth modes ill-posed under mesh
             refinement (Thorin & Legrand 2018), ``ConsistentMass()`` for penalty contacts and
-            discrete models. For a rotated normal ``n`` the redistribution runs in the frame
-            where ``n`` is a coordinate axis (every node not rotated otherwise is turned by the
-            same ``R``, coordinates by ``R^T``): there it is the computation of a positive-axis
-            normal, so a rotated model is the rotation of the axis-aligned one. Nodes with
-            other nodal frames, partial supports or massless DOFs near the contact keep their
-            own DOFs in that frame (mass conservation along ``n`` is then approximate there).
+            discrete models. For a rotated normal the redistribution runs in the frame where the
+            normal is an axis, so a rotated model is the rotation of the axis-aligned one.
         """
         return add_contacts(self, laws, contact_mass)
 

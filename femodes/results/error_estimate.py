@@ -52,18 +52,12 @@ class ErrorEstimate:
     amplitude : ndarray
         Relative error of the displacement from the harmonic truncation: ``|Q - Q_inf| / |Q|``
         over all Fourier coefficients (the RMS over the period and the DOFs).
-    penetration, tension : ndarray
-        Contact quality of the point as stored: max penetration over the largest contact-DOF
-        displacement, max tension over the largest contact force (0 without contacts).
-    harmonics : ndarray of int
-        Harmonics of the point as stored.
-    rate : ndarray
-        Observed contraction of the error per doubling of H (``inf``: unchanged to round-off).
-    method : ndarray of str
-        One of :data:`ERROR_METHODS` per point (``"none"`` everywhere: the harmonic truncation
-        was not estimated).
-    rtol : float or None
-        The requested tolerance (``None``: estimate only).
+    penetration, tension, harmonics : ndarray
+        Contact quality of the point as stored (max penetration over the largest contact-DOF
+        displacement, max tension over the largest contact force; 0 without contacts); its harmonics.
+    rate, method : ndarray
+        Observed contraction of the error per doubling of H (``inf``: unchanged to round-off); one of
+        :data:`ERROR_METHODS` per point (``"none"``: not estimated). ``rtol``: the tolerance asked.
     omega_limit, omega_limit_error : ndarray or None
         Frequency extrapolated to ``H -> inf`` and the relative half-width of the interval that
         contains the limit, for branches with complementarity contacts (rigid impacts converge to
@@ -72,24 +66,18 @@ class ErrorEstimate:
     finest : ndarray of int or None
         The largest number of harmonics whose solution entered the point's estimate (``2 H``, or
         more where ``rtol`` added levels; 0 where the exact orbit by shooting answered).
-    mesh : ndarray or None
-        Relative frequency error from the spatial discretisation (Richardson extrapolation over
-        meshes, :func:`femodes.estimate_mesh_error`); NaN where the meshes do not give one;
-        ``None``: the mesh was not estimated.
-    mesh_method : str or None
-        How :attr:`mesh` was estimated (meshes, matching, convergence order stated or measured).
+    mesh, mesh_method : ndarray or None, str or None
+        Relative frequency error from the mesh (Richardson over meshes,
+        :func:`femodes.estimate_mesh_error`; NaN where they give none; ``None``: not estimated), and how.
     caveat : str or None
         Why the branch is not the converged answer of the problem whatever its error numbers say
         (e.g. ``"grazing family: ... does not predict the forced resonance"``): with a caveat no
         point is :attr:`met`.
-    amplitude_limit : ndarray or None
-        ``max_t |q_d(t)|`` of the exact orbit of each point per DOF, shape ``(n_points, n_dofs)``
-        (NaN rows: no exact orbit; ``None``: shooting did not answer anywhere). Where it is given,
-        :meth:`femodes.Branch.amplitude` reads it, with the error bar :attr:`amplitude_error`.
-    amplitude_limit_error : ndarray or None
-        Relative error bar of those amplitudes per point: the exact orbit's frequency half-width
-        (its square root at a fold, where the amplitude moves like the square root of the
-        frequency), at least :data:`AMPLITUDE_SAMPLING`; NaN where there are none.
+    amplitude_limit, amplitude_limit_error : ndarray or None
+        ``max_t |q_d(t)|`` per DOF of each point's exact orbit, ``(n_points, n_dofs)`` (NaN rows: none;
+        ``None``: shooting never answered), read by :meth:`femodes.Branch.amplitude`; and its relative
+        error bar per point (the frequency half-width, its square root at a fold; at least
+        :data:`AMPLITUDE_SAMPLING`).
     """
 
     omega: np.ndarray

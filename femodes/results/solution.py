@@ -29,11 +29,8 @@ class PeriodicSolution:
         The frequency of the truncated Fourier series ``Q, P`` (the harmonic balance's solution;
         :attr:`period`, :meth:`displacement` and the other syntheses use it); equal to
         :attr:`omega` without an error estimate.
-    Q : ndarray (n_coef, n_dofs)
-        Displacement coefficients on the model it was solved on.
-    P : ndarray (n_coef, n_complementarity_contacts)
-        Contact force coefficients.
-    harmonics : Harmonics
+    Q, P, harmonics : ndarray (n_coef, n_dofs), ndarray (n_coef, n_contacts), Harmonics
+        Displacement coefficients on the model it was solved on; contact force coefficients.
     energy : float
         Period-averaged mechanical energy.
     xi : float
@@ -49,12 +46,9 @@ class PeriodicSolution:
         Floquet multipliers (largest modulus first) and stability, when the branch has them
         (``stability=True``); ``None`` otherwise.
     error_estimate : float or None
-        Estimated relative error of frequency and amplitude (the larger) with respect to the
-        converged answer of the sources the branch's estimate covers (``H -> inf``; and ``h -> 0``
-        if the mesh was estimated: :attr:`ErrorEstimate.covers`), when the branch has one
-        (``rtol=`` of the analyses, :func:`femodes.estimate_error`,
-        :func:`femodes.estimate_mesh_error`); ``None`` otherwise. ``harmonics`` is the point's own
-        (error control may use more harmonics at some points than at others).
+        Estimated relative error of frequency and amplitude (the larger) against the converged
+        answer of the sources the branch's estimate covers (:attr:`ErrorEstimate.covers`); ``None``
+        without one. ``harmonics`` is the point's own (error control may add harmonics).
     omega_error, amplitude_error : float or None
         The two parts of :attr:`error_estimate`: the relative error of :attr:`omega` (what
         ``rtol`` controls) and of :meth:`amplitude` (the exact orbit's where the estimate found
