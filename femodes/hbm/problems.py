@@ -97,7 +97,7 @@ class ForcedResponseProblem:
 
     def phase_shift(self, x: np.ndarray, tau: float) -> np.ndarray:
         """The unknowns of the response delayed by the phase ``tau`` (radians of ``w t / nu``).
-        With :meth:`phase_generator`, what the continuation's ``predictor="phase"`` uses."""
+        With :meth:`phase_generator`, what the continuation's ``predictors.Phase()`` uses."""
         return self.system.time_shift(np.asarray(x, dtype=float), float(tau))
 
     def phase_generator(self, x: np.ndarray) -> np.ndarray:
