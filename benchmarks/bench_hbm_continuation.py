@@ -1,0 +1,103 @@
+"""Full 3-D HBM on a real continuation: CPU per Newton iteration with the default block solver and
+with ``BlockSolver(reuse=True)``, side by side in one run (issue 38, item 3).
+
+``bench_hbm_iter.py`` times single Newton iterations at frequencies 1 % apart, so every harmonic
+block is factorised again. A continuation's corrector moves the frequency far less between its
+iterations (1e-5 to 1e-3 relative), which is where reused factors pay. Here the box3d model of
+``bench_solids_scale.py`` (P2 tetrahedra, a contact per tip node, H = 5) is continued from
+w = 1.5 for ``--points`` points with the options of ``fm.frequency_response``
+(``fm.ForcedResponseProblem`` + ``fm.continuation``, the same machinery), in alternating child
+processes, one BLAS thread. Recorded: CPU time of the continuation, Newton iterations
+(``n_newton``), their ratio, the solver's counters, peak RSS, and the branch itself (both variants
+must give the same points: the reused path solves to the exact path's backward error).
+
+    python benchmarks/bench_hbm_continuation.py --sizes 4,6 --points 6
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pickle
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results_hbm_continuation.json"
+
+
+def child(size: int, points: int, reuse: bool, cache: Path) -> dict:
+    import numpy as np
+
+    import femodes as fm
+    from femodes.analyses import frequency_response_options
+    from femodes.hbm.linsolve import BlockSolver
+
+    with open(cache / f"box3d_{size}.pkl", "rb") as fh:
+        _, model, built = pickle.load(fh)
+    solver = BlockSolver(reuse=True) if reuse else BlockSolver()
+    c0 = time.process_time()
+    pr = fm.ForcedResponseProblem(model, fm.Harmonics(5), solver=solver)
+    res = fm.continuation(pr, (1.5, 2.5), options=frequency_response_options(max_points=points))
+    cpu = time.process_time() - c0
+    amp = [float(np.max(np.abs(pr.unpack(x, p).Q))) for x, p in zip(res.x, res.p)]
+    return {"size": size, "N": built["N"], "n_contacts": built["n_contacts"], "unknowns": int(pr.size),
+            "reuse": reuse, "cpu_s": cpu, "n_newton": int(res.n_newton), "points": len(res.p),
+            "cpu_per_iteration_s": cpu / max(int(res.n_newton), 1), "status": int(res.status),
+            "omega": [float(p) for p in res.p], "max_abs_Q": amp, "stats": dict(solver.stats),
+            "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+            "backend": fm.sparse_backend_info().indefinite}
+
+
+def build_cache(size: int, cache: Path) -> None:
+    path = cache / f"box3d_{size}.pkl"
+    if path.is_file():
+        return
+    sys.path.insert(0, str(HERE))
+    import bench_solids_scale as b
+
+    built: dict = {}
+    plain, model = b._models("box3d", size, built)
+    cache.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as fh:
+        pickle.dump((plain, model, built), fh, protocol=5)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", default="4")
+    ap.add_argument("--points", type=int, default=6)
+    ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "femodes_hbm_iter_cache")
+    ap.add_argument("--json", type=Path, default=RESULTS)
+    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child:
+        size, points, reuse = int(args.child[0]), int(args.child[1]), args.child[2] == "1"
+        print(json.dumps(child(size, points, reuse, args.cache)))
+        return
+    recs = json.loads(args.json.read_text()) if args.json.is_file() else []
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    for size in [int(s) for s in args.sizes.split(",")]:
+        build_cache(size, args.cache)
+        for reuse in (False, True):
+            load0 = os.getloadavg()
+            p = subprocess.run([sys.executable, __file__, "--cache", str(args.cache), "--child", str(size),
+                                str(args.points), "1" if reuse else "0"], env=env, capture_output=True, text=True)
+            try:
+                rec = json.loads(p.stdout.strip().splitlines()[-1])
+            except (IndexError, json.JSONDecodeError):
+                rec = {"size": size, "reuse": reuse, "error": p.stderr[-3000:]}
+            rec.update(load_before=list(load0), load_after=list(os.getloadavg()))
+            recs.append(rec)
+            print({k: rec.get(k) for k in ("N", "reuse", "cpu_s", "n_newton", "cpu_per_iteration_s", "points",
+                                           "stats", "peak_mib", "error")}, flush=True)
+            args.json.write_text(json.dumps(recs, indent=1))
+
+
+if __name__ == "__main__":
+    main()
