@@ -180,6 +180,7 @@ class MeshFields:
         out = np.zeros((self.t.size, self.n_nodes, 3))
         for j, node in enumerate(self.contact_nodes):
             if node >= 0:
+                assert self.contact_direction is not None  # __post_init__ fills it
                 out[:, node, :] -= self.contact_force[:, j, None] * self.contact_direction[j][None, :]
         return out
 
@@ -228,6 +229,7 @@ class MeshFields:
         magnified, the obstacle drawn at ``scale * gap`` is touched exactly when the contact closes."""
         out = np.full((self.contact_nodes.size, 3), np.nan)
         ok = self.contact_nodes >= 0
+        assert self.coordinates is not None and self.contact_direction is not None  # __post_init__ fills them
         out[ok] = self.coordinates[self.contact_nodes[ok]] + scale * (self.contact_gaps[ok, None]
                                                                        * self.contact_direction[ok])
         return out
@@ -250,6 +252,7 @@ class MeshFields:
             known = ", ".join(repr(k) for k in sorted(self.boundaries)) or "none"
             raise ValueError(f"MeshFields.boundary_coordinate: unknown boundary {name!r}; the mesh has {known}")
         nodes = np.asarray(self.boundaries[name], dtype=np.int64)
+        assert self.coordinates is not None  # __post_init__ fills it
         X = self.coordinates[nodes]
         if self.dim == 2:
             chains = polyline_order(self.boundary_facets[name][:, :2])
@@ -378,13 +381,14 @@ def sample_fields(source: Any, model: Any, t: Any = None, *, n_frames: int = 36,
         force = np.zeros((t.size, len(dofs)))
     uq, uv = model.mesh_map.full_field(q), model.mesh_map.full_field(v)
     nodal = np.asarray(fe.nodal)
-    nodes, comps = [], []
+    node_list: list[int] = []
+    comps: list[int] = []
     for d in dofs:
         full = model.mesh_map.fe_dof(int(d))
         hit = np.argwhere(nodal == full) if full is not None else np.zeros((0, 2))
-        nodes.append(int(hit[0, 1]) if hit.size else -1)
+        node_list.append(int(hit[0, 1]) if hit.size else -1)
         comps.append(int(hit[0, 0]) if hit.size else 0)
-    nodes = np.asarray(nodes, dtype=int)
+    nodes = np.asarray(node_list, dtype=int)
     force = np.asarray(force, dtype=float).reshape(t.size, len(dofs))
     common = dict(t=t, period=period, omega=omega, contact_nodes=nodes, contact_gaps=np.asarray(gaps, dtype=float),
                   contact_force=force)

@@ -106,6 +106,7 @@ def estimate_mesh_error(fine: Branch, coarse: Branch, *, coarser: Branch | None 
     d1 = w - wc
     r1 = h[1] / h[0]
     if coarser is None:
+        assert order is not None  # required without coarser (checked above)
         err = np.abs(d1) / (r1 ** order - 1.0)
         p_used, measured, n_ok = order, False, int(np.sum(np.isfinite(err)))
         how = f"Richardson from {_names(branches, h)}, order {order:g} stated"

@@ -191,8 +191,10 @@ def kept_dofs(model: StructuralModel, keep: Sequence | None = None) -> np.ndarra
                 "craig_bampton: keep must be a location or a list of locations (names, (name, component) pairs "
                 f"or DOF indices), got {keep!r}"
             )
+        dm = model.dofmap
+        assert dm is not None  # check_fields fills it on construction
         with named_by("craig_bampton: keep"):
-            extra = [d for k in keep for d in node_dof_list(model.dofmap, k)]
+            extra = [d for k in keep for d in node_dof_list(dm, k)]
     kept = np.array(sorted(set(declared) | set(extra)), dtype=int)
     if kept.size == 0:
         raise ValueError(
@@ -407,6 +409,7 @@ def _reduced_model(model: StructuralModel, kept: np.ndarray, T: np.ndarray, omeg
     def reindex(items):
         return tuple(Attached(a.item, pos[a.dof]) for a in items)
 
+    assert model.dofmap is not None  # check_fields fills it on construction
     dofmap = model.dofmap.restrict(kept).extended([f"cb mode {j + 1}" for j in range(n_modes)])
     return ReducedModel(
         M=_project(model.M.tocsr(), T, kept.size),

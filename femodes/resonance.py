@@ -98,7 +98,8 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch]) -> tu
         inside = logE[0] <= np.log(e) <= logE[-1]
         w_bb = float(np.interp(np.log(e), logE, wb)) if inside else float("nan")
         w = float(b.omega[i])
-        tongue, modes = None, ()
+        tongue: int | None = None
+        modes: tuple[int, ...] = ()
         for k, t in enumerate(backbone.internal_resonances):
             ws = np.asarray(t.get("omega", ()), dtype=float)
             ws = ws[np.isfinite(ws)]

@@ -307,7 +307,7 @@ def _mumps(A, symmetric: bool) -> Factor:
     if symmetric:
         solve, solve_sparse = _mumps_solvers(ctx, A.dtype)
         return Factor("mumps", A.shape[0], A.dtype, solve, solve, solve_sparse=solve_sparse)
-    transposed = []
+    transposed: list = []
 
     def solve_t(b):  # A^T factorised on first use (unsymmetric matrices are rare here)
         if not transposed:

@@ -57,7 +57,7 @@ def _file_mode() -> int:
     return 0o666 & ~mask
 
 
-def atomic_write(target, write: Callable[[str], None], *, durable: bool = False) -> Path:
+def atomic_write(target, write: Callable[[str], object], *, durable: bool = False) -> Path:
     """Write ``target`` through ``write(tmp_name)`` and rename the result over ``target``.
 
     ``write`` receives the name of a new empty file in ``target``'s folder (libraries such as

@@ -32,6 +32,7 @@ from .floquet import (StabilityOptions, root_on_secant)
 from .solvers import (ContinuationOptions, NewtonOptions, semismooth_newton)
 from .solvers.checks import entry_point
 from .solvers.threads import limit_blas_threads
+from .stability_methods import StabilityMethod
 from .branch_points import DENSE_LIMIT, switch_at_branch_point
 
 __all__ = ["switch_branch", "DENSE_LIMIT"]
@@ -119,7 +120,7 @@ def _same_bifurcation(a: Bifurcation, b: Bifurcation) -> bool:
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
 def switch_branch(branch: Branch, bifurcation: Bifurcation, omega: tuple[float, float], *,
                   amplitude: float | None = None, options: ContinuationOptions | None = None,
-                  stability: bool | str | StabilityOptions = False, window: int = 10) -> Branch:
+                  stability: bool | StabilityMethod | StabilityOptions = False, window: int = 10) -> Branch:
     """Continue the branch born at ``bifurcation`` of ``branch`` (module docstring).
 
     Parameters
@@ -140,7 +141,7 @@ def switch_branch(branch: Branch, bifurcation: Bifurcation, omega: tuple[float, 
     options : ContinuationOptions, optional
         Continuation of the new branch (default :func:`~femodes.frequency_response_options`, resp.
         :func:`~femodes.analyses.nonlinear_mode_options`); ``options.newton`` also corrects located points.
-    stability : bool, str or StabilityOptions
+    stability : bool, StabilityMethod or StabilityOptions
         Stability of the new branch, as in :func:`~femodes.frequency_response` (needed to switch again).
     window : int
         Points of ``branch`` on each side of the bifurcation searched for the HBM's own bifurcation.

@@ -19,6 +19,7 @@ from typing import Any
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 import scipy.sparse as sp
 import skfem
 
@@ -324,7 +325,7 @@ def element_property(mesh: Any, value: Any, cls: type, arg: str) -> np.ndarray:
     raise InputTypeError(f"{arg} must be a {cls.__name__} or a mapping {{subdomain: {cls.__name__}}}, got {type(value).__name__}")
 
 
-def quad_field(basis: Any, per_element: np.ndarray) -> np.ndarray:
+def quad_field(basis: Any, per_element: ArrayLike) -> np.ndarray:
     """Element-wise constant coefficient as a (n_elements, n_quadrature_points) array."""
     return np.repeat(np.asarray(per_element, dtype=float)[:, None], basis.X.shape[1], axis=1)
 
@@ -360,7 +361,7 @@ def build_fe_model(
     K: sp.spmatrix,
     components: tuple,
     aliases: Mapping[str, str],
-    constraints: Sequence[tuple[str, Sequence[str], str]],
+    constraints: Sequence[tuple[str, Sequence[str], Sequence[str]]],
     point_masses: Mapping | None,
     springs: Mapping | None,
     nodal: np.ndarray | None = None,
@@ -463,7 +464,7 @@ class _NodalDofs:
         return self.node(loc, arg), c
 
 
-def _constrained_dofs(dofs: _NodalDofs, constraints: Sequence[tuple[str, Sequence[str], str]]) -> dict:
+def _constrained_dofs(dofs: _NodalDofs, constraints: Sequence[tuple[str, Sequence[str], Sequence[str]]]) -> dict:
     """``{(node, component index): "arg='name'"}`` of every support."""
     constrained: dict = {}
     for arg, names, comps in constraints:
@@ -520,7 +521,8 @@ def _on_free_dofs(A: sp.spmatrix, free: np.ndarray) -> sp.csr_matrix:
     return S
 
 
-def _dof_labels(coords: np.ndarray, components: tuple, free: np.ndarray, node_dof: np.ndarray, locations: dict) -> list:
+def _dof_labels(coords: np.ndarray, components: tuple, free: np.ndarray, node_dof: np.ndarray,
+                locations: Mapping[str, int]) -> list:
     """``"name.comp"`` at named points, ``"comp@x=..."`` (``"comp@(x, y)"`` in 2-D/3-D) at other nodes,
     ``"interior dof i"`` elsewhere."""
     labels = [""] * free.size

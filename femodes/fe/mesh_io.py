@@ -466,7 +466,8 @@ def _from_meshio_solid(raw: meshio.Mesh, fname: str):
     point_groups: dict[str, list] = {}
     names = _field_names(raw.field_data or {})
     key = _tag_key(raw.cell_data)
-    blocks, data = [], {}
+    blocks: list = []
+    data: dict = {}
     for ib, (ctype, conn) in enumerate(linear):
         if ctype == "vertex":
             if key is not None:

@@ -9,6 +9,7 @@ mass of all the contact DOFs of a boundary at once (:func:`redistribute_surface_
 from __future__ import annotations
 
 import logging
+from typing import Any
 
 import numpy as np
 import scipy.linalg as sla
@@ -58,7 +59,7 @@ def redistribute_contact_mass(fe, M: sp.spmatrix, dof: int) -> tuple[sp.csr_matr
     cand = np.flatnonzero(trans)
     cand = cand[cand != dof]
     order = cand[np.argsort(np.abs(pos[cand] - pos[dof]), kind="stable")]
-    report = {"mass_moved": float(dm), "total_mass": float(m_tot)}
+    report: dict[str, Any] = {"mass_moved": float(dm), "total_mass": float(m_tot)}
     if order.size == 0 or dm <= 0:
         report.update(com_shift=0.0, targets=[])
         return M2.tocsr(), report
@@ -266,13 +267,13 @@ def _lumps(MSS: sp.csr_matrix, dm: np.ndarray, ds: np.ndarray, rtol: float = 1e-
             touched |= t_set
         bad |= {t for t in touched if alive[t] and mass[t] <= tiny}
     out = []
-    for i in np.flatnonzero(alive):
-        if mass[i] <= tiny:
+    for lump in np.flatnonzero(alive):
+        if mass[lump] <= tiny:
             raise ValueError(
                 "with_contact: the consistent mass of a contact patch is not positive (an isolated P2 vertex?); "
                 "use contact_mass=fm.ConsistentMass() or order=1"
             )
-        out.append((np.array(sorted(members[i]), dtype=int), float(mass[i]), mom[:, i]))
+        out.append((np.array(sorted(members[lump]), dtype=int), float(mass[lump]), mom[:, lump]))
     return out
 
 

@@ -498,6 +498,7 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
             err = last[1]
             red.last_estimate = (m, err, last[2], last[3] + 1)
             break
+        assert m_coarse is not None  # m_next is None otherwise
         err = 0.0 if m_coarse == m else _error_near(red, m_coarse, fine, x, omega, xi, ratio)
         red.last_estimate = (m, err, omega, 0)
         if err <= REDUCTION_TOL:
@@ -509,6 +510,7 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
     if err > REDUCTION_TOL:
         log.info("hill_exponents: reduction error estimate %.1e above %.0e with %d modes", err, REDUCTION_TOL, m)
     red.alpha = used / top
+    assert fine is not None  # the first pass solved (or returned None)
     return dataclasses.replace(fine, vectors=red.expand(fine.vectors, m), reduction_error=err, complete=False)
 
 
@@ -550,6 +552,7 @@ def _error_near(red: FreeInterfaceReduction, m_coarse: int, fine: HillResult, x,
             return si.near(complex(s) + 1e-9j * omega, 2)[0]
     err = 0.0
     done: list[complex] = []
+    assert fine.central is not None  # _hill sets it
     for s in fine.central[:4]:
         if any(abs(s - d) <= 1e-9 * omega or abs(s - np.conj(d)) <= 1e-9 * omega for d in done):
             continue  # a conjugate partner changes by the same amount

@@ -90,7 +90,7 @@ class _Basis:
         self.model, self.kept = model, kept
         self.omega = np.zeros(0)
         self.Phi = np.zeros((model.n_dofs, 0))
-        self.F = None       # K^-1 E_k (n x n_kept)
+        self.F: np.ndarray | None = None       # K^-1 E_k (n x n_kept)
         self.failed = False
 
     def static(self) -> np.ndarray | None:

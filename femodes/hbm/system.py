@@ -25,6 +25,7 @@ stalls near its resonance, where the exact one runs through both folds). Cubic s
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -270,6 +271,7 @@ class HBMSystem:
         ``w`` and ``xi`` (zero on the contact-force rows); small systems from the cached dense
         operators (four small dense products instead of a dozen sparse ones)."""
         nq = self.nq
+        terms: Sequence[np.ndarray]  # (r, dr/dw, dr/dxi)
         if nq <= DENSE_MAX_SIZE and self.C_lr is None:
             terms = self.stiffness.dense_residual(Q.reshape(-1), omega, xi)
         else:

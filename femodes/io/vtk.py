@@ -90,7 +90,7 @@ def _add_field_data(path: Path, field_data: dict) -> None:
 
 def _frame_data(fields: MeshFields, scale: float | None) -> tuple[list, dict, list]:
     """Cells, field data common to every frame, and the point data of each frame."""
-    field_base = {"period": np.array([fields.period]), "omega": np.array([fields.omega])}
+    field_base: dict[str, np.ndarray | None] = {"period": np.array([fields.period]), "omega": np.array([fields.omega])}
     if fields.contact_nodes.size:
         field_base["contact_node"] = fields.contact_nodes.astype(np.int64)
         field_base["contact_gap"] = fields.contact_gaps

@@ -59,11 +59,12 @@ def bind_contacts(model, laws, node_of: np.ndarray, comp_of: np.ndarray) -> tupl
     used = {a.dof for a in model.contacts}
     frames = dict(dm.frames)
     pending: dict = {}  # nodes rotated by this call
-    normals = {}  # node -> normal of its first contact
+    normals: dict[int, np.ndarray] = {}  # node -> normal of its first contact
     for a in model.contacts:
         k = int(node_of[a.dof])
         if k >= 0:
             normals.setdefault(k, dm.axis(k, int(comp_of[a.dof])))
+    rot: dict  # node -> NodalFrame of each law
     for law in laws:
         if not isinstance(law, CONTACT_LAWS):
             raise TypeError(

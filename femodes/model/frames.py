@@ -14,6 +14,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 import scipy.sparse as sp
 
 from .damping import LowRankDamping, damping_spec_fresh, fingerprinted
@@ -90,19 +91,19 @@ def same_normal(a: NodalFrame, b: NodalFrame) -> bool:
     return a.slot == b.slot and bool(np.allclose(a.normal, b.normal, rtol=0.0, atol=1e-12))
 
 
-def block_rotation(node_dof: np.ndarray, n: int, nodes: Sequence[int], rotations: np.ndarray) -> sp.csr_matrix:
+def block_rotation(node_dof: np.ndarray, n: int, nodes: ArrayLike, rotations: ArrayLike) -> sp.csr_matrix:
     """Sparse orthogonal ``n x n`` matrix: ``rotations[k]`` on the DOFs ``node_dof[nodes[k]]`` (all
     free), the identity on every other DOF."""
-    nodes = np.asarray(nodes, dtype=int)
-    rotations = np.asarray(rotations, dtype=float).reshape(nodes.size, node_dof.shape[1], node_dof.shape[1])
-    dofs = node_dof[nodes]  # (k, dim)
+    node_idx = np.asarray(nodes, dtype=int)
+    rotation = np.asarray(rotations, dtype=float).reshape(node_idx.size, node_dof.shape[1], node_dof.shape[1])
+    dofs = node_dof[node_idx]  # (k, dim)
     other = np.ones(n, dtype=bool)
     other[dofs.ravel()] = False
     eye = np.flatnonzero(other)
     dim = dofs.shape[1]
     rows = np.concatenate([eye, np.repeat(dofs, dim, axis=1).ravel()])
     cols = np.concatenate([eye, np.tile(dofs, (1, dim)).ravel()])
-    vals = np.concatenate([np.ones(eye.size), rotations.ravel()])
+    vals = np.concatenate([np.ones(eye.size), rotation.ravel()])
     return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
 
 

@@ -113,6 +113,7 @@ class StructuralModel:
         """Model DOF index of a location (see :class:`DofMap`); ``owner`` is deprecated (it named
         the errors, which start with ``"dof: "``)."""
         with named_by(deprecated_owner(owner, "StructuralModel.dof")):
+            assert self.dofmap is not None  # check_fields fills it on construction
             return self.dofmap.find(at)
 
     def force_vectors(self) -> dict:

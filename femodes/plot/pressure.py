@@ -111,11 +111,13 @@ def contact_pressure(solution: PeriodicSolution, model: Any = None, *, boundary:
     mine = np.array([c for c, b in enumerate(f.contact_boundary) if b == boundary])
     pressure = np.zeros((f.t.size, f.n_nodes))
     for c in mine:
+        assert f.contact_measure is not None  # a solid's fields (dim > 1 checked above) have it
         pressure[:, f.contact_nodes[c]] += f.contact_force[:, c] / f.contact_measure[c]
     total = f.contact_force[:, mine].sum(axis=1)
     nodes, s = f.boundary_coordinate(boundary)
     values = pressure[:, nodes]
     if f.dim == 3:
+        assert f.coordinates is not None  # MeshFields.__post_init__ fills it
         s, values = _columns(s, values, float(np.ptp(f.coordinates, axis=0).max()))
     # close the period: the row t/T = 1 is the row t = 0
     tau = np.append(np.arange(n_frames) / n_frames, 1.0)

@@ -123,6 +123,7 @@ def _local_report(n_failed: int, first: tuple[float, str] | None, n_steps: int, 
     """Words for the steps whose local problem was not solved (``""`` if none)."""
     if not n_failed:
         return ""
+    assert first is not None  # the recorder keeps the first failure of n_failed > 0
     t, why = first
     return (f"the local problem (contact impulses + nonlinear forces) was not solved to tolerance at {n_failed} of "
             f"{n_steps} steps, first at t = {t:.6g}{where}: {why}")
@@ -387,7 +388,8 @@ class _PeriodMap:
         self.history: list[Segment] = []  # the last 4 periods
         self.n_periods = 0
         self.change = math.inf
-        self.n_failed, self.first_failure, self.failed_period = 0, None, 0
+        self.n_failed, self.failed_period = 0, 0
+        self.first_failure: tuple[float, str] | None = None
 
     def advance(self) -> None:
         """Integrate one period (time restarts at 0 each period: the forcing is T-periodic)."""
@@ -395,6 +397,7 @@ class _PeriodMap:
         self.n_periods += 1
         if out.n_failed:
             if self.first_failure is None:
+                assert out.first_failure is not None  # the recorder keeps the first failure of n_failed > 0
                 t, why = out.first_failure
                 self.first_failure = ((self.n_periods - 1) * self.T + t, why)
                 self.failed_period = self.n_periods

@@ -107,6 +107,7 @@ def unsupported(model: StructuralModel, massless_contacts: bool = False) -> str:
         return (f"model has {n} DOFs; the dense variational equations ((2n)^2 = {4 * n * n} unknowns) are "
                 f"limited to {MAX_DOFS} DOFs: reduce the model first (fm.craig_bampton) or {_HILL}")
     Md = model.M.diagonal()
+    assert model.dofmap is not None  # check_fields fills it on construction
     for j, a in enumerate(model.contacts):
         if not massless_contacts and isinstance(a.item, UnilateralContact) and not Md[a.dof] > 0.0:
             return (f"model: UnilateralContact {j} (at={a.item.at!r}) acts on DOF {model.dofmap.label(a.dof)!r}, "
@@ -174,7 +175,7 @@ class Flow:
     def _smooth_laws(self, model) -> None:
         """Smooth laws (cubic springs, penalty contacts), stacked per class: their force() gives
         value and derivative at once."""
-        groups: dict[type, list] = {}
+        groups: dict[Any, list] = {}  # law class (with its stack()) -> attachments
         for a in list(model.nonlinearities) + [model.contacts[j] for j, _, _ in self.penalty]:
             if not callable(getattr(a.item, "force", None)) or not hasattr(type(a.item), "stack"):
                 raise InputTypeError(
@@ -333,7 +334,7 @@ class Run:
         the sign of the gap for ``t > t_s`` and tends to the gap rate at ``t_s``.
         """
         n = self.flow.n
-        events = []
+        events: list[tuple] = []
         for j, law, c in self.flow.unilateral:
             touching = self._gap(x, law, c) <= self._touch_tol(x, law)
             if touching and x[v_index(n, c)] > 0.0:
@@ -341,17 +342,17 @@ class Run:
             # gap rate dg_N/dt = -v_c (g_N = gap - q_c, laws.py)
             events.append(("impact", j, law, c, self._event(law, c, t, -x[v_index(n, c)], touching, sign=1.0)))
             events[-1][-1].direction = -1  # the gap closes
-        for j, law, c in self.flow.penalty:
-            pen = -self._gap(x, law, c)  # penetration q_c - gap: > 0 where the spring acts
-            touching = abs(pen) <= self._touch_tol(x, law)
+        for j, spring, c in self.flow.penalty:
+            pen = -self._gap(x, spring, c)  # penetration q_c - gap: > 0 where the spring acts
+            touching = abs(pen) <= self._touch_tol(x, spring)
             vc = x[v_index(n, c)]
             if not touching:
                 self.active[j] = pen > 0
             elif vc != 0.0:
                 self.active[j] = vc > 0
-            kink = self._event(law, c, t, vc, touching, sign=-1.0)
+            kink = self._event(spring, c, t, vc, touching, sign=-1.0)
             kink.direction = -1 if self.active[j] else 1  # leaving the current side
-            events.append(("kink", j, law, c, kink))
+            events.append(("kink", j, spring, c, kink))
         return x, events
 
     @staticmethod
@@ -363,7 +364,7 @@ class Run:
         else:
             def event(t, y):
                 return sign * float(law.gap_function(y[c]))
-        event.terminal = True
+        event.terminal = True  # type: ignore[attr-defined]  # solve_ivp reads a terminal attribute set on the function
         return event
 
     def run(self) -> tuple[np.ndarray, list]:

@@ -93,6 +93,7 @@ def exact_flow_unsupported(model: StructuralModel) -> str:
                 hint = (" (stiffness-proportional damping beta K, or a damping matrix given directly, has a row "
                         "there: use mass-proportional (alpha) or modal damping, or keep the node's mass with "
                         "with_contact(..., contact_mass=fm.ConsistentMass()))" if which == "damping" else "")
+                assert model.dofmap is not None  # check_fields fills it on construction
                 return (f"DOF {model.dofmap.label(int(d))!r} has no mass on the diagonal but {which} coupling it to other "
                         f"DOFs: a massless DOF must have zero rows of M and C (mass-proportional damping){hint}")
         n_massless = sum(1 for a in model.contacts if not Md[a.dof] > 0.0)
@@ -143,7 +144,7 @@ class _Mode:
         self.Le = Le.reshape(len(flow.dofs), 2 * nI)
         self.Re = self.Le @ V
         self.fastest = float(np.max(np.abs(lam)))
-        self._loads = None
+        self._loads: tuple | None = None
 
     def loads(self, flow: LinearImpactFlow):
         """The frequency-independent parts of the particular solutions (cached): harmonics ``ks``
@@ -193,7 +194,7 @@ class _ModeAt:
         X = (W / den) @ m.V.T  # (n_k, 2nI)
         self.ks, self.X, self.iw, self.G = ks, X, iw, G
         self._W, self._den, self._V = W, den, m.V
-        self._dX = None  # dX, when first asked for
+        self._dX: np.ndarray | None = None  # dX, when first asked for
         self.Yq = X @ m.Lq.T + G
         self.Yv = X @ m.Lv.T + iw[:, None] * G
         self.Ye = X @ m.Le.T + Ye0
@@ -210,9 +211,10 @@ class _ModeAt:
     @property
     def dX(self) -> np.ndarray:
         """``X_k' = d X_k / d w = V (-i k W_k / (i k w - lambda)^2)`` per harmonic (computed once)."""
-        if self._dX is None:
-            self._dX = (self._W * (-1j * self.ks[:, None]) / self._den ** 2) @ self._V.T
-        return self._dX
+        dX = self._dX
+        if dX is None:
+            dX = self._dX = (self._W * (-1j * self.ks[:, None]) / self._den ** 2) @ self._V.T
+        return dX
 
     def particular_omega(self, t: float) -> np.ndarray:
         """``d x_p(t) / d w`` at a fixed time ``t``: ``Re sum_k (X_k' + i k t X_k) e^{i k w t}``."""
@@ -320,7 +322,7 @@ class LinearImpactFlow:
         T = 2.0 * math.pi / self.omega if period is None else float(period)
         return FlowRun(self, np.asarray(x0, dtype=float), float(t0), float(t0) + T, variational)
 
-    def start_mode(self, x: np.ndarray, t: float) -> frozenset:
+    def start_mode(self, x: np.ndarray, t: float) -> frozenset | None:
         """The massless contacts closed at the start: the set whose condensed displacements keep
         to the gaps and whose forces are compressive (unique: the condensed stiffness is
         positive definite), by enumeration."""
@@ -354,6 +356,7 @@ def periodicity_residual(flow: LinearImpactFlow, x: np.ndarray, omega: float, t0
     r = run.x_end - x
     if not variational:
         return r, None, None, run
+    assert run.Phi is not None  # a variational run has it
     return r, run.Phi - np.eye(x.size), run.x_end_omega, run
 
 

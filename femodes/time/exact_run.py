@@ -68,7 +68,7 @@ class FlowRun:
         self._sigma = None  # d x(t) / d w at a fixed time t, the start time's move included
         self.sensitivities: list = []
         self.sigmas: list = []
-        self._series = None  # the Fourier coefficients (RunSeries), when first asked for
+        self._series: RunSeries | None = None  # the Fourier coefficients (RunSeries), when first asked for
         closed = flow.start_mode(x, t0)
         t = t0
         while True:
@@ -170,9 +170,10 @@ class FlowRun:
 
     # -- Fourier coefficients in closed form (RunSeries) ----------------------------------------
     def _fourier(self) -> RunSeries:
-        if self._series is None:
-            self._series = RunSeries(self)
-        return self._series
+        series = self._series
+        if series is None:
+            series = self._series = RunSeries(self)
+        return series
 
     def coefficients(self, H: int) -> tuple[np.ndarray, np.ndarray]:
         """Real Fourier coefficients ``[c0, c1, s1, ..., cH, sH]`` of the displacements (shape

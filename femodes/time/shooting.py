@@ -496,10 +496,9 @@ def shoot(
         3: f"iteration {nit + 1}: Phi - I is singular (a multiplier at +1: fold) and no least-squares step reduced "
            f"max|x(T) - x0| = {norm:.3g}",
     }[status]
-    res = norm
     (log.info if status == 0 else log.debug)("shoot: %s", message)  # reported in the result
     return ShootingResult(
-        x=x, success=status == 0, status=status, message=message, nit=nit, residual_norm=res,
+        x=x, success=status == 0, status=status, message=message, nit=nit, residual_norm=norm,
         multipliers=mono.multipliers, monodromy=mono.matrix, impacts=mono.impacts, period=T,
         omega=2.0 * math.pi / T if autonomous else flow.omega,
     )

@@ -8,6 +8,8 @@ Newton iteration of :class:`~femodes.time.moreau_step.Stepper`).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..laws import CubicSpring, PenaltyContact
@@ -22,13 +24,15 @@ class SmoothLaws:
     def __init__(self, smooth: list, pos: dict, n_local: int):
         cubic = sorted(((law, pos[d]) for law, d in smooth if isinstance(law, CubicSpring)), key=lambda ld: ld[1])
         penalty = [(law, pos[d]) for law, d in smooth if isinstance(law, PenaltyContact)]
-        self.laws = []
+        # (stacked law, local positions: a slice when contiguous else an index array, whether one repeats)
+        self.laws: list[tuple[Any, Any, bool]] = []
         for kind, group in ((CubicSpring, cubic), (PenaltyContact, penalty)):
             if group:
-                loc = np.asarray([i for _, i in group], dtype=int)
-                if np.array_equal(loc, np.arange(loc[0], loc[0] + loc.size)):
-                    loc = slice(int(loc[0]), int(loc[0]) + loc.size)
-                repeats = not isinstance(loc, slice) and np.unique(loc).size < loc.size
+                idx = np.asarray([i for _, i in group], dtype=int)
+                loc: Any = idx
+                if np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+                    loc = slice(int(idx[0]), int(idx[0]) + idx.size)
+                repeats = not isinstance(loc, slice) and np.unique(idx).size < idx.size
                 self.laws.append((kind.stack(law for law, _ in group), loc, repeats))
         #: one kind of law, one law on every local DOF
         self.everywhere = (len(self.laws) == 1 and isinstance(self.laws[0][1], slice)

@@ -51,7 +51,7 @@ class _Recorder:
         self.U[0], self.V[0] = q, v
         self.k = 1
         self.n_failed = 0
-        self.first_failure = None
+        self.first_failure: tuple[float, str] | None = None
 
     def failed(self, t: float, message: str) -> None:
         self.n_failed += 1
@@ -82,6 +82,7 @@ def integrate(st: Stepper, t0: float, n_steps: int, q, v, store_every: int = 1) 
 def _forcing_samples(st: Stepper, tk: np.ndarray, n_steps: int) -> np.ndarray:
     """Forces on the forced DOFs at the step times ``tk`` (rows)."""
     if st.fk.size:
+        assert st.omega is not None  # harmonic forcing requires omega (drivers._check_omega)
         return np.real(np.exp(1j * st.omega * np.outer(tk, st.fk)) @ st.Fk) + st.f0
     return np.tile(st.f0, (n_steps + 1, 1))
 
@@ -181,12 +182,11 @@ class _DenseRun:
 def _run_sparse(st: Stepper, rec: _Recorder, tk: np.ndarray, fall: np.ndarray | None, q, v, n_steps: int):
     """The loop of large models (:meth:`Stepper.step`, sparse LU); the final ``(q, v)``."""
     nc, store = st.n_contacts, rec.store
-    forced = fall is not None
     acc = np.zeros(nc)
     Kq = st.K @ q
     f0 = f1 = None
     for k in range(n_steps):
-        if forced:
+        if fall is not None:
             f0, f1 = fall[k], fall[k + 1]
         q, v, Kq, imp, failure = st.step(q, v, Kq, f0, f1)
         if failure is not None:

@@ -43,13 +43,13 @@ class DenseFactorization:
         self.A = A
         self.schur = (ForceSchur.build(J, A, max_growth=options.schur_max_growth)
                       if A.shape[0] >= options.schur_min_size else None)
-        self.lu = None
+        self.lu: tuple | None = None
         if self.schur is None:
             self._factor()
 
     def _factor(self) -> None:
-        self.lu = sla.lu_factor(self.A, check_finite=False)
-        if np.any(np.diagonal(self.lu[0]) == 0.0):
+        self.lu = lu = sla.lu_factor(self.A, check_finite=False)
+        if np.any(np.diagonal(lu[0]) == 0.0):
             raise RuntimeError("Factor is exactly singular")
 
     def solve(self, b):

@@ -57,9 +57,13 @@ class BlockElimination:
             def forward(i: int):
                 blk = blocks[i]
                 rho = bq[blk.k][I] if blk.s is None else bq[blk.k][I] - 1j * bq[blk.s][I]
+                assert blk.lu is not None  # nI > 0: each harmonic has its interior LU
                 z = blk.lu.solve(rho * inv_sc)
                 w = (blk.Zbi @ z[R]) * sc if nb else None
-                v = (vc[i] @ z).real if m else None
+                v = None
+                if m:
+                    assert vc is not None  # the lean Schur complement keeps its border rows
+                    v = (vc[i] @ z).real
                 ym = real_times_complex(lr.UI.T, np.ascontiguousarray(z, dtype=complex)) * sc if mr else None
                 return z, w, v, ym
 
@@ -94,10 +98,13 @@ class BlockElimination:
                     else:
                         full = np.zeros((nI, k), dtype=complex)
                         full[R] = blk.Zib @ zc
+                        assert blk.lu is not None  # nI > 0: each harmonic has its interior LU
                         z = z - blk.lu.solve(full)
                 if m:
+                    assert Zu is not None  # the lean Schur complement keeps the border columns' solutions
                     z = z - Zu[i] @ xm
                 if mr and blk.s is not None and blk.f != 0.0:
+                    assert xy is not None  # set when mr
                     # Z_II^-1 (U_I diag(g) y) with y = y_c - i y_s, by products (LowRankSplit.apply_x)
                     yc = xy[blk.k] - 1j * xy[blk.s]
                     z = z - lr.apply_x(blk, lr.Z.lowrank_gain(blk.f)[:, None] * yc)
@@ -120,6 +127,7 @@ class BlockElimination:
 
         def one(blk: HarmonicFactors):
             rho = X[blk.k] - (1j * X[blk.s] if blk.s is not None else 0.0)
+            assert blk.lu is not None  # called with interior DOFs only: each harmonic has its LU
             z = blk.lu.solve(rho)
             return blk, z
 

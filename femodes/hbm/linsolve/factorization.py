@@ -55,7 +55,8 @@ class StructuredFactorization:
         self.threads = threads
         self.F = F = J.system.linear.factors(J.omega, J.xi, threads) if F is None else F
         self.exact = F.omega == J.omega and F.xi == J.xi
-        self.refactored = None  # the exact factorisation, once a reused solve's safeguard built it
+        # the exact factorisation, once a reused solve's safeguard built it
+        self.refactored: StructuredFactorization | None = None
         self.layout = layout = SchurLayout.of(J, F)
         # the leaner solve path (the interior solutions of the border columns kept, W = Z_II^-1
         # Z_Ib used where kept): without modal damping, and with it when every harmonic kept W and

@@ -75,7 +75,7 @@ class LinearFactors:
         self.lowrank = lr = pat.lowrank
         self.rank = 0 if lr is None else lr.rank
         self.modes = None if lr is None else lr.modes
-        jobs = [(0, None, 0.0)]
+        jobs: list[tuple[int, int | None, float]] = [(0, None, 0.0)]
         for k in range(1, h.n_harmonics + 1):
             f = k * self.omega / h.subharmonic
             jobs.append((int(h.layout.cos_index(k)), int(h.layout.sin_index(k)), f))

@@ -78,8 +78,8 @@ class KrylovReusedFactorization(ReusedFactorization):
                 solver.record_reuse(state, self, passes, 0.0, ok=False)
                 log.debug("reused factors (w0 = %.9g, w = %.9g): GMRES not converged in %d passes; refactorising",
                           self.F.omega, J.omega, passes)
-                self.refactored = solver.fresh_factorization(J, self.threads, state)
-                return self.refactored.solve(B)
+                refactored = self.refactored = solver.fresh_factorization(J, self.threads, state)
+                return refactored.solve(B)
             X[:, j:j + 1] = x
         solver.record_reuse(state, self, passes, 0.0, ok=True)
         if 2 * passes > budget:

@@ -88,6 +88,7 @@ class LowRankSplit:
         are solved for."""
         m = self.rank
         nb, nI = pat.bdofs.size, pat.perm.size
+        assert self.modes is not None  # condense takes this path with modes only
         PhiI, Phib, lam, G, sI, ES = self.modes
         a = f * f
         c = DynamicStiffness.mass_shift(f, xi)
@@ -105,6 +106,8 @@ class LowRankSplit:
         # X = Z_II^-1 U_I = (Phi_I + W_b Phi_b + c Z_II^-1 E_I) / mu with E = M Phi - U on the rows
         # sI (lowrank_modes): U_I^T X. The modes' residual K Phi - U diag(w^2) is round-off
         # (checked there); what it leaves is for the refinement.
+        WS: np.ndarray | None
+        Xbad: np.ndarray | None
         mu_ok = mu.copy()
         mu_ok[bad] = 1.0  # those columns are overwritten below
         UX = G + UWb @ Phib
@@ -136,6 +139,7 @@ class LowRankSplit:
         """``Z_II^-1 U_I V`` (complex ``V``, ``m x k``) of one harmonic from the modes relation
         of :meth:`_condense_modes`, ``Z_II^-1 U_I = (Phi_I + W_b Phi_b + c Z_II^-1 E_I) diag(1/mu)``
         (the columns at ``k w`` near a mode's frequency solved directly): products, no solve."""
+        assert self.modes is not None  # blk.Xm is kept on the modes path only (_condense_modes)
         PhiI, Phib, _, _, _, ES = self.modes
         inv_mu, bad, Xbad, WS, c = blk.Xm
         Vm = np.ascontiguousarray(V * inv_mu[:, None], dtype=complex)
@@ -150,6 +154,7 @@ class LowRankSplit:
 
     def rows_x(self, blk, L: np.ndarray) -> np.ndarray:
         """``L Z_II^-1 U_I`` (complex ``L``, ``r x n_I``) by the relation of :meth:`apply_x`."""
+        assert self.modes is not None  # blk.Xm is kept on the modes path only (_condense_modes)
         PhiI, Phib, _, _, _, ES = self.modes
         inv_mu, bad, Xbad, WS, c = blk.Xm
         out = real_times_complex(PhiI.T, np.ascontiguousarray(L.T, dtype=complex)).T

@@ -131,8 +131,8 @@ class ReusedFactorization(StructuredFactorization):
         solver.record_reuse(state, self, passes, worst, ok=False)
         log.debug("reused factors (w0 = %.9g, w = %.9g): contraction %.2e after %d passes; refactorising",
                   self.F.omega, J.omega, worst, passes)
-        self.refactored = solver.fresh_factorization(J, self.threads, state)
-        return self.refactored.solve(B)
+        refactored = self.refactored = solver.fresh_factorization(J, self.threads, state)
+        return refactored.solve(B)
 
     def _residual_after(self, B: np.ndarray, x: np.ndarray, d: np.ndarray) -> np.ndarray:
         """``B - J x`` after the pass that solved ``P d = r`` (``r`` the previous residual) and set

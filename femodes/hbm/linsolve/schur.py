@@ -76,7 +76,9 @@ class SchurComplement:
 
     def __init__(self, J: HarmonicBlockJacobian, F: LinearFactors, layout: SchurLayout, lean: bool):
         self.J, self.F, self.L = J, F, layout
-        self.Zu = self.vc = None
+        # the lean path's interior solutions of the border columns and its border rows, per harmonic
+        self.Zu: list | None = None
+        self.vc: list | None = None
         T = self._boundary_block()
         self._add_condensed_stiffness(T)
         if layout.m and F.pat.perm.size:
@@ -130,6 +132,7 @@ class SchurComplement:
         R = self.F.pat.R
         # columns: z = Z^-1 (u_c - i u_s); interior solution (Re z, -Im z)
         rho = Ui[blk.k] - (1j * Ui[blk.s] if blk.s is not None else 0.0)
+        assert blk.lu is not None  # called with interior DOFs only (F.pat.perm.size): each harmonic has its LU
         z = blk.lu.solve(rho)
         # rows: y = Z^-T (v_c + i v_s); v^T R^-1 = (Re, Im) of y^T
         mu = Vi[:, blk.k, :].T + (1j * Vi[:, blk.s, :].T if blk.s is not None else 0.0)
@@ -194,6 +197,7 @@ class SchurComplement:
 
         def one(blk: HarmonicFactors):
             rho = Ui[blk.k] - (1j * Ui[blk.s] if blk.s is not None else 0.0)
+            assert blk.lu is not None  # called with interior DOFs only (F.pat.perm.size): each harmonic has its LU
             z = blk.lu.solve(rho)                                          # (nI, m)
             vc = Vi[:, blk.k, :] + (1j * Vi[:, blk.s, :] if blk.s is not None else 0.0)  # (m, nI)
             if not nb:

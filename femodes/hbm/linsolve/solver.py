@@ -110,6 +110,7 @@ class BlockSolver:
             state = self._state(J.system)
             F = self._reusable(J, state)
             if F is not None:
+                assert state is not None  # _reusable finds factors in a state only
                 try:
                     # sparse-direct blocks (2-D/3-D meshes): GMRES, where a factorisation costs
                     # tens to hundreds of solves (.krylov); band LU: the stationary iteration
