@@ -239,11 +239,26 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
             res = _start_coarse(model, problem, w, seed, strategy, newton, res)
             E = _energy(problem, res.x) if res.success else math.nan
             fractions = modal_energy_fractions(problem, res.x, lm.omega, lm.shapes) if res.success else None
-        if guide is not None and not guide.holds(w, E):
+        def fits(E):
+            """On the family the coarse one guides: at its frequency for its energy, and its energy
+            not above the coarse family's by more than _ENERGY_JUMP beyond the last orbits' (the
+            median of the last three: one orbit pulled low by a tongue beside it must not turn the
+            family away)."""
+            if guide is None:
+                return True
+            if not guide.holds(w, E):
+                return False
+            last = [o for o in orbits[-3:] if guide.covers(o.omega)]
+            if last and guide.covers(w):
+                offset = float(np.median([math.log(o.energy) - guide.log_energy(o.omega) for o in last]))
+                jump = math.log(E) - guide.log_energy(w) - offset
+                return jump <= math.log1p(_ENERGY_JUMP)
+            return True
+
+        if not fits(E):
             # off the family traced with fewer harmonics (a tongue's orbit, or the secant led onto a
             # neighbouring family): start again from that family's orbit at this frequency
-            log.debug("w = %.6g: E = %.4g is off the coarse family (w there %.6g); restarting from it", w, E,
-                      guide.omega_at(E))
+            log.debug("w = %.6g: E = %.4g is off the coarse family; restarting from it", w, E)
             again = guide.refine(w)
             if again is not None:
                 res = again
@@ -252,13 +267,13 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
         log.debug("w = %.6g: success %s, E = %.4g, share of mode %d %.3f", w, res.success, E, mode,
                   fractions[mode - 1] if fractions is not None else math.nan)
         if (res.success and E > eg * (1.0 - strategy.start) and fractions[mode - 1] >= strategy.min_fraction
-                and (guide is None or guide.holds(w, E))):
+                and fits(E)):
             close_tongue()
             skips = 0
             orbits.append(_Orbit(res.x, w, E, int(res.nit)))
             # past the end once the orbits left after removing the tongues' (_drop_off_curve) are
             if E >= energy_max and len(orbits) >= 2 and orbits[-2].energy >= energy_max:
-                kept, _ = _drop_off_curve(problem, orbits, [], lm, strategy)
+                kept, _ = _drop_off_curve(problem, orbits, [], lm, strategy, guide)
                 if sum(o.energy >= energy_max for o in kept) >= 2:
                     break
             if res.nit <= 4:
@@ -285,7 +300,7 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
     else:
         message = f"stopped after {strategy.max_points} frequencies (PeriodDriven.max_points)"
     close_tongue()
-    orbits, tongues = _drop_off_curve(problem, orbits, tongues, lm, strategy)
+    orbits, tongues = _drop_off_curve(problem, orbits, tongues, lm, strategy, guide)
     past = [i for i, o in enumerate(orbits) if o.energy >= energy_max]
     if past:  # the branch ends at the first orbit past the end of the span...
         below = orbits[: past[0]]
@@ -355,6 +370,7 @@ def _start_coarse(model: StructuralModel, problem: NonlinearModeProblem, w: floa
 
 
 _ENERGY_STEP = 0.1  # largest relative energy step of a guided sweep where the family is steep
+_ENERGY_JUMP = 0.3  # largest rise of the energy over the coarse family's between orbits of a guided sweep
 
 
 class _Guide:
@@ -398,6 +414,10 @@ class _Guide:
             return math.nan
         k = int(np.clip(np.searchsorted(self.w, w), 1, self.w.size - 1))
         return float((self.logE_w[k] - self.logE_w[k - 1]) / (self.w[k] - self.w[k - 1]))
+
+    def log_energy(self, w: float) -> float:
+        """``log E`` of the coarse family at ``w`` (interpolated)."""
+        return float(np.interp(w, self.w, self.logE_w))
 
     def omega_at(self, energy: float) -> float:
         """The coarse family's frequency at ``energy`` (interpolated in ``log E``; below or above its
@@ -448,7 +468,7 @@ class _Guide:
 
 def _coarse_family(model, problem, energy_max, strategy, newton, lm) -> _Guide | None:
     """With more than ``strategy.start_harmonics`` harmonics: the contact-phase family traced first
-    with ``start_harmonics`` (a sweep of its own, to 1.5 ``energy_max``), which guides the sweep
+    with ``start_harmonics`` (a sweep of its own, to twice ``energy_max``), which guides the sweep
     with all the harmonics. With many harmonics the tongues are dense, and past a cluster of them
     the secant through the last orbits leads Newton onto a neighbouring family with about twice the
     energy (the bar with 80 elements and 40 harmonics: mode 1 still holding 76-80 % of the energy,
@@ -460,23 +480,27 @@ def _coarse_family(model, problem, energy_max, strategy, newton, lm) -> _Guide |
     h = type(s.h)(n_harmonics=strategy.start_harmonics, subharmonic=s.h.subharmonic)
     coarse = NonlinearModeProblem(model, h, problem.mode, reference_energy=problem.reference_energy,
                                   projection=s.projection)
-    orbits, _, message = period_driven_sweep(model, coarse, 1.5 * energy_max, strategy, newton, spectrum=lm)
+    orbits, _, message = period_driven_sweep(model, coarse, 2.0 * energy_max, strategy, newton, spectrum=lm)
     log.info("period-driven sweep guided by the family with %d harmonics (%d orbits; %s)", h.n_harmonics,
              len(orbits), message)
     return _Guide(model, problem, coarse, orbits, strategy, newton) if len(orbits) >= 3 else None
 
 
-def _drop_off_curve(problem, orbits: list[_Orbit], tongues, lm, strategy):
+def _drop_off_curve(problem, orbits: list[_Orbit], tongues, lm, strategy, guide: _Guide | None = None):
     """Orbits of a tongue that the sweep solved without noticing: the family's energy is a smooth,
     increasing function of the frequency, while a tongue's orbits lie off it by 10-40 % (an
     internal resonance feeds energy into another mode at nearly the same frequency). An orbit
     with more energy than one of the next three, then one whose ``log E`` departs by more than
     ``log(1 + strategy.off_curve)`` from the straight line through its accepted neighbours (in
-    ``w``), the worst first, is moved to the tongues."""
+    ``w``), the worst first, is moved to the tongues. With a ``guide`` (:func:`_coarse_family`)
+    the line is drawn through ``log E`` less the coarse family's: where the family's energy grows
+    steeply towards its asymptote its own curvature between neighbours far apart is not taken for
+    a tongue's departure."""
     if len(orbits) < 3:
         return orbits, tongues
     w = np.array([o.omega for o in orbits])
     logE = np.log([o.energy for o in orbits])
+    trend = np.array([guide.log_energy(x) for x in w]) if guide is not None else np.zeros_like(w)
     # first the lower envelope: a tongue's orbits carry the energy another mode took, above the
     # family's at the same frequency, and the family's energy rises with its frequency, so an orbit
     # with more energy than a later one is a tongue's
@@ -490,8 +514,9 @@ def _drop_off_curve(problem, orbits: list[_Orbit], tongues, lm, strategy):
         for j in range(idx.size):
             # neighbours: the nearest kept orbits on each side (two on one side at the ends)
             a, b = [idx[j - 1], idx[j + 1]] if 0 < j < idx.size - 1 else (idx[1:3] if j == 0 else idx[-3:-1])
-            line = logE[a] + (logE[b] - logE[a]) * (w[idx[j]] - w[a]) / (w[b] - w[a])
-            dev[j] = abs(logE[idx[j]] - line)
+            d = logE - trend
+            line = d[a] + (d[b] - d[a]) * (w[idx[j]] - w[a]) / (w[b] - w[a])
+            dev[j] = abs(d[idx[j]] - line)
         worst = int(np.argmax(dev))
         if dev[worst] <= tol:
             break
