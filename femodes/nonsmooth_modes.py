@@ -224,6 +224,11 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
         return res, E, fractions
 
     for _ in range(strategy.max_points):
+        if guide is not None and orbits and w > guide.w[-1]:
+            # past the coarse family's last orbit (twice the end of the span) nothing guides the
+            # sweep any more: towards the family's asymptote the tongues are dense
+            message = f"stopped at w = {w:.6g} rad/s, past the coarse family's last orbit"
+            break
         if guide is not None and orbits and guide.covers(w) and guide.covers(orbits[-1].omega):
             # the last orbit moved as the coarse family moves (a secant through orbits pulled by a
             # tongue beside them would lead onto a neighbouring family)
@@ -276,6 +281,10 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
                 kept, _ = _drop_off_curve(problem, orbits, [], lm, strategy, guide)
                 if sum(o.energy >= energy_max for o in kept) >= 2:
                     break
+            # (guided: once the orbit past the end that the branch would end at is there)
+            if guide is not None and E >= energy_max and _end(_drop_off_curve(problem, orbits, [], lm, strategy, guide)[0],
+                                                              energy_max, guide, strategy) is not None:
+                break
             if res.nit <= 4:
                 step = min(1.5 * step, strategy.max_step * w0)
             slope = guide.slope(w) if guide is not None else math.nan
@@ -308,9 +317,7 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
         # it by, and the family's energy is steep there); a guided sweep takes the first orbit past
         # the end that does, judged by its frequency at its energy (steady there, unlike the energy
         # at a frequency), the others past the end are left out
-        candidates = [orbits[i] for i in past] if guide is not None else [orbits[past[0]]]
-        end = next((c for c in candidates if len(below) < 2 or _continues(below[-2], below[-1], c, guide, strategy)),
-                   None)
+        end = _end(orbits, energy_max, guide, strategy)
         if end is None:
             orbits = below
             message = (f"stopped at the energy {orbits[-1].energy:g}, short of {energy_max:g}: the next orbit is "
@@ -320,6 +327,18 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
         tongues = [t for t in tongues if t.omega[0] < orbits[-1].omega]
     log.info("period-driven sweep of mode %d: %d orbits, %d tongues; %s", mode, len(orbits), len(tongues), message)
     return orbits, tongues, message
+
+
+def _end(orbits: list[_Orbit], energy_max: float, guide, strategy: PeriodDriven) -> _Orbit | None:
+    """The orbit past ``energy_max`` that ends the branch ``orbits``: the first one, or for a guided
+    sweep the first that continues the two before the first (:func:`_continues`); None if none does."""
+    past = [i for i, o in enumerate(orbits) if o.energy >= energy_max]
+    if not past:
+        return None
+    below = orbits[: past[0]]
+    candidates = [orbits[i] for i in past] if guide is not None else [orbits[past[0]]]
+    return next((c for c in candidates if len(below) < 2 or _continues(below[-2], below[-1], c, guide, strategy)),
+                None)
 
 
 def _continues(a: _Orbit, b: _Orbit, c: _Orbit, guide, strategy: PeriodDriven) -> bool:
@@ -508,7 +527,9 @@ def _drop_off_curve(problem, orbits: list[_Orbit], tongues, lm, strategy, guide:
     nxt = np.array([logE[i + 1: i + 4].min() if i + 1 < logE.size else np.inf for i in range(logE.size)])
     keep = logE <= nxt + 1e-12
     tol = math.log1p(strategy.off_curve)
-    while keep.sum() >= 4:
+    # (a guided sweep's orbits passed that test against the coarse family already, which, unlike
+    # the line through two neighbours, holds across the gaps the tongues leave)
+    while guide is None and keep.sum() >= 4:
         idx = np.flatnonzero(keep)
         dev = np.zeros(idx.size)
         for j in range(idx.size):
