@@ -18,6 +18,13 @@ tongue is only a narrow band of frequencies. A solve that fails, or whose orbit 
 its energy to other modes, is such a tongue: it is left out of the branch and listed with the
 modes that took the energy (:class:`InternalResonance`).
 
+With many harmonics the tongues are dense, and past a cluster of them the secant through the last
+orbits leads Newton onto a neighbouring family with more energy. With more harmonics than
+``PeriodDriven.start_harmonics`` the sweep is therefore guided by the family traced first with
+that many (:func:`_coarse_family`): the predictor follows it, an orbit off it (in frequency at its
+energy, or with an energy rising over it) is solved again from its orbit, and the tongues' and the
+end's tests are drawn against it (issue 35; ``benchmarks/README_bar_convergence.md``).
+
 Checked against the continuum's first nonsmooth mode of the bar (d'Alembert, ``tests/
 bar_stop_reference.py``; Yoong, Thorin & Legrand, Nonlinear Dynamics 91, 2018): see
 ``tests/test_nonsmooth_modes.py``.
