@@ -11,12 +11,13 @@ energy grows (``E_g = pi^2 g^2 / 16``: the linear mode touching the stop).
 
 The discrete backbone's error has three parts (benchmarks/README_bar_convergence.md):
 
-* harmonic truncation: a bias, the family's frequency too low by 0.4 % (H = 10), 0.2-0.3 %
-  (H = 20), 0.1-0.2 % (H = 40) on fine meshes. Measured here as the mean error of the orbits
-  between 2 and 8 E_g on 160 elements, for H = 10, 20, 40; its rate ``|mean| ~ H^-q``. The study
-  adds H = 15 and 30, which do not fall on the line everywhere: on 320 elements the five give
-  q = 0.69 +- 0.28, on 160 elements H = 30 keeps 3 orbits in 2-8 E_g and the five-point fit says
-  nothing (0.2 +- 1.0); at H = 5 the bias has the other sign. A slow rate over a factor 4 in H.
+* harmonic truncation: a bias, the family's frequency too low by 0.4 % (H = 10), 0.3 % (H = 20),
+  0.2 % (H = 40) on 160 elements. Measured here as the mean error of the orbits between 2 and
+  8 E_g on 160 elements, for H = 10, 20, 40; its rate ``|mean| ~ H^-q``. The rate is weakly
+  determined: the study (benchmarks/README_bar_convergence.md), whose runs with H = 15-80 reach
+  25 E_g since the sweep is guided by the family with 10 harmonics, finds at most a slow fall over
+  H = 10-40 with H = 15 and 30 added (q = 0.5 +- 0.3 on 160 elements, 0.0 +- 0.2 on 320), and
+  0.1 % at H = 60-80 on 320 elements; at H = 5 the bias has the other sign.
 * the mesh: at a fixed H (10) and fixed frequencies, the orbits converge as the mesh is refined.
   Measured here by the median change of the error at 13 frequencies between a mesh and the one
   twice as fine (20 to 160 elements), with and without mass redistribution at the contact node;

@@ -148,6 +148,36 @@ def test_period_driven_options_are_checked():
         fm.nonlinear_mode(m, 1, (0.5 * eg, 4 * eg), 5, past_grazing="period")
 
 
+def test_guided_sweep_reaches_the_end_of_the_span():
+    """With more harmonics than ``PeriodDriven.start_harmonics`` the sweep is guided by the family
+    traced first with that many (issue 35). 40 elements with H = 20 used to stop at 18.9 E_g: past a
+    cluster of tongues the secant through the last orbits led onto a neighbouring family with about
+    twice the energy, whose orbits the lower envelope then removed. Now it reaches 25 E_g on the
+    contact-phase family, mode 1 holding most of the energy, every orbit past 1.5 E_g within 1 % of
+    the continuum (0.6 % measured; benchmarks/README_bar_convergence.md has the grid)."""
+    from femodes.hbm import NonlinearModeProblem
+    from femodes.nonsmooth_modes import modal_energy_fractions
+
+    model = bar(40)
+    eg = fm.grazing_energy(model)
+    br = fm.nonlinear_mode(model, 1, energy=(0.5 * eg, 25 * eg), harmonics=20)
+    assert br.success and br.meta["family"] == "contact phase", br.message
+    assert br.energy.max() >= 25 * eg
+    past = br.energy >= 1.5 * eg
+    assert past.sum() >= 15
+    err = br.omega[past] / first_nonsmooth_mode(br.energy[past] / eg)[0] - 1
+    assert np.max(np.abs(err)) < 1e-2, err
+    # the family's energy rises with its frequency: no neighbouring family on the branch
+    assert np.all(np.diff(br.energy[past]) > 0)
+    problem = NonlinearModeProblem(model, fm.Harmonics(n_harmonics=20), 1, reference_energy=eg)
+    lm = fm.linear_modes(model, n=12)
+    shares = [modal_energy_fractions(problem, problem.pack(Q, P, w, xi), lm.omega, lm.shapes)[0]
+              for Q, P, w, xi in zip(br.Q[past], br.P[past], br.omega[past], br.xi[past])]
+    assert min(shares) > 0.5, shares
+    with pytest.raises(ValueError, match="family_tol must be in"):
+        fm.PeriodDriven(family_tol=0.0)
+
+
 def test_period_sweep_start_from_fewer_harmonics(model):
     """The sweep's start when Newton from the linear mode fails (H = 80 on 160 elements, 67 s: in
     benchmarks/README_bar_convergence.md): the orbit with ``start_harmonics`` harmonics, doubled up
