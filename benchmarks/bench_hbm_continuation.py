@@ -54,20 +54,6 @@ def child(size: int, points: int, reuse: bool, cache: Path) -> dict:
             "backend": fm.sparse_backend_info().indefinite}
 
 
-def build_cache(size: int, cache: Path) -> None:
-    path = cache / f"box3d_{size}.pkl"
-    if path.is_file():
-        return
-    sys.path.insert(0, str(HERE))
-    import bench_solids_scale as b
-
-    built: dict = {}
-    plain, model = b._models("box3d", size, built)
-    cache.mkdir(parents=True, exist_ok=True)
-    with open(path, "wb") as fh:
-        pickle.dump((plain, model, built), fh, protocol=5)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="4")
@@ -80,6 +66,9 @@ def main() -> None:
         size, points, reuse = int(args.child[0]), int(args.child[1]), args.child[2] == "1"
         print(json.dumps(child(size, points, reuse, args.cache)))
         return
+    sys.path.insert(0, str(HERE))
+    from bench_hbm_iter import build_cache  # the same pickled box3d models as bench_hbm_iter.py
+
     recs = json.loads(args.json.read_text()) if args.json.is_file() else []
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
     for size in [int(s) for s in args.sizes.split(",")]:
