@@ -35,8 +35,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -46,6 +45,7 @@ from .linear import grazing_energy, linear_modes
 from .model import StructuralModel
 from .results import Branch
 from .solvers import NewtonOptions, semismooth_newton
+from .sweep_guide import Guide, solve_in_stages
 
 __all__ = ["PeriodDriven", "InternalResonance", "modal_energy_fractions", "period_driven_sweep", "captured_past_grazing",
            "continue_past_grazing", "family_caveat"]
@@ -124,13 +124,6 @@ class PeriodDriven:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"PeriodDriven: {name} must be a positive integer, got {v!r}")
-
-
-def _at_frequency(pd: Any, w: float) -> Callable[[np.ndarray], Any]:
-    """The residual and Jacobian of the period-driven problem ``pd`` at the frequency ``w``."""
-    def fun(z: np.ndarray) -> Any:
-        return pd.residual(z, w)[:2]
-    return fun
 
 
 @dataclasses.dataclass(frozen=True)
@@ -374,128 +367,20 @@ def _start_coarse(model: StructuralModel, problem: NonlinearModeProblem, w: floa
     harmonics, not with 80; the orbit with 40 is). Returns ``failed`` if a stage fails."""
     s = problem.system
     H = s.h.n_harmonics
-    stages = [strategy.start_harmonics]
-    while 2 * stages[-1] < H:
-        stages.append(2 * stages[-1])
     linear = s.split(seed[: s.size])
-    previous = None
-    for k in stages + [H]:
-        h = s.h if k == H else type(s.h)(n_harmonics=k, subharmonic=s.h.subharmonic)
-        pd = PeriodDrivenModeProblem(model, h, problem.mode, reference_energy=problem.reference_energy,
-                                     projection=s.projection)
-        # the linear mode (with all harmonics it just failed), else the last stage's orbit
-        for Q, P in ([linear] if k < H else []) + ([previous] if previous is not None else []):
-            Qk, Pk = np.zeros((h.n_coef, Q.shape[1])), np.zeros((h.n_coef, P.shape[1]))
-            m = min(h.n_coef, Q.shape[0])
-            Qk[:m], Pk[:m] = Q[:m], P[:m]
-            res = semismooth_newton(_at_frequency(pd, w), pd.pack(Qk, Pk, w), options=newton)
-            if res.success:
-                break
-        else:
-            return failed
-        u = pd.unpack(res.x, 0.0)
-        previous = (u.Q, u.P)
-    return res
+
+    def starts(k: int, previous):  # the linear mode (with all harmonics it just failed), else the last stage's orbit
+        return ([linear] if k < H else []) + ([previous] if previous is not None else [])
+
+    res = solve_in_stages(model, problem, w, strategy.start_harmonics, starts, newton)
+    return failed if res is None else res
 
 
 _ENERGY_STEP = 0.1  # largest relative energy step of a guided sweep where the family is steep
 _ENERGY_JUMP = 0.3  # largest rise of the energy over the coarse family's between orbits of a guided sweep
 
 
-class _Guide:
-    """The family traced first with fewer harmonics (:func:`_coarse_family`): its frequency at a
-    given energy (:meth:`holds` tells whether an orbit lies on it within ``strategy.family_tol``),
-    and its orbit at a given frequency refined up to all the harmonics (:meth:`refine`)."""
-
-    def __init__(self, model, problem, coarse, orbits, strategy, newton):
-        self.model, self.problem, self.coarse = model, problem, coarse
-        self.strategy, self.newton = strategy, newton
-        by_w = sorted(orbits, key=lambda o: o.omega)
-        self.w = np.array([o.omega for o in by_w])
-        self.x = np.array([o.x for o in by_w])
-        self.logE_w = np.log([o.energy for o in by_w])
-        by_e = sorted(orbits, key=lambda o: o.energy)
-        self.logE = np.log([o.energy for o in by_e])
-        self.wE = np.array([o.omega for o in by_e])
-
-    def covers(self, w: float) -> bool:
-        return bool(self.w[0] <= w <= self.w[-1])
-
-    def _interp(self, w: float) -> np.ndarray:
-        k = int(np.clip(np.searchsorted(self.w, w), 1, self.w.size - 1))
-        t = (w - self.w[k - 1]) / (self.w[k] - self.w[k - 1])
-        return (1.0 - t) * self.x[k - 1] + t * self.x[k]
-
-    def padded(self, w: float) -> np.ndarray:
-        """The coarse family's unknowns at ``w`` (interpolated), in the layout of all the harmonics
-        (the others zero)."""
-        c, s = self.coarse.system, self.problem.system
-        x = self._interp(w)
-        Q, P = c.split(x[: c.size])
-        Qk, Pk = np.zeros((s.h.n_coef, Q.shape[1])), np.zeros((s.h.n_coef, P.shape[1]))
-        Qk[: Q.shape[0]], Pk[: P.shape[0]] = Q, P
-        return np.concatenate([s.join(Qk, Pk), x[c.size:]])
-
-    def slope(self, w: float) -> float:
-        """``d log E / d w`` of the coarse family at ``w`` (between its two neighbouring orbits; nan
-        outside it)."""
-        if not self.covers(w):
-            return math.nan
-        k = int(np.clip(np.searchsorted(self.w, w), 1, self.w.size - 1))
-        return float((self.logE_w[k] - self.logE_w[k - 1]) / (self.w[k] - self.w[k - 1]))
-
-    def log_energy(self, w: float) -> float:
-        """``log E`` of the coarse family at ``w`` (interpolated)."""
-        return float(np.interp(w, self.w, self.logE_w))
-
-    def omega_at(self, energy: float) -> float:
-        """The coarse family's frequency at ``energy`` (interpolated in ``log E``; below or above its
-        orbits, the first or last frequency)."""
-        return float(np.interp(math.log(energy), self.logE, self.wE)) if energy > 0 else math.nan
-
-    def holds(self, w: float, energy: float) -> bool:
-        """Whether the orbit ``(w, energy)`` lies on the coarse family: within ``family_tol`` of its
-        frequency at that energy, or, above the coarse family's last energy, not below its last
-        frequency by more than that (the family's frequency rises with the energy)."""
-        if not (math.isfinite(energy) and energy > 0):
-            return False
-        wc = self.omega_at(energy)
-        tol = self.strategy.family_tol
-        if math.log(energy) > self.logE[-1]:
-            return w >= wc * (1.0 - tol)
-        return abs(w / wc - 1.0) <= tol
-
-    def refine(self, w: float):
-        """Newton's result at ``w`` with all the harmonics, started from the coarse family's orbit
-        there (interpolated between its two neighbours in ``w``, solved with the coarse harmonics,
-        then with twice as many, the new ones zero, and so on), or None if ``w`` is outside the
-        coarse family or a stage fails."""
-        if not self.covers(w):
-            return None
-        x = self._interp(w)
-        s = self.problem.system
-        c = self.coarse.system
-        Q, P = c.split(x[: c.size])
-        stages = [c.h.n_harmonics]
-        while 2 * stages[-1] < s.h.n_harmonics:
-            stages.append(2 * stages[-1])
-        res = None
-        for k in stages + [s.h.n_harmonics]:
-            h = s.h if k == s.h.n_harmonics else type(s.h)(n_harmonics=k, subharmonic=s.h.subharmonic)
-            pd = PeriodDrivenModeProblem(self.model, h, self.problem.mode,
-                                         reference_energy=self.problem.reference_energy, projection=s.projection)
-            Qk, Pk = np.zeros((h.n_coef, Q.shape[1])), np.zeros((h.n_coef, P.shape[1]))
-            m = min(h.n_coef, Q.shape[0])
-            Qk[:m], Pk[:m] = Q[:m], P[:m]
-            res = semismooth_newton(_at_frequency(pd, w), pd.pack(Qk, Pk, w), options=self.newton)
-            if not res.success:
-                return None
-            u = pd.unpack(res.x, 0.0)
-            Q, P = u.Q, u.P
-        return res
-
-
-def _coarse_family(model, problem, energy_max, strategy, newton, lm) -> _Guide | None:
+def _coarse_family(model, problem, energy_max, strategy, newton, lm) -> Guide | None:
     """With more than ``strategy.start_harmonics`` harmonics: the contact-phase family traced first
     with ``start_harmonics`` (a sweep of its own, to twice ``energy_max``), which guides the sweep
     with all the harmonics. With many harmonics the tongues are dense, and past a cluster of them
@@ -512,10 +397,10 @@ def _coarse_family(model, problem, energy_max, strategy, newton, lm) -> _Guide |
     orbits, _, message = period_driven_sweep(model, coarse, 2.0 * energy_max, strategy, newton, spectrum=lm)
     log.info("period-driven sweep guided by the family with %d harmonics (%d orbits; %s)", h.n_harmonics,
              len(orbits), message)
-    return _Guide(model, problem, coarse, orbits, strategy, newton) if len(orbits) >= 3 else None
+    return Guide(model, problem, coarse, orbits, strategy, newton) if len(orbits) >= 3 else None
 
 
-def _drop_off_curve(problem, orbits: list[_Orbit], tongues, lm, strategy, guide: _Guide | None = None):
+def _drop_off_curve(problem, orbits: list[_Orbit], tongues, lm, strategy, guide: Guide | None = None):
     """Orbits of a tongue that the sweep solved without noticing: the family's energy is a smooth,
     increasing function of the frequency, while a tongue's orbits lie off it by 10-40 % (an
     internal resonance feeds energy into another mode at nearly the same frequency). An orbit

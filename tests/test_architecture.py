@@ -38,6 +38,7 @@ LAYERS = {
     "femodes.static_contact": 5,
     "femodes.exact_response": 5,
     "femodes.nonsmooth_modes": 5,
+    "femodes.sweep_guide": 5,
     "femodes.resonance": 5,
     "femodes.runs": 5,
     "femodes.floquet": 5,
