@@ -10,8 +10,10 @@ w = 1.5 for ``--points`` points with the options of ``fm.frequency_response``
 processes, one BLAS thread. Recorded: CPU time of the continuation, Newton iterations
 (``n_newton``), their ratio, the solver's counters, peak RSS, and the branch itself (both variants
 must give the same points: the reused path solves to the exact path's backward error).
+``--backends`` runs each variant on each named sparse back-end (``FEMODES_SPARSE_BACKEND`` of
+the child; MKL's threads, for PARDISO, at ``--mkl-threads``, one by default as the BLAS).
 
-    python benchmarks/bench_hbm_continuation.py --sizes 4,6 --points 6
+    python benchmarks/bench_hbm_continuation.py --sizes 4,6 --points 6 --backends mumps,pardiso
 """
 
 from __future__ import annotations
@@ -40,15 +42,16 @@ def child(size: int, points: int, reuse: bool, cache: Path) -> dict:
 
     with open(cache / f"box3d_{size}.pkl", "rb") as fh:
         _, model, built = pickle.load(fh)
-    solver = BlockSolver(reuse=True) if reuse else BlockSolver()
-    c0 = time.process_time()
+    solver = BlockSolver(reuse=bool(reuse))  # forced either way (the default "auto" reuses at these sizes)
+    c0, w0 = time.process_time(), time.perf_counter()
     pr = fm.ForcedResponseProblem(model, fm.Harmonics(5), solver=solver)
     res = fm.continuation(pr, (1.5, 2.5), options=frequency_response_options(max_points=points))
-    cpu = time.process_time() - c0
+    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     amp = [float(np.max(np.abs(pr.unpack(x, p).Q))) for x, p in zip(res.x, res.p)]
     return {"size": size, "N": built["N"], "n_contacts": built["n_contacts"], "unknowns": int(pr.size),
-            "reuse": reuse, "cpu_s": cpu, "n_newton": int(res.n_newton), "points": len(res.p),
-            "cpu_per_iteration_s": cpu / max(int(res.n_newton), 1), "status": int(res.status),
+            "reuse": reuse, "cpu_s": cpu, "wall_s": wall, "n_newton": int(res.n_newton), "points": len(res.p),
+            "cpu_per_iteration_s": cpu / max(int(res.n_newton), 1),
+            "wall_per_iteration_s": wall / max(int(res.n_newton), 1), "status": int(res.status),
             "omega": [float(p) for p in res.p], "max_abs_Q": amp, "stats": dict(solver.stats),
             "peak_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
             "backend": fm.sparse_backend_info().indefinite}
@@ -60,6 +63,9 @@ def main() -> None:
     ap.add_argument("--points", type=int, default=6)
     ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "femodes_hbm_iter_cache")
     ap.add_argument("--json", type=Path, default=RESULTS)
+    ap.add_argument("--backends", default="", help="comma-separated FEMODES_SPARSE_BACKEND values (default: auto)")
+    ap.add_argument("--mkl-threads", default="1")
+    ap.add_argument("--reuse", default="0,1", help="the variants: 0 default solver, 1 BlockSolver(reuse=True)")
     ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
@@ -70,10 +76,11 @@ def main() -> None:
     from bench_hbm_iter import build_cache  # the same pickled box3d models as bench_hbm_iter.py
 
     recs = json.loads(args.json.read_text()) if args.json.is_file() else []
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
     for size in [int(s) for s in args.sizes.split(",")]:
         build_cache(size, args.cache)
-        for reuse in (False, True):
+        for backend, reuse in [(b, r == "1") for b in (args.backends or "auto").split(",") for r in args.reuse.split(",")]:
+            env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS=args.mkl_threads,
+                       FEMODES_SPARSE_BACKEND=backend)
             load0 = os.getloadavg()
             p = subprocess.run([sys.executable, __file__, "--cache", str(args.cache), "--child", str(size),
                                 str(args.points), "1" if reuse else "0"], env=env, capture_output=True, text=True)
@@ -81,10 +88,11 @@ def main() -> None:
                 rec = json.loads(p.stdout.strip().splitlines()[-1])
             except (IndexError, json.JSONDecodeError):
                 rec = {"size": size, "reuse": reuse, "error": p.stderr[-3000:]}
-            rec.update(load_before=list(load0), load_after=list(os.getloadavg()))
+            rec.update(load_before=list(load0), load_after=list(os.getloadavg()), requested_backend=backend,
+                       mkl_threads=args.mkl_threads)
             recs.append(rec)
-            print({k: rec.get(k) for k in ("N", "reuse", "cpu_s", "n_newton", "cpu_per_iteration_s", "points",
-                                           "stats", "peak_mib", "error")}, flush=True)
+            print({k: rec.get(k) for k in ("N", "backend", "reuse", "cpu_s", "n_newton", "cpu_per_iteration_s",
+                                           "wall_per_iteration_s", "points", "stats", "peak_mib", "error")}, flush=True)
             args.json.write_text(json.dumps(recs, indent=1))
 
 

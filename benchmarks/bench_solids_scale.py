@@ -548,10 +548,8 @@ def _hbm_iter(model, rec: dict, repeat: int, reuse: bool = False) -> None:
     import femodes as fm
     from femodes.solvers import newton
 
-    solver = None
-    if reuse:
-        from femodes.hbm.linsolve import BlockSolver
-        solver = BlockSolver(reuse=True)
+    from femodes.hbm.linsolve import BlockSolver
+    solver = BlockSolver(reuse=bool(reuse))  # forced either way (the default "auto" reuses at 3-D sizes)
     (pr, ts, cs) = _cpu_wall(lambda: fm.ForcedResponseProblem(model, fm.Harmonics(H), solver=solver))
     rec.update(setup_s=ts, setup_cpu_s=cs, unknowns=int(pr.size), backend=fm.sparse_backend_info().indefinite)
     p0 = 1.5

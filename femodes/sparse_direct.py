@@ -3,7 +3,7 @@ r"""Models layer (leaf): sparse direct factorisations behind one small interface
 Every place of femodes that factorises a large sparse matrix (Craig-Bampton constraint modes,
 shift-invert eigen-solves, linear responses, time stepping, the per-harmonic blocks of the
 harmonic balance solver and Hill's method) calls :func:`factorize` and uses the returned
-:class:`Factor`'s ``solve``. Three back-ends:
+:class:`Factor`'s ``solve``. Four back-ends:
 
 ``superlu``
     scipy's SuperLU (:func:`scipy.sparse.linalg.splu`), with the caller's ordering options. It
@@ -16,22 +16,18 @@ harmonic balance solver and Hill's method) calls :func:`factorize` and uses the 
     MUMPS (multifrontal, sequential) through python-mumps: real or complex, symmetric (``LDL^T``,
     also complex symmetric, not Hermitian) or unsymmetric (``LU``), with the PORD ordering (the
     fastest of its orderings on femodes' 3-D blocks, ``benchmarks/README_backends.md``).
+``pardiso``
+    oneMKL PARDISO (supernodal, threaded) through :mod:`.sparse_pardiso`: the same kinds as MUMPS.
 
 The environment variable ``FEMODES_SPARSE_BACKEND`` (``auto`` by default, or ``superlu``,
-``cholmod``, ``mumps``) chooses. ``auto`` takes, by the measurement of
-``benchmarks/bench_backends.py`` on P2 tetrahedra (CPU time at 1.9e4 / 6.1e4 DOFs: ``K_II`` and
-its constraint-mode solves 2.2x / 6.8x faster with CHOLMOD than with SuperLU, 1.9x / 8.2x with
-MUMPS; a complex harmonic block 7x / 4.5x with MUMPS), CHOLMOD for positive definite
-matrices, MUMPS for the others, each when installed, and SuperLU for matrices below
-:data:`AUTO_MIN_SIZE` rows (where SuperLU is as fast and its results are the ones the tests
-were written against). A named back-end is used at every size, for the matrices it can take
-(CHOLMOD only the positive definite ones; the others then go to SuperLU). A back-end that is
-requested but not installed falls back to SuperLU with one log record.
-:func:`sparse_backend_info` says what is in use.
-
-Matrices that share one sparsity pattern (the harmonic blocks ``K - f^2 M + i f C`` of the HBM
-solver) are factorised through a :class:`PatternFactorizer`: the pattern's CSC structure is built
-once, and MUMPS's symbolic analysis is reused from one matrix to the next.
+``cholmod``, ``mumps``, ``pardiso``) chooses. ``auto`` takes, by the measurement of
+``benchmarks/bench_backends.py`` on P2 tetrahedra (:data:`AUTO_POSITIVE_DEFINITE`), CHOLMOD for
+positive definite matrices, MUMPS for the others, PARDISO where they are not installed, and
+SuperLU below :data:`AUTO_MIN_SIZE` rows (as fast there, and the tests' reference). A named
+back-end is used at every size for the matrices it takes (CHOLMOD: positive definite only; the
+others go to SuperLU); one that is not installed falls back to SuperLU with one log record.
+:func:`sparse_backend_info` says what is in use. Matrices of one sparsity pattern (the harmonic
+blocks ``K - f^2 M + i f C``) go through a :class:`PatternFactorizer`, which reuses the analysis.
 
 A factorisation that fails (singular, or not positive definite) raises
 :class:`SingularMatrixError`, a :class:`RuntimeError` like SuperLU's own. A positive definite
@@ -61,7 +57,7 @@ log = logging.getLogger(__name__)
 #: The environment variable that selects the back-end.
 ENV_VAR = "FEMODES_SPARSE_BACKEND"
 #: The back-ends, SuperLU first (always installed), and the value that picks by measurement.
-BACKENDS = ("superlu", "cholmod", "mumps")
+BACKENDS = ("superlu", "cholmod", "mumps", "pardiso")
 _CHOICES = ("auto",) + BACKENDS
 #: ``auto`` keeps SuperLU below this many rows: for positive definite matrices it is as fast there
 #: (P2 box, 3e3 DOFs: K 22 ms SuperLU, 23 ms CHOLMOD, 39 ms MUMPS; 8.8e3 DOFs: K_II and its
@@ -73,6 +69,15 @@ AUTO_MIN_SIZE = 5000
 #: 1.7 s against 2.1 s (AMD), 4.0 s (automatic: SCOTCH) and 4.2 s (SCOTCH), of the complex block
 #: 4.3 s against 7.5-7.7 s (exploratory run, ``benchmarks/README_backends.md``).
 MUMPS_ORDERING = "pord"
+#: ``auto``'s preference, the first installed of each list. ``benchmarks/bench_backends.py`` on one
+#: thread (CPU s at 1.9e4 / 6.1e4 DOFs, P2 box): ``K_II`` and its constraint-mode solves SuperLU
+#: 0.88 / 22.6, CHOLMOD 0.46 / 3.51, MUMPS 0.47 / 2.69, PARDISO 0.55 / 3.28; a complex block and
+#: its condensation columns SuperLU 6.93 / 30.5, MUMPS 0.94 / 6.56, PARDISO 1.00 / 7.34; a whole
+#: Craig-Bampton SuperLU 1.97 / 30.8, the others 1.34-1.60 / 7.34-7.54. PARDISO comes last on one thread; it is the one fast back-end that installs from a
+#: wheel alone (``pip install mkl``, no compiler or system library), and its threads pay on several
+#: cores (``FEMODES_BLAS_THREADS``; ``benchmarks/README_backends.md``).
+AUTO_POSITIVE_DEFINITE = ("cholmod", "mumps", "pardiso")
+AUTO_INDEFINITE = ("mumps", "pardiso")
 
 _logged: set[str] = set()
 _imported: set[str] = set()
@@ -95,6 +100,10 @@ def _import(name: str):
             from sksparse import cholmod as module
         elif name == "mumps":
             import mumps as module
+        elif name == "pardiso":
+            from . import sparse_pardiso as module
+            if module.load_library() is None:
+                raise ImportError("libmkl_rt not found (pip install mkl)")
         else:
             return spla
     except Exception as exc:  # ImportError, or a shared library that does not load
@@ -119,7 +128,7 @@ def requested_backend() -> str:
     Raises
     ------
     ValueError
-        If the value is not one of ``auto, superlu, cholmod, mumps``; the message names the
+        If the value is not one of ``auto, superlu, cholmod, mumps, pardiso``; the message names the
         variable and the valid values.
     """
     raw = os.environ.get(ENV_VAR, "")
@@ -137,13 +146,12 @@ def _choose(n: int, positive_definite: bool) -> str:
     if req == "auto":
         if n < AUTO_MIN_SIZE:
             return "superlu"
-        order = ("cholmod", "mumps") if positive_definite else ("mumps",)
-        for name in order:
+        for name in (AUTO_POSITIVE_DEFINITE if positive_definite else AUTO_INDEFINITE):
             if _import(name) is not None:
                 return name
         _log_once("auto-missing", logging.INFO,
-                  "%s=auto: neither CHOLMOD (scikit-sparse) nor MUMPS (python-mumps) is installed; "
-                  "sparse factorisations use SuperLU (make venv-fast installs them)", ENV_VAR)
+                  "%s=auto: none of CHOLMOD (scikit-sparse), MUMPS (python-mumps) and PARDISO (mkl) is installed; "
+                  "sparse factorisations use SuperLU (make venv installs them where it can)", ENV_VAR)
         return "superlu"
     if _import(req) is None:
         _log_once(f"missing:{req}", logging.WARNING,
@@ -316,6 +324,27 @@ def _mumps(A, symmetric: bool) -> Factor:
     return Factor("mumps", A.shape[0], A.dtype, ctx.solve, solve_t)
 
 
+def _pardiso_factor(handle) -> Factor:
+    return Factor("pardiso", handle.n, handle.dtype, handle.solve, lambda b: handle.solve(b, trans=True), nnz=handle.nnz)
+
+
+def _pardiso(A, symmetric: bool, positive_definite: bool) -> Factor:
+    mod = _import("pardiso")
+    A = A.astype(np.result_type(A.dtype, np.float64), copy=False)
+    mtype = mod.matrix_type(A.dtype, symmetric, positive_definite)
+    try:
+        handle = mod.PardisoHandle(A, mtype)
+    except mod.PardisoError as exc:
+        if exc.code == -4 and mtype == 2:  # not positive definite: symmetric indefinite, as CHOLMOD's fallback
+            log.debug("PARDISO's Cholesky rejected the matrix (%s); symmetric indefinite factorisation instead", exc)
+            return _pardiso(A, True, False)
+        raise SingularMatrixError(str(exc)) from None
+    if handle.perturbed:
+        raise SingularMatrixError(f"PARDISO perturbed {handle.perturbed} pivot(s) even with scaling and matching: "
+                                  f"the matrix is numerically singular")
+    return _pardiso_factor(handle)
+
+
 def factorize(A, *, positive_definite: bool = False, symmetric: bool | None = None,
               superlu_options: dict | None = None) -> Factor:
     """Factorise the square sparse matrix ``A`` with the back-end in use (module docstring).
@@ -360,6 +389,8 @@ def factorize(A, *, positive_definite: bool = False, symmetric: bool | None = No
         backend = _choose(max(n, AUTO_MIN_SIZE), False)
         if backend in ("superlu", "cholmod"):
             return _superlu(A, superlu_options)
+    if backend == "pardiso":
+        return _pardiso(A, bool(symmetric), positive_definite)
     return _mumps(A, bool(symmetric))
 
 
@@ -377,7 +408,10 @@ class PatternFactorizer:
       matrix of the same kind (real or complex) is factorised in it numerically only
       (``Context.factor(reuse_analysis=True)``). The PORD analysis is about a quarter of a 3-D
       harmonic block's factorisation (0.56 of 2.3 s at 3.6e4 DOFs,
-      ``benchmarks/README_solids_scale.md``).
+      ``benchmarks/README_solids_scale.md``);
+    - with PARDISO and a symmetric pattern whose diagonal is stored, the same: an analysed
+      handle whose factor was released takes the next matrix of its type by a numerical
+      factorisation alone (:meth:`.sparse_pardiso.PardisoHandle.refactor`).
 
     The numerical factorisation with a reused analysis is MUMPS's own threshold-pivoting ``LDL^T``
     (``CNTL(1)`` as a fresh one; pivots that fail the threshold are delayed, at the cost of fill),
@@ -389,7 +423,7 @@ class PatternFactorizer:
     Attributes
     ----------
     analyses, reused : int
-        MUMPS factorisations with a fresh analysis, and with a reused one.
+        MUMPS or PARDISO factorisations with a fresh analysis, and with a reused one.
     """
 
     def __init__(self, rows, cols, n: int, *, symmetric: bool | None = None):
@@ -409,7 +443,15 @@ class PatternFactorizer:
         # upper triangle (what MUMPS reads of a symmetric matrix), in a fixed order
         self._upper = np.flatnonzero(rows <= cols) if self.symmetric else None
         self._upper_rc = (rows[self._upper], cols[self._upper]) if self.symmetric else None
-        self._idle: dict[str, list] = {}
+        # PARDISO's order of the upper triangle (CSR: by row, then column); its symmetric types
+        # need the whole diagonal stored, which the harmonic blocks' patterns have
+        self._csr_upper: np.ndarray | None = None
+        self._full_diagonal = False
+        if self._upper is not None and self._upper_rc is not None:
+            ru, cu = self._upper_rc
+            self._csr_upper = self._upper[np.lexsort((cu, ru))]
+            self._full_diagonal = int(np.count_nonzero(ru == cu)) == n
+        self._idle: dict = {}
         self._lock = threading.Lock()
         self.analyses = 0
         self.reused = 0
@@ -430,6 +472,8 @@ class PatternFactorizer:
         backend = _choose(self.n, positive_definite)
         if self.symmetric and backend == "mumps":
             return self._mumps(values)
+        if self.symmetric and backend == "pardiso" and self._full_diagonal:
+            return self._pardiso(values, positive_definite)
         if backend == "cholmod" and self.symmetric:
             try:
                 return _cholmod(self.matrix(values))
@@ -463,7 +507,37 @@ class PatternFactorizer:
         weakref.finalize(fac, self._give_back, key, ctx)
         return fac
 
-    def _give_back(self, key: str, ctx) -> None:
+    def _pardiso(self, values, positive_definite: bool) -> Factor:
+        mod = _import("pardiso")
+        assert self._csr_upper is not None
+        data = np.ascontiguousarray(values[self._csr_upper], dtype=np.result_type(values.dtype, np.float64))
+        mtype = mod.matrix_type(data.dtype, True, positive_definite)
+        key = ("pardiso", mtype)
+        with self._lock:
+            idle = self._idle.get(key)
+            handle = idle.pop() if idle else None
+        try:
+            if handle is None:
+                assert self._upper_rc is not None  # a symmetric pattern (the caller's test)
+                rows, cols = self._upper_rc
+                A = sp.csr_matrix((values[self._upper].astype(data.dtype), (rows, cols)), shape=(self.n, self.n))
+                handle = mod.PardisoHandle(A, mtype)
+                self.analyses += 1
+            else:
+                handle.refactor(data)
+                self.reused += 1
+        except mod.PardisoError as exc:
+            if exc.code == -4 and mtype == 2:  # not positive definite: symmetric indefinite, unpooled
+                return _pardiso(self.matrix(values), True, False)
+            raise SingularMatrixError(str(exc)) from None  # the handle is dropped
+        if handle.perturbed:
+            raise SingularMatrixError(f"PARDISO perturbed {handle.perturbed} pivot(s) even with scaling and "
+                                      f"matching: the matrix is numerically singular")
+        fac = _pardiso_factor(handle)
+        weakref.finalize(fac, self._give_back, key, handle)
+        return fac
+
+    def _give_back(self, key, ctx) -> None:
         with self._lock:
             self._idle.setdefault(key, []).append(ctx)
 

@@ -433,10 +433,14 @@ def test_reuse_switch_and_options():
     J, fac, _ = _reused_pair(model, h, 1.3, 1.3 * (1 + 1e-6), solver)
     assert fac.exact and fac.F.omega == J.omega and solver.stats["reused"] == 0
     assert solver.stats["factorizations"] == 2
-    assert repr(solver) == "BlockSolver()" and repr(BlockSolver(reuse=True)) == "BlockSolver(reuse=True)"
+    assert repr(BlockSolver()) == "BlockSolver()" and repr(BlockSolver(reuse=True)) == "BlockSolver(reuse=True)"
+    assert repr(solver) == "BlockSolver(reuse=False)"
     assert repr(BlockSolver(options=BlockSolverOptions(dense_max_size=10))) == (
         f"BlockSolver(options={BlockSolverOptions(dense_max_size=10)!r})")
-    assert BlockSolver().reuse is False  # measured slower on the bars of benchmarks/README_corrector.md
+    # "auto": not on band blocks (measured slower on the bars of benchmarks/README_corrector.md)
+    assert BlockSolver().reuse == "auto" and not BlockSolver().reuses(J)
+    with pytest.raises(TypeError, match="'auto'"):
+        BlockSolver(reuse="yes")
     # beyond the window: factorised afresh
     solver = BlockSolver(reuse=True, reuse_window=1e-3)
     _, fac, _ = _reused_pair(model, h, 1.3, 1.3 * (1 + 2e-3), solver)

@@ -2,7 +2,7 @@
 with SuperLU to a tolerance derived from the conditioning, a back-end that is missing falls back
 with one log record, a bad name is a clear error; forced through ``FEMODES_SPARSE_BACKEND``,
 Craig-Bampton, linear modes, linear responses and the HBM block solver give SuperLU's results.
-The fallback path runs everywhere; the CHOLMOD and MUMPS paths where they are installed
+The fallback path runs everywhere; the CHOLMOD, MUMPS and PARDISO paths where they are installed
 (``make venv`` installs them when it can)."""
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def test_backend_agrees_with_superlu(box, backend, name):
     assert xc.shape == (K.shape[0],)
     assert np.abs(xc - (ref_k[:, 0] + 2j * ref_k[:, 1])).max() <= tol * np.abs(ref_k).max()
     fz = sd.factorize(Z)
-    assert fz.backend == ("mumps" if name == "mumps" else "superlu")  # CHOLMOD takes SPD only
+    assert fz.backend == ("superlu" if name == "cholmod" else name)  # CHOLMOD takes SPD only
     assert np.abs(fz.solve(B + 1j * B[::-1]) - ref_z).max() <= tol * np.abs(ref_z).max()
     assert np.abs(fz.solve(B[:, 0], trans=True) - ref_zt).max() <= tol * np.abs(ref_zt).max()
 
@@ -152,9 +152,54 @@ def test_forced_backend_in_hbm_blocks(box, backend):
             assert np.abs(lu.solve(R, trans=trans) - ref[trans]).max() <= tol * np.abs(ref[trans]).max()
 
 
-def test_bad_backend_name_is_a_clear_error(backend):
+@pytest.mark.skipif("pardiso" not in INSTALLED, reason="PARDISO (mkl) not installed")
+def test_pardiso_fallbacks_and_singular(backend):
+    """PARDISO: a matrix given as positive definite that is not is factorised as symmetric
+    indefinite (as CHOLMOD's rejection is); a singular indefinite matrix, which PARDISO would
+    factorise with a perturbed pivot, raises SingularMatrixError; a symmetric matrix without some
+    stored diagonal entries (which PARDISO's symmetric types need) solves."""
     backend("pardiso")
-    with pytest.raises(ValueError, match=r"FEMODES_SPARSE_BACKEND='pardiso'.*auto, superlu, cholmod, mumps"):
+    rng = np.random.default_rng(7)
+    n = 200
+    A = sp.random(n, n, density=0.03, random_state=8)
+    S = (A + A.T + 8 * sp.identity(n)).tocsc()
+    b = rng.standard_normal(n)
+    for M in (S - 9.5 * sp.identity(n), (S - 9.5 * sp.identity(n)) * (1 + 0.2j)):
+        f = sd.factorize(M.tocsc(), positive_definite=True)
+        assert f.backend == "pardiso"
+        # forward error <= cond(M) eps; the residual of a backward-stable solve: a few eps ||M|| ||x||
+        x = f.solve(b)
+        assert np.abs(M @ x - b).max() <= 1e3 * np.finfo(float).eps * abs(M).max() * np.abs(x).max() * n
+    Z = sp.csc_matrix(np.diag([1.0, -2.0, 0.0]))
+    with pytest.raises(sd.SingularMatrixError, match="numerically singular"):
+        sd.factorize(Z)
+    P = sp.csc_matrix(np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 2.0], [0.0, 2.0, 3.0]]))  # (0, 0) not stored
+    P.eliminate_zeros()
+    x = sd.factorize(P).solve(np.ones(3))
+    assert np.abs(P @ x - 1).max() <= 1e-14 * 10
+
+
+def test_pardiso_thread_count_from_the_environment(monkeypatch):
+    """PARDISO's own thread count (not femodes' BLAS limit): FEMODES_PARDISO_THREADS, else
+    MKL_NUM_THREADS, else the available cores; a bad value names its variable."""
+    from femodes import sparse_pardiso as spp
+
+    monkeypatch.delenv(spp.ENV_VAR, raising=False)
+    monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
+    assert spp.pardiso_threads() >= 1
+    monkeypatch.setenv("MKL_NUM_THREADS", "2")
+    assert spp.pardiso_threads() == 2
+    monkeypatch.setenv(spp.ENV_VAR, "3")
+    assert spp.pardiso_threads() == 3
+    for bad in ("0", "two"):
+        monkeypatch.setenv(spp.ENV_VAR, bad)
+        with pytest.raises(ValueError, match="FEMODES_PARDISO_THREADS must be a positive integer"):
+            spp.pardiso_threads()
+
+
+def test_bad_backend_name_is_a_clear_error(backend):
+    backend("umfpack")
+    with pytest.raises(ValueError, match=r"FEMODES_SPARSE_BACKEND='umfpack'.*auto, superlu, cholmod, mumps, pardiso"):
         sd.factorize(sp.identity(3, format="csc"))
     with pytest.raises(ValueError, match="FEMODES_SPARSE_BACKEND"):
         fm.sparse_backend_info()
@@ -183,10 +228,9 @@ def test_auto_keeps_superlu_for_small_matrices(backend):
     assert sd.factorize(A, positive_definite=True).backend == "superlu"
     info = fm.sparse_backend_info()
     assert info.requested == "auto" and info.min_size == sd.AUTO_MIN_SIZE
-    if "cholmod" in INSTALLED:
-        assert info.positive_definite == "cholmod"
-    if "mumps" in INSTALLED:
-        assert info.indefinite == "mumps"
+    first = {kind: next((b for b in order if b in INSTALLED), "superlu")
+             for kind, order in (("pd", sd.AUTO_POSITIVE_DEFINITE), ("indef", sd.AUTO_INDEFINITE))}
+    assert (info.positive_definite, info.indefinite) == (first["pd"], first["indef"])
 
 
 @pytest.mark.skipif(not OPTIONAL or not set(OPTIONAL) & set(INSTALLED), reason="no optional back-end installed")
@@ -257,9 +301,9 @@ def test_pattern_factorizer_matches_factorize(box, backend, name):
         if w == 1.5:
             alive.append(f)  # held: the next matrix needs an instance of its own
         del f, ref
-    if name == "mumps":
+    if name in ("mumps", "pardiso"):
         # 1.5 (held), 3.0 fresh; 1.515 reuses 3.0's instance; the real K another kind (CHOLMOD
-        # is not installed as the named back-end here: MUMPS LDL^T of K, a fresh real analysis)
+        # is not the named back-end here: MUMPS LDL^T or PARDISO LL^T of K, a fresh real analysis)
         assert (pf.analyses, pf.reused) == (3, 1)
         pf.release()
         assert not any(pf._idle.values())
@@ -293,7 +337,7 @@ def test_hbm_steps_with_shared_analysis_and_harmonic_zero(forced_box, name):
         static = blk0
     # Z(0) = K at any xi too (the nonlinear-mode continuation's unknown): one entry, shared
     assert pr.system.linear.factors(1.54, 0.3).blocks[0] is static and len(pat.static) == 1
-    if name == "mumps":
+    if name in ("mumps", "pardiso"):
         assert pat.factorizer.reused > 0
 
 
@@ -333,6 +377,28 @@ def test_reuse_by_gmres_on_sparse_blocks(forced_box, name):
     r0, J0, _ = fm.ForcedResponseProblem(model, H).residual(x, 1.65)
     dx0 = J0.factorize().solve(r0)
     assert np.abs(dx - dx0).max() <= tol * np.abs(dx0).max()
+
+
+def test_auto_reuse_follows_the_blocks_kind_and_size(box):
+    """BlockSolver's default reuse="auto" reuses factors on sparse-direct blocks of at least
+    ``reuse_auto_min_rows`` interior rows (GMRES with the last frequency's factors), and not below
+    it: the small box below the default limit factorises at every frequency, and with the limit
+    lowered under its size the next frequency is solved with the factors of the first."""
+    from femodes.hbm.linsolve import BlockSolver, BlockSolverOptions
+    from femodes.hbm.linsolve.krylov import KrylovReusedFactorization
+
+    model, K, Z, tol = box
+    forced = model.with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=1e-3))
+    H = fm.Harmonics(3)
+    for limit, reused in ((None, False), (100, True)):
+        solver = BlockSolver() if limit is None else BlockSolver(options=BlockSolverOptions(reuse_auto_min_rows=limit))
+        pr = fm.ForcedResponseProblem(forced, H, solver=solver)
+        x = pr.initial_guess(1.5)
+        J = pr.residual(x, 1.5)[1]
+        assert solver.reuses(J) is reused and J.system.linear.block_pattern().perm.size < 10000
+        J.factorize()
+        fac = pr.residual(x, 1.5 * (1 + 1e-3))[1].factorize()
+        assert isinstance(fac, KrylovReusedFactorization) is reused
 
 
 def test_block_pattern_pickles_without_its_factorisations(box):

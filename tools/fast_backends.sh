@@ -24,5 +24,14 @@ if [ -f /usr/include/dmumps_c.h ]; then
 else
     echo "NOTE: MUMPS headers missing (Debian/Ubuntu: apt-get install libmumps-seq-dev); skipping python-mumps"
 fi
+# PARDISO: the mkl wheel (x86-64 only; ~0.9 GB installed; proprietary licence, free to use),
+# bound by femodes itself through ctypes (femodes/sparse_pardiso.py)
+case "$(uname -m)" in
+    x86_64|amd64)
+        "$PY" -m pip install --quiet "mkl>=2024.0" || \
+            echo "NOTE: the mkl wheel (PARDISO) did not install; femodes uses MUMPS or SuperLU instead" ;;
+    *)
+        echo "NOTE: no mkl wheel for $(uname -m); skipping PARDISO" ;;
+esac
 "$PY" -c "import femodes.sparse_direct as s; print('sparse direct back-ends:', ', '.join(s.available_backends()))" || true
 exit 0

@@ -26,19 +26,18 @@ class BlockSolverOptions:
     dense_max_size : int, default 250
         Systems up to this many unknowns are assembled densely and factorised by LAPACK.
     dense_fill : float, default 0.25
-        Below ``structured_min_size``, a system whose nonlinear block alone fills at least this
-        fraction of the matrix is factorised densely too.
+        Below ``structured_min_size``, dense too when the nonlinear block fills this fraction.
     dense_operators_max : int, default 1000
-        A dense matrix (``HarmonicBlockJacobian.toarray``) is assembled from the system's cached dense
-        operators up to this many displacement coefficients, else from the sparse matrix.
+        Displacement coefficients up to which a dense ``HarmonicBlockJacobian.toarray`` comes from the
+        system's cached dense operators, not from the sparse matrix.
     schur_min_size : int, default 400
         Dense systems from this size on eliminate the displacements first when they can (``ForceSchur``).
     schur_max_growth : float, default 1e6
         Largest entry growth accepted from eliminating the displacements without pivoting across blocks
         (the Schur complement's largest entry over the blocks'); growth ``g`` costs up to ``g eps``.
     keep_w_max_bytes : int, default 256 MiB
-        Memory allowed for keeping the condensation columns ``W = Z_II^-1 Z_Ib`` of all harmonics; a
-        solve then needs one band solve per harmonic instead of two.
+        Memory for keeping the condensation columns ``W = Z_II^-1 Z_Ib`` of all harmonics (a solve
+        then needs one band solve per harmonic, not two).
     band_max_fill : float, default 7.0
         The interior block is factorised by LAPACK band LU when its band storage ``(3 kl + 1) n_I`` is
         at most this many times its nonzeros, else by the sparse direct back-end.
@@ -51,8 +50,10 @@ class BlockSolverOptions:
         a band LU with its assembly, a SuperLU factorisation, the products and Schur solve of a pass,
         the residual product ``J x`` of the refinement test.
     reuse_forward_tol : float, default 1e-12
-        Forward-error target of a solve with reused factors: the predicted next correction must be
-        below this times ``max |x|``.
+        Forward-error target of a reused solve: next correction below this times ``max |x|``.
+    reuse_auto_min_rows : int, default 10000
+        ``BlockSolver(reuse="auto")`` reuses factors on sparse-direct blocks of at least this many
+        interior rows (2-D/3-D meshes), never on band blocks.
     """
 
     structured_min_size: int = 2000
@@ -72,6 +73,7 @@ class BlockSolverOptions:
     reuse_pass_overhead: float = 1.9
     reuse_matvec_cost: float = 1.3
     reuse_forward_tol: float = 1e-12
+    reuse_auto_min_rows: int = 10000
 
     def __post_init__(self):
         for f in dataclasses.fields(self):

@@ -41,7 +41,7 @@ class BlockSolver:
 
     Parameters
     ----------
-    reuse : bool, default False
+    reuse : bool or "auto", default "auto"
         Reuse the per-harmonic factors of a nearby frequency (:mod:`femodes.hbm.linsolve.reuse`):
         a Jacobian at ``w`` within ``reuse_window`` (relative) of the frequency ``w0`` of the
         factors this solver used last for the same system (and at the same ``xi``) is solved
@@ -50,8 +50,9 @@ class BlockSolver:
         refinement would need more passes than a factorisation costs. Band-LU blocks (line
         meshes) iterate ``x <- x + P^-1 (b - J x)`` (:mod:`~femodes.hbm.linsolve.reuse`);
         sparse-direct blocks (2-D/3-D meshes) run GMRES with ``P^-1`` as preconditioner, its
-        budget the measured cost of the factors (:mod:`~femodes.hbm.linsolve.krylov`). Why it is
-        off by default: :doc:`/guide/performance` (Why these defaults).
+        budget the measured cost of the factors (:mod:`~femodes.hbm.linsolve.krylov`). ``"auto"``:
+        on sparse-direct blocks of at least ``options.reuse_auto_min_rows`` rows only
+        (:doc:`/guide/performance`, Why these defaults).
     reuse_window : float, default 0.05
         Largest ``|w - w0| / |w0|`` tried.
     max_passes : int, optional
@@ -70,17 +71,17 @@ class BlockSolver:
         afresh).
     """
 
-    def __init__(self, *, reuse: bool = False, reuse_window: float = 0.05, max_passes: int | None = None,
+    def __init__(self, *, reuse: bool | str = "auto", reuse_window: float = 0.05, max_passes: int | None = None,
                  options: BlockSolverOptions | None = None):
-        if not isinstance(reuse, (bool, np.bool_)):
-            raise TypeError(f"reuse must be True or False, got {reuse!r}")
+        if not (isinstance(reuse, (bool, np.bool_)) or reuse == "auto"):
+            raise TypeError(f"reuse must be True, False or 'auto', got {reuse!r}")
         if not (isinstance(reuse_window, (int, float)) and 0.0 <= float(reuse_window) < 1.0):
             raise ValueError(f"reuse_window must be in [0, 1), got {reuse_window!r}")
         if max_passes is not None and (not isinstance(max_passes, (int, np.integer)) or max_passes < 1):
             raise ValueError(f"max_passes must be a positive integer or None, got {max_passes!r}")
         if options is not None and not isinstance(options, BlockSolverOptions):
             raise TypeError(f"options must be a BlockSolverOptions, got {options!r}")
-        self.reuse = bool(reuse)
+        self.reuse: bool | str = reuse if reuse == "auto" else bool(reuse)
         self.reuse_window = float(reuse_window)
         self.max_passes = None if max_passes is None else int(max_passes)
         self.options = DEFAULT_OPTIONS if options is None else options
@@ -129,6 +130,14 @@ class BlockSolver:
             return AssembledFactorization(J)
 
     # -- reuse ------------------------------------------------------------------------------
+    def reuses(self, J: HarmonicBlockJacobian) -> bool:
+        """Whether factors of a nearby frequency may serve ``J`` (``reuse``; ``"auto"``: sparse-direct
+        blocks of at least ``options.reuse_auto_min_rows`` interior rows)."""
+        if self.reuse != "auto":
+            return bool(self.reuse)
+        pat = J.system.linear.block_pattern()
+        return not pat.banded and pat.perm.size >= self.options.reuse_auto_min_rows
+
     def _state(self, system) -> ReuseState | None:
         try:
             st = self._states.get(system)
@@ -144,7 +153,7 @@ class BlockSolver:
         at that frequency); they become the base of later reuse. Without reuse the last factors are
         let go first: a Newton iteration at a new frequency then holds one set of factors, not two
         (and their MUMPS instances are refactorised, ``sparse_direct.PatternFactorizer``)."""
-        if (not self.reuse and state is not None and state.F is not None
+        if (state is not None and state.F is not None and not self.reuses(J)
                 and (state.F.omega, state.F.xi) != (float(J.omega), float(J.xi))):
             state.F = None
         F = J.system.linear.factors(J.omega, J.xi, threads)
@@ -156,7 +165,7 @@ class BlockSolver:
     def _reusable(self, J: HarmonicBlockJacobian, state: ReuseState | None):
         """The factors to solve ``J`` with if they are at another, close frequency and the last
         measured contraction predicts a refinement within budget; else None."""
-        if not self.reuse or state is None or state.F is None:
+        if state is None or state.F is None or not self.reuses(J):
             return None
         F0 = state.F
         if F0.xi != J.xi or F0.pat is not J.system.linear.block_pattern():
@@ -195,8 +204,8 @@ class BlockSolver:
 
     def __repr__(self) -> str:
         args = []
-        if self.reuse:
-            args.append("reuse=True")
+        if self.reuse != "auto":
+            args.append(f"reuse={self.reuse!r}")
         if self.reuse_window != 0.05:
             args.append(f"reuse_window={self.reuse_window!r}")
         if self.max_passes is not None:
