@@ -42,7 +42,7 @@ def child(size: int, points: int, reuse: bool, cache: Path) -> dict:
 
     with open(cache / f"box3d_{size}.pkl", "rb") as fh:
         _, model, built = pickle.load(fh)
-    solver = BlockSolver(reuse=bool(reuse))  # forced either way (the default "auto" reuses at these sizes)
+    solver = BlockSolver(reuse=reuse)  # True / False forced, or the default "auto"
     c0, w0 = time.process_time(), time.perf_counter()
     pr = fm.ForcedResponseProblem(model, fm.Harmonics(5), solver=solver)
     res = fm.continuation(pr, (1.5, 2.5), options=frequency_response_options(max_points=points))
@@ -64,12 +64,13 @@ def main() -> None:
     ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "femodes_hbm_iter_cache")
     ap.add_argument("--json", type=Path, default=RESULTS)
     ap.add_argument("--backends", default="", help="comma-separated FEMODES_SPARSE_BACKEND values (default: auto)")
-    ap.add_argument("--mkl-threads", default="1")
-    ap.add_argument("--reuse", default="0,1", help="the variants: 0 default solver, 1 BlockSolver(reuse=True)")
+    ap.add_argument("--mkl-threads", default="1", help="PARDISO's threads (MKL_NUM_THREADS of the child); '' to leave it unset")
+    ap.add_argument("--reuse", default="0,1", help="the variants: 0 BlockSolver(reuse=False), 1 reuse=True, auto the default")
     ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        size, points, reuse = int(args.child[0]), int(args.child[1]), args.child[2] == "1"
+        size, points = int(args.child[0]), int(args.child[1])
+        reuse = {"1": True, "0": False}.get(args.child[2], "auto")
         print(json.dumps(child(size, points, reuse, args.cache)))
         return
     sys.path.insert(0, str(HERE))
@@ -78,16 +79,18 @@ def main() -> None:
     recs = json.loads(args.json.read_text()) if args.json.is_file() else []
     for size in [int(s) for s in args.sizes.split(",")]:
         build_cache(size, args.cache)
-        for backend, reuse in [(b, r == "1") for b in (args.backends or "auto").split(",") for r in args.reuse.split(",")]:
-            env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS=args.mkl_threads,
-                       FEMODES_SPARSE_BACKEND=backend)
+        for backend, reuse in [(b, r) for b in (args.backends or "auto").split(",") for r in args.reuse.split(",")]:
+            env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", FEMODES_SPARSE_BACKEND=backend)
+            env.pop("MKL_NUM_THREADS", None)
+            if args.mkl_threads:
+                env["MKL_NUM_THREADS"] = args.mkl_threads
             load0 = os.getloadavg()
             p = subprocess.run([sys.executable, __file__, "--cache", str(args.cache), "--child", str(size),
-                                str(args.points), "1" if reuse else "0"], env=env, capture_output=True, text=True)
+                                str(args.points), reuse], env=env, capture_output=True, text=True)
             try:
                 rec = json.loads(p.stdout.strip().splitlines()[-1])
             except (IndexError, json.JSONDecodeError):
-                rec = {"size": size, "reuse": reuse, "error": p.stderr[-3000:]}
+                rec = {"size": size, "reuse": {"1": True, "0": False}.get(reuse, "auto"), "error": p.stderr[-3000:]}
             rec.update(load_before=list(load0), load_after=list(os.getloadavg()), requested_backend=backend,
                        mkl_threads=args.mkl_threads)
             recs.append(rec)

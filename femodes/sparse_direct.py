@@ -22,7 +22,8 @@ harmonic balance solver and Hill's method) calls :func:`factorize` and uses the 
 The environment variable ``FEMODES_SPARSE_BACKEND`` (``auto`` by default, or ``superlu``,
 ``cholmod``, ``mumps``, ``pardiso``) chooses. ``auto`` takes, by the measurement of
 ``benchmarks/bench_backends.py`` on P2 tetrahedra (:data:`AUTO_POSITIVE_DEFINITE`), CHOLMOD for
-positive definite matrices, MUMPS for the others, PARDISO where they are not installed, and
+positive definite matrices, MUMPS for the others (PARDISO when it may use two threads or more,
+:func:`auto_order`), each when installed, and
 SuperLU below :data:`AUTO_MIN_SIZE` rows (as fast there, and the tests' reference). A named
 back-end is used at every size for the matrices it takes (CHOLMOD: positive definite only; the
 others go to SuperLU); one that is not installed falls back to SuperLU with one log record.
@@ -48,6 +49,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .solvers.threads import refresh_blas_limit
+from .sparse_pardiso import pardiso_threads
 
 __all__ = ["BACKENDS", "ENV_VAR", "AUTO_MIN_SIZE", "Factor", "PatternFactorizer", "SingularMatrixError",
            "SparseBackendInfo", "available_backends", "factorize", "is_symmetric", "sparse_backend_info"]
@@ -73,11 +75,15 @@ MUMPS_ORDERING = "pord"
 #: thread (CPU s at 1.9e4 / 6.1e4 DOFs, P2 box): ``K_II`` and its constraint-mode solves SuperLU
 #: 0.88 / 22.6, CHOLMOD 0.46 / 3.51, MUMPS 0.47 / 2.69, PARDISO 0.55 / 3.28; a complex block and
 #: its condensation columns SuperLU 6.93 / 30.5, MUMPS 0.94 / 6.56, PARDISO 1.00 / 7.34; a whole
-#: Craig-Bampton SuperLU 1.97 / 30.8, the others 1.34-1.60 / 7.34-7.54. PARDISO comes last on one thread; it is the one fast back-end that installs from a
-#: wheel alone (``pip install mkl``, no compiler or system library), and its threads pay on several
-#: cores (``FEMODES_BLAS_THREADS``; ``benchmarks/README_backends.md``).
+#: Craig-Bampton SuperLU 1.97 / 30.8, the others 1.34-1.60 / 7.34-7.54. So on one thread PARDISO
+#: comes last; it is the one fast back-end that installs from a wheel alone (``pip install mkl``).
 AUTO_POSITIVE_DEFINITE = ("cholmod", "mumps", "pardiso")
 AUTO_INDEFINITE = ("mumps", "pardiso")
+#: The order for complex and indefinite matrices when PARDISO may use two threads or more
+#: (:func:`.sparse_pardiso.pardiso_threads`; MUMPS is sequential here): a Newton iteration of a
+#: 6.1e4-DOF 3-D HBM continuation took 12.5 s with MUMPS against 8.2 s of wall time with PARDISO
+#: on two threads, both with the default solver options (``benchmarks/README_solids_scale.md``).
+AUTO_INDEFINITE_THREADED = ("pardiso", "mumps")
 
 _logged: set[str] = set()
 _imported: set[str] = set()
@@ -138,6 +144,15 @@ def requested_backend() -> str:
     return value
 
 
+def auto_order(positive_definite: bool) -> tuple[str, ...]:
+    """``auto``'s back-ends for this kind of matrix, in order of preference (those installed first
+    win): :data:`AUTO_POSITIVE_DEFINITE`, or for the others :data:`AUTO_INDEFINITE_THREADED` when
+    PARDISO may use two threads or more (``FEMODES_PARDISO_THREADS``), else :data:`AUTO_INDEFINITE`."""
+    if positive_definite:
+        return AUTO_POSITIVE_DEFINITE
+    return AUTO_INDEFINITE_THREADED if pardiso_threads() >= 2 else AUTO_INDEFINITE
+
+
 def _choose(n: int, positive_definite: bool) -> str:
     """The back-end for an ``n x n`` matrix of this kind under the current request."""
     req = requested_backend()
@@ -146,7 +161,7 @@ def _choose(n: int, positive_definite: bool) -> str:
     if req == "auto":
         if n < AUTO_MIN_SIZE:
             return "superlu"
-        for name in (AUTO_POSITIVE_DEFINITE if positive_definite else AUTO_INDEFINITE):
+        for name in auto_order(positive_definite):
             if _import(name) is not None:
                 return name
         _log_once("auto-missing", logging.INFO,

@@ -30,7 +30,8 @@ several cores, unlike the small dense operations that femodes' BLAS limit
 with its own thread count, set thread-locally around the call (``mkl_set_num_threads_local``):
 ``FEMODES_PARDISO_THREADS``, else ``MKL_NUM_THREADS``, else the cores this process may use
 (:func:`pardiso_threads`). On the 2-core machine, a Newton iteration of a 6.1e4-DOF 3-D HBM
-problem took 10.7 s of wall time on two threads (``benchmarks/README_solids_scale.md``).
+continuation took 8.2 s of wall time on two threads against 12.5 s with the sequential MUMPS
+(``benchmarks/README_solids_scale.md``).
 
 Only the LP64 interface (32-bit indices) is used: matrices up to 2^31 stored entries.
 """

@@ -179,6 +179,23 @@ def test_pardiso_fallbacks_and_singular(backend):
     assert np.abs(P @ x - 1).max() <= 1e-14 * 10
 
 
+def test_auto_prefers_pardiso_for_complex_blocks_on_two_threads(monkeypatch):
+    """auto's order for complex / indefinite matrices: PARDISO first when it may use two threads
+    (MUMPS is sequential), MUMPS first on one; positive definite matrices keep CHOLMOD first."""
+    from femodes import sparse_pardiso as spp
+
+    monkeypatch.setenv(spp.ENV_VAR, "2")
+    assert sd.auto_order(False) == sd.AUTO_INDEFINITE_THREADED == ("pardiso", "mumps")
+    assert sd.auto_order(True) == sd.AUTO_POSITIVE_DEFINITE
+    monkeypatch.setenv(spp.ENV_VAR, "1")
+    assert sd.auto_order(False) == sd.AUTO_INDEFINITE == ("mumps", "pardiso")
+    monkeypatch.setenv(sd.ENV_VAR, "auto")
+    if "pardiso" in INSTALLED and "mumps" in INSTALLED:
+        assert fm.sparse_backend_info().indefinite == "mumps"
+        monkeypatch.setenv(spp.ENV_VAR, "2")
+        assert fm.sparse_backend_info().indefinite == "pardiso"
+
+
 def test_pardiso_thread_count_from_the_environment(monkeypatch):
     """PARDISO's own thread count (not femodes' BLAS limit): FEMODES_PARDISO_THREADS, else
     MKL_NUM_THREADS, else the available cores; a bad value names its variable."""
@@ -228,8 +245,8 @@ def test_auto_keeps_superlu_for_small_matrices(backend):
     assert sd.factorize(A, positive_definite=True).backend == "superlu"
     info = fm.sparse_backend_info()
     assert info.requested == "auto" and info.min_size == sd.AUTO_MIN_SIZE
-    first = {kind: next((b for b in order if b in INSTALLED), "superlu")
-             for kind, order in (("pd", sd.AUTO_POSITIVE_DEFINITE), ("indef", sd.AUTO_INDEFINITE))}
+    first = {kind: next((b for b in sd.auto_order(pd) if b in INSTALLED), "superlu")
+             for kind, pd in (("pd", True), ("indef", False))}
     assert (info.positive_definite, info.indefinite) == (first["pd"], first["indef"])
 
 

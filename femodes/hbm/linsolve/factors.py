@@ -85,7 +85,8 @@ class LinearFactors:
         # up Z_II^-1 U_I are kept too: the solve then takes the lean path (one band solve per
         # harmonic, issue 38 item 5)
         self.keep_w = bool((not self.rank or self.modes is not None) and nb and pat.perm.size
-                           and 16 * pat.perm.size * nb * len(jobs) <= opts.keep_w_max_bytes)
+                           and 16 * pat.perm.size * nb * len(jobs)
+                           <= (opts.keep_w_max_bytes if pat.banded else opts.keep_w_max_bytes_sparse))
         superlu = opts.superlu_options
 
         def one(job):

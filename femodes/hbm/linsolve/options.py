@@ -35,9 +35,9 @@ class BlockSolverOptions:
     schur_max_growth : float, default 1e6
         Largest entry growth accepted from eliminating the displacements without pivoting across blocks
         (the Schur complement's largest entry over the blocks'); growth ``g`` costs up to ``g eps``.
-    keep_w_max_bytes : int, default 256 MiB
-        Memory for keeping the condensation columns ``W = Z_II^-1 Z_Ib`` of all harmonics (a solve
-        then needs one band solve per harmonic, not two).
+    keep_w_max_bytes, keep_w_max_bytes_sparse : int, default 256 MiB, 2 GiB
+        Memory for keeping the condensation columns ``W = Z_II^-1 Z_Ib`` of all harmonics, band and
+        sparse-direct blocks (a solve then needs one block solve per harmonic, not two).
     band_max_fill : float, default 7.0
         The interior block is factorised by LAPACK band LU when its band storage ``(3 kl + 1) n_I`` is
         at most this many times its nonzeros, else by the sparse direct back-end.
@@ -63,6 +63,7 @@ class BlockSolverOptions:
     schur_min_size: int = 400
     schur_max_growth: float = 1e6
     keep_w_max_bytes: int = 256 * 2 ** 20
+    keep_w_max_bytes_sparse: int = 2 * 2 ** 30
     band_max_fill: float = 7.0
     superlu_permc_spec: str = "MMD_AT_PLUS_A"
     superlu_diag_pivot_thresh: float = 0.1
