@@ -3,7 +3,7 @@ r"""Models layer (leaf): sparse direct factorisations behind one small interface
 Every place of femodes that factorises a large sparse matrix (Craig-Bampton constraint modes,
 shift-invert eigen-solves, linear responses, time stepping, the per-harmonic blocks of the
 harmonic balance solver and Hill's method) calls :func:`factorize` and uses the returned
-:class:`Factor`'s ``solve``. Four back-ends:
+:class:`Factor`'s ``solve``; :func:`schur_complement` condenses onto chosen rows. Four back-ends:
 
 ``superlu``
     scipy's SuperLU (:func:`scipy.sparse.linalg.splu`), with the caller's ordering options. It
@@ -52,7 +52,8 @@ from .solvers.threads import refresh_blas_limit
 from .sparse_pardiso import pardiso_threads
 
 __all__ = ["BACKENDS", "ENV_VAR", "AUTO_MIN_SIZE", "Factor", "PatternFactorizer", "SingularMatrixError",
-           "SparseBackendInfo", "available_backends", "factorize", "is_symmetric", "sparse_backend_info"]
+           "SparseBackendInfo", "available_backends", "auto_order", "factorize", "is_symmetric", "schur_complement",
+           "sparse_backend_info"]
 
 log = logging.getLogger(__name__)
 
@@ -407,6 +408,52 @@ def factorize(A, *, positive_definite: bool = False, symmetric: bool | None = No
     if backend == "pardiso":
         return _pardiso(A, bool(symmetric), positive_definite)
     return _mumps(A, bool(symmetric))
+
+
+def schur_complement(A, keep, *, positive_definite: bool = False, symmetric: bool | None = None) -> np.ndarray:
+    """The Schur complement ``S = A_kk - A_ki A_ii^-1 A_ik`` of ``A`` on the rows and columns ``keep``.
+
+    ``i`` are the other indices; ``S`` is dense, in the order of ``keep``. With MUMPS (chosen as
+    :func:`factorize` chooses) it comes from MUMPS's own partial factorisation (``ICNTL(19)``), which
+    never forms ``A_ii^-1 A_ik``; the other back-ends factorise ``A_ii`` and solve for the
+    ``len(keep)`` columns of ``A_ik``. ``positive_definite`` and ``symmetric`` as for
+    :func:`factorize` (they describe ``A``).
+
+    Raises
+    ------
+    ValueError
+        ``keep`` is empty, has repeated or out-of-range indices, or keeps every index.
+    SingularMatrixError
+        ``A_ii`` is singular.
+    """
+    A = sp.csc_matrix(A)
+    n = A.shape[0]
+    if A.shape != (n, n):
+        raise ValueError(f"schur_complement: A must be square, got shape {A.shape}")
+    k = np.asarray(keep, dtype=np.int64).ravel()
+    if k.size == 0 or k.size >= n or np.unique(k).size != k.size or k.min() < 0 or k.max() >= n:
+        raise ValueError(f"schur_complement: keep must hold between 1 and {n - 1} distinct indices in [0, {n}), "
+                         f"got {k.size} (min {k.min() if k.size else None}, max {k.max() if k.size else None})")
+    positive_definite = bool(positive_definite) and not np.iscomplexobj(A.data)
+    if symmetric is None:
+        symmetric = is_symmetric(A)
+    if _choose(n, positive_definite) == "mumps":
+        mumps = _import("mumps")
+        ctx = mumps.Context()
+        ctx.set_matrix(sp.triu(A, format="coo") if symmetric else A.tocoo(), symmetric=bool(symmetric))
+        try:
+            S = np.array(ctx.schur(k, ordering=MUMPS_ORDERING))
+        except mumps.MUMPSError as exc:
+            raise SingularMatrixError(str(exc)) from None
+        if symmetric:  # MUMPS returns the lower triangle of a symmetric Schur complement
+            S = np.tril(S) + np.tril(S, -1).T
+        return S
+    mask = np.ones(n, dtype=bool)
+    mask[k] = False
+    i = np.flatnonzero(mask)
+    Ar = A.tocsr()
+    f = factorize(Ar[i][:, i], positive_definite=positive_definite, symmetric=symmetric)
+    return Ar[k][:, k].toarray() - Ar[k][:, i] @ f.solve(Ar[i][:, k].toarray())
 
 
 class PatternFactorizer:

@@ -214,6 +214,29 @@ def test_pardiso_thread_count_from_the_environment(monkeypatch):
             spp.pardiso_threads()
 
 
+@pytest.mark.parametrize("name", ["superlu"] + OPTIONAL)
+def test_schur_complement_on_every_backend(box, backend, name):
+    """schur_complement(A, keep) equals A_kk - A_ki A_ii^-1 A_ik computed densely, for the real
+    stiffness and the complex symmetric block, on every installed back-end (MUMPS's own partial
+    factorisation returns a triangle of a symmetric Schur complement: the whole is checked), to
+    the fixture's cond eps tolerance; bad ``keep`` is a ValueError that says what it must be."""
+    if name not in INSTALLED:
+        pytest.skip(f"{name} not installed")
+    model, K, Z, tol = box
+    keep = np.array(sorted({c.dof for c in model.contacts}))[::3]
+    i = np.setdiff1d(np.arange(K.shape[0]), keep)
+    backend(name)
+    for A, pd in ((K, True), (Z, False)):
+        D = A.toarray()
+        ref = D[np.ix_(keep, keep)] - D[np.ix_(keep, i)] @ np.linalg.solve(D[np.ix_(i, i)], D[np.ix_(i, keep)])
+        S = sd.schur_complement(A, keep, positive_definite=pd)
+        assert S.shape == (keep.size, keep.size)
+        assert np.abs(S - ref).max() <= tol * np.abs(ref).max()
+    for bad in ([], [0, 0], [K.shape[0]], np.arange(K.shape[0])):
+        with pytest.raises(ValueError, match="keep must hold"):
+            sd.schur_complement(K, bad)
+
+
 def test_bad_backend_name_is_a_clear_error(backend):
     backend("umfpack")
     with pytest.raises(ValueError, match=r"FEMODES_SPARSE_BACKEND='umfpack'.*auto, superlu, cholmod, mumps, pardiso"):
