@@ -18,6 +18,9 @@ complex   the harmonic block ``Z = K_II - w^2 M_II + i w C_II`` at ``w = 1.5`` (
           eigenfrequencies), ``factorize(Z, symmetric=True)`` (SuperLU with the options of the
           HBM block solver, ``BlockSolverOptions().superlu_options``), then one solve with ``n_b`` columns.
 cb        the whole ``fm.craig_bampton(model, n_modes=20)`` under ``FEMODES_SPARSE_BACKEND``.
+modes     ``fm.linear_modes(model, n=20)`` (shift-invert eigen-solve) likewise.
+
+``--backends`` limits the back-ends (default: all installed); ``--ops`` the operations.
 
 Results: ``benchmarks/results_backends.json``; summary: ``benchmarks/README_backends.md``.
 """
@@ -28,6 +31,7 @@ import os
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")  # PARDISO on one thread too (its calls set their own count)
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -65,7 +69,7 @@ def cpu(f):
     return time.process_time() - t, out
 
 
-def run(n: int, repeat: int, backends) -> list[dict]:
+def run(n: int, repeat: int, backends, ops=("spd", "complex", "cb", "modes")) -> list[dict]:
     model = model_of(n)
     bd = np.array(sorted({c.dof for c in model.contacts}))
     mask = np.ones(model.n_dofs, bool)
@@ -77,13 +81,14 @@ def run(n: int, repeat: int, backends) -> list[dict]:
     w = 1.5
     Z = (K - w * w * M + 1j * w * C)[I][:, I].tocsc()
     ZIB = (K - w * w * M + 1j * w * C)[I][:, bd].toarray()
-    recs = {(op, b): [] for op in ("spd", "complex", "cb") for b in backends}
+    recs = {(op, b): [] for op in ("spd", "complex", "cb", "modes") for b in backends}
     ref = {}
     for r in range(repeat):
         for b in backends:
             os.environ[sd.ENV_VAR] = b
-            for op, A, B, kw in (("spd", KII, KIB, dict(positive_definite=True)),
-                                 ("complex", Z, ZIB, dict(symmetric=True, superlu_options=SUPERLU_OPTIONS))):
+            for op, A, B, kw in [o for o in (("spd", KII, KIB, dict(positive_definite=True)),
+                                              ("complex", Z, ZIB, dict(symmetric=True, superlu_options=SUPERLU_OPTIONS)))
+                                 if o[0] in ops]:
                 tf, f = cpu(lambda: sd.factorize(A, **kw))
                 ts, X = cpu(lambda: f.solve(B))  # noqa: F821 (f is bound on the line above)
                 res = float(np.abs(A @ X - B).max() / np.abs(B).max())
@@ -93,16 +98,24 @@ def run(n: int, repeat: int, backends) -> list[dict]:
                 recs[(op, b)].append(dict(factor_s=tf, solve_s=ts, total_s=tf + ts, residual=res,
                                           rel_diff_vs_first=diff, used=f.backend))
                 del f
-            tc, rom = cpu(lambda: fm.craig_bampton(model, n_modes=20))
-            om = np.sort(fm.linear_modes(rom, n=10).omega) if r == 0 else None
-            if om is not None:
-                ref.setdefault("omega", om)
-            recs[("cb", b)].append(dict(total_s=tc, omega_rel_diff=(float(np.abs(om / ref["omega"] - 1).max())
-                                                                     if om is not None else None)))
+            tc = tm = float("nan")
+            if "cb" in ops:
+                tc, rom = cpu(lambda: fm.craig_bampton(model, n_modes=20))
+                om = np.sort(fm.linear_modes(rom, n=10).omega) if r == 0 else None
+                if om is not None:
+                    ref.setdefault("omega", om)
+                recs[("cb", b)].append(dict(total_s=tc, omega_rel_diff=(float(np.abs(om / ref["omega"] - 1).max())
+                                                                         if om is not None else None)))
+            if "modes" in ops:
+                tm, lm = cpu(lambda: fm.linear_modes(model, n=20))
+                ref.setdefault("modes", lm.omega)
+                recs[("modes", b)].append(dict(total_s=tm, omega_rel_diff=float(np.abs(lm.omega / ref["modes"] - 1).max())))
             print(f"n={n} N={model.n_dofs} repeat {r} {b}: spd {recs[('spd', b)][-1]['total_s']:.2f} s, "
-                  f"complex {recs[('complex', b)][-1]['total_s']:.2f} s, cb {tc:.2f} s", flush=True)
+                  f"complex {recs[('complex', b)][-1]['total_s']:.2f} s, cb {tc:.2f} s, modes {tm:.2f} s", flush=True)
     out = []
     for (op, b), rs in recs.items():
+        if not rs:
+            continue
         med = {k: statistics.median(x[k] for x in rs) for k in rs[0] if k.endswith("_s")}
         out.append(dict(size=n, n_dofs=int(model.n_dofs), n_interior=int(I.size), n_b=int(bd.size),
                         op=op, backend=b, repeats=rs, **{"median_" + k: v for k, v in med.items()}))
@@ -113,19 +126,24 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="3,4,6")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--backends", default="", help="comma-separated (default: every installed back-end)")
+    ap.add_argument("--ops", default="spd,complex,cb,modes")
+    ap.add_argument("--json", type=Path, default=OUT)
     args = ap.parse_args(argv)
-    backends = sd.available_backends()
+    backends = tuple(b for b in (args.backends.split(",") if args.backends else sd.available_backends())
+                     if b in sd.available_backends())
+    ops = tuple(args.ops.split(","))
     results = dict(cpu=cpu_model(), note="CPU time, BLAS 1 thread, machine shared with other sessions",
                    backends=list(backends), runs=[])
     with threadpool_limits(1):
         for n in (int(s) for s in args.sizes.split(",")):
-            results["runs"] += run(n, args.repeat, backends)
-            OUT.write_text(json.dumps(results, indent=1))
+            results["runs"] += run(n, args.repeat, backends, ops)
+            args.json.write_text(json.dumps(results, indent=1))
     for r in results["runs"]:
-        base = next(x for x in results["runs"] if x["size"] == r["size"] and x["op"] == r["op"]
-                    and x["backend"] == "superlu")
+        base = next((x for x in results["runs"] if x["size"] == r["size"] and x["op"] == r["op"]
+                     and x["backend"] == backends[0]), r)
         print(f"{r['n_dofs']:7d} {r['op']:8s} {r['backend']:8s} {r['median_total_s']:8.2f} s "
-              f"(x{base['median_total_s'] / r['median_total_s']:.1f} vs SuperLU)")
+              f"(x{base['median_total_s'] / r['median_total_s']:.1f} vs {backends[0]})")
 
 
 if __name__ == "__main__":

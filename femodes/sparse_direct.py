@@ -413,10 +413,10 @@ def factorize(A, *, positive_definite: bool = False, symmetric: bool | None = No
 def schur_complement(A, keep, *, positive_definite: bool = False, symmetric: bool | None = None) -> np.ndarray:
     """The Schur complement ``S = A_kk - A_ki A_ii^-1 A_ik`` of ``A`` on the rows and columns ``keep``.
 
-    ``i`` are the other indices; ``S`` is dense, in the order of ``keep``. With MUMPS (chosen as
-    :func:`factorize` chooses) it comes from MUMPS's own partial factorisation (``ICNTL(19)``), which
-    never forms ``A_ii^-1 A_ik``; the other back-ends factorise ``A_ii`` and solve for the
-    ``len(keep)`` columns of ``A_ik``. ``positive_definite`` and ``symmetric`` as for
+    ``i`` are the other indices; ``S`` is dense, in the order of ``keep``. With MUMPS or PARDISO
+    (chosen as :func:`factorize` chooses) it comes from the library's own partial factorisation
+    (MUMPS ``ICNTL(19)``, PARDISO ``iparm[35]``), which never forms ``A_ii^-1 A_ik``; SuperLU and
+    CHOLMOD factorise ``A_ii`` and solve for the ``len(keep)`` columns of ``A_ik``. ``positive_definite`` and ``symmetric`` as for
     :func:`factorize` (they describe ``A``).
 
     Raises
@@ -437,7 +437,21 @@ def schur_complement(A, keep, *, positive_definite: bool = False, symmetric: boo
     positive_definite = bool(positive_definite) and not np.iscomplexobj(A.data)
     if symmetric is None:
         symmetric = is_symmetric(A)
-    if _choose(n, positive_definite) == "mumps":
+    backend = _choose(n, positive_definite)
+    if backend == "pardiso":
+        mod = _import("pardiso")
+        A = A.astype(np.result_type(A.dtype, np.float64), copy=False)
+        order = np.argsort(k)  # PARDISO returns the kept rows in increasing order
+        try:
+            S, perturbed = mod.schur(A, k, mod.matrix_type(A.dtype, bool(symmetric), positive_definite))
+        except mod.PardisoError as exc:
+            raise SingularMatrixError(str(exc)) from None
+        if perturbed:
+            raise SingularMatrixError(f"PARDISO perturbed {perturbed} pivot(s) of A_ii: numerically singular")
+        inverse = np.empty_like(order)
+        inverse[order] = np.arange(k.size)
+        return S[np.ix_(inverse, inverse)]
+    if backend == "mumps":
         mumps = _import("mumps")
         ctx = mumps.Context()
         ctx.set_matrix(sp.triu(A, format="coo") if symmetric else A.tocoo(), symmetric=bool(symmetric))

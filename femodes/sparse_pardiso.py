@@ -49,7 +49,7 @@ import weakref
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["ENV_VAR", "PardisoError", "PardisoHandle", "load_library", "matrix_type", "pardiso_threads"]
+__all__ = ["ENV_VAR", "PardisoError", "PardisoHandle", "load_library", "matrix_type", "pardiso_threads", "schur"]
 
 #: The environment variable of PARDISO's thread count (module docstring).
 ENV_VAR = "FEMODES_PARDISO_THREADS"
@@ -270,3 +270,41 @@ class PardisoHandle:
         self.iparm[11] = 2 if (trans and self.mtype in (11, 13)) else 0
         self._call(33, B, X, B.shape[1])
         return X[:, 0] if one else X
+
+
+def schur(A, keep: np.ndarray, mtype: int) -> tuple[np.ndarray, int]:
+    """PARDISO's own Schur complement of ``A`` on the rows and columns ``keep`` (``iparm[35] = 1``,
+    the kept rows marked in ``perm``, phase 12; dense, row-major in the order of increasing index)
+    and the number of pivots PARDISO perturbed; the instance is released before returning."""
+    lib = load_library()
+    if lib is None:
+        raise RuntimeError("PARDISO: libmkl_rt not found (pip install mkl)")
+    S = sp.triu(A, format="csr") if mtype in (2, -2, 6) else sp.csr_matrix(A)
+    S.sum_duplicates()
+    if mtype in (2, -2, 6):
+        S = _with_diagonal(S)
+    S.sort_indices()
+    n = int(S.shape[0])
+    a = np.ascontiguousarray(S.data)
+    ia, ja = S.indptr.astype(np.int32), S.indices.astype(np.int32)
+    pt, iparm = np.zeros(64, dtype=np.int64), np.zeros(64, dtype=np.int32)
+    lib.pardisoinit(pt.ctypes.data, ctypes.byref(_I(mtype)), iparm.ctypes.data)
+    iparm[0], iparm[1], iparm[7], iparm[34], iparm[35] = 1, 2, 0, 1, 1
+    perm = np.zeros(n, dtype=np.int32)
+    perm[keep] = 1
+    k = int(np.count_nonzero(perm))
+    x = np.zeros(k * k, dtype=a.dtype)
+    b = np.zeros(n, dtype=a.dtype)
+    err = _I(0)
+    previous = lib.MKL_Set_Num_Threads_Local(pardiso_threads())
+    try:
+        lib.pardiso(pt.ctypes.data, ctypes.byref(_I(1)), ctypes.byref(_I(1)), ctypes.byref(_I(mtype)),
+                    ctypes.byref(_I(12)), ctypes.byref(_I(n)), a.ctypes.data, ia.ctypes.data, ja.ctypes.data,
+                    perm.ctypes.data, ctypes.byref(_I(1)), iparm.ctypes.data, ctypes.byref(_I(0)), b.ctypes.data,
+                    x.ctypes.data, ctypes.byref(err))
+    finally:
+        lib.MKL_Set_Num_Threads_Local(previous)
+        _release(lib, pt, mtype, n)
+    if err.value:
+        raise PardisoError(12, int(err.value))
+    return x.reshape(k, k), int(iparm[13])

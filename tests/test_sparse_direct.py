@@ -217,16 +217,17 @@ def test_pardiso_thread_count_from_the_environment(monkeypatch):
 @pytest.mark.parametrize("name", ["superlu"] + OPTIONAL)
 def test_schur_complement_on_every_backend(box, backend, name):
     """schur_complement(A, keep) equals A_kk - A_ki A_ii^-1 A_ik computed densely, for the real
-    stiffness and the complex symmetric block, on every installed back-end (MUMPS's own partial
-    factorisation returns a triangle of a symmetric Schur complement: the whole is checked), to
+    stiffness, the complex symmetric block and an unsymmetric one, with ``keep`` unsorted, on every
+    installed back-end (MUMPS returns a triangle of a symmetric Schur complement, PARDISO the rows
+    in increasing order: the whole is checked in the caller's order), to
     the fixture's cond eps tolerance; bad ``keep`` is a ValueError that says what it must be."""
     if name not in INSTALLED:
         pytest.skip(f"{name} not installed")
     model, K, Z, tol = box
-    keep = np.array(sorted({c.dof for c in model.contacts}))[::3]
+    keep = np.array(sorted({c.dof for c in model.contacts}))[::3][::-1]  # not sorted: the order is S's
     i = np.setdiff1d(np.arange(K.shape[0]), keep)
     backend(name)
-    for A, pd in ((K, True), (Z, False)):
+    for A, pd in ((K, True), (Z, False), (Z + sp.triu(Z, 1) * 0.1, False)):  # the last one unsymmetric
         D = A.toarray()
         ref = D[np.ix_(keep, keep)] - D[np.ix_(keep, i)] @ np.linalg.solve(D[np.ix_(i, i)], D[np.ix_(i, keep)])
         S = sd.schur_complement(A, keep, positive_definite=pd)
