@@ -23,8 +23,8 @@ The environment variable ``FEMODES_SPARSE_BACKEND`` (``auto`` by default, or ``s
 ``cholmod``, ``mumps``, ``pardiso``) chooses. ``auto`` takes, by the measurement of
 ``benchmarks/bench_backends.py`` on P2 tetrahedra (:data:`AUTO_POSITIVE_DEFINITE`), CHOLMOD for
 positive definite matrices, MUMPS for the others (PARDISO when it may use two threads or more,
-:func:`auto_order`), each when installed, and
-SuperLU below :data:`AUTO_MIN_SIZE` rows (as fast there, and the tests' reference). A named
+:func:`auto_order`), each when installed, and SuperLU below :data:`AUTO_MIN_SIZE` rows (as fast
+there, and the tests' reference). A named
 back-end is used at every size for the matrices it takes (CHOLMOD: positive definite only; the
 others go to SuperLU); one that is not installed falls back to SuperLU with one log record.
 :func:`sparse_backend_info` says what is in use. Matrices of one sparsity pattern (the harmonic
@@ -416,8 +416,8 @@ def schur_complement(A, keep, *, positive_definite: bool = False, symmetric: boo
     ``i`` are the other indices; ``S`` is dense, in the order of ``keep``. With MUMPS or PARDISO
     (chosen as :func:`factorize` chooses) it comes from the library's own partial factorisation
     (MUMPS ``ICNTL(19)``, PARDISO ``iparm[35]``), which never forms ``A_ii^-1 A_ik``; SuperLU and
-    CHOLMOD factorise ``A_ii`` and solve for the ``len(keep)`` columns of ``A_ik``. ``positive_definite`` and ``symmetric`` as for
-    :func:`factorize` (they describe ``A``).
+    CHOLMOD factorise ``A_ii`` and solve for the ``len(keep)`` columns of ``A_ik``.
+    ``positive_definite`` and ``symmetric`` describe ``A``, as for :func:`factorize`.
 
     Raises
     ------
@@ -442,8 +442,14 @@ def schur_complement(A, keep, *, positive_definite: bool = False, symmetric: boo
         mod = _import("pardiso")
         A = A.astype(np.result_type(A.dtype, np.float64), copy=False)
         order = np.argsort(k)  # PARDISO returns the kept rows in increasing order
+        mtype = mod.matrix_type(A.dtype, bool(symmetric), positive_definite)
         try:
-            S, perturbed = mod.schur(A, k, mod.matrix_type(A.dtype, bool(symmetric), positive_definite))
+            try:
+                S, perturbed = mod.schur(A, k, mtype)
+            except mod.PardisoError as exc:
+                if not (exc.code == -4 and mtype == 2):
+                    raise
+                S, perturbed = mod.schur(A, k, -2)  # not positive definite: LDL^T, as factorize does
         except mod.PardisoError as exc:
             raise SingularMatrixError(str(exc)) from None
         if perturbed:

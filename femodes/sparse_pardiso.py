@@ -161,6 +161,17 @@ def _with_diagonal(S: sp.csr_matrix) -> sp.csr_matrix:
                           (np.concatenate([C.row, miss]), np.concatenate([C.col, miss]))), shape=S.shape)
 
 
+def _csr(A, mtype: int) -> sp.csr_matrix:
+    """What PARDISO reads of ``A``: CSR with sorted columns, the upper triangle with every diagonal
+    entry stored (explicit zeros where ``A`` has none) for the symmetric types."""
+    S = sp.triu(A, format="csr") if mtype in (2, -2, 6) else sp.csr_matrix(A)
+    S.sum_duplicates()
+    if mtype in (2, -2, 6):
+        S = _with_diagonal(S)
+    S.sort_indices()
+    return S
+
+
 def _release(lib, pt, mtype, n) -> None:
     err = _I(0)
     dummy = np.zeros(1)
@@ -194,11 +205,7 @@ class PardisoHandle:
             raise RuntimeError("PARDISO: libmkl_rt not found (pip install mkl)")
         self._lib = lib
         self.mtype = int(mtype)
-        S = sp.triu(A, format="csr") if self.mtype in (2, -2, 6) else sp.csr_matrix(A)
-        S.sum_duplicates()
-        if self.mtype in (2, -2, 6):
-            S = _with_diagonal(S)  # PARDISO's symmetric types need every diagonal entry stored
-        S.sort_indices()
+        S = _csr(A, self.mtype)
         self.n = int(S.shape[0])
         self._ia = S.indptr.astype(np.int32)
         self._ja = S.indices.astype(np.int32)
@@ -279,11 +286,7 @@ def schur(A, keep: np.ndarray, mtype: int) -> tuple[np.ndarray, int]:
     lib = load_library()
     if lib is None:
         raise RuntimeError("PARDISO: libmkl_rt not found (pip install mkl)")
-    S = sp.triu(A, format="csr") if mtype in (2, -2, 6) else sp.csr_matrix(A)
-    S.sum_duplicates()
-    if mtype in (2, -2, 6):
-        S = _with_diagonal(S)
-    S.sort_indices()
+    S = _csr(A, mtype)
     n = int(S.shape[0])
     a = np.ascontiguousarray(S.data)
     ia, ja = S.indptr.astype(np.int32), S.indices.astype(np.int32)
