@@ -3,7 +3,8 @@ r"""Models layer (leaf): sparse direct factorisations behind one small interface
 Every place of femodes that factorises a large sparse matrix (Craig-Bampton constraint modes,
 shift-invert eigen-solves, linear responses, time stepping, the per-harmonic blocks of the
 harmonic balance solver and Hill's method) calls :func:`factorize` and uses the returned
-:class:`Factor`'s ``solve``; :func:`schur_complement` condenses onto chosen rows. Four back-ends:
+:class:`Factor`'s ``solve`` (:func:`femodes.sparse_schur.schur_complement` condenses onto chosen
+rows through the same back-ends). Four back-ends:
 
 ``superlu``
     scipy's SuperLU (:func:`scipy.sparse.linalg.splu`), with the caller's ordering options. It
@@ -52,8 +53,8 @@ from .solvers.threads import refresh_blas_limit
 from .sparse_pardiso import pardiso_threads
 
 __all__ = ["BACKENDS", "ENV_VAR", "AUTO_MIN_SIZE", "Factor", "PatternFactorizer", "SingularMatrixError",
-           "SparseBackendInfo", "available_backends", "auto_order", "factorize", "is_symmetric", "schur_complement",
-           "sparse_backend_info"]
+           "SparseBackendInfo", "available_backends", "auto_order", "backend_module", "chosen_backend", "factorize",
+           "is_symmetric", "sparse_backend_info"]
 
 log = logging.getLogger(__name__)
 
@@ -100,8 +101,8 @@ def _log_once(key: str, level: int, msg: str, *args) -> None:
         log.log(level, msg, *args)
 
 
-def _import(name: str):
-    """The back-end's module, or None if it is not installed."""
+def backend_module(name: str):
+    """The back-end's module (``name`` one of :data:`BACKENDS`), or None if it is not installed."""
     try:
         if name == "cholmod":
             from sksparse import cholmod as module
@@ -126,7 +127,7 @@ def _import(name: str):
 
 def available_backends() -> tuple[str, ...]:
     """The back-ends that import on this machine (SuperLU always)."""
-    return tuple(b for b in BACKENDS if _import(b) is not None)
+    return tuple(b for b in BACKENDS if backend_module(b) is not None)
 
 
 def requested_backend() -> str:
@@ -154,8 +155,8 @@ def auto_order(positive_definite: bool) -> tuple[str, ...]:
     return AUTO_INDEFINITE_THREADED if pardiso_threads() >= 2 else AUTO_INDEFINITE
 
 
-def _choose(n: int, positive_definite: bool) -> str:
-    """The back-end for an ``n x n`` matrix of this kind under the current request."""
+def chosen_backend(n: int, positive_definite: bool) -> str:
+    """The back-end :func:`factorize` takes for an ``n x n`` matrix of this kind under the current request."""
     req = requested_backend()
     if req == "superlu":
         return "superlu"
@@ -163,13 +164,13 @@ def _choose(n: int, positive_definite: bool) -> str:
         if n < AUTO_MIN_SIZE:
             return "superlu"
         for name in auto_order(positive_definite):
-            if _import(name) is not None:
+            if backend_module(name) is not None:
                 return name
         _log_once("auto-missing", logging.INFO,
                   "%s=auto: none of CHOLMOD (scikit-sparse), MUMPS (python-mumps) and PARDISO (mkl) is installed; "
                   "sparse factorisations use SuperLU (make venv installs them where it can)", ENV_VAR)
         return "superlu"
-    if _import(req) is None:
+    if backend_module(req) is None:
         _log_once(f"missing:{req}", logging.WARNING,
                   "%s=%s but that back-end is not installed; sparse factorisations use SuperLU", ENV_VAR, req)
         return "superlu"
@@ -207,7 +208,7 @@ def sparse_backend_info() -> SparseBackendInfo:
     req = requested_backend()
     n = AUTO_MIN_SIZE if req == "auto" else 0
     return SparseBackendInfo(requested=req, available=available_backends(),
-                             positive_definite=_choose(max(n, 1), True), indefinite=_choose(max(n, 1), False),
+                             positive_definite=chosen_backend(max(n, 1), True), indefinite=chosen_backend(max(n, 1), False),
                              min_size=n)
 
 
@@ -275,7 +276,7 @@ def _superlu(A, options: dict | None) -> Factor:
 
 
 def _cholmod(A) -> Factor:
-    cholmod = _import("cholmod")
+    cholmod = backend_module("cholmod")
     try:
         f = cholmod.cholesky(A.tocsc())
     except cholmod.CholmodNotPositiveDefiniteError as exc:
@@ -289,7 +290,7 @@ def _cholmod(A) -> Factor:
 
 
 def _mumps_context(A, symmetric: bool):
-    mumps = _import("mumps")
+    mumps = backend_module("mumps")
     ctx = mumps.Context()
     ctx.set_matrix(sp.triu(A, format="coo") if symmetric else A.tocoo(), symmetric=symmetric)
     try:
@@ -345,7 +346,7 @@ def _pardiso_factor(handle) -> Factor:
 
 
 def _pardiso(A, symmetric: bool, positive_definite: bool) -> Factor:
-    mod = _import("pardiso")
+    mod = backend_module("pardiso")
     A = A.astype(np.result_type(A.dtype, np.float64), copy=False)
     mtype = mod.matrix_type(A.dtype, symmetric, positive_definite)
     try:
@@ -391,7 +392,7 @@ def factorize(A, *, positive_definite: bool = False, symmetric: bool | None = No
     if A.shape != (n, n):
         raise ValueError(f"factorize: A must be square, got shape {A.shape}")
     positive_definite = bool(positive_definite) and not np.iscomplexobj(A.data)
-    backend = _choose(n, positive_definite)
+    backend = chosen_backend(n, positive_definite)
     if backend == "superlu":
         return _superlu(A, superlu_options)
     if symmetric is None:
@@ -402,78 +403,12 @@ def factorize(A, *, positive_definite: bool = False, symmetric: bool | None = No
                 return _cholmod(A)
             except SingularMatrixError as exc:
                 log.debug("CHOLMOD rejected the matrix (%s); symmetric indefinite factorisation instead", exc)
-        backend = _choose(max(n, AUTO_MIN_SIZE), False)
+        backend = chosen_backend(max(n, AUTO_MIN_SIZE), False)
         if backend in ("superlu", "cholmod"):
             return _superlu(A, superlu_options)
     if backend == "pardiso":
         return _pardiso(A, bool(symmetric), positive_definite)
     return _mumps(A, bool(symmetric))
-
-
-def schur_complement(A, keep, *, positive_definite: bool = False, symmetric: bool | None = None) -> np.ndarray:
-    """The Schur complement ``S = A_kk - A_ki A_ii^-1 A_ik`` of ``A`` on the rows and columns ``keep``.
-
-    ``i`` are the other indices; ``S`` is dense, in the order of ``keep``. With MUMPS or PARDISO
-    (chosen as :func:`factorize` chooses) it comes from the library's own partial factorisation
-    (MUMPS ``ICNTL(19)``, PARDISO ``iparm[35]``), which never forms ``A_ii^-1 A_ik``; SuperLU and
-    CHOLMOD factorise ``A_ii`` and solve for the ``len(keep)`` columns of ``A_ik``.
-    ``positive_definite`` and ``symmetric`` describe ``A``, as for :func:`factorize`.
-
-    Raises
-    ------
-    ValueError
-        ``keep`` is empty, has repeated or out-of-range indices, or keeps every index.
-    SingularMatrixError
-        ``A_ii`` is singular.
-    """
-    A = sp.csc_matrix(A)
-    n = A.shape[0]
-    if A.shape != (n, n):
-        raise ValueError(f"schur_complement: A must be square, got shape {A.shape}")
-    k = np.asarray(keep, dtype=np.int64).ravel()
-    if k.size == 0 or k.size >= n or np.unique(k).size != k.size or k.min() < 0 or k.max() >= n:
-        raise ValueError(f"schur_complement: keep must hold between 1 and {n - 1} distinct indices in [0, {n}), "
-                         f"got {k.size} (min {k.min() if k.size else None}, max {k.max() if k.size else None})")
-    positive_definite = bool(positive_definite) and not np.iscomplexobj(A.data)
-    if symmetric is None:
-        symmetric = is_symmetric(A)
-    backend = _choose(n, positive_definite)
-    if backend == "pardiso":
-        mod = _import("pardiso")
-        A = A.astype(np.result_type(A.dtype, np.float64), copy=False)
-        order = np.argsort(k)  # PARDISO returns the kept rows in increasing order
-        mtype = mod.matrix_type(A.dtype, bool(symmetric), positive_definite)
-        try:
-            try:
-                S, perturbed = mod.schur(A, k, mtype)
-            except mod.PardisoError as exc:
-                if not (exc.code == -4 and mtype == 2):
-                    raise
-                S, perturbed = mod.schur(A, k, -2)  # not positive definite: LDL^T, as factorize does
-        except mod.PardisoError as exc:
-            raise SingularMatrixError(str(exc)) from None
-        if perturbed:
-            raise SingularMatrixError(f"PARDISO perturbed {perturbed} pivot(s) of A_ii: numerically singular")
-        inverse = np.empty_like(order)
-        inverse[order] = np.arange(k.size)
-        return S[np.ix_(inverse, inverse)]
-    if backend == "mumps":
-        mumps = _import("mumps")
-        ctx = mumps.Context()
-        ctx.set_matrix(sp.triu(A, format="coo") if symmetric else A.tocoo(), symmetric=bool(symmetric))
-        try:
-            S = np.array(ctx.schur(k, ordering=MUMPS_ORDERING))
-        except mumps.MUMPSError as exc:
-            raise SingularMatrixError(str(exc)) from None
-        if symmetric:  # MUMPS returns the lower triangle of a symmetric Schur complement
-            S = np.tril(S) + np.tril(S, -1).T
-        return S
-    mask = np.ones(n, dtype=bool)
-    mask[k] = False
-    i = np.flatnonzero(mask)
-    Ar = A.tocsr()
-    f = factorize(Ar[i][:, i], positive_definite=positive_definite, symmetric=symmetric)
-    return Ar[k][:, k].toarray() - Ar[k][:, i] @ f.solve(Ar[i][:, k].toarray())
 
 
 class PatternFactorizer:
@@ -551,7 +486,7 @@ class PatternFactorizer:
         if values.shape != (self.nnz,):
             raise ValueError(f"PatternFactorizer: {self.nnz} values expected, got shape {values.shape}")
         positive_definite = bool(positive_definite) and not np.iscomplexobj(values)
-        backend = _choose(self.n, positive_definite)
+        backend = chosen_backend(self.n, positive_definite)
         if self.symmetric and backend == "mumps":
             return self._mumps(values)
         if self.symmetric and backend == "pardiso" and self._full_diagonal:
@@ -561,13 +496,13 @@ class PatternFactorizer:
                 return _cholmod(self.matrix(values))
             except SingularMatrixError as exc:
                 log.debug("CHOLMOD rejected the matrix (%s); symmetric indefinite factorisation instead", exc)
-            if _choose(max(self.n, AUTO_MIN_SIZE), False) == "mumps":
+            if chosen_backend(max(self.n, AUTO_MIN_SIZE), False) == "mumps":
                 return self._mumps(values)
         return factorize(self.matrix(values), positive_definite=positive_definite, symmetric=self.symmetric,
                          superlu_options=superlu_options)
 
     def _mumps(self, values) -> Factor:
-        mumps = _import("mumps")
+        mumps = backend_module("mumps")
         data = np.ascontiguousarray(values[self._upper])
         key = data.dtype.char
         A = sp.coo_matrix((data, self._upper_rc), shape=(self.n, self.n))
@@ -590,7 +525,7 @@ class PatternFactorizer:
         return fac
 
     def _pardiso(self, values, positive_definite: bool) -> Factor:
-        mod = _import("pardiso")
+        mod = backend_module("pardiso")
         assert self._csr_upper is not None
         data = np.ascontiguousarray(values[self._csr_upper], dtype=np.result_type(values.dtype, np.float64))
         mtype = mod.matrix_type(data.dtype, True, positive_definite)

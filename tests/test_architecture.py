@@ -24,6 +24,7 @@ LAYERS = {
     "femodes.dynamic_stiffness": 2,
     "femodes.sparse_direct": 2,
     "femodes.sparse_pardiso": 2,
+    "femodes.sparse_schur": 2,
     "femodes.fe": 2,
     "femodes.model": 2,
     "femodes.linear": 2,

@@ -15,6 +15,7 @@ import scipy.sparse as sp
 
 import femodes as fm
 from femodes import sparse_direct as sd
+from femodes.sparse_schur import schur_complement
 from tests.conftest import roundoff_rtol
 
 OPTIONAL = [b for b in sd.BACKENDS if b != "superlu"]
@@ -216,7 +217,7 @@ def test_pardiso_thread_count_from_the_environment(monkeypatch):
 
 @pytest.mark.parametrize("name", ["superlu"] + OPTIONAL)
 def test_schur_complement_on_every_backend(box, backend, name):
-    """schur_complement(A, keep) equals A_kk - A_ki A_ii^-1 A_ik computed densely, for the real
+    """schur_complement(A, keep) (femodes.sparse_schur) equals A_kk - A_ki A_ii^-1 A_ik computed densely, for the real
     stiffness, the complex symmetric block and an unsymmetric one, with ``keep`` unsorted, on every
     installed back-end (MUMPS returns a triangle of a symmetric Schur complement, PARDISO the rows
     in increasing order: the whole is checked in the caller's order), to
@@ -230,18 +231,18 @@ def test_schur_complement_on_every_backend(box, backend, name):
     for A, pd in ((K, True), (Z, False), (Z + sp.triu(Z, 1) * 0.1, False)):  # the last one unsymmetric
         D = A.toarray()
         ref = D[np.ix_(keep, keep)] - D[np.ix_(keep, i)] @ np.linalg.solve(D[np.ix_(i, i)], D[np.ix_(i, keep)])
-        S = sd.schur_complement(A, keep, positive_definite=pd)
+        S = schur_complement(A, keep, positive_definite=pd)
         assert S.shape == (keep.size, keep.size)
         assert np.abs(S - ref).max() <= tol * np.abs(ref).max()
     # a symmetric indefinite matrix given as positive definite (K shifted: 3 negative eigenvalues
     # of D_ii, cond 2e3 against K_II's 5e3, so the fixture's tolerance holds): LDL^T, as factorize does
     D = (K - 2e-3 * abs(K).max() * sp.identity(K.shape[0])).tocsc().toarray()
     ref = D[np.ix_(keep, keep)] - D[np.ix_(keep, i)] @ np.linalg.solve(D[np.ix_(i, i)], D[np.ix_(i, keep)])
-    S = sd.schur_complement(sp.csc_matrix(D), keep, positive_definite=True)
+    S = schur_complement(sp.csc_matrix(D), keep, positive_definite=True)
     assert np.abs(S - ref).max() <= tol * np.abs(ref).max()
     for bad in ([], [0, 0], [K.shape[0]], np.arange(K.shape[0])):
         with pytest.raises(ValueError, match="keep must hold"):
-            sd.schur_complement(K, bad)
+            schur_complement(K, bad)
 
 
 def test_bad_backend_name_is_a_clear_error(backend):
@@ -253,7 +254,7 @@ def test_bad_backend_name_is_a_clear_error(backend):
 
 
 def test_missing_backend_falls_back_with_one_log_record(backend, monkeypatch, caplog):
-    monkeypatch.setattr(sd, "_import", lambda name: sd.spla if name == "superlu" else None)
+    monkeypatch.setattr(sd, "backend_module", lambda name: sd.spla if name == "superlu" else None)
     monkeypatch.setattr(sd, "_logged", set())
     A = sp.diags([4.0, 5.0, 6.0]).tocsc()
     for name in OPTIONAL:
