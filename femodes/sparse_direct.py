@@ -342,6 +342,10 @@ def _mumps(A, symmetric: bool) -> Factor:
 
 
 def _pardiso_factor(handle) -> Factor:
+    """The factor of a factorised PARDISO handle; SingularMatrixError if pivots stayed perturbed."""
+    if handle.perturbed:
+        raise SingularMatrixError(f"PARDISO perturbed {handle.perturbed} pivot(s) even with scaling and matching: "
+                                  f"the matrix is numerically singular")
     return Factor("pardiso", handle.n, handle.dtype, handle.solve, lambda b: handle.solve(b, trans=True), nnz=handle.nnz)
 
 
@@ -356,9 +360,6 @@ def _pardiso(A, symmetric: bool, positive_definite: bool) -> Factor:
             log.debug("PARDISO's Cholesky rejected the matrix (%s); symmetric indefinite factorisation instead", exc)
             return _pardiso(A, True, False)
         raise SingularMatrixError(str(exc)) from None
-    if handle.perturbed:
-        raise SingularMatrixError(f"PARDISO perturbed {handle.perturbed} pivot(s) even with scaling and matching: "
-                                  f"the matrix is numerically singular")
     return _pardiso_factor(handle)
 
 
@@ -547,10 +548,7 @@ class PatternFactorizer:
             if exc.code == -4 and mtype == 2:  # not positive definite: symmetric indefinite, unpooled
                 return _pardiso(self.matrix(values), True, False)
             raise SingularMatrixError(str(exc)) from None  # the handle is dropped
-        if handle.perturbed:
-            raise SingularMatrixError(f"PARDISO perturbed {handle.perturbed} pivot(s) even with scaling and "
-                                      f"matching: the matrix is numerically singular")
-        fac = _pardiso_factor(handle)
+        fac = _pardiso_factor(handle)  # perturbed pivots raise before the handle could be pooled
         weakref.finalize(fac, self._give_back, key, handle)
         return fac
 
