@@ -2,7 +2,8 @@
 """Modal vs Rayleigh damping per continuation point in CPU time (issue 38, item 5).
 
 The model and continuation of ``bench_damping.py`` (P1 bar with a stop, H = 5, 6 points from
-w = 1.40); both dampings in one process, alternated over 5 rounds, ``time.process_time`` (the
+w = 1.40); both dampings in one process, alternated over ``ROUNDS`` rounds (15 up to 1e4 DOFs, where a
+continuation takes 0.1-0.7 s and single rounds scatter by 10 %; 5 above), ``time.process_time`` (the
 machine is shared), BLAS on one thread; prints the medians and their ratio. Before/after: run it
 with ``PYTHONPATH`` pointing at another tree (``git archive REV femodes | tar -x -C DIR``)::
 
@@ -35,7 +36,7 @@ def main(sizes):
             models = {d: build_model(N, d) for d in ("rayleigh", "modal")}
             per = {d: [] for d in models}
             its = {}
-            for _ in range(5):
+            for _ in range(15 if N <= 10000 else 5):
                 for d, m in models.items():
                     t = time.process_time()
                     br = fm.frequency_response(m, (W_START, W_END), h, options=opts)

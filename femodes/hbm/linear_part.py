@@ -126,7 +126,7 @@ class LinearPart:
                     z = lu.solve(rhs)[:, 0]
                 else:  # Z = Z_sparse + U diag(i f d) U^T: Woodbury on the harmonic block
                     U = Z.lowrank.U
-                    z = low_rank_solver(lu.solve, U, Z.lowrank_gain(f), U)(rhs)[:, 0]
+                    z = low_rank_solver(lu.solve, U, Z.lowrank_gain(f), U, AinvL=_modes_solve(Z, lu, f))(rhs)[:, 0]
                 out[c], out[si] = z.real, -z.imag
         except StructureFailure:
             out = _solve_linear_lsqr(self.stiffness, R, omega)
@@ -155,3 +155,27 @@ class LinearPart:
         F = LinearFactors(self, omega, xi, self.threads if threads is None else threads)
         self._cache["factors"] = (key, F)
         return F
+
+
+def _modes_solve(Z, lu: BlockLU, f: float) -> np.ndarray | None:
+    """``(K - f^2 M)^{-1} U`` from the modes relation of :meth:`DynamicStiffness.lowrank_modes`
+    (None without it): ``(Phi + c (K - c M)^{-1} E) diag(1/mu)``, ``c = f^2``, ``mu = w^2 - c``, with
+    one solve per changed mass row of ``E`` and one per mode whose ``mu`` is near zero (solved
+    directly), instead of the ``m`` solves of ``U`` (a linear response with modal damping: 4x
+    the Rayleigh one's cost on a 1e3-DOF bar)."""
+    em = Z.lowrank_modes()
+    if em is None:
+        return None
+    Phi, lam, rows, Erows = em
+    c = f * f
+    mu = lam - c
+    bad = np.abs(mu) <= 1e-6 * max(float(lam.max()), c, 1e-300)
+    X = Phi / np.where(bad, 1.0, mu)
+    if rows.size:
+        unit = np.zeros((Phi.shape[0], rows.size))
+        unit[rows, np.arange(rows.size)] = 1.0
+        X = X + lu.solve(unit) @ (c * Erows / np.where(bad, 1.0, mu))
+    if bad.any():
+        X = np.asarray(X, dtype=np.result_type(X, complex if lu.complex else float))
+        X[:, bad] = lu.solve(Z.lowrank.U[:, bad])
+    return X

@@ -159,10 +159,11 @@ class Damping:
         return f"Damping(sparse nnz={self.C.nnz}, low-rank part {low})"
 
 
-def low_rank_solver(solve, L: np.ndarray, g: np.ndarray, R: np.ndarray, *, matvec=None, refine: int = 2):
+def low_rank_solver(solve, L: np.ndarray, g: np.ndarray, R: np.ndarray, *, matvec=None, refine: int = 2,
+                    AinvL: np.ndarray | None = None):
     r"""Solver of ``(A + L diag(g) R^T) x = b`` from a solver ``solve(b) = A^{-1} b`` (Woodbury).
 
-    With ``X = A^{-1} L`` (``m`` solves, done here once) and the ``m x m`` capacitance matrix
+    With ``X = A^{-1} L`` (``m`` solves, done here once; ``AinvL`` if the caller has it) and the ``m x m`` capacitance matrix
     ``S = I + diag(g) R^T X``: ``x0 = A^{-1} b``, ``y = S^{-1} diag(g) R^T x0``, ``x = x0 - X y``
     (Hager 1989, "Updating the inverse of a matrix", SIAM Rev. 31:221). No ``g^{-1}`` is formed,
     so zero gains are fine. ``matvec(x) = A x``, if given, adds up to ``refine`` steps of
@@ -174,7 +175,7 @@ def low_rank_solver(solve, L: np.ndarray, g: np.ndarray, R: np.ndarray, *, matve
     L = np.asarray(L)
     R = np.asarray(R)
     g = np.asarray(g)
-    X = solve(L)
+    X = solve(L) if AinvL is None else np.asarray(AinvL)
     S = np.eye(g.size, dtype=np.result_type(X, g)) + g[:, None] * (R.T @ X)
     lu = sla.lu_factor(S, check_finite=False)
 

@@ -135,15 +135,17 @@ class LowRankSplit:
         WS = np.ascontiguousarray(W[:, nb:nb + ns], dtype=complex) if ns else None
         return Zc, Wb, (inv_mu, bad, Xbad, WS, c)
 
-    def apply_x(self, blk, V: np.ndarray) -> np.ndarray:
+    def apply_x(self, blk, V: np.ndarray, PhiVm: np.ndarray | None = None) -> np.ndarray:
         """``Z_II^-1 U_I V`` (complex ``V``, ``m x k``) of one harmonic from the modes relation
         of :meth:`_condense_modes`, ``Z_II^-1 U_I = (Phi_I + W_b Phi_b + c Z_II^-1 E_I) diag(1/mu)``
-        (the columns at ``k w`` near a mode's frequency solved directly): products, no solve."""
+        (the columns at ``k w`` near a mode's frequency solved directly): products, no solve.
+        ``PhiVm``: ``Phi_I`` times :meth:`scaled` ``(blk, V)`` if the caller computed it (for all
+        harmonics in one product, which reads ``Phi_I`` once); it is added to in place."""
         assert self.modes is not None  # blk.Xm is kept on the modes path only (_condense_modes)
         PhiI, Phib, _, _, _, ES = self.modes
-        inv_mu, bad, Xbad, WS, c = blk.Xm
-        Vm = np.ascontiguousarray(V * inv_mu[:, None], dtype=complex)
-        X = real_times_complex(PhiI, Vm)
+        _, bad, Xbad, WS, c = blk.Xm
+        Vm = self.scaled(blk, V)
+        X = real_times_complex(PhiI, Vm) if PhiVm is None else PhiVm
         if blk.W is not None and blk.W.shape[1]:
             X += blk.W @ (Phib @ Vm)
         if WS is not None:
@@ -151,6 +153,11 @@ class LowRankSplit:
         if Xbad is not None:
             X += Xbad @ V[bad]
         return X
+
+    @staticmethod
+    def scaled(blk, V: np.ndarray) -> np.ndarray:
+        """``diag(1/mu) V`` (zero on the modes solved directly), as :meth:`apply_x` uses it."""
+        return np.ascontiguousarray(V * blk.Xm[0][:, None], dtype=complex)
 
     def rows_x(self, blk, L: np.ndarray) -> np.ndarray:
         """``L Z_II^-1 U_I`` (complex ``L``, ``r x n_I``) by the relation of :meth:`apply_x`."""
@@ -191,48 +198,74 @@ class ModalElimination:
     """The modal coordinates eliminated from the Schur complement ``T`` harmonic by harmonic: they
     couple only to the nonlinear DOFs of their harmonic and to the borders, so ``T_yy`` is block
     diagonal and the dense LU works on ``T_rr - T_ry T_yy^-1 T_yr``, the size it has with Rayleigh
-    damping (at H = 10 the modal coordinates of 20 modes would make it 21x larger). The ``2m x 2m``
-    blocks are inverted in one batched call. :meth:`build` returns None (the full ``T`` is
-    factorised, with its pivoting) if a block is ill-conditioned (condition number above 1e10).
+    damping (at H = 10 the modal coordinates of 20 modes would make it 21x larger). The block of a
+    harmonic pair is the real form ``[[X, Y], [-Y, X]]`` of the complex ``X + i Y`` (the condensed
+    stiffness, :meth:`SchurComplement._add_condensed_stiffness`), so it is inverted as the ``m x m``
+    complex matrix, all harmonics in one batched call. :meth:`build` returns None (the full ``T``
+    is factorised, with its pivoting) if a block is ill-conditioned (condition number above 1e10).
     """
 
-    def __init__(self, Tr, r, invs, Try, Y, oy: int, om: int):
-        self.Tr, self.r, self.invs, self.Try, self.Y = Tr, r, invs, Try, Y
+    def __init__(self, Tr, r, single, paired, Try, Y, oy: int, om: int):
+        self.Tr, self.r, self.single, self.paired, self.Try, self.Y = Tr, r, single, paired, Try, Y
         self.oy, self.om = oy, om
 
+    @staticmethod
+    def _stacked(X: np.ndarray, single, paired, mr: int) -> tuple[np.ndarray, np.ndarray]:
+        """``X`` (rows coefficient-major, ``(nc mr, k)``) as the stacks ``(n_0, mr, k)`` of the
+        single rows and ``(n_p, 2 mr, k)`` of the pairs ``[cos; sin]``."""
+        X4 = X.reshape(-1, mr, X.shape[1])
+        return X4[single[0]], np.concatenate([X4[paired[0]], X4[paired[1]]], axis=1)
+
+    @staticmethod
+    def _unstack(out: np.ndarray, z0: np.ndarray, zp: np.ndarray, single, paired, mr: int) -> None:
+        o4 = out.reshape(-1, mr, out.shape[1])
+        o4[single[0]] = z0
+        o4[paired[0]] = zp[:, :mr]
+        o4[paired[1]] = zp[:, mr:]
+
     @classmethod
-    def build(cls, T: np.ndarray, groups: list, oy: int, om: int) -> ModalElimination | None:
-        """``groups``: the positions (relative to ``oy``) of each harmonic's modal coordinates,
-        ``T[oy:om]`` the modal rows."""
+    def build(cls, T: np.ndarray, rows: tuple, mr: int, oy: int, om: int) -> ModalElimination | None:
+        """``rows``: the coefficient rows ``(k, s)`` of each harmonic (``s = -1`` for harmonic 0),
+        ``mr`` modal coordinates per row, ``T[oy:om]`` the modal rows (coefficient-major)."""
         nB = T.shape[0]
+        nc = (om - oy) // mr
         r = np.r_[0:oy, om:nB]
-        Tyy = T[oy:om, oy:om]
+        single = (np.array([k for k, s in rows if s < 0], dtype=int),)
+        paired = (np.array([k for k, s in rows if s >= 0], dtype=int), np.array([s for k, s in rows if s >= 0], dtype=int))
+        Tyy = T[oy:om, oy:om].reshape(nc, mr, nc, mr)
+        A0 = Tyy[single[0], :, single[0], :]                               # (n_0, mr, mr)
+        Zp = Tyy[paired[0], :, paired[0], :] + 1j * Tyy[paired[0], :, paired[1], :]   # (n_p, mr, mr)
+        try:
+            inv0, invp = np.linalg.inv(A0), np.linalg.inv(Zp)
+        except np.linalg.LinAlgError:
+            return None
+
+        def rows_inf(B):  # infinity norms of the blocks (of the real forms for complex blocks)
+            return (np.abs(B.real) + np.abs(B.imag)).sum(axis=2).max(axis=1)
+        cond = np.concatenate([rows_inf(A0) * rows_inf(inv0), rows_inf(Zp) * rows_inf(invp)])
+        if not (np.all(np.isfinite(inv0)) and np.all(np.isfinite(invp))) or np.any(cond > 1e10):
+            return None
+        realp = np.empty((invp.shape[0], 2 * mr, 2 * mr))                  # the real forms of the inverses
+        realp[:, :mr, :mr] = realp[:, mr:, mr:] = invp.real
+        realp[:, :mr, mr:] = invp.imag
+        realp[:, mr:, :mr] = -invp.imag
         Tyr = T[oy:om][:, r]
         Y = np.empty((om - oy, r.size))
-        invs = []
-        for size in sorted({g.size for g in groups}):
-            gs = np.array([g for g in groups if g.size == size])          # (n_blocks, size)
-            B = Tyy[gs[:, :, None], gs[:, None, :]]                      # (n_blocks, size, size)
-            try:
-                inv = np.linalg.inv(B)
-            except np.linalg.LinAlgError:
-                return None
-            cond = np.abs(B).sum(axis=2).max(axis=1) * np.abs(inv).sum(axis=2).max(axis=1)
-            if not np.all(np.isfinite(inv)) or np.any(cond > 1e10):
-                return None
-            Y[gs] = inv @ Tyr[gs]
-            invs.append((gs, inv))
+        t0, tp = cls._stacked(Tyr, single, paired, mr)
+        cls._unstack(Y, inv0 @ t0, realp @ tp, single, paired, mr)
         Try = T[r][:, oy:om]
         Tr = T[np.ix_(r, r)] - Try @ Y
-        return cls(Tr, r, invs, Try, Y, oy, om)
+        return cls(Tr, r, (single[0], inv0), (paired, realp), Try, Y, oy, om)
 
     def solve(self, lu, rhsB: np.ndarray) -> np.ndarray:
         """``T^-1 rhsB`` from the LU of the reduced matrix ``Tr``."""
         oy, om, r = self.oy, self.om, self.r
+        (k0, inv0), (paired, realp) = self.single, self.paired
+        mr = inv0.shape[1] if inv0.size else realp.shape[1] // 2
         ry = rhsB[oy:om]
         zy = np.empty_like(ry)
-        for gs, inv in self.invs:
-            zy[gs] = inv @ ry[gs]
+        t0, tp = self._stacked(ry, (k0,), paired, mr)
+        self._unstack(zy, inv0 @ t0, realp @ tp, (k0,), paired, mr)
         xr = sla.lu_solve(lu, rhsB[r] - self.Try @ zy, check_finite=False)
         x = np.empty_like(rhsB)
         x[r] = xr
