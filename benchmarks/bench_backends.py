@@ -7,6 +7,11 @@ Run from the repository root (the back-ends that are not installed are skipped):
 
     python3 benchmarks/bench_backends.py                 # sizes n = 3, 4, 6 (8.8e3, 1.9e4, 6.1e4 DOFs)
     python3 benchmarks/bench_backends.py --sizes 4 --repeat 3
+    python3 benchmarks/bench_backends.py --geometry strip2d --sizes 113,160 --ops spd,complex
+
+``--geometry strip2d``: the issue's 2-D rows, a plane-stress strip 1 x 0.1 of Q1 quadrilaterals
+(``fm.rectangle_mesh(nx=10 n, ny=n, quadrilaterals=True)``, ``fm.solid(plane="stress")``, clamped "left",
+a stop on "right"): n = 113 / 160 give 2.6e5 / 5.2e5 DOFs.
 
 Operations, each run for every back-end in one process, back-ends interleaved within each repeat
 (the machine is shared: CPU time by ``time.process_time``, BLAS on one thread through
@@ -56,11 +61,19 @@ from _machine import cpu_model  # noqa: E402
 OUT = Path(__file__).resolve().parent / "results_backends.json"
 
 
-def model_of(n: int):
-    mesh = fm.box_mesh(length=1.0, width=0.1, height=0.1, nx=10 * n, ny=n, nz=n)
-    model = fm.solid(mesh, fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left", order=2)
+def model_of(n: int, geometry: str = "box3d"):
+    if geometry == "strip2d":
+        mesh = fm.rectangle_mesh(length=1.0, height=0.1, nx=10 * n, ny=n, quadrilaterals=True)
+        model = fm.solid(mesh, fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left", plane="stress", thickness=1.0)
+        direction: tuple = (1.0, 0.0)
+    elif geometry == "box3d":
+        mesh = fm.box_mesh(length=1.0, width=0.1, height=0.1, nx=10 * n, ny=n, nz=n)
+        model = fm.solid(mesh, fm.Material(E=1.0, rho=1.0, nu=0.3), clamped="left", order=2)
+        direction = (1.0, 0.0, 0.0)
+    else:
+        raise SystemExit(f"--geometry: unknown {geometry!r} (box3d or strip2d)")
     return model.with_damping(beta=0.02).with_contact(
-        fm.UnilateralContact(at="right", gap=0.01, direction=(1.0, 0.0, 0.0)))
+        fm.UnilateralContact(at="right", gap=0.01, direction=direction))
 
 
 def cpu(f):
@@ -69,8 +82,8 @@ def cpu(f):
     return time.process_time() - t, out
 
 
-def run(n: int, repeat: int, backends, ops=("spd", "complex", "cb", "modes")) -> list[dict]:
-    model = model_of(n)
+def run(n: int, repeat: int, backends, ops=("spd", "complex", "cb", "modes"), geometry: str = "box3d") -> list[dict]:
+    model = model_of(n, geometry)
     bd = np.array(sorted({c.dof for c in model.contacts}))
     mask = np.ones(model.n_dofs, bool)
     mask[bd] = False
@@ -119,7 +132,7 @@ def run(n: int, repeat: int, backends, ops=("spd", "complex", "cb", "modes")) ->
         if not rs:
             continue
         med = {k: statistics.median(x[k] for x in rs) for k in rs[0] if k.endswith("_s")}
-        out.append(dict(size=n, n_dofs=int(model.n_dofs), n_interior=int(I.size), n_b=int(bd.size),
+        out.append(dict(geometry=geometry, size=n, n_dofs=int(model.n_dofs), n_interior=int(I.size), n_b=int(bd.size),
                         op=op, backend=b, repeats=rs, **{"median_" + k: v for k, v in med.items()}))
     return out
 
@@ -130,6 +143,7 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--backends", default="", help="comma-separated (default: every installed back-end)")
     ap.add_argument("--ops", default="spd,complex,cb,modes")
+    ap.add_argument("--geometry", default="box3d", help="box3d (P2 tetrahedra) or strip2d (Q1 quadrilaterals)")
     ap.add_argument("--json", type=Path, default=OUT)
     args = ap.parse_args(argv)
     backends = tuple(b for b in (args.backends.split(",") if args.backends else sd.available_backends())
@@ -139,7 +153,7 @@ def main(argv=None):
                    backends=list(backends), runs=[])
     with threadpool_limits(1):
         for n in (int(s) for s in args.sizes.split(",")):
-            results["runs"] += run(n, args.repeat, backends, ops)
+            results["runs"] += run(n, args.repeat, backends, ops, args.geometry)
             args.json.write_text(json.dumps(results, indent=1))
     for r in results["runs"]:
         base = next((x for x in results["runs"] if x["size"] == r["size"] and x["op"] == r["op"]
