@@ -11,7 +11,7 @@ structure (``K Phi = M Phi diag(w^2)``, checked: :meth:`DynamicStiffness.lowrank
 ``n_b`` columns ``Z_k[I, I]^{-1} Z_k[I, b]`` already solved, so a Newton iteration costs about
 what it costs with Rayleigh damping (``benchmarks/README.md``, "Modal damping"). The modal
 coordinates couple only within their harmonic and to the borders, so they are eliminated
-harmonic by harmonic (``2m x 2m`` blocks, :class:`ModalElimination`) before the dense LU, which
+harmonic by harmonic (``m x m`` complex blocks, :class:`ModalElimination`) before the dense LU, which
 keeps the size it has with Rayleigh damping. Woodbury on each block is the same algebra in
 another order; the bordered form keeps the refinement and fallback paths unchanged.
 """
