@@ -10,7 +10,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .dynamic_stiffness import DynamicStiffness
 from .eigen import IllConditionedWarning, eigenvalue_floor, normal_modes
@@ -160,13 +159,14 @@ class LinearResponse:
 def _solve_lowrank(Z, lr, g: np.ndarray, F: np.ndarray) -> np.ndarray:
     """``(Z + U diag(g) U^T) q = F`` (``g = i w d``) by Woodbury on the LU of the sparse part ``Z``;
     if ``Z`` alone is singular (an undamped resonance of the sparse part that the modal damping
-    damps), SuperLU on the sparse augmented system ``[[Z, U diag(g)], [U^T, -I]] [q; y] = [F; 0]``."""
+    damps), the sparse augmented system ``[[Z, U diag(g)], [U^T, -I]] [q; y] = [F; 0]``."""
     try:
         lu = factorize(Z)
     except RuntimeError:
         m = lr.rank
         A = sp.bmat([[Z, sp.csr_matrix(lr.U * g)], [sp.csr_matrix(lr.U.T), -sp.identity(m)]], format="csc")
-        return spla.splu(A).solve(np.concatenate([np.asarray(F, dtype=complex), np.zeros(m, dtype=complex)]))[: Z.shape[0]]
+        return factorize(A, symmetric=False).solve(
+            np.concatenate([np.asarray(F, dtype=complex), np.zeros(m, dtype=complex)]))[: Z.shape[0]]
     return low_rank_solver(lu.solve, lr.U, g, lr.U, matvec=lambda x: Z @ x)(F)
 
 

@@ -214,6 +214,22 @@ def test_interior_resonance_falls_back_to_superlu():
     assert backward_error(J, fac.solve(b), b) < 1e-13
 
 
+
+def test_assembled_fallback_takes_the_sparse_backend():
+    """The assembled LU (the structured solver's fallback, AssembledSolver) factorises with the
+    back-end ``sparse_direct`` picks for a matrix of its size (an unsymmetric LU of MUMPS or
+    PARDISO above 5000 rows where installed, SuperLU otherwise) and solves to round-off."""
+    from femodes import sparse_direct as sd
+
+    pr = forced(bar_model(n_el=600, n_contacts=3), fm.Harmonics(5), solver=AssembledSolver())
+    _, J, _ = pr.residual(state(pr, 3, 1e-3), 1.3)
+    assert J.shape[0] > sd.AUTO_MIN_SIZE
+    fac = J.factorize()
+    assert isinstance(fac, AssembledFactorization)
+    assert fac.lu.backend == sd.chosen_backend(J.shape[0], False)
+    b = np.random.default_rng(4).standard_normal(pr.size)
+    assert backward_error(J, fac.solve(b), b) < 1e-13
+
 def test_singular_jacobian_raises():
     model, h = CASES["chain"]()
     pr = forced(model, h)

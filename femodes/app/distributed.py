@@ -31,9 +31,9 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..dynamic_stiffness import DynamicStiffness
+from ..sparse_direct import factorize
 
 __all__ = ["HarmonicBlock", "harmonic_block", "distributed_newton_step", "assembled_jacobian"]
 
@@ -55,7 +55,8 @@ class HarmonicBlock:
         Z = harmonic_block(K, M, C, omega, k)
         self.n = K.shape[0]
         self.k = k
-        self.lu = spla.splu(Z)
+        self.lu = factorize(Z)  # the sparse direct back-end in use on this worker
+        self.size = Z.shape[0]
         c = np.asarray(contact_dofs, dtype=int)
         self.rows = c if k == 0 else np.concatenate([c, c + self.n])  # P_k: the contact coefficients
         self.Zr = None
@@ -63,7 +64,7 @@ class HarmonicBlock:
     def reduce(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(P Z^-1 P^T, P Z^-1 r)`` for the right-hand side ``r`` of this harmonic."""
         self.Zr = self.lu.solve(np.asarray(r, dtype=float))
-        E = np.zeros((self.lu.shape[0], self.rows.size))
+        E = np.zeros((self.size, self.rows.size))
         E[self.rows, np.arange(self.rows.size)] = 1.0
         self.ZP = self.lu.solve(E)
         return self.ZP[self.rows], self.Zr[self.rows]

@@ -134,7 +134,7 @@ class HBMSystem:
     solver : BlockSolver or AssembledSolver, optional
         How the Jacobian (always a :class:`~femodes.hbm.linsolve.HarmonicBlockJacobian`) is
         factorised: per-harmonic factorisations and a Schur complement on the nonlinear DOFs
-        (default, :class:`~femodes.hbm.BlockSolver`) or SuperLU on the assembled matrix
+        (default, :class:`~femodes.hbm.BlockSolver`) or a sparse direct LU of the assembled matrix
         (:class:`~femodes.hbm.AssembledSolver`, for checks and comparisons).
     threads : int, optional
         Threads for the per-harmonic factorisations of large models (``0``: all CPUs; default

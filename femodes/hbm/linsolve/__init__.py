@@ -10,7 +10,7 @@ harmonics, a nonlinear part on the nonlinear DOFs, dense borders. :class:`BlockS
 2. condensing onto the boundary: a dense Schur complement, factorised by LU with partial
    pivoting (:mod:`.schur`; modal damping's low-rank part in :mod:`.lowrank`);
 3. back substitution (:mod:`.elimination`), then iterative refinement against the true ``J``
-   with SuperLU on the assembled matrix as the fallback (:mod:`.factorization`, :mod:`.assembled`);
+   with a sparse direct LU of the assembled matrix as the fallback (:mod:`.factorization`, :mod:`.assembled`);
 4. optionally reusing the factors of a nearby frequency (:mod:`.reuse`; GMRES on sparse-direct
    blocks, :mod:`.krylov`).
 

@@ -13,8 +13,8 @@ import warnings
 
 import numpy as np
 import scipy.linalg as sla
-import scipy.sparse.linalg as spla
 
+from ...sparse_direct import factorize
 from .jacobian import HarmonicBlockJacobian
 from .options import DEFAULT_OPTIONS, BlockSolverOptions
 
@@ -177,15 +177,17 @@ class ForceSchur:
 
 
 class AssembledFactorization:
-    """SuperLU on the assembled matrix; with modal damping on the sparse augmented matrix
-    ``[[J_sparse, s B], [I x U^T, -I]]`` (:meth:`HarmonicBlockJacobian.augmented`), whose extra
-    unknowns are the modal coordinates: the dense ``U diag(d) U^T`` is never assembled."""
+    """The sparse direct back-end in use (:func:`femodes.sparse_direct.factorize`: SuperLU below
+    its 5000 rows, an unsymmetric MUMPS or PARDISO ``LU`` above) on the assembled matrix; with
+    modal damping on the sparse augmented matrix ``[[J_sparse, s B], [I x U^T, -I]]``
+    (:meth:`HarmonicBlockJacobian.augmented`), whose extra unknowns are the modal coordinates: the
+    dense ``U diag(d) U^T`` is never assembled."""
 
     def __init__(self, J: HarmonicBlockJacobian):
         A = J.augmented()
         self.n = J.shape[0]
         self.extra = 0 if A is None else A.shape[0] - self.n
-        self.lu = spla.splu(J.tocsc() if A is None else A.tocsc())
+        self.lu = factorize(J.tocsc() if A is None else A.tocsc(), symmetric=False)
 
     def solve(self, b):
         b = np.asarray(b, dtype=float)
@@ -196,8 +198,9 @@ class AssembledFactorization:
 
 
 class AssembledSolver:
-    """Linear solver strategy: SuperLU on the assembled sparse Jacobian, whatever its size (for
-    checks and comparisons with :class:`~femodes.hbm.BlockSolver`)."""
+    """Linear solver strategy: a sparse direct factorisation of the assembled Jacobian, whatever
+    its size (:class:`AssembledFactorization`; for checks and comparisons with
+    :class:`~femodes.hbm.BlockSolver`)."""
 
     def factorize(self, J: HarmonicBlockJacobian, *, threads: int | None = None):
         return AssembledFactorization(J)

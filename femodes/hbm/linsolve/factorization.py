@@ -5,7 +5,7 @@ Interior blocks per harmonic (:mod:`.factors`), the dense Schur complement on th
 the true ``J`` (one matrix-vector product) if the residual is not at round-off; a block that
 cannot be factorised (singular ``K`` of a free structure at harmonic 0, ``k w`` at an
 eigenfrequency of the structure with its nonlinear DOFs held) raises :class:`~.blocks.StructureFailure`,
-and an inaccurate solve falls back to SuperLU on the assembled matrix.
+and an inaccurate solve falls back to a sparse direct LU of the assembled matrix.
 """
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ class StructuredFactorization:
         else:
             res = B - J.matvec(x)
             if not np.all(np.isfinite(x)) or np.max(np.abs(res)) > 1e6 * tol:
-                log.debug("structured solve inaccurate (|res| = %.2e); SuperLU on the assembled matrix",
+                log.debug("structured solve inaccurate (|res| = %.2e); the assembled matrix",
                           float(np.max(np.abs(res))))
                 x = AssembledFactorization(J).solve(B)
         return x

@@ -22,7 +22,7 @@ class BlockSolverOptions:
     Parameters
     ----------
     structured_min_size : int, default 2000
-        Systems smaller than this are solved by SuperLU on the assembled matrix.
+        Systems smaller than this are solved by a sparse LU of the assembled matrix (SuperLU at these sizes).
     dense_max_size : int, default 250
         Systems up to this many unknowns are assembled densely and factorised by LAPACK.
     dense_fill : float, default 0.25

@@ -37,7 +37,7 @@ class BlockSolver:
     (:mod:`femodes.hbm.linsolve`); systems up to ``options.dense_max_size`` unknowns (or below
     ``options.structured_min_size`` and at least ``options.dense_fill`` full) are assembled
     densely for LAPACK, larger ones below ``structured_min_size`` and blocks that cannot be
-    factorised (an interior resonance) go to SuperLU on the assembled matrix.
+    factorised (an interior resonance) go to a sparse direct LU of the assembled matrix.
 
     Parameters
     ----------
@@ -126,7 +126,7 @@ class BlockSolver:
                     return fac
             return self.fresh_factorization(J, threads, state)
         except StructureFailure as exc:
-            log.debug("structured HBM factorisation not applicable (%s); SuperLU on the assembled matrix", exc)
+            log.debug("structured HBM factorisation not applicable (%s); the assembled matrix", exc)
             return AssembledFactorization(J)
 
     # -- reuse ------------------------------------------------------------------------------
