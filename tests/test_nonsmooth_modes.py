@@ -178,6 +178,28 @@ def test_guided_sweep_reaches_the_end_of_the_span():
         fm.PeriodDriven(family_tol=0.0)
 
 
+
+def test_end_orbit_judged_by_the_guide_slope():
+    """The orbit past the end of the span continues the branch if its frequency at its energy lies
+    within ``family_tol`` of the line through the last orbit with the coarse family's slope. 80
+    elements with H = 40 stopped at 19 E_g: its last two orbits (1.95077 and 1.95688 rad/s, 18.0
+    and 19.0 E_g) gave a secant of half the family's slope (8.8 against the continuum's 15.6 per
+    rad/s there), and the family's orbit at 1.97084 rad/s, 27.2 E_g (0.49 % from the continuum),
+    was taken for a tongue's. The numbers are that run's."""
+    from femodes.nonsmooth_modes import _continues, _Orbit
+
+    class Guide:  # the coarse family's d log E / d w at the last orbit
+        def slope(self, w):
+            return 15.6
+
+    eg = math.pi ** 2 * 1e-4 / 16
+    a, b = _Orbit(None, 1.95077, 17.97 * eg, 3), _Orbit(None, 1.95688, 18.95 * eg, 3)
+    st = fm.PeriodDriven()
+    assert _continues(a, b, _Orbit(None, 1.97084, 27.23 * eg, 3), Guide(), st)
+    assert not _continues(a, b, _Orbit(None, 1.97084, 27.23 * eg, 3), None, st)
+    # 40 % more energy at the same frequency: 1.6 % off the line in frequency, a neighbouring family's
+    assert not _continues(a, b, _Orbit(None, 1.97084, 39.0 * eg, 3), Guide(), st)
+
 def test_period_sweep_start_from_fewer_harmonics(model):
     """The sweep's start when Newton from the linear mode fails (H = 80 on 160 elements, 67 s: in
     benchmarks/README_bar_convergence.md): the orbit with ``start_harmonics`` harmonics, doubled up
