@@ -220,3 +220,23 @@ def test_projection_drops_round_off_by_its_own_scale(rng):
             Tp = T * (1.0 + 64 * eps * rng.standard_normal(T.shape))
             Rp = red._project(A.tocsr(), Tp, nB).toarray()
             np.testing.assert_array_equal(Rp != 0, R != 0)
+
+
+def test_rayleigh_damping_reduced_from_the_reduced_mass_and_stiffness():
+    """Rayleigh damping is reduced as ``alpha Mr + beta Kr`` (no third projection): equal to the
+    projection ``T^T C T`` to the round-off of the products (the projections' own 1e3-ulp scale,
+    ``_project``); a damping matrix replaced after ``with_damping`` is projected as it is."""
+    import dataclasses
+
+    import femodes.reduction as red
+
+    model = (fixed_free_bar(200).with_contact(fm.UnilateralContact(at="tip", gap=0.01))
+             .with_damping(alpha=0.03, beta=2e-4))
+    assert red._rayleigh_coefficients(model) == (0.03, 2e-4)
+    rom = fm.craig_bampton(model, 8)
+    ref = red._project(model.C.tocsr(), rom.basis, rom.kept.size).toarray()
+    assert np.abs(rom.C.toarray() - ref).max() <= 1e3 * np.finfo(float).eps * np.abs(ref).max()
+    other = dataclasses.replace(model, C=2.0 * model.C)  # no longer alpha M + beta K of its spec
+    assert red._rayleigh_coefficients(other) is None
+    rom2 = fm.craig_bampton(other, 8)
+    assert np.allclose(rom2.C.toarray(), 2.0 * ref, rtol=0, atol=1e3 * np.finfo(float).eps * np.abs(ref).max())
