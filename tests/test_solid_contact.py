@@ -3,6 +3,8 @@ errors, surface mass redistribution, and a smoke run of the harmonic balance."""
 
 import logging
 
+import warnings
+
 import numpy as np
 import pytest
 import scipy.sparse.linalg as sla
@@ -49,7 +51,7 @@ def test_one_contact_per_boundary_node(order):
 def test_constrained_nodes_are_skipped_with_a_log(caplog):
     model = strip()
     with caplog.at_level(logging.INFO, logger="femodes.model"):
-        c = model.with_contact(fm.UnilateralContact(at="bottom", gap=0.01, direction=(0.0, 1.0)))
+        c = model.with_contact(fm.UnilateralContact(at="bottom", gap=0.01, direction=(0.0, -1.0)))
     assert len(c.contacts) == 20  # 21 nodes, the one on the clamped edge skipped
     assert "1 of 21 nodes of 'bottom' are constrained" in caplog.text
     X, comp = dof_coordinates(model)
@@ -94,13 +96,18 @@ def test_contact_errors():
     with pytest.raises(TypeError, match="direction"):
         fm.PenaltyContact(at="right", gap=0.01, stiffness=1.0, direction="x")
     # inclined and negative normals rotate the DOFs of the contact nodes (tests/test_inclined_contact.py)
+    # (a normal into the body is accepted with a warning that names the outward one)
     for direction in ((1.0, 1.0), (-1.0, 0.0)):
-        inclined = model.with_contact(fm.UnilateralContact(at="right", gap=0.01, direction=direction))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            inclined = model.with_contact(fm.UnilateralContact(at="right", gap=0.01, direction=direction))
+        into = [w for w in caught if "points into the body" in str(w.message)]
+        assert len(into) == (1 if direction == (-1.0, 0.0) else 0)
         assert inclined.frame is not None and len(inclined.contacts) == 5 and len(inclined.dofmap.frames) == 5
     with pytest.raises(ValueError, match="unknown location 'casing'.*'bottom', 'left', 'right', 'top'"):
         model.with_contact(fm.UnilateralContact(at="casing", gap=0.01, direction=(1.0, 0.0)))
     with pytest.raises(ValueError, match="every node of 'left' is constrained"):
-        model.with_contact(fm.UnilateralContact(at="left", gap=0.01, direction=(1.0, 0.0)))
+        model.with_contact(fm.UnilateralContact(at="left", gap=0.01, direction=(-1.0, 0.0)))
     with pytest.raises(ValueError, match="selects 'u_y'"):
         model.with_contact(fm.UnilateralContact(at=("right", "u_x"), gap=0.01, direction=(0.0, 1.0)))
     once = model.with_contact(fm.UnilateralContact(at="right", gap=0.01, direction=(1.0, 0.0)))
@@ -142,7 +149,7 @@ def test_redistribution_cost_is_near_linear():
 
     model = strip(nx=400, ny=20, quad=True)  # 16800 DOFs, 401 nodes on "bottom" (one clamped)
     t = time.perf_counter()
-    c = model.with_contact(fm.UnilateralContact(at="bottom", gap=0.01, direction=(0.0, 1.0)))
+    c = model.with_contact(fm.UnilateralContact(at="bottom", gap=0.01, direction=(0.0, -1.0)))
     assert len(c.contacts) == 400 and time.perf_counter() - t < 5.0  # measured 0.1 s
     assert c.M.nnz < 1.1 * model.M.nnz  # local fill only
 
