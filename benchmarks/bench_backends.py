@@ -24,6 +24,8 @@ complex   the harmonic block ``Z = K_II - w^2 M_II + i w C_II`` at ``w = 1.5`` (
           eigenfrequencies), ``factorize(Z, symmetric=True)`` (SuperLU with the options of the
           HBM block solver, ``BlockSolverOptions().superlu_options``), then one solve with ``n_b`` columns.
 cb        the whole ``fm.craig_bampton(model, n_modes=20)`` under ``FEMODES_SPARSE_BACKEND``.
+floor     what CHOLMOD or MUMPS itself costs for cb's work (``bench_solids_scale._cb_floor``: the
+          factorisation of ``K_II``, its ``n_b`` solves, ARPACK shift-invert for 20 modes).
 modes     ``fm.linear_modes(model, n=20)`` (shift-invert eigen-solve) likewise.
 
 ``--backends`` limits the back-ends (default: all installed); ``--ops`` the operations.
@@ -112,7 +114,7 @@ def run(n: int, repeat: int, backends, ops=("spd", "complex", "cb", "modes"), ge
     w = 1300.0 if geometry == "blade" else 1.5   # between the first two eigenfrequencies
     Z = (K - w * w * M + 1j * w * C)[I][:, I].tocsc()
     ZIB = (K - w * w * M + 1j * w * C)[I][:, bd].toarray()
-    recs = {(op, b): [] for op in ("spd", "complex", "cb", "modes") for b in backends}
+    recs = {(op, b): [] for op in ("spd", "complex", "cb", "modes", "floor") for b in backends}
     ref = {}
     for r in range(repeat):
         for b in backends:
@@ -138,6 +140,14 @@ def run(n: int, repeat: int, backends, ops=("spd", "complex", "cb", "modes"), ge
                     ref.setdefault("omega", om)
                 recs[("cb", b)].append(dict(total_s=tc, omega_rel_diff=(float(np.abs(om / ref["omega"] - 1).max())
                                                                          if om is not None else None)))
+            if "floor" in ops and b in ("cholmod", "mumps"):
+                # what the library itself costs for cb's work (factor, n_b solves, 20 modes by
+                # shift-invert with the factor), called directly: README_solids_scale.md's floor
+                from bench_solids_scale import _cb_floor
+                rec: dict = {}
+                _cb_floor(model, b, rec, 1)
+                recs[("floor", b)].append(dict(total_s=rec["cpu_s"], factor_s=rec["factor_cpu_s"],
+                                               solve_s=rec["solve_nb_cpu_s"], eigen_s=rec["eigen_cpu_s"]))
             if "modes" in ops:
                 tm, lm = cpu(lambda: fm.linear_modes(model, n=20))
                 ref.setdefault("modes", lm.omega)
