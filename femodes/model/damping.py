@@ -163,9 +163,10 @@ def low_rank_solver(solve, L: np.ndarray, g: np.ndarray, R: np.ndarray, *, matve
                     AinvL: np.ndarray | None = None):
     r"""Solver of ``(A + L diag(g) R^T) x = b`` from a solver ``solve(b) = A^{-1} b`` (Woodbury).
 
-    With ``X = A^{-1} L`` (``m`` solves, done here once; ``AinvL`` if the caller has it) and the ``m x m`` capacitance matrix
-    ``S = I + diag(g) R^T X``: ``x0 = A^{-1} b``, ``y = S^{-1} diag(g) R^T x0``, ``x = x0 - X y``
-    (Hager 1989, "Updating the inverse of a matrix", SIAM Rev. 31:221). No ``g^{-1}`` is formed,
+    With ``X = A^{-1} L`` (``m`` solves, done here once; ``AinvL`` if the caller has it) and the
+    ``m x m`` capacitance matrix ``S = I + diag(g) R^T X``: ``x0 = A^{-1} b``,
+    ``y = S^{-1} diag(g) R^T x0``, ``x = x0 - X y`` (Hager 1989, "Updating the inverse of a
+    matrix", SIAM Rev. 31:221). No ``g^{-1}`` is formed,
     so zero gains are fine. ``matvec(x) = A x``, if given, adds up to ``refine`` steps of
     iterative refinement against the full matrix (``A`` may be ill-conditioned: the undamped
     sparse part near a resonance that the low-rank part damps). ``b`` may be 1-D or 2-D.

@@ -93,7 +93,8 @@ class BlockElimination:
             # Phi_I diag(1/mu) (diag(g) y) of every harmonic with modal coordinates in one product
             # (LowRankSplit.apply_x; Phi_I read once)
             modal = [i for i, blk in enumerate(blocks) if mr and blk.s is not None and blk.f != 0.0]
-            gy = {}
+            gy: dict = {}
+            PXs: dict = {}
             if modal:
                 assert xy is not None  # set when mr
                 for i in modal:

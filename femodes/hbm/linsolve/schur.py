@@ -121,7 +121,8 @@ class SchurComplement:
         single, paired = _condensed_index(L.nB, L.nb, L.mr, L.off_y,
                                           tuple((blk.k, -1 if blk.s is None else blk.s) for blk in blocks))
         sc = self.J.scale
-        flat = T.reshape(-1)  # a view (T is C-contiguous); ndarray.flat's fancy indexing is 5x slower
+        assert T.flags.c_contiguous  # (_boundary_block's array): the flat view writes into T
+        flat = T.reshape(-1)  # ndarray.flat's fancy indexing is 5x slower
         ones = [blk.Zc for blk in blocks if blk.s is None]
         twos = [blk.Zc for blk in blocks if blk.s is not None]
         if ones:
@@ -230,8 +231,8 @@ class SchurComplement:
         # the coefficient rows are consecutive in T (q_b coefficient-major from 0, the modal
         # coordinates from off_y): the border columns and rows of all harmonics go in by slices
         nc, off, oy = L.nc, L.off_m, L.off_y
-        colq, rowq = np.empty((nc, nb, m)), np.empty((m, nc, nb))
-        coly, rowy = (np.empty((nc, mr, m)), np.empty((m, nc, mr))) if mr else (None, None)
+        colq, rowq = np.zeros((nc, nb, m)), np.zeros((m, nc, nb))
+        coly, rowy = (np.zeros((nc, mr, m)), np.zeros((m, nc, mr))) if mr else (None, None)
         for blk, (_, _, Wz, yZ, vu, ym, my) in zip(F.blocks, out):
             colq[blk.k], rowq[:, blk.k] = Wz.real, yZ.real
             if blk.s is not None:
