@@ -395,8 +395,8 @@ def _project_damping(model: StructuralModel, T: np.ndarray, n_kept: int, Mr: sp.
                      Kr: sp.csr_matrix) -> sp.csr_matrix | None:
     """``T^T C T`` of the whole damping. Rayleigh damping ``C = alpha M + beta K`` (as
     ``with_damping`` made it, checked entry by entry) is ``alpha Mr + beta Kr`` from the projected
-    ``Mr, Kr``: no third projection (a third of the projections' cost, which with 637 kept DOFs of
-    a 7.9e4-DOF blade is the larger part of the reduction). A modal (low-rank) part
+    ``Mr, Kr``: no third projection (the projections are a third of the reduction of a
+    7.9e4-DOF blade with 637 kept DOFs, ``benchmarks/README_backends.md``). A modal (low-rank) part
     ``U diag(d) U^T`` is projected through ``C T = C_sparse T + U diag(d) (U^T T)`` (no ``n x n``
     matrix); the reduced damping is small and generally dense (the fixed-interface modes are not
     the model's modes), so it is stored as an ordinary matrix with the clean-up of :func:`_project`."""
