@@ -20,8 +20,8 @@ threadpoolctl, ``OMP_NUM_THREADS=1``; medians of the repeats):
 
 spd       ``factorize(K_II, positive_definite=True)`` (interior = all DOFs but the contact DOFs),
           then one solve with the ``n_b`` columns of ``K_IB`` (the constraint modes).
-complex   the harmonic block ``Z = K_II - w^2 M_II + i w C_II`` at ``w = 1.5`` (between
-          eigenfrequencies), ``factorize(Z, symmetric=True)`` (SuperLU with the options of the
+complex   the harmonic block ``Z = K_II - w^2 M_II + i w C_II`` at ``w = 1.5`` (the blade: 1300
+          rad/s; between eigenfrequencies), ``factorize(Z, symmetric=True)`` (SuperLU with the options of the
           HBM block solver, ``BlockSolverOptions().superlu_options``), then one solve with ``n_b`` columns.
 cb        the whole ``fm.craig_bampton(model, n_modes=20)`` under ``FEMODES_SPARSE_BACKEND``.
 floor     what CHOLMOD or MUMPS itself costs for cb's work (``bench_solids_scale._cb_floor``: the
