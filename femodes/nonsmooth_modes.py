@@ -534,8 +534,13 @@ def continue_past_grazing(branch: Branch, problem: NonlinearModeProblem, model: 
                     "energy continuation's branch", why, message)
         branch.meta["energy_continuation"] = why
         return branch
-    return _compose(branch, problem, orbits, tongues, message, why, grazing_energy(model, problem.mode, modes=lm),
-                    energy_max)
+    out = _compose(branch, problem, orbits, tongues, message, why, grazing_energy(model, problem.mode, modes=lm),
+                   energy_max)
+    if not out.success:  # as a continuation that stops short of its span says (a branch short of it)
+        log.warning("nonlinear_mode: the contact-phase family ends at the energy %.6g, %.3g of the span's end %.6g "
+                    "(success False): %s", float(out.energy.max()), float(out.energy.max()) / energy_max,
+                    energy_max, message)
+    return out
 
 
 def _compose(below: Branch, problem: NonlinearModeProblem, orbits: list[_Orbit], tongues: list[InternalResonance],

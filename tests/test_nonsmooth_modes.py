@@ -237,3 +237,16 @@ def test_saved_backbone_keeps_its_family_and_tongues(backbone, tmp_path):
     # (a failed solve in a tongue has energy NaN: compared as text)
     assert json.dumps(back.internal_resonances) == json.dumps(backbone.internal_resonances)
     np.testing.assert_array_equal(back.omega, backbone.omega)
+
+
+def test_short_contact_phase_family_is_said(model, caplog):
+    """A period-driven sweep that ends short of the span (here its frequency budget) returns the
+    branch with success False and says so at WARNING level, as a continuation that stops short
+    does (a 2-D blade's sweep stopped at 3.4 of 20 E_g with only an INFO line)."""
+    eg = fm.grazing_energy(model)
+    with caplog.at_level(logging.WARNING, logger="femodes"):
+        br = fm.nonlinear_mode(model, 1, energy=(0.5 * eg, 25 * eg), harmonics=10,
+                               past_grazing=fm.PeriodDriven(max_points=5))
+    assert not br.success and br.energy.max() < 25 * eg
+    assert any("contact-phase family ends at the energy" in r.getMessage() and "success False" in r.getMessage()
+               for r in caplog.records), [r.getMessage() for r in caplog.records]
