@@ -17,7 +17,7 @@ from ..dynamic_stiffness import CoefficientStiffness
 from ..model import StructuralModel, low_rank_solver
 from .harmonics import Harmonics
 from .linsolve import BlockLU, LinearFactors, StructureFailure, build_pattern
-from .linsolve.lowrank import split_lowrank
+from .linsolve.lowrank import modal_shift, split_lowrank
 
 __all__ = ["LinearPart"]
 
@@ -167,15 +167,15 @@ def _modes_solve(Z, lu: BlockLU, f: float) -> np.ndarray | None:
     if em is None:
         return None
     Phi, lam, rows, Erows = em
-    c = f * f
-    mu = lam - c
-    bad = np.abs(mu) <= 1e-6 * max(float(lam.max()), c, 1e-300)
-    X = Phi / np.where(bad, 1.0, mu)
+    c, mu, bad = modal_shift(lam, f)
+    mu_ok = mu.copy()
+    mu_ok[bad] = 1.0  # those columns are solved directly below
+    X = Phi / mu_ok
     if rows.size:
         unit = np.zeros((Phi.shape[0], rows.size))
         unit[rows, np.arange(rows.size)] = 1.0
-        X = X + lu.solve(unit) @ (c * Erows / np.where(bad, 1.0, mu))
-    if bad.any():
+        X = X + lu.solve(unit) @ (c * Erows / mu_ok)
+    if bad.size:
         X = np.asarray(X, dtype=np.result_type(X, complex if lu.complex else float))
         X[:, bad] = lu.solve(Z.lowrank.U[:, bad])
     return X

@@ -26,7 +26,7 @@ import scipy.linalg as sla
 from ...dynamic_stiffness import DynamicStiffness
 from .blocks import BlockPattern, real_times_complex
 
-__all__ = ["LowRankSplit", "split_lowrank", "ModalElimination"]
+__all__ = ["LowRankSplit", "split_lowrank", "modal_shift", "ModalElimination"]
 
 
 @dataclass
@@ -90,10 +90,7 @@ class LowRankSplit:
         nb, nI = pat.bdofs.size, pat.perm.size
         assert self.modes is not None  # condense takes this path with modes only
         PhiI, Phib, lam, G, sI, ES = self.modes
-        a = f * f
-        c = DynamicStiffness.mass_shift(f, xi)
-        mu = lam - c
-        bad = np.flatnonzero(np.abs(mu) <= 1e-6 * max(float(lam.max()), a, 1e-300))
+        c, mu, bad = modal_shift(lam, f, xi)
         gd = self.Z.lowrank_gain(f)
         ns = sI.size
         full = np.zeros((nI, nb + ns + bad.size), dtype=complex)
@@ -109,7 +106,7 @@ class LowRankSplit:
         WS: np.ndarray | None
         Xbad: np.ndarray | None
         mu_ok = mu.copy()
-        mu_ok[bad] = 1.0  # those columns are overwritten below
+        mu_ok[bad] = 1.0  # those columns are overwritten below (modal_shift)
         UX = G + UWb @ Phib
         if ns:
             WS = np.ascontiguousarray(W[:, nb:nb + ns], dtype=complex)
@@ -173,6 +170,17 @@ class LowRankSplit:
         if Xbad is not None:
             out[:, bad] = L @ Xbad
         return out
+
+
+def modal_shift(lam: np.ndarray, f: float, xi: float = 0.0) -> tuple:
+    """``(c, mu, bad)`` of the modes relation at the frequency ``f``: the mass shift ``c``
+    (:meth:`DynamicStiffness.mass_shift`, real without ``xi``), ``mu = w^2 - c`` and the modes whose
+    ``|mu|`` is within 1e-6 of the spectrum's scale of zero (``k w`` at their frequency: the relation
+    cannot divide by ``mu``, their columns are solved directly)."""
+    c = DynamicStiffness.mass_shift(f, xi) if xi else f * f
+    mu = lam - c
+    bad = np.flatnonzero(np.abs(mu) <= 1e-6 * max(float(lam.max()), f * f, 1e-300))
+    return c, mu, bad
 
 
 def split_lowrank(pat: BlockPattern, Z: DynamicStiffness) -> LowRankSplit | None:

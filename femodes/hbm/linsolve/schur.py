@@ -62,9 +62,12 @@ class SchurLayout:
     def hpos(self, row: int) -> np.ndarray:
         """Positions of the condensed block of one coefficient row: nonlinear DOFs, then modal
         coordinates (the rows and columns of ``HarmonicFactors.Zc``)."""
-        if not self.mr:
-            return self.qpos(row)
-        return np.concatenate([self.qpos(row), self.ypos(row)])
+        return _hpos(row, self.nb, self.mr, self.off_y)
+
+    def block_rows(self, F: LinearFactors) -> tuple:
+        """The coefficient rows ``(k, s)`` of each harmonic block of ``F`` (``s = -1`` for harmonic
+        0), hashable: the key of the cached positions (:func:`_condensed_index`)."""
+        return tuple((blk.k, -1 if blk.s is None else blk.s) for blk in F.blocks)
 
 
 class SchurComplement:
@@ -92,8 +95,7 @@ class SchurComplement:
         self.T = T
         self.ymodal = None
         if layout.mr:
-            rows = tuple((blk.k, -1 if blk.s is None else blk.s) for blk in F.blocks)
-            self.ymodal = ModalElimination.build(T, rows, layout.mr, layout.off_y, layout.off_m)
+            self.ymodal = ModalElimination.build(T, layout.block_rows(F), layout.mr, layout.off_y, layout.off_m)
         if self.ymodal is not None:
             self._factor(self.ymodal.Tr)
         elif layout.nB:
@@ -118,8 +120,7 @@ class SchurComplement:
         """Linear condensed stiffness per harmonic, real form ``[[X, Y], [-Y, X]]`` on ``(a, b)``:
         all harmonics in one scatter through the flat positions of :func:`_condensed_index`."""
         L, blocks = self.L, self.F.blocks
-        single, paired = _condensed_index(L.nB, L.nb, L.mr, L.off_y,
-                                          tuple((blk.k, -1 if blk.s is None else blk.s) for blk in blocks))
+        single, paired = _condensed_index(L.nB, L.nb, L.mr, L.off_y, L.block_rows(self.F))
         sc = self.J.scale
         assert T.flags.c_contiguous  # (_boundary_block's array): the flat view writes into T
         flat = T.reshape(-1)  # ndarray.flat's fancy indexing is 5x slower
@@ -272,14 +273,17 @@ def _condensed_index(nB: int, nb: int, mr: int, off_y: int, rows: tuple) -> tupl
     (``(k, s)`` coefficient rows, ``s = -1`` for harmonic 0): those of the real blocks, then those of
     the ``[[X, Y], [-Y, X]]`` real forms, in the order of ``rows`` (positions as :meth:`SchurLayout.hpos`;
     cached: they depend on the layout's sizes only)."""
-    def hpos(row: int) -> np.ndarray:
-        q = row * nb + np.arange(nb)
-        return np.concatenate([q, off_y + row * mr + np.arange(mr)]) if mr else q
-
     def square(pos: np.ndarray) -> np.ndarray:
         return (pos[:, None] * nB + pos[None, :]).ravel()
 
     empty = np.zeros(0, dtype=np.intp)
-    single = [square(hpos(k)) for k, s in rows if s < 0]
-    paired = [square(np.concatenate([hpos(k), hpos(s)])) for k, s in rows if s >= 0]
+    single = [square(_hpos(k, nb, mr, off_y)) for k, s in rows if s < 0]
+    paired = [square(np.concatenate([_hpos(k, nb, mr, off_y), _hpos(s, nb, mr, off_y)])) for k, s in rows if s >= 0]
     return (np.concatenate(single) if single else empty, np.concatenate(paired) if paired else empty)
+
+
+def _hpos(row: int, nb: int, mr: int, off_y: int) -> np.ndarray:
+    """:meth:`SchurLayout.hpos` from the layout's sizes: the ``nb`` nonlinear DOFs of coefficient
+    row ``row`` (coefficient-major from 0), then its ``mr`` modal coordinates (from ``off_y``)."""
+    q = row * nb + np.arange(nb)
+    return np.concatenate([q, off_y + row * mr + np.arange(mr)]) if mr else q
