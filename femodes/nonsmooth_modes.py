@@ -43,6 +43,7 @@ from .hbm.problems import NonlinearModeProblem, PeriodDrivenModeProblem
 from .laws import UnilateralContact
 from .linear import grazing_energy, linear_modes
 from .model import StructuralModel
+from .resonance import modal_energy_shares
 from .results import Branch
 from .solvers import NewtonOptions, semismooth_newton
 from .sweep_guide import Guide, solve_in_stages
@@ -149,18 +150,9 @@ class InternalResonance:
 
 def modal_energy_fractions(problem: NonlinearModeProblem, x: np.ndarray, omegas: np.ndarray,
                            shapes: np.ndarray) -> np.ndarray:
-    """Share of the period-averaged energy of each linear mode (mass-normalised ``shapes``,
-    frequencies ``omegas``) in the orbit ``x``: ``E_k = <eta_k'^2 + w_k^2 eta_k^2> / 2`` with the
-    modal coordinate ``eta_k = phi_k^T M q``, divided by the sum over the modes given."""
-    s = problem.system
+    """:func:`~femodes.resonance.modal_energy_shares` of the orbit ``x`` of ``problem``."""
     u = problem.unpack(x, 0.0)
-    eta = u.Q @ np.asarray(s.M @ shapes)                 # (n_coef, n_modes) modal coefficients
-    w = s.w[:, None]
-    kinetic = 0.5 * u.omega ** 2 * np.sum(w * (s.D1 @ eta) ** 2, axis=0)
-    potential = 0.5 * omegas ** 2 * np.sum(w * eta ** 2, axis=0)
-    e = kinetic + potential
-    total = float(np.sum(e))
-    return e / total if total > 0 else np.zeros_like(e)
+    return modal_energy_shares(problem.system.h, u.Q, u.omega, problem.system.M, omegas, shapes)
 
 
 class _Orbit(NamedTuple):
@@ -231,6 +223,7 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
             # sweep any more: towards the family's asymptote the tongues are dense
             message = f"stopped at w = {w:.6g} rad/s, past the coarse family's last orbit"
             break
+        secant = False
         if guide is not None and orbits and guide.covers(w) and guide.covers(orbits[-1].omega):
             # the last orbit moved as the coarse family moves (a secant through orbits pulled by a
             # tongue beside them would lead onto a neighbouring family)
@@ -238,10 +231,21 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
         elif len(orbits) >= 2:
             a, b = orbits[-2], orbits[-1]
             guess = b.x + (b.x - a.x) * (w - b.omega) / (b.omega - a.omega)
+            secant = True
         else:
             guess = (orbits[-1].x if orbits else seed).copy()
         guess[n] = w
         res, E, fractions = solve(guess)
+        if secant and skips and not (res.success and fractions[mode - 1] >= strategy.min_fraction):
+            # inside a gap the secant through the two orbits before it extrapolates over the whole
+            # gap (the 2-D blade of examples/resonance_on_backbones.py with H = 10: from 1048 to
+            # 1124 rad/s, nine times the spacing of those orbits) and leads Newton nowhere; the
+            # last orbit itself, at the new frequency, finds the family again past the tongue
+            guess = orbits[-1].x.copy()
+            guess[n] = w
+            again, E2, f2 = solve(guess)
+            if again.success and f2[mode - 1] >= strategy.min_fraction:
+                res, E, fractions = again, E2, f2
         if not orbits and not res.success and problem.system.h.n_harmonics > strategy.start_harmonics:
             res = _start_coarse(model, problem, w, seed, strategy, newton, res)
             E = _energy(problem, res.x) if res.success else math.nan

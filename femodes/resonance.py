@@ -15,9 +15,23 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .linear import linear_modes
 from .results import Branch
 
-__all__ = ["ResonancePeak", "compare_resonance", "TONGUE_MARGIN", "ON_BACKBONE"]
+__all__ = ["ResonancePeak", "compare_resonance", "modal_energy_shares", "TONGUE_MARGIN", "ON_BACKBONE", "CAPTURED"]
+
+
+def modal_energy_shares(harmonics, Q: np.ndarray, omega: float, M, omegas: np.ndarray, shapes: np.ndarray) -> np.ndarray:
+    """Share of the period-averaged energy of each linear mode (mass-normalised ``shapes``,
+    frequencies ``omegas``) in the motion of harmonic coefficients ``Q`` (``n_coef x n_dofs``) at
+    the frequency ``omega``: ``E_k = <eta_k'^2 + w_k^2 eta_k^2> / 2`` with the modal coordinate
+    ``eta_k = phi_k^T M q``, divided by the sum over the modes given."""
+    eta = np.asarray(Q) @ np.asarray(M @ shapes)                 # (n_coef, n_modes) modal coefficients
+    w = np.asarray(harmonics.galerkin.norm_weights())[:, None]
+    D1 = np.asarray(harmonics.operators.derivative_domega())
+    e = 0.5 * omega ** 2 * np.sum(w * (D1 @ eta) ** 2, axis=0) + 0.5 * omegas ** 2 * np.sum(w * eta ** 2, axis=0)
+    total = float(np.sum(e))
+    return e / total if total > 0 else np.zeros_like(e)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -29,9 +43,13 @@ class ResonancePeak:
     ``log E``), NaN when the energy is outside the backbone's range; ``distance``:
     ``omega / omega_backbone - 1``; ``index``: the peak's index on its branch; ``tongue``: the
     index in ``backbone.internal_resonances`` of the tongue of internal resonance whose
-    frequencies (widened by :data:`TONGUE_MARGIN`) hold the peak, or None, with ``tongue_modes``
-    the modes that take the energy there: a forced response caught by an internal resonance
-    peaks there, not on the family that steps over it.
+    frequencies (from the backbone's orbits on either side of it, widened by
+    :data:`TONGUE_MARGIN`) hold the peak, or None, with ``tongue_modes`` the modes that take the
+    energy there: a forced response caught by an internal resonance peaks there, not on the
+    family that steps over it. ``shares``: the share of the peak's energy in each of the forced
+    model's lowest linear modes (:func:`modal_energy_shares`), and ``ratios`` their ``w_k / w``;
+    ``captured_by``: the mode other than the backbone's ``mode`` holding the largest share, when
+    it holds at least :data:`CAPTURED` (the peak is an internal resonance's), else None.
     """
 
     omega: float
@@ -41,17 +59,30 @@ class ResonancePeak:
     index: int
     tongue: int | None = None
     tongue_modes: tuple[int, ...] = ()
+    mode: int = 1
+    shares: tuple[float, ...] = ()
+    ratios: tuple[float, ...] = ()
+    captured_by: int | None = None
 
     @property
     def predicted(self) -> str:
-        """One line: on the backbone (within :data:`ON_BACKBONE`, with the distance), else in a
-        listed tongue, else off it or outside its energy range."""
+        """One line: on the backbone (within :data:`ON_BACKBONE`, with the distance), else caught
+        by an internal resonance (the mode, its share and frequency ratio) and whether the backbone
+        lists its tongue, else in a listed tongue, else off it or outside its energy range."""
         if np.isfinite(self.distance) and abs(self.distance) <= ON_BACKBONE:
             return f"on the backbone, {self.distance:+.2%}"
+        where = (f"{self.distance:+.2%} from the backbone's family" if np.isfinite(self.distance)
+                 else "outside the backbone's energy range")
+        if self.captured_by is not None:
+            k = self.captured_by
+            r = self.ratios[k - 1]
+            listed = (f"in the tongue {self.tongue} listed on the backbone" if self.tongue is not None
+                      else "a tongue the backbone does not list")
+            return (f"caught by an internal resonance: mode {k} holds {self.shares[k - 1]:.0%} of the energy "
+                    f"(w_{k} / w = {r:.2f}, near {round(r)}:1), {listed}; {where}")
         if self.tongue is not None:
             modes = ", ".join(str(m) for m in self.tongue_modes) or "?"
-            return (f"in the tongue of internal resonance {self.tongue} (modes {modes}) listed on the backbone, "
-                    f"{self.distance:+.2%} from the family past it")
+            return f"in the tongue of internal resonance {self.tongue} (modes {modes}) listed on the backbone, {where}"
         if np.isfinite(self.distance):
             return f"off the backbone, {self.distance:+.2%}"
         return "outside the backbone's energy range"
@@ -63,9 +94,41 @@ TONGUE_MARGIN = 0.01
 #: :attr:`ResonancePeak.predicted` calls a peak within this relative distance on the backbone.
 ON_BACKBONE = 0.01
 
+#: Share of a forced peak's energy in a mode other than the backbone's from which the peak is an
+#: internal resonance's, when it is off the backbone (`examples/resonance_on_backbones.py`: the
+#: 2-D blade's peaks in its 5:1 tongue 28-72 % at H = 7 and 31-74 % at H = 10; on the backbone,
+#: the bar's largest other share 10-13 %, the 3-D blade's 21-39 % near its own 5:1 resonance, the
+#: beam's 95-98 % where its backbone rides the 6:1 one with mode 2).
+CAPTURED = 0.25
+
+#: Lowest linear modes over which a forced peak's energy shares are taken.
+SHARE_MODES = 12
+
+
+def _tongue_band(backbone: Branch, ws: np.ndarray) -> tuple[float, float]:
+    """Frequencies a tongue spans: from the backbone's last orbit below its points to its first
+    above (the tongue's own points are only where the sweep tried)."""
+    below = backbone.omega[backbone.omega < ws.min()]
+    above = backbone.omega[backbone.omega > ws.max()]
+    return (float(below.max()) if below.size else float(ws.min()),
+            float(above.min()) if above.size else float(ws.max()))
+
+
+def _shares(branch: Branch, i: int, cache: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Energy shares of the lowest linear modes of ``branch.model`` at its point ``i``, and ``w_k / w``."""
+    model = branch.model
+    if model is None:
+        return np.zeros(0), np.zeros(0)
+    if id(model) not in cache:
+        cache[id(model)] = linear_modes(model, n=int(min(SHARE_MODES, model.n_dofs)))
+    lm = cache[id(model)]
+    w = float(branch.omega[i])
+    return modal_energy_shares(branch.harmonics, branch.Q[i], w, model.M, lm.omega, lm.shapes), lm.omega / w
+
 
 def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch]) -> tuple[ResonancePeak, ...]:
-    """Distance, in frequency at equal energy, between each forced response's peak and the backbone.
+    """Distance, in frequency at equal energy, between each forced response's peak and the backbone,
+    and whether an internal resonance caught the peak.
 
     Parameters
     ----------
@@ -89,7 +152,14 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch]) -> tu
         raise ValueError("compare_resonance: the backbone has fewer than two points; trace it over an energy span")
     order = np.argsort(backbone.energy, kind="stable")
     logE, wb = np.log(backbone.energy[order]), backbone.omega[order]
+    mode = int(backbone.meta.get("mode", 1))
+    bands = []
+    for t in backbone.internal_resonances:
+        ws = np.asarray(t.get("omega", ()), dtype=float)
+        ws = ws[np.isfinite(ws)]
+        bands.append(_tongue_band(backbone, ws) if ws.size else None)
     out = []
+    cache: dict = {}
     for b in branches:
         if not len(b):
             raise ValueError("compare_resonance: a forced branch has no point")
@@ -100,13 +170,16 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch]) -> tu
         w = float(b.omega[i])
         tongue: int | None = None
         modes: tuple[int, ...] = ()
-        for k, t in enumerate(backbone.internal_resonances):
-            ws = np.asarray(t.get("omega", ()), dtype=float)
-            ws = ws[np.isfinite(ws)]
-            if ws.size and ws.min() * (1 - TONGUE_MARGIN) <= w <= ws.max() * (1 + TONGUE_MARGIN):
+        for k, (t, band) in enumerate(zip(backbone.internal_resonances, bands)):
+            if band is not None and band[0] * (1 - TONGUE_MARGIN) <= w <= band[1] * (1 + TONGUE_MARGIN):
                 tongue, modes = k, tuple(int(m) for m in t.get("modes", ()))
                 break
+        shares, ratios = _shares(b, i, cache)
+        others = [k for k in np.argsort(shares)[::-1] if k != mode - 1]
+        captured = int(others[0]) + 1 if others and shares[others[0]] >= CAPTURED else None
         out.append(ResonancePeak(omega=w, energy=e, omega_backbone=w_bb,
                                  distance=float(w / w_bb - 1.0) if inside else float("nan"), index=i,
-                                 tongue=tongue, tongue_modes=modes))
+                                 tongue=tongue, tongue_modes=modes, mode=mode,
+                                 shares=tuple(float(v) for v in shares), ratios=tuple(float(v) for v in ratios),
+                                 captured_by=captured))
     return tuple(out)

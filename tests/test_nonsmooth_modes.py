@@ -12,6 +12,7 @@ import logging
 import math
 
 import numpy as np
+import scipy.linalg
 import pytest
 
 import femodes as fm
@@ -137,6 +138,27 @@ def test_compare_resonance_bad_input(backbone):
         fm.compare_resonance("x", backbone)
     with pytest.raises(TypeError, match="forced must be a Branch from femodes.frequency_response"):
         fm.compare_resonance(backbone, backbone)
+
+
+def test_modal_energy_shares_analytic():
+    """Two modes of a 2-DOF system, ``q(t) = a phi_1 cos(w t) + b phi_2 sin(3 w t)``: mode k's
+    period-averaged energy is ``(A_k^2 / 4)(w_k^2 + (j_k w)^2)`` (its kinetic and potential parts
+    averaged over the period), so the shares are known in closed form; round-off tolerance."""
+    from femodes.resonance import modal_energy_shares
+
+    M = np.diag([2.0, 1.0])
+    K = np.array([[6.0, -2.0], [-2.0, 4.0]])
+    lam, phi = scipy.linalg.eigh(K, M)
+    omegas = np.sqrt(lam)
+    h = fm.Harmonics(n_harmonics=3)
+    w, a, b = 1.3, 0.7, 0.2
+    Q = np.zeros((h.n_coef, 2))
+    Q[h.layout.cos_index(1)] = a * phi[:, 0]
+    Q[h.layout.sin_index(3)] = b * phi[:, 1]
+    e = np.array([a**2 * (omegas[0] ** 2 + w**2), b**2 * (omegas[1] ** 2 + (3 * w) ** 2)]) / 4
+    got = modal_energy_shares(h, Q, w, M, omegas, phi)
+    assert np.allclose(got, e / e.sum(), rtol=0, atol=1e-14)
+    assert np.all(modal_energy_shares(h, 0 * Q, w, M, omegas, phi) == 0)
 
 
 def test_period_driven_options_are_checked():

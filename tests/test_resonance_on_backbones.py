@@ -29,7 +29,14 @@ def test_forced_peaks_lie_on_the_backbone_or_in_a_listed_tongue(study):
     if name == "blade2d":
         assert all(p.tongue is not None and 2 in p.tongue_modes for p in peaks)
         assert all("tongue" in p.predicted for p in peaks)
+        # the peak's own energy says which resonance caught it: mode 2 at w_2 / w near 5
+        # (measured 28 % and 48 % of the energy at the two levels, w_2 / w = 4.83-4.85)
+        assert all(p.captured_by == 2 and p.shares[1] >= 0.25 and abs(p.ratios[1] - 5.0) < 0.3 for p in peaks)
+        assert all("caught by an internal resonance: mode 2" in p.predicted for p in peaks)
+        assert peaks[1].shares[1] > peaks[0].shares[1]   # less damping: further up the tongue
         return
+    if name == "bar":
+        assert all(p.captured_by is None for p in peaks)  # mode 1 keeps 78-84 % of the energy
     if name == "bar":
         assert study["family"] == "contact phase"
     bound = {"bar": 6e-3, "beam": 2e-3, "blade3d": 5e-3}[name]
@@ -38,3 +45,25 @@ def test_forced_peaks_lie_on_the_backbone_or_in_a_listed_tongue(study):
     # lower damping: a higher peak, further up the backbone
     assert peaks[1].energy > peaks[0].energy
 
+
+
+def test_blade2d_backbone_steps_over_its_tongue_with_more_harmonics():
+    """With H = 10 the 2-D blade's sweep meets no orbit from 1052 to 1120 rad/s (its 5:1 tongue with
+    mode 2): the secant through the two orbits before the gap extrapolated over all of it and the
+    sweep stopped at 3.4 E_g; started from the last orbit inside a gap it finds the family past the
+    tongue (measured: 4.7 E_g at 1124 rad/s, 24.8 E_g at the end; H = 7 gives 4.65 E_g at 1115
+    rad/s) and lists the gap as a tongue."""
+    import femodes as fm
+
+    s = ex.STRUCTURES["blade2d"]()
+    eg = fm.grazing_energy(s["free"], 1)
+    bb = fm.nonlinear_mode(s["free"], 1, energy=(0.5 * eg, 20 * eg), harmonics=10)
+    assert bb.success and bb.meta["family"] == "contact phase"
+    assert bb.energy.max() >= 20 * eg
+    w = np.sort(bb.omega)
+    gap = int(np.argmax(np.diff(w)))
+    assert 1040 < w[gap] < 1060 and 1110 < w[gap + 1] < 1135, (w[gap], w[gap + 1])
+    assert any(w[gap] < t["omega"][0] and t["omega"][-1] < w[gap + 1] for t in bb.internal_resonances)
+    # the family keeps rising through the gap: energy and frequency grow together
+    order = np.argsort(bb.omega)
+    assert np.all(np.diff(bb.energy[order][bb.omega[order] > 850]) > 0)
