@@ -5,6 +5,9 @@ For each structure: the backbone of mode 1 (``fm.nonlinear_mode``, default past 
 forced responses with the same force and damping halved twice, and
 :func:`femodes.compare_resonance`: the distance, in frequency at equal energy, between each
 forced peak and the backbone. As damping falls, the peak climbs in energy along the backbone.
+Where a tongue of internal resonance that the backbone steps over catches the peaks (the 2-D
+blade), the tongue's own branch (:func:`femodes.tongue_branch`) is traced and the peaks are
+measured against it too.
 
 - ``bar``: clamped P1 bar, E = rho = A = L = 1, 20 elements, stop 0.01 at the tip, stiffness
   proportional damping (``beta``), tip force 0.004, H = 10 (its backbone is the period-driven
@@ -106,7 +109,13 @@ def run(name: str, quick: bool = False, echo: bool = True) -> dict:
     opts = fm.ContinuationOptions(max_points=2000)
     forced = [fm.frequency_response(s["forced"](d), s["span"], s["H"], options=opts) for d in levels]
     peaks = fm.compare_resonance(backbone, forced)
-    out = {"name": name, "backbone": backbone, "forced": forced, "peaks": peaks, "damping": levels,
+    # a peak that a tongue of internal resonance caught: the tongue's own branch, and the peaks
+    # measured against it too
+    held = sorted({p.tongue for p in peaks if p.tongue is not None and p.captured_by is not None})
+    tongues = [fm.tongue_branch(backbone, k) for k in held]
+    if tongues:
+        peaks = fm.compare_resonance(backbone, forced, tongues=tongues)
+    out = {"name": name, "backbone": backbone, "forced": forced, "peaks": peaks, "damping": levels, "tongues": tongues,
            "grazing_energy": e_g, "family": backbone.meta.get("family"), "seconds": time.perf_counter() - t0}
     if echo:
         for d, p in zip(levels, peaks):

@@ -22,6 +22,7 @@ from .analyses import StaticContactResult, frequency_response, nonlinear_mode, s
 from .exact_response import exact_frequency_response
 from .nonsmooth_modes import InternalResonance, PeriodDriven
 from .resonance import ResonancePeak, compare_resonance
+from .tongues import tongue_branch
 from .floquet import StabilityOptions, StabilityResult, stability
 from .accuracy import AccuracyOptions, estimate_error
 from .mesh_error import estimate_mesh_error
@@ -61,6 +62,7 @@ __all__ = [
     "InternalResonance",
     "ResonancePeak",
     "compare_resonance",
+    "tongue_branch",
     "DofMap",
     "HarmonicForce",
     "StructuralModel",

@@ -50,6 +50,9 @@ class ResonancePeak:
     model's lowest linear modes (:func:`modal_energy_shares`), and ``ratios`` their ``w_k / w``;
     ``captured_by``: the mode other than the backbone's ``mode`` holding the largest share, when
     it holds at least :data:`CAPTURED` (the peak is an internal resonance's), else None.
+    ``on_tongue`` and ``tongue_distance``: of the tongue branches given to
+    :func:`compare_resonance` (:func:`femodes.tongue_branch`), the index of the one nearest the
+    peak in frequency at its energy and that distance (None and NaN without one covering it).
     """
 
     omega: float
@@ -63,6 +66,8 @@ class ResonancePeak:
     shares: tuple[float, ...] = ()
     ratios: tuple[float, ...] = ()
     captured_by: int | None = None
+    on_tongue: int | None = None
+    tongue_distance: float = float("nan")
 
     @property
     def predicted(self) -> str:
@@ -73,6 +78,11 @@ class ResonancePeak:
             return f"on the backbone, {self.distance:+.2%}"
         where = (f"{self.distance:+.2%} from the backbone's family" if np.isfinite(self.distance)
                  else "outside the backbone's energy range")
+        if np.isfinite(self.tongue_distance) and abs(self.tongue_distance) <= ON_BACKBONE:
+            inside = f" (mode {self.captured_by} holds {self.shares[self.captured_by - 1]:.0%} of the energy)" \
+                if self.captured_by is not None else ""
+            return (f"on the branch of the tongue given as tongues[{self.on_tongue}]{inside}, "
+                    f"{self.tongue_distance:+.2%}; {where}")
         if self.captured_by is not None:
             k = self.captured_by
             r = self.ratios[k - 1]
@@ -126,7 +136,20 @@ def _shares(branch: Branch, i: int, cache: dict) -> tuple[np.ndarray, np.ndarray
     return modal_energy_shares(branch.harmonics, branch.Q[i], w, model.M, lm.omega, lm.shapes), lm.omega / w
 
 
-def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch]) -> tuple[ResonancePeak, ...]:
+def _distance(branch: Branch, w: float, e: float) -> float:
+    """``w / w_branch(e) - 1`` on ``branch`` (interpolated in ``log E`` between its orbits in energy
+    order), NaN outside its energies."""
+    if not len(branch):
+        return float("nan")
+    order = np.argsort(branch.energy, kind="stable")
+    logE = np.log(branch.energy[order])
+    if not logE[0] <= np.log(e) <= logE[-1]:
+        return float("nan")
+    return float(w / np.interp(np.log(e), logE, branch.omega[order]) - 1.0)
+
+
+def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch], *,
+                      tongues: Sequence[Branch] = ()) -> tuple[ResonancePeak, ...]:
     """Distance, in frequency at equal energy, between each forced response's peak and the backbone,
     and whether an internal resonance caught the peak.
 
@@ -136,6 +159,9 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch]) -> tu
         A nonlinear mode (``kind == "nonlinear mode"``) of the free system.
     forced : Branch or sequence of Branch
         Forced responses of the same structure (damped), e.g. at decreasing damping.
+    tongues : sequence of Branch, optional
+        Branches inside the backbone's tongues (:func:`femodes.tongue_branch`); each peak is also
+        measured against the nearest of them (``on_tongue``, ``tongue_distance``).
 
     Returns
     -------
@@ -152,6 +178,9 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch]) -> tu
         raise ValueError("compare_resonance: the backbone has fewer than two points; trace it over an energy span")
     order = np.argsort(backbone.energy, kind="stable")
     logE, wb = np.log(backbone.energy[order]), backbone.omega[order]
+    tongues = list(tongues)
+    if not all(isinstance(t, Branch) and t.kind == "nonlinear mode" for t in tongues):
+        raise TypeError("compare_resonance: tongues must be Branches from femodes.tongue_branch")
     mode = int(backbone.meta.get("mode", 1))
     bands = []
     for t in backbone.internal_resonances:
@@ -177,9 +206,11 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch]) -> tu
         shares, ratios = _shares(b, i, cache)
         others = [k for k in np.argsort(shares)[::-1] if k != mode - 1]
         captured = int(others[0]) + 1 if others and shares[others[0]] >= CAPTURED else None
+        near = [(abs(d), j, d) for j, d in ((j, _distance(t, w, e)) for j, t in enumerate(tongues)) if np.isfinite(d)]
+        _, on_tongue, d_tongue = min(near) if near else (0.0, None, float("nan"))
         out.append(ResonancePeak(omega=w, energy=e, omega_backbone=w_bb,
                                  distance=float(w / w_bb - 1.0) if inside else float("nan"), index=i,
                                  tongue=tongue, tongue_modes=modes, mode=mode,
                                  shares=tuple(float(v) for v in shares), ratios=tuple(float(v) for v in ratios),
-                                 captured_by=captured))
+                                 captured_by=captured, on_tongue=on_tongue, tongue_distance=d_tongue))
     return tuple(out)

@@ -42,6 +42,7 @@ LAYERS = {
     "femodes.nonsmooth_modes": 5,
     "femodes.sweep_guide": 5,
     "femodes.resonance": 5,
+    "femodes.tongues": 5,
     "femodes.runs": 5,
     "femodes.floquet": 5,
     "femodes.stability_methods": 5,
