@@ -134,7 +134,8 @@ class InternalResonance:
 
     ``omega``: the frequencies (rad/s) of the sweep's orbits that fell in it (or ``nan`` energy for
     failed solves); ``energy``: their energies; ``modes``: the linear modes (1-based) holding the
-    largest share of the energy there, with ``shares``; ``ratios``: for each, the harmonic ``j``
+    largest share of the energy there (where no solve succeeded, on the family's orbits on either
+    side), with ``shares``; ``ratios``: for each, the harmonic ``j``
     nearest to ``w_k / w`` (a ``j:1`` resonance with mode ``k``).
     """
 
@@ -170,10 +171,12 @@ def _spectrum(model: StructuralModel, problem: NonlinearModeProblem, strategy: P
     return linear_modes(model, n=int(min(max(strategy.n_modes, problem.mode + 1), model.n_dofs)))
 
 
-def _tongue(points: list[tuple[float, float, np.ndarray | None]], lm, mode: int) -> InternalResonance:
+def _tongue(points: list[tuple[float, float, np.ndarray | None]], lm, mode: int, beside=()) -> InternalResonance:
     """The tongue of the sweep's points ``(w, E, energy shares or None)``: the (up to three) other
-    modes with more than 5 % of the energy there on average, and their ``w_k / w``."""
-    shares = np.mean([f for _, _, f in points if f is not None] or [np.zeros(lm.omega.size)], axis=0)
+    modes with more than 5 % of the energy there on average, and their ``w_k / w``; where no solve
+    succeeded, the shares of the family's orbits ``beside`` it (the 2-D blade at H = 10: mode 2
+    holds 10 % just below its 5:1 tongue)."""
+    shares = np.mean([f for _, _, f in points if f is not None] or list(beside) or [np.zeros(lm.omega.size)], axis=0)
     order = [k for k in np.argsort(shares)[::-1] if k != mode - 1 and shares[k] > 0.05][:3]
     wm = float(np.mean([w for w, _, _ in points]))
     return InternalResonance(omega=tuple(float(w) for w, _, _ in points), energy=tuple(float(e) for _, e, _ in points),
@@ -199,9 +202,10 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
     tongues: list[InternalResonance] = []
     pending: list[tuple[float, float, np.ndarray | None]] = []
 
-    def close_tongue():
+    def close_tongue(after=None):
         if pending:
-            tongues.append(_tongue(pending, lm, mode))
+            beside = [modal_energy_fractions(problem, orbits[-1].x, lm.omega, lm.shapes)] if orbits else []
+            tongues.append(_tongue(pending, lm, mode, beside + ([after] if after is not None else [])))
             pending.clear()
 
     w = (1.0 + strategy.start) * w0
@@ -280,7 +284,7 @@ def period_driven_sweep(model: StructuralModel, problem: NonlinearModeProblem, e
                   fractions[mode - 1] if fractions is not None else math.nan)
         if (res.success and E > eg * (1.0 - strategy.start) and fractions[mode - 1] >= strategy.min_fraction
                 and fits(E)):
-            close_tongue()
+            close_tongue(fractions)
             skips = 0
             orbits.append(_Orbit(res.x, w, E, int(res.nit)))
             # past the end once the orbits left after removing the tongues' (_drop_off_curve) are

@@ -72,7 +72,10 @@ def test_blade2d_backbone_steps_over_its_tongue_with_more_harmonics():
     w = np.sort(bb.omega)
     gap = int(np.argmax(np.diff(w)))
     assert 1040 < w[gap] < 1060 and 1110 < w[gap + 1] < 1135, (w[gap], w[gap + 1])
-    assert any(w[gap] < t["omega"][0] and t["omega"][-1] < w[gap + 1] for t in bb.internal_resonances)
+    (gap_tongue,) = [t for t in bb.internal_resonances if w[gap] < t["omega"][0] and t["omega"][-1] < w[gap + 1]]
+    # no solve succeeded in it: its modes come from the family's orbits beside it (mode 2: 10 % below
+    # the gap, 25 % above; measured mean 18 %)
+    assert gap_tongue["modes"][0] == 2 and 0.05 < gap_tongue["shares"][0] < 0.5
     # the family keeps rising through the gap: energy and frequency grow together
     order = np.argsort(bb.omega)
     assert np.all(np.diff(bb.energy[order][bb.omega[order] > 850]) > 0)
