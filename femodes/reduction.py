@@ -214,7 +214,7 @@ def _reduction_basis(K, M, kept: np.ndarray, interior: np.ndarray, n_modes: int)
         KII = KI[:, interior].tocsc()
         KIB = KI[:, kept].tocsc()
         del KI
-        MII = M[interior][:, interior].tocsc()
+        MII = M[interior][:, interior]  # CSR: ARPACK multiplies by it (symmetric: the same matrix)
         lu = _factor_interior(KII)
         # the constraint modes in blocks of columns (PSI_BLOCK_BYTES): K_IB and Psi are n_I x n_B
         # dense, 1.4 GB each at 1e6 DOFs and 169 kept DOFs, held next to the factor
@@ -360,15 +360,20 @@ def _project(A, T: np.ndarray, n_kept: int, lowrank: Any = None) -> sp.csr_matri
     R = np.zeros((width, width))
     Sm = np.zeros((width, width - n_kept))
     step = max(256, int(PROJECT_BLOCK_BYTES // (8 * max(width, 1))))
+    # the upper triangle only, in column blocks (the product is symmetric; 8 blocks cut the
+    # products of a 7.9e4-DOF blade's 657 columns from 1.39 to 0.97 s)
+    edges = np.linspace(0, width, min(8, max(1, width // 64)) + 1).astype(int)
     for r0 in range(0, n, step):
         rows = slice(r0, min(n, r0 + step))
         Tr = T[rows]
-        R += Tr.T @ (A[rows] @ T)
+        ATr = A[rows] @ T
+        for c0, c1 in zip(edges[:-1], edges[1:]):
+            R[c0:c1, c0:] += Tr[:, c0:c1].T @ ATr[:, c0:]
         Sm += np.abs(Tr).T @ Bm[rows]
     del Bm
     if UT is not None:
         R += UT.T @ (lowrank.d[:, None] * UT)
-    R = 0.5 * (R + R.T)
+    R = np.triu(R) + np.triu(R, 1).T
     Sm[n_kept:] = 0.5 * (Sm[n_kept:] + Sm[n_kept:].T)
     d = np.sqrt(np.abs(np.diag(R)))
     scale = np.maximum(Sm, np.outer(d, d[n_kept:]))
@@ -420,10 +425,21 @@ def _rayleigh_coefficients(model: StructuralModel) -> tuple[float, float] | None
         return None
     alpha, beta = float(spec["alpha"]), float(spec.get("beta", 0.0))
     C, M, K = (sp.csr_matrix(A) for A in (model.C, model.M, model.K))
-    diff = abs(C - (alpha * M + beta * K))
-    bound = 4.0 * np.finfo(float).eps * (abs(alpha) * abs(M) + abs(beta) * abs(K))
-    over = diff - bound
-    return (alpha, beta) if over.nnz == 0 or float(over.max()) <= 0.0 else None
+    # a probe instead of the entry-by-entry difference (four n x n sparse sums, 0.8 s of a 17 s
+    # reduction at 7.9e4 DOFs): C x - (alpha M x + beta K x) for a fixed random x is round-off
+    # unless C differs from alpha M + beta K, whose entries' own round-off (4 eps) is then
+    # summed with the products' (one eps per term of a row) in the bound
+    x = np.random.default_rng(0).standard_normal(C.shape[0])
+    diff = np.abs(C @ x - (alpha * (M @ x) + beta * (K @ x)))
+    ax = np.abs(x)
+    row = int(max(np.diff(A.indptr).max(initial=0) for A in (C, M, K)))
+    scale = abs(alpha) * _abs(M) @ ax + abs(beta) * _abs(K) @ ax + _abs(C) @ ax
+    return (alpha, beta) if np.all(diff <= (4.0 + 2.0 * row) * np.finfo(float).eps * scale) else None
+
+
+def _abs(A: sp.csr_matrix) -> sp.csr_matrix:
+    """``|A|`` entry by entry (``A``'s index arrays shared, not copied)."""
+    return sp.csr_matrix((np.abs(A.data), A.indices, A.indptr), shape=A.shape, copy=False)
 
 
 def _reduced_model(model: StructuralModel, kept: np.ndarray, T: np.ndarray, omega_i: np.ndarray, n_modes: int) -> ReducedModel:
