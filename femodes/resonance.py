@@ -79,10 +79,11 @@ class ResonancePeak:
         where = (f"{self.distance:+.2%} from the backbone's family" if np.isfinite(self.distance)
                  else "outside the backbone's energy range")
         if np.isfinite(self.tongue_distance) and abs(self.tongue_distance) <= ON_BACKBONE:
-            inside = f" (mode {self.captured_by} holds {self.shares[self.captured_by - 1]:.0%} of the energy)" \
+            listed = f", the backbone's tongue {self.tongue}" if self.tongue is not None else ""
+            inside = f"; mode {self.captured_by} holds {self.shares[self.captured_by - 1]:.0%} of the energy" \
                 if self.captured_by is not None else ""
-            return (f"on the branch of the tongue given as tongues[{self.on_tongue}]{inside}, "
-                    f"{self.tongue_distance:+.2%}; {where}")
+            return (f"on a tongue's branch (tongues[{self.on_tongue}]{listed}), {self.tongue_distance:+.2%}{inside}; "
+                    f"{where}")
         if self.captured_by is not None:
             k = self.captured_by
             r = self.ratios[k - 1]
