@@ -164,7 +164,10 @@ def switch_branch(branch: Branch, bifurcation: Bifurcation, omega: tuple[float, 
     if not isinstance(branch, Branch):
         raise TypeError(f"switch_branch: branch must be a femodes Branch, got {type(branch).__name__}")
     if not isinstance(bifurcation, Bifurcation):
-        raise TypeError(f"switch_branch: bifurcation must be one of branch.bifurcations, got {type(bifurcation).__name__}")
+        tongue = isinstance(bifurcation, dict) and "ratios" in bifurcation
+        raise TypeError(f"switch_branch: bifurcation must be one of branch.bifurcations, got {type(bifurcation).__name__}"
+                        + ("; a tongue of internal resonance (one of branch.internal_resonances) is not a bifurcation "
+                           "of the traced family: its own branch is fm.tongue_branch(branch, k)" if tongue else ""))
     if branch.kind not in ("forced", "nonlinear mode"):
         raise ValueError(f"switch_branch: branch.kind must be 'forced' or 'nonlinear mode', got {branch.kind!r}")
     kind = bifurcation.kind
