@@ -11,12 +11,15 @@ measures how far a backbone can be trusted for a structure: it shrinks with the 
 from __future__ import annotations
 
 import dataclasses
+import logging
 from collections.abc import Sequence
 
 import numpy as np
 
 from .linear import linear_modes
 from .results import Branch
+
+log = logging.getLogger(__name__)
 
 __all__ = ["ResonancePeak", "compare_resonance", "modal_energy_shares", "TONGUE_MARGIN", "ON_BACKBONE", "CAPTURED"]
 
@@ -131,8 +134,14 @@ def _shares(branch: Branch, i: int, cache: dict) -> tuple[np.ndarray, np.ndarray
     if model is None:
         return np.zeros(0), np.zeros(0)
     if id(model) not in cache:
-        cache[id(model)] = linear_modes(model, n=int(min(SHARE_MODES, model.n_dofs)))
+        try:
+            cache[id(model)] = linear_modes(model, n=int(min(SHARE_MODES, model.n_dofs)))
+        except (ValueError, RuntimeError) as exc:  # the distances do not need them: reported without shares
+            log.warning("compare_resonance: no modal energy shares at the peaks (linear_modes failed: %s)", exc)
+            cache[id(model)] = None
     lm = cache[id(model)]
+    if lm is None:
+        return np.zeros(0), np.zeros(0)
     w = float(branch.omega[i])
     return modal_energy_shares(branch.harmonics, branch.Q[i], w, model.M, lm.omega, lm.shapes), lm.omega / w
 

@@ -140,6 +140,24 @@ def test_compare_resonance_bad_input(backbone):
         fm.compare_resonance(backbone, backbone)
 
 
+def test_compare_resonance_reports_distances_when_the_modes_fail(backbone, monkeypatch, caplog):
+    """The shares at the peaks need the forced model's linear modes; when they fail, the distances
+    are still reported (without shares), and the log says why."""
+    import femodes.resonance as res
+
+    forced = fm.frequency_response(bar(20, beta=0.02, force=0.004), omega=(1.0, 1.6), harmonics=3)
+    (ok,) = fm.compare_resonance(backbone, forced)
+    assert len(ok.shares) == 12 and ok.shares[0] > 0.5 and abs(sum(ok.shares) - 1) < 1e-12
+
+    def fail(*a, **k):
+        raise RuntimeError("no modes")
+
+    monkeypatch.setattr(res, "linear_modes", fail)
+    (peak,) = fm.compare_resonance(backbone, forced)
+    assert peak.shares == () and peak.captured_by is None and peak.distance == ok.distance
+    assert "no modal energy shares at the peaks" in caplog.text
+
+
 def test_modal_energy_shares_analytic():
     """Two modes of a 2-DOF system, ``q(t) = a phi_1 cos(w t) + b phi_2 sin(3 w t)``: mode k's
     period-averaged energy is ``(A_k^2 / 4)(w_k^2 + (j_k w)^2)`` (its kinetic and potential parts
