@@ -33,7 +33,8 @@ def test_points_below_contact_take_the_exponents_of_the_first():
         k = min(fresh.size, along.size)
         assert k >= 2
         top_a, top_f = np.sort(np.abs(along))[::-1][:k], np.sort(np.abs(fresh))[::-1][:k]
-        assert np.allclose(top_a, top_f, rtol=0, atol=1e-12), (i, top_a, top_f)
+        # |mu| <= 1 from the same eigen-solve at another period: a multiple of eps (measured 10 eps)
+        assert np.allclose(top_a, top_f, rtol=0, atol=1e3 * np.finfo(float).eps), (i, top_a, top_f)
 
 
 def test_at_rest_tells_contact_and_smooth_laws_apart():

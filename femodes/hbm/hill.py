@@ -247,13 +247,15 @@ def hill_exponents(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0
     omega = float(omega)
     if not (math.isfinite(omega) and omega > 0):
         raise ValueError(f"hill_exponents: omega must be a positive finite number, got {omega!r}")
-    if reduce is None:
-        # the dense solve holds the unknowns with mass or damping (the others are eliminated)
-        reduce = _n_dynamic_unknowns(system) > REDUCE_MIN_UNKNOWNS
-    # an orbit on which the nonlinear forces act as at rest (below the first contact) has the
-    # linear system's exponents: those of the last such orbit, at this frequency (hill_rest)
     kept = getattr(system, "_cache", None)  # an HBMSystem's cache (a test's stand-in may have none)
     cache: dict = kept if isinstance(kept, dict) else {}
+    if reduce is None:
+        # the dense solve holds the unknowns with mass or damping (the others are eliminated)
+        if "hill_n_dynamic" not in cache:
+            cache["hill_n_dynamic"] = _n_dynamic_unknowns(system)
+        reduce = cache["hill_n_dynamic"] > REDUCE_MIN_UNKNOWNS
+    # an orbit on which the nonlinear forces act as at rest (below the first contact) has the
+    # linear system's exponents: those of the last such orbit, at this frequency (hill_rest)
     rest = isinstance(kept, dict) and at_rest(system, x)
     period = system.h.grid.period(omega)
     last = cache.get(("hill_at_rest", reduce)) if rest else None
