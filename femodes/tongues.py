@@ -12,6 +12,7 @@ is traced here from the family's last orbit below the tongue, and
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -25,6 +26,8 @@ from .solvers import ContinuationOptions, continuation
 from .solvers.checks import entry_point
 
 __all__ = ["tongue_branch"]
+
+log = logging.getLogger(__name__)
 
 
 def _start(backbone: Branch, k: int) -> int:
@@ -42,7 +45,7 @@ def _start(backbone: Branch, k: int) -> int:
 
 
 @entry_point("tongue_branch")
-def tongue_branch(backbone: Branch, tongue: int = 0, energy: tuple[float, float] | None = None, *,
+def tongue_branch(backbone: Branch, tongue: int = 0, energy_max: float | None = None, *,
                   options: ContinuationOptions | None = None) -> Branch:
     """The branch of the free system inside a tongue of internal resonance of ``backbone``.
 
@@ -53,9 +56,9 @@ def tongue_branch(backbone: Branch, tongue: int = 0, energy: tuple[float, float]
         ``backbone.internal_resonances``; computed with the default projection.
     tongue : int
         Index of the tongue in ``backbone.internal_resonances``.
-    energy : (float, float), optional
-        Energy span; default: from the backbone's last orbit below the tongue to the end of the
-        backbone's span. It starts at that orbit whatever is given; the second value is the end.
+    energy_max : float, optional
+        Energy at which the branch ends (it starts at the backbone's last orbit below the tongue);
+        default: the end of the backbone's energy span.
     options : ContinuationOptions, optional
         As for :func:`femodes.nonlinear_mode`.
 
@@ -76,9 +79,10 @@ def tongue_branch(backbone: Branch, tongue: int = 0, energy: tuple[float, float]
     i = _start(backbone, tongue)
     e0 = float(backbone.energy[i])
     span = backbone.meta.get("energy_span", [e0, float(np.max(backbone.energy))])
-    e1 = float(span[1]) if energy is None else float(energy[1])
+    e1 = float(span[1]) if energy_max is None else float(energy_max)
     if not (math.isfinite(e1) and e1 > e0):
-        raise ValueError(f"tongue_branch: energy[1] must be above the start orbit's energy {e0:g}, got {e1!r}")
+        raise ValueError(f"tongue_branch: energy_max must be above the start orbit's energy {e0:g} (the backbone's "
+                         f"last orbit below the tongue), got {e1!r}")
     mode = int(backbone.meta.get("mode", 1))
     model = backbone.model
     h = backbone.harmonics
@@ -89,6 +93,8 @@ def tongue_branch(backbone: Branch, tongue: int = 0, energy: tuple[float, float]
     meta = {"mode": mode, "energy_span": [e0, e1], "family": "internal resonance", "tongue": int(tongue),
             "start": {"omega": float(backbone.omega[i]), "energy": e0}}
     branch = branch_from_continuation(problem, res, kind="nonlinear mode", model=model, meta=meta)
+    if not branch.success:
+        log.warning("tongue_branch: the branch of tongue %d ends short of the energy %.6g: %s", tongue, e1, branch.message)
     if len(branch):
         lm = linear_modes(model, n=int(min(SHARE_MODES, model.n_dofs)))
         f = modal_energy_shares(h, branch.Q[-1], float(branch.omega[-1]), model.M, lm.omega, lm.shapes)

@@ -95,8 +95,8 @@ def test_tongue_branch_bad_input():
     n = len(bb.internal_resonances)
     with pytest.raises(ValueError, match=f"tongue must be an index into backbone.internal_resonances \\(it lists {n}\\)"):
         fm.tongue_branch(bb, n)
-    with pytest.raises(ValueError, match="energy\\[1\\] must be above the start orbit's energy"):
-        fm.tongue_branch(bb, n - 1, energy=(0.0, 0.1 * e2))
+    with pytest.raises(ValueError, match="energy_max must be above the start orbit's energy"):
+        fm.tongue_branch(bb, n - 1, energy_max=0.1 * e2)
     with pytest.raises(TypeError, match="its own branch is fm.tongue_branch"):
         fm.switch_branch(bb, bb.internal_resonances[0], (900.0, 1000.0))
     with pytest.raises(TypeError, match="tongues must be Branches from femodes.tongue_branch"):
