@@ -39,7 +39,7 @@ def test_forced_peaks_lie_on_the_backbone_or_in_a_listed_tongue(study):
         assert all("caught by an internal resonance: mode 2" in p.predicted for p in first)
         assert peaks[1].shares[1] > peaks[0].shares[1]   # less damping: further up the tongue
         # ...and they lie on the tongue's own branch (fm.tongue_branch), whose energy mode 2 takes:
-        # measured +0.05 % and +0.51 % (H = 7; +0.23, +0.12, +0.10 % at H = 10), against -6 to -11 %
+        # measured +0.05 % and +0.51 % (H = 7; +0.22, +0.13, +0.10 % at H = 10), against -6 to -11 %
         # from the family past the tongue
         (tongue,) = study["tongues"]
         assert tongue.success and tongue.meta["family"] == "internal resonance" and tongue.meta["modes"][0] == 2
