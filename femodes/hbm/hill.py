@@ -47,7 +47,7 @@ from ..eigen import krylov_start
 from ..sparse_direct import factorize
 from .hill_elimination import algebraic_unknowns, dense_array, eliminate
 from .hill_reduction import FreeInterfaceReduction
-from .hill_rest import XI_TOL, at_rest, moved
+from .hill_rest import XI_TOL, at_rest
 from .system import HBMSystem
 
 __all__ = ["HillResult", "hill_matrices", "hill_exponents", "DENSE_LIMIT", "REDUCE_MIN_DOFS"]
@@ -260,7 +260,13 @@ def hill_exponents(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0
     period = system.h.grid.period(omega)
     last = cache.get(("hill_at_rest", reduce)) if rest else None
     if last is not None and abs(xi - last[0]) * period <= XI_TOL and last[1].central is not None:
-        return moved(last[1], omega, period, omega / system.h.subharmonic)
+        # the same central exponents, folded and exponentiated with this period
+        r = last[1]
+        s = _fold(r.central, omega / system.h.subharmonic)
+        mu = np.exp(s * period)
+        order = np.argsort(-np.abs(mu), kind="stable")
+        return dataclasses.replace(r, exponents=s[order], multipliers=mu[order], centroids=r.centroids[order],
+                                   vectors=r.vectors[:, order], period=period, central=r.central[order])
     res = None
     if reduce:
         res = _reduced(system, np.asarray(x, dtype=float), omega, xi, n_shifts=n_shifts, k_per_shift=k_per_shift)

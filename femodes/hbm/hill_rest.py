@@ -4,21 +4,19 @@ Below the first contact (the start of a forced curve, a backbone below its grazi
 contact of an orbit is open over the whole period and the nonlinear forces' Jacobian is the one
 at rest: the linearised system is time-invariant, and its Floquet exponents are the eigenvalues of
 the linear system, whatever the amplitude and the frequency (the copies of Hill's spectrum are
-then exact: the harmonics decouple). :func:`at_rest` tells such an orbit, and
-:func:`moved` turns the exponents found at one such orbit into the result at another frequency
-(only the period, and with it the folding and the multipliers, change). Measured along the forced
+then exact: the harmonics decouple). :func:`at_rest` tells such an orbit; the exponents found at
+one such orbit serve the others (:func:`femodes.hbm.hill.hill_exponents`: only the period, and
+with it the folding and the multipliers, change). Measured along the forced
 curves of examples/blade_casing.py and examples/user_blade_3d.py: 21 of 38 and 18 of 38 points.
 """
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 from .nonlinear_forces import Triplets
 
-__all__ = ["at_rest", "moved", "XI_TOL"]
+__all__ = ["at_rest", "XI_TOL"]
 
 #: Largest change of the artificial damping ``xi`` (times the period) between two orbits at rest
 #: whose exponents are taken as the same: ``xi`` moves an exponent by about ``xi / 2``, so the
@@ -41,18 +39,8 @@ def at_rest(system, x: np.ndarray) -> bool:
     x = np.asarray(x, dtype=float)
     if getattr(system, "nonlinear", None) is None or x.size != system.size or np.any(x[system.nq:]):
         return False  # not an HBMSystem's orbit, or a contact force somewhere
-    N, N0 = _nonlinear_jacobian(system, x), _nonlinear_jacobian(system, np.zeros_like(x))
+    cache = getattr(system, "_cache", {})
+    if "hill_rest_jacobian" not in cache:  # the same at every orbit of the system
+        cache["hill_rest_jacobian"] = _nonlinear_jacobian(system, np.zeros_like(x))
+    N, N0 = _nonlinear_jacobian(system, x), cache["hill_rest_jacobian"]
     return N.shape == N0.shape and (N != N0).nnz == 0
-
-
-def moved(result, omega: float, period: float, base: float):
-    """The Hill result ``result`` of an orbit at rest, at another frequency ``omega`` (period
-    ``period``, spacing of the copies ``base``): the same central exponents, folded and exponentiated
-    with the new period, sorted by decreasing multiplier modulus."""
-    s = np.asarray(result.central)
-    folded = s - 1j * np.round(s.imag / base) * base
-    mu = np.exp(folded * period)
-    order = np.argsort(-np.abs(mu), kind="stable")
-    return dataclasses.replace(result, exponents=folded[order], multipliers=mu[order],
-                               centroids=np.asarray(result.centroids)[order],
-                               vectors=np.asarray(result.vectors)[:, order], period=period, central=s[order])
