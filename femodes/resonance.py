@@ -18,10 +18,11 @@ import numpy as np
 
 from .linear import linear_modes
 from .results import Branch
+from .solvers.checks import entry_name, entry_point
 
 log = logging.getLogger(__name__)
 
-__all__ = ["ResonancePeak", "compare_resonance", "modal_energy_shares", "TONGUE_MARGIN", "ON_BACKBONE", "CAPTURED"]
+__all__ = ["ResonancePeak", "compare_resonance", "modal_energy_shares", "point_shares", "TONGUE_MARGIN", "ON_BACKBONE", "CAPTURED"]
 
 
 def modal_energy_shares(harmonics, Q: np.ndarray, omega: float, M, omegas: np.ndarray, shapes: np.ndarray) -> np.ndarray:
@@ -128,36 +129,38 @@ def _tongue_band(backbone: Branch, ws: np.ndarray) -> tuple[float, float]:
             float(above.min()) if above.size else float(ws.max()))
 
 
-def _shares(branch: Branch, i: int, cache: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Energy shares of the lowest linear modes of ``branch.model`` at its point ``i``, and ``w_k / w``."""
+def point_shares(branch: Branch, i: int, cache: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Energy shares (:func:`modal_energy_shares`) of the :data:`SHARE_MODES` lowest linear modes of
+    ``branch.model`` at the branch's point ``i``, and their ``w_k / w``; empty without a model or
+    when its modes fail (logged). ``cache``: a dict keeping the modes of each model between calls."""
     model = branch.model
-    if model is None:
-        return np.zeros(0), np.zeros(0)
-    if id(model) not in cache:
+    cache = {} if cache is None else cache
+    if model is not None and id(model) not in cache:
         try:
             cache[id(model)] = linear_modes(model, n=int(min(SHARE_MODES, model.n_dofs)))
-        except (ValueError, RuntimeError) as exc:  # the distances do not need them: reported without shares
-            log.warning("compare_resonance: no modal energy shares at the peaks (linear_modes failed: %s)", exc)
+        except (ValueError, RuntimeError) as exc:  # what needs the shares goes on without them
+            log.warning("%s: no modal energy shares (linear_modes failed: %s)", entry_name() or "point_shares", exc)
             cache[id(model)] = None
-    lm = cache[id(model)]
+    lm = cache.get(id(model)) if model is not None else None
     if lm is None:
         return np.zeros(0), np.zeros(0)
     w = float(branch.omega[i])
     return modal_energy_shares(branch.harmonics, branch.Q[i], w, model.M, lm.omega, lm.shapes), lm.omega / w
 
 
-def _distance(branch: Branch, w: float, e: float) -> float:
-    """``w / w_branch(e) - 1`` on ``branch`` (interpolated in ``log E`` between its orbits in energy
-    order), NaN outside its energies."""
+def _omega_at(branch: Branch, e: float) -> float:
+    """The frequency of ``branch`` at the energy ``e`` (linear interpolation in ``log E`` between its
+    orbits in energy order), NaN outside its energies."""
     if not len(branch):
         return float("nan")
     order = np.argsort(branch.energy, kind="stable")
     logE = np.log(branch.energy[order])
     if not logE[0] <= np.log(e) <= logE[-1]:
         return float("nan")
-    return float(w / np.interp(np.log(e), logE, branch.omega[order]) - 1.0)
+    return float(np.interp(np.log(e), logE, branch.omega[order]))
 
 
+@entry_point("compare_resonance")
 def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch], *,
                       tongues: Sequence[Branch] = ()) -> tuple[ResonancePeak, ...]:
     """Distance, in frequency at equal energy, between each forced response's peak and the backbone,
@@ -186,8 +189,6 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch], *,
         raise TypeError("compare_resonance: forced must be a Branch from femodes.frequency_response, or a list of them")
     if len(backbone) < 2:
         raise ValueError("compare_resonance: the backbone has fewer than two points; trace it over an energy span")
-    order = np.argsort(backbone.energy, kind="stable")
-    logE, wb = np.log(backbone.energy[order]), backbone.omega[order]
     tongues = list(tongues)
     if not all(isinstance(t, Branch) and t.kind == "nonlinear mode" for t in tongues):
         raise TypeError("compare_resonance: tongues must be Branches from femodes.tongue_branch")
@@ -203,23 +204,22 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch], *,
         if not len(b):
             raise ValueError("compare_resonance: a forced branch has no point")
         i = int(np.argmax(b.energy))
-        e = float(b.energy[i])
-        inside = logE[0] <= np.log(e) <= logE[-1]
-        w_bb = float(np.interp(np.log(e), logE, wb)) if inside else float("nan")
-        w = float(b.omega[i])
+        e, w = float(b.energy[i]), float(b.omega[i])
+        w_bb = _omega_at(backbone, e)
         tongue: int | None = None
         modes: tuple[int, ...] = ()
         for k, (t, band) in enumerate(zip(backbone.internal_resonances, bands)):
             if band is not None and band[0] * (1 - TONGUE_MARGIN) <= w <= band[1] * (1 + TONGUE_MARGIN):
                 tongue, modes = k, tuple(int(m) for m in t.get("modes", ()))
                 break
-        shares, ratios = _shares(b, i, cache)
+        shares, ratios = point_shares(b, i, cache)
         others = [k for k in np.argsort(shares)[::-1] if k != mode - 1]
         captured = int(others[0]) + 1 if others and shares[others[0]] >= CAPTURED else None
-        near = [(abs(d), j, d) for j, d in ((j, _distance(t, w, e)) for j, t in enumerate(tongues)) if np.isfinite(d)]
+        near = [(abs(d), j, d) for j, d in ((j, w / _omega_at(t, e) - 1.0) for j, t in enumerate(tongues))
+                if np.isfinite(d)]
         _, on_tongue, d_tongue = min(near) if near else (0.0, None, float("nan"))
         out.append(ResonancePeak(omega=w, energy=e, omega_backbone=w_bb,
-                                 distance=float(w / w_bb - 1.0) if inside else float("nan"), index=i,
+                                 distance=w / w_bb - 1.0, index=i,
                                  tongue=tongue, tongue_modes=modes, mode=mode,
                                  shares=tuple(float(v) for v in shares), ratios=tuple(float(v) for v in ratios),
                                  captured_by=captured, on_tongue=on_tongue, tongue_distance=d_tongue))

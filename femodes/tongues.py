@@ -19,8 +19,7 @@ import numpy as np
 
 from .analyses import branch_from_continuation, nonlinear_mode_options
 from .hbm.problems import NonlinearModeProblem
-from .linear import linear_modes
-from .resonance import SHARE_MODES, modal_energy_shares
+from .resonance import point_shares
 from .results import Branch
 from .solvers import ContinuationOptions, continuation
 from .solvers.checks import entry_point
@@ -96,8 +95,7 @@ def tongue_branch(backbone: Branch, tongue: int = 0, energy_max: float | None = 
     if not branch.success:
         log.warning("tongue_branch: the branch of tongue %d ends short of the energy %.6g: %s", tongue, e1, branch.message)
     if len(branch):
-        lm = linear_modes(model, n=int(min(SHARE_MODES, model.n_dofs)))
-        f = modal_energy_shares(h, branch.Q[-1], float(branch.omega[-1]), model.M, lm.omega, lm.shapes)
+        f, _ = point_shares(branch, len(branch) - 1)
         others = [j for j in np.argsort(f)[::-1] if j != mode - 1 and f[j] > 0.05]
         branch.meta["modes"] = [int(j) + 1 for j in others]
         branch.meta["shares"] = [float(f[j]) for j in others]

@@ -155,7 +155,7 @@ def test_compare_resonance_reports_distances_when_the_modes_fail(backbone, monke
     monkeypatch.setattr(res, "linear_modes", fail)
     (peak,) = fm.compare_resonance(backbone, forced)
     assert peak.shares == () and peak.captured_by is None and peak.distance == ok.distance
-    assert "no modal energy shares at the peaks" in caplog.text
+    assert "compare_resonance: no modal energy shares (linear_modes failed: no modes)" in caplog.text
 
 
 def test_modal_energy_shares_analytic():
