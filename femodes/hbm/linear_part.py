@@ -167,9 +167,7 @@ def _modes_solve(Z, lu: BlockLU, f: float) -> np.ndarray | None:
     if em is None:
         return None
     Phi, lam, rows, Erows = em
-    c, mu, bad = modal_shift(lam, f)
-    mu_ok = mu.copy()
-    mu_ok[bad] = 1.0  # those columns are solved directly below
+    c, mu_ok, bad = modal_shift(lam, f)  # the bad modes' columns are solved directly below
     X = Phi / mu_ok
     if rows.size:
         unit = np.zeros((Phi.shape[0], rows.size))

@@ -90,7 +90,7 @@ class LowRankSplit:
         nb, nI = pat.bdofs.size, pat.perm.size
         assert self.modes is not None  # condense takes this path with modes only
         PhiI, Phib, lam, G, sI, ES = self.modes
-        c, mu, bad = modal_shift(lam, f, xi)
+        c, mu_ok, bad = modal_shift(lam, f, xi)
         gd = self.Z.lowrank_gain(f)
         ns = sI.size
         full = np.zeros((nI, nb + ns + bad.size), dtype=complex)
@@ -105,8 +105,6 @@ class LowRankSplit:
         # (checked there); what it leaves is for the refinement.
         WS: np.ndarray | None
         Xbad: np.ndarray | None
-        mu_ok = mu.copy()
-        mu_ok[bad] = 1.0  # those columns are overwritten below (modal_shift)
         UX = G + UWb @ Phib
         if ns:
             WS = np.ascontiguousarray(W[:, nb:nb + ns], dtype=complex)
@@ -174,12 +172,14 @@ class LowRankSplit:
 
 def modal_shift(lam: np.ndarray, f: float, xi: float = 0.0) -> tuple:
     """``(c, mu, bad)`` of the modes relation at the frequency ``f``: the mass shift ``c``
-    (:meth:`DynamicStiffness.mass_shift`, real without ``xi``), ``mu = w^2 - c`` and the modes whose
-    ``|mu|`` is within 1e-6 of the spectrum's scale of zero (``k w`` at their frequency: the relation
-    cannot divide by ``mu``, their columns are solved directly)."""
+    (:meth:`DynamicStiffness.mass_shift`, real without ``xi``), the divisors ``mu = w^2 - c`` and
+    the modes ``bad`` whose ``|mu|`` is within 1e-6 of the spectrum's scale of zero (``k w`` at
+    their frequency: the relation cannot divide by ``mu``, their columns are solved directly; their
+    ``mu`` is 1, so that dividing by all of ``mu`` is safe)."""
     c = DynamicStiffness.mass_shift(f, xi) if xi else f * f
     mu = lam - c
     bad = np.flatnonzero(np.abs(mu) <= 1e-6 * max(float(lam.max()), f * f, 1e-300))
+    mu[bad] = 1.0
     return c, mu, bad
 
 
