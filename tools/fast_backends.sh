@@ -5,7 +5,7 @@
 # a back-end whose headers are missing or whose build fails is skipped with a note, and femodes
 # uses SuperLU instead (one log line). Usage: sh tools/fast_backends.sh .venv/bin/python
 PY=${1:-.venv/bin/python}
-BIN=$(dirname "$PY")
+BIN=$(cd "$(dirname "$PY")" && pwd)  # absolute: pip builds in a temporary directory
 # python-mumps' build runs its _version.py as `#!/usr/bin/env python`: the venv's python must be
 # first on PATH (Debian has no `python` command)
 PATH="$BIN:$PATH"
