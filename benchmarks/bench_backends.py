@@ -24,6 +24,8 @@ complex   the harmonic block ``Z = K_II - w^2 M_II + i w C_II`` at ``w = 1.5`` (
           rad/s; between eigenfrequencies), ``factorize(Z, symmetric=True)`` (SuperLU with the options of the
           HBM block solver, ``BlockSolverOptions().superlu_options``), then one solve with ``n_b`` columns.
 cb        the whole ``fm.craig_bampton(model, n_modes=20)`` under ``FEMODES_SPARSE_BACKEND``.
+cbquad    the same with the reduced stiffness's kept block by the quadratic form ``T_b^T K T_b``
+          (``reduction.SCHUR_COND_EPS = -1``: the reduction before it took the Schur complement).
 floor     what CHOLMOD or MUMPS itself costs for cb's work (``bench_solids_scale._cb_floor``: the
           factorisation of ``K_II``, its ``n_b`` solves, ARPACK shift-invert for 20 modes).
 modes     ``fm.linear_modes(model, n=20)`` (shift-invert eigen-solve) likewise.
@@ -114,7 +116,7 @@ def run(n: int, repeat: int, backends, ops=("spd", "complex", "cb", "modes"), ge
     w = 1300.0 if geometry == "blade" else 1.5   # between the first two eigenfrequencies
     Z = (K - w * w * M + 1j * w * C)[I][:, I].tocsc()
     ZIB = (K - w * w * M + 1j * w * C)[I][:, bd].toarray()
-    recs = {(op, b): [] for op in ("spd", "complex", "cb", "modes", "floor") for b in backends}
+    recs = {(op, b): [] for op in ("spd", "complex", "cb", "cbquad", "modes", "floor") for b in backends}
     ref = {}
     for r in range(repeat):
         for b in backends:
@@ -140,6 +142,19 @@ def run(n: int, repeat: int, backends, ops=("spd", "complex", "cb", "modes"), ge
                     ref.setdefault("omega", om)
                 recs[("cb", b)].append(dict(total_s=tc, omega_rel_diff=(float(np.abs(om / ref["omega"] - 1).max())
                                                                          if om is not None else None)))
+            if "cbquad" in ops:
+                from femodes import reduction
+
+                bound, reduction.SCHUR_COND_EPS = reduction.SCHUR_COND_EPS, -1.0
+                try:
+                    tq, romq = cpu(lambda: fm.craig_bampton(model, n_modes=20))
+                finally:
+                    reduction.SCHUR_COND_EPS = bound
+                if r == 0:
+                    oq = np.sort(fm.linear_modes(romq, n=10).omega)
+                    ref.setdefault("omega", oq)
+                recs[("cbquad", b)].append(dict(total_s=tq, omega_rel_diff=(float(np.abs(oq / ref["omega"] - 1).max())
+                                                                             if r == 0 else None)))
             if "floor" in ops and b in ("cholmod", "mumps"):
                 # what the library itself costs for cb's work (factor, n_b solves, 20 modes by
                 # shift-invert with the factor), called directly: README_solids_scale.md's floor

@@ -410,8 +410,8 @@ def _project(A, T: np.ndarray, n_kept: int, lowrank: Any = None, schur_rows: np.
 #: the quadratic form's own products, and the quadratic form costs the ``n x n_b`` product
 #: ``K T_b`` (3.1 s of 15.9 s on a 7.9e4-DOF blade with 637 kept DOFs). Measured against
 #: ``3 EI / L^3`` on cantilevers of 50-800 elements (``cond eps`` 6.5e-9 to 4.1e-4) under SuperLU,
-#: MUMPS and PARDISO: the Schur form's tip-stiffness error is within 0.3-12x of the quadratic
-#: form's (1e-10 to 5e-6), smaller in 9 of the 21 cases; on the blade (cond 7e6) both put the
+#: MUMPS and PARDISO: the Schur form's tip-stiffness error is 0.09-16 times the quadratic
+#: form's (1e-10 to 5e-6), smaller in 11 of the 21 cases; on the blade (cond 7e6) both put the
 #: smallest reduced stiffness eigenvalue 1.5e-10 from a reference with refined ``Psi``. Past
 #: this bound (a 1000-element beam, ``cond eps`` 1e-3: 3.4e-5 against 3.2e-6) the quadratic form.
 SCHUR_COND_EPS = 1e-4

@@ -233,3 +233,24 @@ def test_lanczos_results_are_the_same_in_every_run():
     again = fm.linear_modes(model, 4)
     np.testing.assert_array_equal(first.omega, again.omega)
     np.testing.assert_array_equal(first.shapes, again.shapes)
+
+
+@pytest.mark.parametrize("fmt", ["csr", "csc", "coo"])
+def test_one_norm_of_the_condition_estimate(fmt):
+    """The condition estimate's ``||K||_1`` is the largest column sum of ``|K|`` from the stored
+    entries (no copy of ``|K|``): equal to scipy's ``norm(K, 1)`` to the rounding of a different
+    summation order (n eps of the norm), with empty columns in the middle and at the end."""
+    import scipy.sparse.linalg as spla
+
+    from femodes.eigen import _one_norm
+
+    rng = np.random.default_rng(5)
+    for shape in ((60, 45), (45, 60), (1, 1)):
+        A = sp.random(*shape, density=0.1, random_state=rng, format="csc")
+        A = (A - 2.0 * sp.random(*shape, density=0.05, random_state=rng, format="csc")).tolil()
+        A[:, shape[1] // 2] = 0.0
+        A[:, shape[1] - 1] = 0.0
+        A = A.asformat(fmt)
+        ref = spla.norm(sp.csc_matrix(A), 1)
+        assert abs(_one_norm(A) - ref) <= shape[0] * np.finfo(float).eps * ref
+    assert _one_norm(sp.csc_matrix((4, 4))) == 0.0
