@@ -97,7 +97,11 @@ def _one_norm(A) -> float:
     if A.format == "csr":
         sums = np.bincount(A.indices, weights=a, minlength=A.shape[1])
     else:  # the columns are the compressed axis: sums over each column's slice
-        sums = np.add.reduceat(np.append(a, 0.0), A.indptr[:-1]) if A.shape[1] else np.zeros(0)
+        # reduceat at each column's start (clipped for empty trailing columns, whose sums are
+        # then zeroed): no padded copy of the entries
+        if not a.size:
+            return 0.0
+        sums = np.add.reduceat(a, np.minimum(A.indptr[:-1], a.size - 1))
         sums[np.diff(A.indptr) == 0] = 0.0
     return float(sums.max(initial=0.0))
 

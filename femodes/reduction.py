@@ -286,7 +286,7 @@ def _fixed_interface_modes(KII, MII, lu: Any, n_modes: int) -> tuple[np.ndarray,
     couplings the projection kept depended on the BLAS kernel. A Rayleigh-Ritz step on each
     part's modes makes them ``M``-orthonormal and ``K``-orthogonal to the round-off of the
     products (:func:`_project` tells the exact zeros from the rest by that round-off)."""
-    n_parts, label = connected_components(abs(KII) + abs(MII), directed=False)
+    n_parts, label = _parts(KII, MII)
     if n_parts == 1:
         # K_II is definite here (factorised above): shift-invert at 0 reuses its factor
         _, phi = normal_modes(KII, MII, n_modes, sigma=0.0, factor=lu, check=False)
@@ -311,6 +311,19 @@ def _fixed_interface_modes(KII, MII, lu: Any, n_modes: int) -> tuple[np.ndarray,
         raise ValueError(f"craig_bampton: n_modes={n_modes} exceeds the {order.size} fixed-interface modes of the "
                          "interior; ask for fewer modes")
     return np.column_stack([columns[i] for i in order]), np.asarray(omegas)[order]
+
+
+def _parts(KII, MII) -> tuple[int, np.ndarray]:
+    """The parts of the interior that no stiffness or mass entry couples (connected components of
+    the pattern of ``|K_II| + |M_II|``). The pattern of ``K_II`` (symmetric: CSC read as CSR, no
+    copy) is tried first: when it is connected so is the union, and the sum of the two absolute
+    values is not formed (0.85 against 0.15 s on a 7.9e4-DOF blade)."""
+    KII = sp.csc_matrix(KII)
+    n_parts, label = connected_components(sp.csr_matrix((KII.data, KII.indices, KII.indptr), shape=KII.shape),
+                                          directed=False)
+    if n_parts == 1:
+        return n_parts, label
+    return connected_components(abs(KII) + abs(MII), directed=False)
 
 
 def _rayleigh_ritz(K, M, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -356,7 +369,7 @@ def _project(A, T: np.ndarray, n_kept: int, lowrank: Any = None, schur_rows: np.
     A = sp.csr_matrix(A)
     n, width = T.shape
     Tm = np.abs(T[:, n_kept:])
-    Bm = abs(A) @ Tm  # |A| |T_m|, n x n_modes
+    Bm = _abs(A) @ Tm  # |A| |T_m|, n x n_modes
     UT = None
     if lowrank is not None:
         UT = lowrank.U.T @ T
@@ -365,21 +378,22 @@ def _project(A, T: np.ndarray, n_kept: int, lowrank: Any = None, schur_rows: np.
     R = np.zeros((width, width))
     Sm = np.zeros((width, width - n_kept))
     step = max(256, int(PROJECT_BLOCK_BYTES // (8 * max(width, 1))))
-    # the upper triangle only, in column blocks (the product is symmetric; 8 blocks cut the
-    # products of a 7.9e4-DOF blade's 657 columns from 1.39 to 0.97 s)
-    edges = np.linspace(0, width, min(8, max(1, width // 64)) + 1).astype(int)
     # contiguous: scipy would copy the strided mode columns (n x n_modes) at every block's product
     Tmodes = np.ascontiguousarray(T[:, n_kept:]) if schur_rows is not None else None
+    # the whole product through the half H = tril(A, -1) + diag(A) / 2 of the symmetric A = H + H^T:
+    # T^T A T = X + X^T with X = T^T H T; scipy's sparse-times-dense product is the costly half
+    # (1.9 of 2.9 s for a 7.9e4-DOF blade's mass and 657 columns) and H has half of A's entries
+    H = None if Tmodes is not None else _lower_half(A)
     for r0 in range(0, n, step):
         rows = slice(r0, min(n, r0 + step))
         Tr = T[rows]
-        if Tmodes is not None:  # the mode columns only
+        if H is None:  # the mode columns only
             R[:, n_kept:] += Tr.T @ (A[rows] @ Tmodes)
         else:
-            ATr = A[rows] @ T
-            for c0, c1 in zip(edges[:-1], edges[1:]):
-                R[c0:c1, c0:] += Tr[:, c0:c1].T @ ATr[:, c0:]
+            R += Tr.T @ (H[rows] @ T)
         Sm += np.abs(Tr).T @ Bm[rows]
+    if H is not None:
+        R += R.T.copy()
     del Bm
     if schur_rows is not None:
         # A T_b = [A_bb + A_bI Psi; A_II Psi + A_Ib] and the second block is the residual r of the
@@ -467,6 +481,17 @@ def _rayleigh_coefficients(model: StructuralModel) -> tuple[float, float] | None
     row = int(max(np.diff(A.indptr).max(initial=0) for A in (C, M, K)))
     scale = abs(alpha) * _abs(M) @ ax + abs(beta) * _abs(K) @ ax + _abs(C) @ ax
     return (alpha, beta) if np.all(diff <= (4.0 + 2.0 * row) * np.finfo(float).eps * scale) else None
+
+
+def _lower_half(A: sp.csr_matrix) -> sp.csr_matrix:
+    """``tril(A, -1) + diag(A) / 2`` (CSR): ``A = H + H^T`` for a symmetric ``A``."""
+    A = sp.csr_matrix(A)
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    lower = A.indices <= rows
+    data = np.where(A.indices == rows, 0.5 * A.data, A.data)[lower]
+    indptr = np.zeros(A.shape[0] + 1, dtype=A.indptr.dtype)
+    np.cumsum(np.bincount(rows[lower], minlength=A.shape[0]), out=indptr[1:])
+    return sp.csr_matrix((data, A.indices[lower], indptr), shape=A.shape)
 
 
 def _abs(A: sp.csr_matrix) -> sp.csr_matrix:
