@@ -277,3 +277,28 @@ def test_stiffness_kept_block_is_the_schur_complement_when_well_conditioned(monk
     monkeypatch.setattr(red, "_project", lambda *a, **k: used.append(k.get("schur_rows")) or project(*a, **k))
     fm.craig_bampton(beam, 4)
     assert used == [None, None]  # mass and stiffness, both quadratic
+
+
+def test_lower_half_and_the_parts_of_the_interior(rng):
+    """``_lower_half`` splits a symmetric matrix exactly (``H + H^T == A``, entry by entry: halving
+    a diagonal entry and adding it back is exact in binary floating point), with empty rows; and
+    the interior's parts come from ``K_II``'s pattern unless the mass couples what the stiffness
+    does not (then from both)."""
+    import scipy.sparse as sp
+
+    import femodes.reduction as red
+
+    A = sp.random(40, 40, density=0.1, random_state=1, format="csr")
+    A = (A + A.T).tolil()
+    A[7, :] = 0.0
+    A[:, 7] = 0.0
+    A = sp.csr_matrix(A)
+    A.eliminate_zeros()
+    H = red._lower_half(A)
+    assert sp.triu(H, 1).nnz == 0
+    assert (H + H.T != A).nnz == 0
+    K = sp.csc_matrix(sp.block_diag([np.array([[2.0, -1.0], [-1.0, 2.0]])] * 2))
+    M = sp.identity(4, format="csr")
+    assert red._parts(K, M)[0] == 2
+    M = sp.csr_matrix(np.eye(4) + 0.1 * (np.eye(4, k=2) + np.eye(4, k=-2)))  # couples the two
+    assert red._parts(K, M)[0] == 1
