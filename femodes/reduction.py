@@ -19,7 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from .eigen import IllConditionedWarning, check_conditioning, normal_modes
 from .model import Attached, MeshMap, StructuralModel
@@ -219,9 +219,9 @@ def _reduction_basis(K, M, kept: np.ndarray, interior: np.ndarray,
         del KI
         MII = M[interior][:, interior]  # CSR: ARPACK multiplies by it (symmetric: the same matrix)
         lu, cond = _factor_interior(KII)
-        # the constraint modes in blocks of columns (PSI_BLOCK_BYTES): K_IB and Psi are n_I x n_B
-        # dense, 1.4 GB each at 1e6 DOFs and 169 kept DOFs, held next to the factor
-        step = max(16, int(PSI_BLOCK_BYTES // (8 * nI)))
+        # the constraint modes in blocks of columns (PSI_BLOCK_COLUMNS, PSI_BLOCK_BYTES): K_IB and
+        # Psi are n_I x n_B dense, 1.4 GB each at 1e6 DOFs and 169 kept DOFs, held next to the factor
+        step = max(16, min(PSI_BLOCK_COLUMNS, int(PSI_BLOCK_BYTES // (8 * nI))))
         for c0 in range(0, nB, step):
             cols = slice(c0, min(nB, c0 + step))
             # Fortran order: the column layout the back-ends solve in, so no copy is made for them
@@ -235,6 +235,12 @@ def _reduction_basis(K, M, kept: np.ndarray, interior: np.ndarray,
 #: Bytes of the block of constraint modes (and of the ``K_IB`` columns it solves for) formed at a
 #: time; the back-ends' block solves read the factor once per block.
 PSI_BLOCK_BYTES = 2**29
+
+#: Columns of constraint modes solved for at a time (at most): the supernodal solves of CHOLMOD and
+#: MUMPS run faster on blocks of about a hundred right-hand sides than on all of them at once (the
+#: 637 columns of a 7.9e4-DOF blade: 5.3-7.3 s at once, 3.9-4.7 s in blocks of 106-320, the
+#: dense blocks 600 MB smaller; ``benchmarks/README_backends.md``).
+PSI_BLOCK_COLUMNS = 128
 
 
 def _factor_interior(KII) -> tuple[Any, float]:
@@ -315,14 +321,16 @@ def _fixed_interface_modes(KII, MII, lu: Any, n_modes: int) -> tuple[np.ndarray,
 
 def _parts(KII, MII) -> tuple[int, np.ndarray]:
     """The parts of the interior that no stiffness or mass entry couples (connected components of
-    the pattern of ``|K_II| + |M_II|``). The pattern of ``K_II`` (symmetric: CSC read as CSR, no
-    copy) is tried first: when it is connected so is the union, and the sum of the two absolute
-    values is not formed (0.85 against 0.15 s on a 7.9e4-DOF blade)."""
+    the pattern of ``|K_II| + |M_II|``). A breadth-first search over the pattern of ``K_II`` (its
+    CSC arrays read as CSR, no copy) comes first: when it reaches every DOF the interior is one
+    part, and neither the sum of the absolute values nor scipy's symmetrized graph is formed
+    (0.013 s against 0.85 s on a 7.9e4-DOF blade). It can only miss DOFs, never join parts, so
+    anything else takes the components of the whole pattern."""
     KII = sp.csc_matrix(KII)
-    n_parts, label = connected_components(sp.csr_matrix((KII.data, KII.indices, KII.indptr), shape=KII.shape),
-                                          directed=False)
-    if n_parts == 1:
-        return n_parts, label
+    if KII.shape[0]:
+        graph = sp.csr_matrix((KII.data, KII.indices, KII.indptr), shape=KII.shape)
+        if breadth_first_order(graph, 0, directed=True, return_predecessors=False).size == KII.shape[0]:
+            return 1, np.zeros(KII.shape[0], dtype=np.int32)
     return connected_components(abs(KII) + abs(MII), directed=False)
 
 
@@ -432,7 +440,7 @@ SCHUR_COND_EPS = 1e-4
 
 
 #: Bytes of the ``rows x width`` block of ``A T`` that :func:`_project` forms at a time.
-PROJECT_BLOCK_BYTES = 32 * 2**20
+PROJECT_BLOCK_BYTES = 16 * 2**20
 
 
 #: Multiple of eps times an entry's round-off scale (:func:`_project`) below which an entry of a
@@ -479,7 +487,7 @@ def _rayleigh_coefficients(model: StructuralModel) -> tuple[float, float] | None
     diff = np.abs(C @ x - (alpha * (M @ x) + beta * (K @ x)))
     ax = np.abs(x)
     row = int(max(np.diff(A.indptr).max(initial=0) for A in (C, M, K)))
-    scale = abs(alpha) * _abs(M) @ ax + abs(beta) * _abs(K) @ ax + _abs(C) @ ax
+    scale = abs(alpha) * (_abs(M) @ ax) + abs(beta) * (_abs(K) @ ax) + _abs(C) @ ax
     return (alpha, beta) if np.all(diff <= (4.0 + 2.0 * row) * np.finfo(float).eps * scale) else None
 
 
