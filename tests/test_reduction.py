@@ -302,3 +302,8 @@ def test_lower_half_and_the_parts_of_the_interior(rng):
     assert red._parts(K, M)[0] == 2
     M = sp.csr_matrix(np.eye(4) + 0.1 * (np.eye(4, k=2) + np.eye(4, k=-2)))  # couples the two
     assert red._parts(K, M)[0] == 1
+    # an explicit zero stored between the parts does not couple them
+    coo = K.tocoo()
+    Kz = sp.csc_matrix((np.r_[coo.data, 0.0, 0.0], (np.r_[coo.row, 1, 2], np.r_[coo.col, 2, 1])), shape=K.shape)
+    assert Kz.nnz == K.nnz + 2 and np.count_nonzero(Kz.data) == K.nnz
+    assert red._parts(Kz, sp.identity(4, format="csr"))[0] == 2
