@@ -374,7 +374,9 @@ def _project(A, T: np.ndarray, n_kept: int, lowrank: Any = None, schur_rows: np.
     coupling of those models above 1.8e4 of it (a Rayleigh damping's mass part on a fine beam).
 
     The products are summed over blocks of rows (:data:`PROJECT_BLOCK_BYTES`), so no
-    ``n x width`` array besides ``T`` is held: at 1e6 DOFs and 300 kept DOFs each is 2.4 GB."""
+    ``n x width`` array besides ``T`` is held: at 1e6 DOFs and 300 kept DOFs each is 2.4 GB. The
+    whole product is ``X + X^T`` with ``X = T^T H T`` and ``H`` the lower half of ``A``
+    (:func:`_lower_half`); its round-off is bounded by the same first scale."""
     A = sp.csr_matrix(A)
     n, width = T.shape
     Tm = np.abs(T[:, n_kept:])

@@ -279,7 +279,7 @@ def test_stiffness_kept_block_is_the_schur_complement_when_well_conditioned(monk
     assert used == [None, None]  # mass and stiffness, both quadratic
 
 
-def test_lower_half_and_the_parts_of_the_interior(rng):
+def test_lower_half_and_the_parts_of_the_interior():
     """``_lower_half`` splits a symmetric matrix exactly (``H + H^T == A``, entry by entry: halving
     a diagonal entry and adding it back is exact in binary floating point), with empty rows; and
     the interior's parts come from ``K_II``'s pattern unless the mass couples what the stiffness
