@@ -496,13 +496,7 @@ def _rayleigh_coefficients(model: StructuralModel) -> tuple[float, float] | None
 
 def _lower_half(A: sp.csr_matrix) -> sp.csr_matrix:
     """``tril(A, -1) + diag(A) / 2`` (CSR): ``A = H + H^T`` for a symmetric ``A``."""
-    A = sp.csr_matrix(A)
-    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-    lower = A.indices <= rows
-    data = np.where(A.indices == rows, 0.5 * A.data, A.data)[lower]
-    indptr = np.zeros(A.shape[0] + 1, dtype=A.indptr.dtype)
-    np.cumsum(np.bincount(rows[lower], minlength=A.shape[0]), out=indptr[1:])
-    return sp.csr_matrix((data, A.indices[lower], indptr), shape=A.shape)
+    return sp.csr_matrix(sp.tril(A, -1, format="csr") + sp.diags(0.5 * A.diagonal(), format="csr"))
 
 
 def _abs(A: sp.csr_matrix) -> sp.csr_matrix:
