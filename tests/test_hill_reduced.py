@@ -159,7 +159,8 @@ def test_sparse_path_drops_a_family_without_a_central_member():
         r = hill_mod._hill(rs, red.state(y, rs), sol.omega_truncated, sol.xi, 2, None)
         assert r.complete == (m == 19)
         lead[m] = abs(r.multipliers[0])
-    # the two reductions differ by one mode far above the cut-off: the same leading multiplier to
-    # well below the stability tolerance 1e-4 (measured: 2e-8)
-    assert abs(lead[20] - lead[19]) < 1e-6, lead
+    # the two reductions differ by one mode far above the cut-off: the same leading multiplier
+    # within the error the reduction is built for (REDUCTION_TOL; measured 5.3e-7, the 20th mode's
+    # own effect; it was 2.16 before)
+    assert abs(lead[20] - lead[19]) < REDUCTION_TOL, lead
     assert abs(lead[19] - 1.0) < 1e-4, lead  # a free orbit: its trivial multiplier, to the truncation
