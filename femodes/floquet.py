@@ -34,8 +34,10 @@ from .results.branch import fill_in_place
 from .solvers import NewtonOptions
 from .solvers.checks import InputTypeError, InputValueError, entry_point
 from .solvers.threads import limit_blas_threads
+from .hbm.hill import COARSE
 from .stability_methods import (AUTO_MAX_STIFFNESS, MAX_CORRECTION, METHODS, Auto, Orbit, ShootingError,
-                                StabilityMethod, StabilityResult, as_stability_method, by_name, is_stable)
+                                StabilityMethod, StabilityResult, as_stability_method, by_name, checked_lead,
+                                harmonic_check, is_stable)
 
 # the location helpers live in femodes.branch_stability; they are re-exported here, where
 # switch_branch and scripts import them from
@@ -155,7 +157,16 @@ def stability(solution: PeriodicSolution, method: StabilityMethod | None = None,
     forced = solution.kind == "forced"
     system = HBMSystem(model if forced else model.without_forcing(), solution.harmonics)
     y = system.join(solution.Q, solution.P)
-    return method(Orbit(model, system, y, solution.Q, solution.omega_truncated, solution.xi, forced), tol)
+    orbit = Orbit(model, system, y, solution.Q, solution.omega_truncated, solution.xi, forced)
+    res = harmonic_check(orbit, method(orbit, tol))
+    if res.unconverged(tol, not forced):
+        log.warning("stability: Hill's verdict is not converged in the harmonics: the largest multiplier but for "
+                    "real positive ones is %.4g with the perturbation truncated to H = %d harmonics and %.4g with %d. "
+                    "Raise the harmonics of the analysis, or check this orbit with "
+                    "fm.stability(solution, fm.stability_methods.Shooting())",
+                    checked_lead(res.multipliers, not forced), solution.harmonics.n_harmonics,
+                    res.coarse, int(COARSE * solution.harmonics.n_harmonics))
+    return res
 
 
 def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: StabilityMethod | None = None,
@@ -201,6 +212,7 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
             last = now
     bifs = find_bifurcations(branch, problem, results, point, tol=tol, newton=newton or NewtonOptions(atol=1e-9, max_iter=20),
                              locate=opts.locate)
+    results = _check_harmonics(results, lambda i: Orbit(model, system, *_state(problem, b, i), forced), tol, forced)
     m = max((r.multipliers.size for r in results), default=0)
     mult = np.full((len(branch), m), np.nan + 0j)
     for i, r in enumerate(results):
@@ -213,6 +225,43 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
         log.info("stability: shooting failed at %d of %d points; Hill's method used there", n_fb, len(results))
     fill_in_place(branch, annotated)  # the legacy of this release: the branch given is filled too
     return annotated
+
+
+def _state(problem, b: Branch, i: int) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """The HBM unknowns, displacement coefficients, frequency and damping of point ``i``."""
+    u = problem.unpack(problem.pack(b.Q[i], b.P[i], b.omega_truncated[i], b.xi[i]), b.parameter[i])
+    return u.y, u.Q, u.omega, u.xi
+
+
+def _check_harmonics(results: list, orbit, tol: float, forced: bool) -> list:
+    """Hill's truncation check (:func:`~femodes.stability_methods.harmonic_check`) at the points
+    where a verdict is made on the multipliers it compares (real positive ones left out,
+    :func:`~femodes.stability_methods.checked_lead`): those unstable by them, and both ends of every
+    change; one warning lists the points whose verdict is not converged in the harmonics
+    (``orbit(i)`` the :class:`Orbit` of point ``i``)."""
+    # the verdicts on the multipliers it compares (checked_lead: real positive ones left out)
+    out_ = [checked_lead(r.multipliers, not forced) > 1.0 + tol for r in results]
+    at = {i for i, r in enumerate(results) if r.method == "hill" and out_[i]}
+    at |= {j for i in range(len(results) - 1) if out_[i] != out_[i + 1] for j in (i, i + 1)
+           if results[j].method == "hill"}
+    if not at:
+        return results
+    start = time.perf_counter()
+    out = list(results)
+    for i in sorted(at):
+        out[i] = harmonic_check(orbit(i), results[i])
+    bad = [i for i in sorted(at) if out[i].unconverged(tol, not forced)]
+    log.info("stability: Hill's truncation check at %d points, %.3g s", len(at), time.perf_counter() - start)
+    if bad:
+        shown = ", ".join(f"{i} ({checked_lead(out[i].multipliers, not forced):.3g} / {out[i].coarse:.3g})"
+                          for i in bad[:6]) + (", ..." if len(bad) > 6 else "")
+        log.warning("stability: at %d of %d points checked, Hill's verdict changes when the perturbation is truncated "
+                    "to %d%% of the harmonics (largest |mu| but for real positive ones, at H / at the coarser truncation: "
+                    "%s): those verdicts "
+                    "are not converged in the harmonics. Raise the harmonics, or check those points with "
+                    "fm.stability(branch[i], fm.stability_methods.Shooting())", len(bad), len(at), int(100 * COARSE),
+                    shown)
+    return out
 
 
 def _warn_uncertain(results, tol: float, forced: bool) -> None:

@@ -47,9 +47,10 @@ from .hill_elimination import algebraic_unknowns, dense_array, eliminate
 from .hill_reduction import FreeInterfaceReduction
 from .hill_sparse import ShiftInvert, sparse_exponents
 from .hill_rest import XI_TOL, at_rest
+from .harmonics import Harmonics
 from .system import HBMSystem
 
-__all__ = ["HillResult", "hill_matrices", "hill_exponents", "DENSE_LIMIT", "REDUCE_MIN_DOFS"]
+__all__ = ["HillResult", "hill_matrices", "hill_exponents", "coarse_multipliers", "COARSE", "DENSE_LIMIT", "REDUCE_MIN_DOFS"]
 
 log = logging.getLogger(__name__)
 
@@ -150,7 +151,7 @@ def hill_matrices(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0.
     return J.tocsr(), embed(J1q), embed(J2q)
 
 
-def _complex_harmonics(system: HBMSystem, V: np.ndarray) -> np.ndarray:
+def _complex_harmonics(system: HBMSystem | _Truncated, V: np.ndarray) -> np.ndarray:
     """Mass-weighted power of each eigenvector at complex harmonics ``m = -H .. H``: shape
     ``(2H + 1, n_vectors)``. ``a cos + b sin = (a - ib)/2 e^{i.} + (a + ib)/2 e^{-i.}``."""
     h, n = system.h, system.n
@@ -169,7 +170,7 @@ def _complex_harmonics(system: HBMSystem, V: np.ndarray) -> np.ndarray:
     return power
 
 
-def _centroids(system: HBMSystem, V: np.ndarray) -> np.ndarray:
+def _centroids(system: HBMSystem | _Truncated, V: np.ndarray) -> np.ndarray:
     power = _complex_harmonics(system, V)
     H = system.h.n_harmonics
     m = np.arange(-H, H + 1)[:, None]
@@ -178,14 +179,14 @@ def _centroids(system: HBMSystem, V: np.ndarray) -> np.ndarray:
     return (m * power).sum(axis=0) / total
 
 
-def _n_dynamic(system: HBMSystem) -> int:
+def _n_dynamic(system: HBMSystem | _Truncated) -> int:
     """DOFs with mass (each contributes two exponents)."""
     Md = system.M.diagonal()
     scale = float(np.max(np.abs(Md))) if Md.size else 0.0
     return int(np.count_nonzero(np.abs(Md) > 1e-14 * scale)) if scale > 0 else 0
 
 
-def _select(system: HBMSystem, s: np.ndarray, V: np.ndarray, base: float, n_keep: int):
+def _select(system: HBMSystem | _Truncated, s: np.ndarray, V: np.ndarray, base: float, n_keep: int):
     """The central copy of each exponent family (module docstring), at most ``n_keep``."""
     cen = _centroids(system, V)
     order = np.lexsort((np.abs(s.imag), np.abs(cen)))
@@ -276,13 +277,23 @@ def hill_exponents(system: HBMSystem, x: np.ndarray, omega: float, xi: float = 0
 def _hill(system: HBMSystem, x: np.ndarray, omega: float, xi: float, n_shifts: int,
           k_per_shift: int | None) -> HillResult:
     """Hill's problem of ``system`` itself (dense or shift-invert)."""
+    J0, J1, J2 = hill_matrices(system, x, omega, xi, dense=system.size <= SMALL)
+    return _solve(system, J0, J1, J2, omega, n_shifts, k_per_shift)
+
+
+def _solve(system: HBMSystem | _Truncated, J0, J1, J2, omega: float, n_shifts: int,
+           k_per_shift: int | None, dense: bool | None = None) -> HillResult:
+    """The selected exponents of the pencil ``J0 + s J1 + s^2 J2`` on the unknowns of ``system``;
+    ``dense`` forces the path (default: dense up to :data:`DENSE_LIMIT` unknowns with mass or
+    damping)."""
     base = omega / system.h.subharmonic          # spacing of the copies, w / nu
     T = system.h.grid.period(omega)
-    N = system.size
-    J0, J1, J2 = hill_matrices(system, x, omega, xi, dense=N <= SMALL)
+    N = J0.shape[0]
     n_keep = 2 * _n_dynamic(system)
     algebraic = algebraic_unknowns(J1, J2)
-    if N - np.count_nonzero(algebraic) <= DENSE_LIMIT:
+    if dense is None:
+        dense = N - np.count_nonzero(algebraic) <= DENSE_LIMIT
+    if dense:
         s, V = _dense(J0, J1, J2, base, algebraic)
         complete = True
     else:
@@ -300,6 +311,55 @@ def _hill(system: HBMSystem, x: np.ndarray, omega: float, xi: float, n_shifts: i
         complete = False
     return HillResult(exponents=s_sel[order], multipliers=mu[order], centroids=cen[idx][order],
                       vectors=V[:, idx][:, order], complete=complete, period=T, central=s[idx][order])
+
+
+#: Hill's truncation check (:func:`coarse_multipliers`): the perturbation's harmonics cut to this
+#: fraction of the orbit's.
+COARSE = 0.75
+
+
+def coarse_multipliers(system: HBMSystem, x: np.ndarray, omega: float, xi: float, n_modes: int | None) -> np.ndarray:
+    """The multipliers of the same orbit with the perturbation truncated to ``Hc = floor(COARSE H)``
+    harmonics, largest modulus first (empty when ``Hc < 1``): Hill's truncation check.
+
+    Hill's problem truncates the perturbation ``p`` of the orbit to the orbit's ``H`` harmonics;
+    its central exponents converge as that truncation grows, spectrally for smooth laws, slowly
+    for complementarity contacts, whose Jacobian jumps at every contact event. The pencil of the
+    coarser truncation is the block of the same pencil on the harmonics up to ``Hc`` (the orbit
+    and its Jacobian unchanged; a prefix of the HBM layout), solved as :func:`hill_exponents`
+    solved the whole one, on the same reduction (``n_modes`` free-interface modes, None: the model
+    itself). A verdict that differs between the two truncations is not converged in the harmonics.
+    """
+    h = system.h
+    Hc = int(COARSE * h.n_harmonics)
+    if Hc < 1:
+        return np.empty(0, dtype=complex)
+    x = np.asarray(x, dtype=float)
+    rs = system
+    if n_modes is not None:
+        red = system._cache["hill_reduction"]  # the reduction hill_exponents solved on
+        rs = red.system_with(n_modes)
+        x = red.state(x, rs)
+    dense = rs.size <= SMALL
+    J = hill_matrices(rs, x, omega, xi, dense=dense)
+    keep = np.concatenate([np.arange((2 * Hc + 1) * rs.n), rs.nq + np.arange((2 * Hc + 1) * rs.n_uc)])
+    sub = [A[np.ix_(keep, keep)] if dense else A[keep][:, keep] for A in J]
+    J0, J1, J2 = sub
+    # the path the whole problem took (a coarse block just under the dense limit would otherwise
+    # cost a dense solve of up to DENSE_LIMIT unknowns where the whole one was a shift-invert)
+    dense_whole = bool(rs.size - np.count_nonzero(algebraic_unknowns(J[1], J[2])) <= DENSE_LIMIT)
+    return _solve(_Truncated(rs, Hc), J0, J1, J2, omega, 2, None, dense=dense_whole).multipliers
+
+
+class _Truncated:
+    """What :func:`_solve` reads of a system (its harmonics, mass, layout), with its harmonics cut
+    to the first ``Hc``."""
+
+    def __init__(self, system: HBMSystem, Hc: int):
+        self.h = Harmonics(Hc, subharmonic=system.h.subharmonic)
+        self.M, self.n, self.n_uc = system.M, system.n, system.n_uc
+        self.nonlinear_dofs = system.nonlinear_dofs
+        self.nq = self.h.n_coef * system.n
 
 
 def _n_dynamic_unknowns(system: HBMSystem) -> int:
