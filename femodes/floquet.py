@@ -212,13 +212,19 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
             last = now
     bifs = find_bifurcations(branch, problem, results, point, tol=tol, newton=newton or NewtonOptions(atol=1e-9, max_iter=20),
                              locate=opts.locate)
-    results = _check_harmonics(results, lambda i: Orbit(model, system, *_state(problem, b, i), forced), tol, forced)
+    results, checked, bad = _check_harmonics(results, lambda i: Orbit(model, system, *_state(problem, b, i), forced),
+                                             tol, forced)
     m = max((r.multipliers.size for r in results), default=0)
     mult = np.full((len(branch), m), np.nan + 0j)
     for i, r in enumerate(results):
         mult[i, : r.multipliers.size] = r.multipliers
     annotated = branch.with_stability(stable=[is_stable(r.multipliers, tol, not forced) for r in results],
                                       multipliers=mult, bifurcations=bifs, methods=[r.method for r in results], tol=tol)
+    # Hill's truncation check, kept with the branch (saved with it; summary.txt of a case reports it)
+    annotated.meta["stability_checked"] = len(checked)
+    annotated.meta["stability_unconverged"] = [
+        {"index": i, "modulus": checked_lead(results[i].multipliers, not forced), "coarse": results[i].coarse}
+        for i in bad]
     _warn_uncertain(results, tol, forced)
     n_fb = sum(r.message != "" for r in results)
     if n_fb:
@@ -233,19 +239,20 @@ def _state(problem, b: Branch, i: int) -> tuple[np.ndarray, np.ndarray, float, f
     return u.y, u.Q, u.omega, u.xi
 
 
-def _check_harmonics(results: list, orbit, tol: float, forced: bool) -> list:
+def _check_harmonics(results: list, orbit, tol: float, forced: bool) -> tuple[list, list[int], list[int]]:
     """Hill's truncation check (:func:`~femodes.stability_methods.harmonic_check`) at the points
     where a verdict is made on the multipliers it compares (real positive ones left out,
     :func:`~femodes.stability_methods.checked_lead`): those unstable by them, and both ends of every
     change; one warning lists the points whose verdict is not converged in the harmonics
-    (``orbit(i)`` the :class:`Orbit` of point ``i``)."""
+    (``orbit(i)`` the :class:`Orbit` of point ``i``). Returns the results, the points checked and
+    those flagged."""
     # the verdicts on the multipliers it compares (checked_lead: real positive ones left out)
     out_ = [checked_lead(r.multipliers, not forced) > 1.0 + tol for r in results]
     at = {i for i, r in enumerate(results) if r.method == "hill" and out_[i]}
     at |= {j for i in range(len(results) - 1) if out_[i] != out_[i + 1] for j in (i, i + 1)
            if results[j].method == "hill"}
     if not at:
-        return results
+        return results, [], []
     start = time.perf_counter()
     out = list(results)
     for i in sorted(at):
@@ -261,7 +268,7 @@ def _check_harmonics(results: list, orbit, tol: float, forced: bool) -> list:
                     "are not converged in the harmonics. Raise the harmonics, or check those points with "
                     "fm.stability(branch[i], fm.stability_methods.Shooting())", len(bad), len(at), int(100 * COARSE),
                     shown)
-    return out
+    return out, sorted(at), bad
 
 
 def _warn_uncertain(results, tol: float, forced: bool) -> None:

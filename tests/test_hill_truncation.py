@@ -64,6 +64,7 @@ def test_smooth_duffing_verdicts_pass_the_check(caplog):
     unstable = np.flatnonzero(~b.stable)
     assert unstable.size >= 3
     assert "not converged in the harmonics" not in caplog.text
+    assert b.stability_unconverged == [] and b.meta["stability_checked"] == 0  # a real pair: nothing compared
     mid = int(unstable[unstable.size // 2])
     r = fm.stability(b[mid], fm.stability_methods.Hill())
     # one DOF: a real pair (1.86 and 0.42 here), both left out, at both truncations
@@ -92,7 +93,7 @@ def cantilever_backbone():
                                      stability=fm.StabilityOptions(method=fm.stability_methods.Hill(), locate=False))
 
 
-def test_a_contact_backbone_with_unconverged_verdicts_is_flagged(cantilever_backbone, caplog):
+def test_a_contact_backbone_with_unconverged_verdicts_is_flagged(cantilever_backbone, caplog, tmp_path):
     """The cantilever reduced to 4 modes, H = 10: its Hill verdicts scatter (unstable at isolated
     points, |mu| up to 11.6) and change when the perturbation is cut to 7 harmonics: the run warns
     and lists them, and each listed point's own check agrees."""
@@ -105,6 +106,15 @@ def test_a_contact_backbone_with_unconverged_verdicts_is_flagged(cantilever_back
     # measured 11 of 16: a branch whose verdicts are not worth much at H = 10
     assert n_bad >= 3 and n_checked >= n_bad
     listed = [int(part.split(" (")[0]) for part in msg.split("coarser truncation: ")[1].split("), ")[:3]]
+    # kept with the branch, saved with it, and reported in a case's summary.txt
+    assert b.stability_unconverged[:3] == listed and len(b.stability_unconverged) == n_bad
+    assert b.meta["stability_checked"] == n_checked
+    back = fm.load_branch(b.save(tmp_path / "cantilever.npz"))
+    assert back.stability_unconverged == b.stability_unconverged
+    from femodes.app.cases.reporting import stability_lines
+
+    line = stability_lines(back)[1]
+    assert line.startswith(f"Hill's truncation check: the verdict of {n_bad} of the {n_checked} points checked")
     caplog.clear()
     for i in listed:
         with caplog.at_level(logging.WARNING, logger="femodes"):

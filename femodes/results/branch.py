@@ -97,6 +97,15 @@ class Branch:
     bifurcations: tuple = _Bifurcations()  # type: ignore[assignment]
 
     @property
+    def stability_unconverged(self) -> list[int]:
+        """Points whose stability verdict failed Hill's truncation check (it changes when the
+        perturbation is cut to fewer harmonics: :func:`femodes.stability_methods.harmonic_check`);
+        empty when none did or stability was not computed. ``meta["stability_unconverged"]`` holds
+        each one's leading moduli at both truncations, ``meta["stability_checked"]`` how many
+        points were checked."""
+        return [int(d["index"]) for d in self.meta.get("stability_unconverged", [])]
+
+    @property
     def internal_resonances(self) -> list[dict]:
         """Tongues of internal resonance that a period-driven nonlinear mode stepped over (frequencies,
         energies, the modes that took the energy and ``w_k / w``); empty otherwise."""

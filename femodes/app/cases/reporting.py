@@ -82,7 +82,9 @@ def stability_lines(branch) -> list[str]:
     ``stability (shooting): 2 stable, 4 unstable of 6 points`` (the methods used, with their
     point counts when ``"auto"`` mixed them), then ``bifurcations: none`` or
     ``bifurcations: N`` and one line per bifurcation in branch order:
-    ``  period_doubling at w = 0.996204 (between points 3 and 4, multiplier -1)``.
+    ``  period_doubling at w = 0.996204 (between points 3 and 4, multiplier -1)``. Points that
+    failed Hill's truncation check (:attr:`~femodes.results.Branch.stability_unconverged`) get a
+    line after the first.
     """
     if branch.stable is None:
         return []
@@ -92,6 +94,13 @@ def stability_lines(branch) -> list[str]:
         used[str(m)] = used.get(str(m), 0) + 1
     methods = ", ".join(used) if len(used) == 1 else ", ".join(f"{m} at {k} points" for m, k in sorted(used.items()))
     lines = [f"stability ({methods or '-'}): {n_stable} stable, {n - n_stable} unstable of {n} points"]
+    bad = branch.meta.get("stability_unconverged", [])
+    if bad:
+        shown = ", ".join(f"{d['index']} ({d['modulus']:.3g} / {d['coarse']:.3g})" for d in bad[:8])
+        lines.append(f"Hill's truncation check: the verdict of {len(bad)} of the "
+                     f"{branch.meta.get('stability_checked', len(bad))} points checked changes with fewer "
+                     f"harmonics (point (|mu| / with 75 % of the harmonics): {shown}{', ...' if len(bad) > 8 else ''}); "
+                     f"not converged: raise the harmonics or check them by shooting")
     if not branch.bifurcations:
         return lines + ["bifurcations: none"]
     lines.append(f"bifurcations: {len(branch.bifurcations)}")
