@@ -219,12 +219,11 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
     for i, r in enumerate(results):
         mult[i, : r.multipliers.size] = r.multipliers
     annotated = branch.with_stability(stable=[is_stable(r.multipliers, tol, not forced) for r in results],
-                                      multipliers=mult, bifurcations=bifs, methods=[r.method for r in results], tol=tol)
-    # Hill's truncation check, kept with the branch (saved with it; summary.txt of a case reports it)
-    annotated.meta["stability_checked"] = len(checked)
-    annotated.meta["stability_unconverged"] = [
-        {"index": i, "modulus": checked_lead(results[i].multipliers, not forced), "coarse": results[i].coarse}
-        for i in bad]
+                                      multipliers=mult, bifurcations=bifs, methods=[r.method for r in results], tol=tol,
+                                      # Hill's truncation check, kept with the branch (summary.txt reports it)
+                                      checked=len(checked),
+                                      unconverged=[{"index": i, "modulus": checked_lead(results[i].multipliers, not forced),
+                                                    "coarse": results[i].coarse} for i in bad])
     _warn_uncertain(results, tol, forced)
     n_fb = sum(r.message != "" for r in results)
     if n_fb:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import copy
 import functools
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -151,11 +151,21 @@ class Branch:
         return _annotated(self, accuracy=checked_accuracy(accuracy, len(self), self.harmonics.n_harmonics,
                                                           "with_accuracy"))
 
-    def with_stability(self, *, stable, multipliers, bifurcations, methods, tol: float) -> Branch:
+    def with_stability(self, *, stable, multipliers, bifurcations, methods, tol: float, checked: int = 0,
+                       unconverged: Sequence[dict] = ()) -> Branch:
         """This branch with the stability of every point (built so by :mod:`femodes.floquet`): the
         verdicts, the multipliers (``(n_points, m)``, NaN-padded), the method of each point and the
-        :class:`Bifurcation` objects; a new branch, this one unchanged."""
-        return _with_stability(self, "with_stability", stable, multipliers, bifurcations, methods, tol)
+        :class:`Bifurcation` objects; a new branch, this one unchanged. ``checked`` points passed
+        through Hill's truncation check and ``unconverged`` those that failed it (``index``,
+        ``modulus``, ``coarse``: :attr:`stability_unconverged`), kept in ``meta`` when any was
+        checked."""
+        new = _with_stability(self, "with_stability", stable, multipliers, bifurcations, methods, tol)
+        for key in ("stability_checked", "stability_unconverged"):  # not those of an earlier stability
+            new.meta.pop(key, None)
+        if checked:
+            new.meta["stability_checked"] = int(checked)
+            new.meta["stability_unconverged"] = [dict(d) for d in unconverged]
+        return new
 
     def __len__(self) -> int:
         return self.omega_truncated.size

@@ -143,7 +143,9 @@ def load_branch(path, model=None) -> Branch:
                                                  arrays["bif_Q"], arrays["bif_P"], located, brackets)]
         br = br.with_stability(stable=arrays["stable"].astype(bool),
                                multipliers=arrays["multipliers_re"] + 1j * arrays["multipliers_im"], bifurcations=bifs,
-                               methods=stab["methods"], tol=float(br.meta.get("stability_tol", 1e-4)))
+                               methods=stab["methods"], tol=float(br.meta.get("stability_tol", 1e-4)),
+                               checked=int(br.meta.get("stability_checked", 0)),
+                               unconverged=br.meta.get("stability_unconverged", ()))
     if model is not None:
         br.attach(model)
     return br
