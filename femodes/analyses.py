@@ -436,5 +436,5 @@ def _with_stability(branch: Branch, problem, model: StructuralModel, stability: 
     if stability is None or branch.stable is not None or not len(branch):
         return branch
     return annotate_branch(branch, problem, model, method=stability.method, tol=stability.tol, newton=options.newton,
-                           locate=stability.locate)
+                           locate=stability.locate, check=stability.check)
 

@@ -227,7 +227,7 @@ def switch_at_branch_point(branch: Branch, bif: Bifurcation, span: tuple[float, 
         log.warning("switch_branch: %s", new.message)
     if stab is not None:
         new = annotate_branch(new, aug.problem, branch.model, method=stab.method, tol=stab.tol, newton=newton,
-                              locate=stab.locate)
+                              locate=stab.locate, check=stab.check)
         new = _with_branch_points(new, newton)
     new.meta["switched_from"] = {
         "kind": "branch_point", "reported_kind": bif.kind, "omega_hbm": float(u_bp.omega), "omega_reported": float(bif.omega), "index": int(i),

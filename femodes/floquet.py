@@ -83,16 +83,27 @@ class StabilityOptions:
         (``Bifurcation.located`` False), classified by that point's crossing multiplier (a jump
         cannot be told from a crossing there). :func:`~femodes.switch_branch` locates the
         bifurcation itself in every case.
+    check : bool
+        True (default): Hill's truncation check where a verdict is made (the points unstable by a
+        complex or negative multiplier, and both ends of every change): the same orbits' Hill
+        problems with the perturbation cut to ``floor(0.75 H)`` harmonics, one warning for the
+        verdicts that change (:func:`~femodes.stability_methods.harmonic_check`,
+        ``Branch.stability_unconverged``), at about 0.42 of a point's Hill solve each. False
+        skips it.
     """
 
     method: StabilityMethod = dataclasses.field(default_factory=Auto)
     tol: float = TOL
     locate: bool | float = True
+    check: bool = True
 
     @entry_point("StabilityOptions")
     def __post_init__(self):
         object.__setattr__(self, "method", as_stability_method(self.method))
         object.__setattr__(self, "tol", _check_tol(self.tol))
+        if not isinstance(self.check, (bool, np.bool_)):
+            raise InputTypeError(f"check must be True or False (Hill's truncation check), got {self.check!r}")
+        object.__setattr__(self, "check", bool(self.check))
         loc = self.locate
         if isinstance(loc, (bool, np.bool_)):
             object.__setattr__(self, "locate", bool(loc))
@@ -171,17 +182,17 @@ def stability(solution: PeriodicSolution, method: StabilityMethod | None = None,
 
 def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: StabilityMethod | None = None,
                     tol: float = TOL,
-                    newton: NewtonOptions | None = None, locate: bool | float = True) -> Branch:
+                    newton: NewtonOptions | None = None, locate: bool | float = True, check: bool = True) -> Branch:
     """``branch`` with ``stable``, ``multipliers``, ``bifurcations`` (a new branch; for this release
     ``branch`` is filled too, :func:`~femodes.results.branch.fill_in_place`): the multipliers of every point (module docstring), then the bifurcations between them
     (:func:`femodes.branch_stability.find_bifurcations`).
 
     ``problem`` is the :class:`ForcedResponseProblem` or :class:`NonlinearModeProblem` the
     branch was traced with; ``newton`` the corrector options of the located points; ``locate``
-    as in :class:`StabilityOptions`; ``method`` a strategy (default
+    and ``check`` as in :class:`StabilityOptions`; ``method`` a strategy (default
     :class:`~femodes.stability_methods.Auto`).
     """
-    opts = StabilityOptions(method=Auto() if method is None else method, tol=tol, locate=locate)
+    opts = StabilityOptions(method=Auto() if method is None else method, tol=tol, locate=locate, check=check)
     if not isinstance(problem, (ForcedResponseProblem, NonlinearModeProblem)):
         raise TypeError(f"annotate_branch: problem must be an HBM problem, got {type(problem).__name__}")
     method, tol = opts.method, opts.tol
@@ -212,8 +223,11 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
             last = now
     bifs = find_bifurcations(branch, problem, results, point, tol=tol, newton=newton or NewtonOptions(atol=1e-9, max_iter=20),
                              locate=opts.locate)
-    results, checked, bad = _check_harmonics(results, lambda i: Orbit(model, system, *_state(problem, b, i), forced),
-                                             tol, forced)
+    checked: list[int] = []
+    bad: list[int] = []
+    if opts.check:
+        results, checked, bad = _check_harmonics(results, lambda i: Orbit(model, system, *_state(problem, b, i), forced),
+                                                 tol, forced)
     m = max((r.multipliers.size for r in results), default=0)
     mult = np.full((len(branch), m), np.nan + 0j)
     for i, r in enumerate(results):

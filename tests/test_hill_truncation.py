@@ -126,3 +126,19 @@ def test_shooting_results_are_not_checked():
     r = StabilityResult(multipliers=np.array([2.0 + 0j]), stable=False, method="shooting")
     assert harmonic_check(None, r) is r  # type: ignore[arg-type]
     assert not r.unconverged(1e-4, False)
+
+
+def test_the_check_can_be_turned_off(caplog):
+    """StabilityOptions(check=False): no truncation check, nothing kept; a bad value is refused."""
+    sys.path.insert(0, str(HERE.parent / "examples"))
+    import cantilever_tip_stop as ct
+
+    eg = ct.E_GRAZE
+    with caplog.at_level(logging.WARNING, logger="femodes"):
+        b = fm.nonlinear_mode(ct.MODELS["CB 4 modes"], 1, energy=(0.5 * eg, 20 * eg), harmonics=10, options=ct.OPTIONS,
+                              stability=fm.StabilityOptions(method=fm.stability_methods.Hill(), locate=False, check=False))
+    assert not b.stable.all()  # unstable points there were, and none was checked
+    assert "not converged in the harmonics" not in caplog.text
+    assert b.stability_unconverged == [] and "stability_checked" not in b.meta
+    with pytest.raises(TypeError, match="check must be True or False"):
+        fm.StabilityOptions(check="yes")
