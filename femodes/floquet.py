@@ -26,6 +26,7 @@ import numpy as np
 
 from .branch_stability import (BRANCH_POINT_DENSE_LIMIT, COLLISION, augmented_jacobian, branch_point_test,
                                find_bifurcations, refine_branch_point, root_on_secant, significant, solve_on_secant)
+from .hbm.hill import COARSE
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .hbm.system import HBMSystem
 from .model import StructuralModel
@@ -34,7 +35,6 @@ from .results.branch import fill_in_place
 from .solvers import NewtonOptions
 from .solvers.checks import InputTypeError, InputValueError, entry_point
 from .solvers.threads import limit_blas_threads
-from .hbm.hill import COARSE
 from .stability_methods import (AUTO_MAX_STIFFNESS, MAX_CORRECTION, METHODS, Auto, Orbit, ShootingError,
                                 StabilityMethod, StabilityResult, as_stability_method, by_name, checked_lead,
                                 harmonic_check, is_stable)

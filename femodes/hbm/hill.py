@@ -43,11 +43,11 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from .harmonics import Harmonics
 from .hill_elimination import algebraic_unknowns, dense_array, eliminate
 from .hill_reduction import FreeInterfaceReduction
 from .hill_sparse import ShiftInvert, sparse_exponents
 from .hill_rest import XI_TOL, at_rest
-from .harmonics import Harmonics
 from .system import HBMSystem
 
 __all__ = ["HillResult", "hill_matrices", "hill_exponents", "coarse_multipliers", "COARSE", "DENSE_LIMIT", "REDUCE_MIN_DOFS"]
