@@ -99,7 +99,7 @@ def test_a_contact_backbone_with_unconverged_verdicts_is_flagged(cantilever_back
     assert len(warnings) == 1, caplog.text
     msg = warnings[0]
     n_bad, n_checked = (int(w) for w in msg.split("at ")[1].split(" points")[0].split(" of "))
-    # measured 11 of 16: a branch whose verdicts are not worth much at H = 10
+    # measured 9 of 16: a branch whose verdicts are not worth much at H = 10
     assert n_bad >= 3 and n_checked >= n_bad
     listed = [int(part.split(" (")[0]) for part in msg.split("coarser truncation: ")[1].split("), ")[:3]]
     # kept with the branch, saved with it, and reported in a case's summary.txt
