@@ -64,9 +64,8 @@ MAX_CORRECTION = 0.2
 #: converge fast, except for a multiplier near +1 (the forced Duffing oscillator, H = 9 against 6:
 #: 1e-15 at its stable points, 2e-9 to 2e-4 at its unstable ones, growing toward the upper fold,
 #: 5e-4 at that fold, where the coarse truncation no longer holds the exact +1 of the whole
-#: Jacobian); the contact artefacts it is
-#: there for move it by 0.1 to 25 (the cantilever with a tip stop of
-#: examples/cantilever_tip_stop.py, 4 modes, H = 10 and 20).
+#: Jacobian); the contact artefacts it is there for move it by 0.1 to 25 (the cantilever with a tip
+#: stop of examples/cantilever_tip_stop.py, 4 modes, H = 10 and 20).
 HARMONIC_CHANGE = 1e-2
 
 
