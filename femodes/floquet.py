@@ -199,20 +199,27 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
     forced = isinstance(problem, ForcedResponseProblem)
     system = problem.system
 
+    def orbit(x: np.ndarray, p: float) -> Orbit:
+        u = problem.unpack(x, p)
+        return Orbit(model, system, u.y, u.Q, u.omega, u.xi, forced)
+
+    def orbit_of(i: int) -> Orbit:
+        """The orbit of the branch's point ``i``."""
+        return orbit(problem.pack(b.Q[i], b.P[i], b.omega_truncated[i], b.xi[i]), b.parameter[i])
+
     def point(x: np.ndarray, p: float, how: str | None = None) -> StabilityResult:
         """The multipliers at a solution ``x`` by ``method``; :class:`Auto` takes the method
         ``how`` names (the one a neighbouring point used), so that a bifurcation is located with
         the method that found it."""
-        u = problem.unpack(x, p)
         strategy = by_name(how) if how and isinstance(method, Auto) else method
-        return strategy(Orbit(model, system, u.y, u.Q, u.omega, u.xi, forced), tol)
+        return strategy(orbit(x, p), tol)
 
     results = []
     start = time.perf_counter()
     last = start
     b = branch
     for i in range(len(b)):
-        results.append(point(problem.pack(b.Q[i], b.P[i], b.omega_truncated[i], b.xi[i]), b.parameter[i]))
+        results.append(method(orbit_of(i), tol))
         now = time.perf_counter()
         if i == 0 and len(b) > 1:
             # the first point carries the set-up (reduction modes, factorisations): an upper bound
@@ -224,10 +231,9 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
     bifs = find_bifurcations(branch, problem, results, point, tol=tol, newton=newton or NewtonOptions(atol=1e-9, max_iter=20),
                              locate=opts.locate)
     checked: list[int] = []
-    bad: list[int] = []
+    bad: list[dict] = []
     if opts.check:
-        results, checked, bad = _check_harmonics(results, lambda i: Orbit(model, system, *_state(problem, b, i), forced),
-                                                 tol, forced)
+        results, checked, bad = _check_harmonics(results, orbit_of, tol, forced)
     m = max((r.multipliers.size for r in results), default=0)
     mult = np.full((len(branch), m), np.nan + 0j)
     for i, r in enumerate(results):
@@ -235,9 +241,7 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
     annotated = branch.with_stability(stable=[is_stable(r.multipliers, tol, not forced) for r in results],
                                       multipliers=mult, bifurcations=bifs, methods=[r.method for r in results], tol=tol,
                                       # Hill's truncation check, kept with the branch (summary.txt reports it)
-                                      checked=len(checked),
-                                      unconverged=[{"index": i, "modulus": checked_lead(results[i].multipliers, not forced),
-                                                    "coarse": results[i].coarse} for i in bad])
+                                      checked=len(checked), unconverged=bad)
     _warn_uncertain(results, tol, forced)
     n_fb = sum(r.message != "" for r in results)
     if n_fb:
@@ -246,23 +250,19 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
     return annotated
 
 
-def _state(problem, b: Branch, i: int) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """The HBM unknowns, displacement coefficients, frequency and damping of point ``i``."""
-    u = problem.unpack(problem.pack(b.Q[i], b.P[i], b.omega_truncated[i], b.xi[i]), b.parameter[i])
-    return u.y, u.Q, u.omega, u.xi
-
-
-def _check_harmonics(results: list, orbit, tol: float, forced: bool) -> tuple[list, list[int], list[int]]:
+def _check_harmonics(results: list, orbit, tol: float, forced: bool) -> tuple[list, list[int], list[dict]]:
     """Hill's truncation check (:func:`~femodes.stability_methods.harmonic_check`) at the points
     where a verdict is made on the multipliers it compares (real positive ones left out,
     :func:`~femodes.stability_methods.checked_lead`): those unstable by them, and both ends of every
     change; one warning lists the points whose verdict is not converged in the harmonics
     (``orbit(i)`` the :class:`Orbit` of point ``i``). Returns the results, the points checked and
-    those flagged."""
-    # the verdicts on the multipliers it compares (checked_lead: real positive ones left out)
-    out_ = [checked_lead(r.multipliers, not forced) > 1.0 + tol for r in results]
-    at = {i for i, r in enumerate(results) if r.method == "hill" and out_[i]}
-    at |= {j for i in range(len(results) - 1) if out_[i] != out_[i + 1] for j in (i, i + 1)
+    a record of each flagged one (``index``, ``modulus`` at H, ``coarse``:
+    :attr:`~femodes.results.Branch.stability_unconverged`)."""
+    # the largest modulus of the multipliers it compares (real positive ones left out), and verdicts on it
+    lead = [checked_lead(r.multipliers, not forced) for r in results]
+    unstable = [m > 1.0 + tol for m in lead]
+    at = {i for i, r in enumerate(results) if r.method == "hill" and unstable[i]}
+    at |= {j for i in range(len(results) - 1) if unstable[i] != unstable[i + 1] for j in (i, i + 1)
            if results[j].method == "hill"}
     if not at:
         return results, [], []
@@ -270,11 +270,12 @@ def _check_harmonics(results: list, orbit, tol: float, forced: bool) -> tuple[li
     out = list(results)
     for i in sorted(at):
         out[i] = harmonic_check(orbit(i), results[i])
-    bad = [i for i in sorted(at) if out[i].unconverged(tol, not forced)]
+    bad = [{"index": i, "modulus": lead[i], "coarse": out[i].coarse} for i in sorted(at)
+           if out[i].unconverged(tol, not forced)]
     log.info("stability: Hill's truncation check at %d points, %.3g s", len(at), time.perf_counter() - start)
     if bad:
-        shown = ", ".join(f"{i} ({checked_lead(out[i].multipliers, not forced):.3g} / {out[i].coarse:.3g})"
-                          for i in bad[:6]) + (", ..." if len(bad) > 6 else "")
+        shown = ", ".join(f"{d['index']} ({d['modulus']:.3g} / {d['coarse']:.3g})"
+                          for d in bad[:6]) + (", ..." if len(bad) > 6 else "")
         log.warning("stability: at %d of %d points checked, Hill's verdict changes when the perturbation is truncated "
                     "to %d%% of the harmonics (largest |mu| but for real positive ones, at H / at the coarser truncation: "
                     "%s): those verdicts "
