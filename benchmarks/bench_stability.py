@@ -367,7 +367,7 @@ def child_compare(ne: int, H: int, contact: str, repeat: int) -> dict:
         finite = np.abs(theta) > 1e-10 * max(1.0, float(np.max(np.abs(theta))))
         s_all, V_all = sigma + 1.0 / theta[finite], Zv[:N, finite]
     else:
-        s_all, V_all = hm._dense(J0, J1, J2, w)
+        s_all, V_all, _ = hm._dense(J0, J1, J2, w)
     cen_all = hm._centroids(system, V_all)
     lead_re = rec["dense"]["lead_exponent"][0]
     near = np.flatnonzero(np.abs(s_all.real - lead_re) < 0.25 * abs(lead_re) + 1e-12)
