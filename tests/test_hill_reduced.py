@@ -6,6 +6,7 @@ matrix (``reduce=False``, itself checked against the dense solve in test_stabili
 residual of the full Hill problem at the expanded eigenvector.
 """
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -128,15 +129,11 @@ def test_small_models_and_free_structures_use_the_whole_model():
     assert hill_exponents(system, np.zeros(system.size), 1.0).n_modes is None
 
 
-def test_sparse_path_drops_a_family_without_a_central_member():
-    """The shift-invert path and the dense solve of the same reduced pencil agree.
-
-    On the FE cantilever of examples/cantilever_tip_stop.py (H = 10, past grazing), the truncated
-    pencil holds a family at Re s = 0.66 with centroids +-0.53, 1.59, 2.64, ... and no member in
-    the centre. The dense selection leaves it out by its count of 2 m. Following a copy to the
-    centre from +0.53 lands on the conjugate (-0.53) and back, and the sparse path used to keep
-    it: |mu| = 3.08 where every dense reduction (4 to 19 modes) converges to 1.00003.
-    """
+def _leads_19_and_20_modes(energy: float) -> dict:
+    """The leading multiplier's modulus of the FE cantilever of examples/cantilever_tip_stop.py
+    (whole model, H = 10) at the end of its backbone up to ``energy`` grazing energies, on free-
+    interface reductions of 19 modes ((2H + 1) m = 399 unknowns with mass: dense) and 20 (420:
+    shift-invert)."""
     from femodes.hbm.hill_reduction import FreeInterfaceReduction
 
     gap = 0.01
@@ -146,7 +143,7 @@ def test_sparse_path_drops_a_family_without_a_central_member():
     lin = fm.linear_modes(model, 1)
     eg = (gap / lin.shapes[model.dof("tip"), 0]) ** 2 * lin.omega[0] ** 2 / 2
     opts = fm.ContinuationOptions(step=0.05, max_step=0.1, newton=fm.NewtonOptions(atol=1e-9, max_iter=20))
-    sol = fm.nonlinear_mode(model, 1, energy=(0.5 * eg, 1.8 * eg), harmonics=10, options=opts)[-1]
+    sol = fm.nonlinear_mode(model, 1, energy=(0.5 * eg, energy * eg), harmonics=10, options=opts)[-1]
     system = HBMSystem(model.without_forcing(), sol.harmonics)
     y = system.join(sol.Q, sol.P)
     red = FreeInterfaceReduction(system, hill_mod.ALPHA)
@@ -154,13 +151,55 @@ def test_sparse_path_drops_a_family_without_a_central_member():
     while red.basis.omega.size < 20 and red.basis.modes(20):
         pass
     lead = {}
-    for m in (19, 20):  # (2H + 1) m = 399 unknowns with mass: dense; 420: shift-invert
+    for m in (19, 20):
         rs = red.system_with(m)
         r = hill_mod._hill(rs, red.state(y, rs), sol.omega_truncated, sol.xi, 2, None)
         assert r.complete == (m == 19)
         lead[m] = abs(r.multipliers[0])
+    return lead
+
+
+def test_sparse_path_drops_a_family_without_a_central_member():
+    """The shift-invert path and the dense solve of the same reduced pencil agree.
+
+    On the FE cantilever of examples/cantilever_tip_stop.py (H = 10, past grazing), the truncated
+    pencil holds a family at Re s = 0.66 with centroids +-0.53, 1.59, 2.64, ... and no member in
+    the centre. The dense selection leaves it out by its count of 2 m. Following a copy to the
+    centre from +0.53 lands on the conjugate (-0.53) and back, and the sparse path used to keep
+    it: |mu| = 3.08 where every dense reduction (4 to 19 modes) converges to 1.00003.
+    """
+    lead = _leads_19_and_20_modes(1.8)
     # the two reductions differ by one mode far above the cut-off: the same leading multiplier
     # within the error the reduction is built for (REDUCTION_TOL; measured 5.3e-7, the 20th mode's
     # own effect; it was 2.16 before)
     assert abs(lead[20] - lead[19]) < REDUCTION_TOL, lead
     assert abs(lead[19] - 1.0) < 1e-4, lead  # a free orbit: its trivial multiplier, to the truncation
+
+
+@pytest.mark.parametrize("energy", [1.55, 11.0])
+def test_sparse_path_drops_an_edge_member_without_its_copy(energy):
+    """Near the peak of the same backbone (1.55 grazing energies, w = 3.7077) and far past it (11),
+    such a family has a member with centroid +-0.48, which the shift-invert path took as central
+    without a follow: |mu| = 16.4 and 1.48, reported as Neimark-Sacker bifurcations, where the dense
+    reductions give 1.00002. Its copy across the centre is not there (the exponent nearest the
+    target is the member's conjugate, 0.04 w off), so it is left out (hill_sparse._has_copy)."""
+    lead = _leads_19_and_20_modes(energy)
+    assert abs(lead[20] - lead[19]) < REDUCTION_TOL, lead
+    assert abs(lead[19] - 1.0) < 1e-4, lead
+
+
+def test_a_period_doubling_keeps_its_copy_on_the_sparse_path(monkeypatch):
+    """A genuine period doubling (Mathieu's first tongue, delta = 1/4: multipliers -10.65 and
+    -0.094, centroids +-1/2) has its conjugate for its copy across the centre: the shift-invert
+    path keeps it, equal to the dense solve's."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_hill import MathieuSystem
+
+    system = MathieuSystem(0.25, 1.0)
+    dense = hill_mod.hill_exponents(system, np.zeros(0), 1.0)
+    monkeypatch.setattr(hill_mod, "DENSE_LIMIT", 0)
+    sparse = hill_mod.hill_exponents(system, np.zeros(0), 1.0, reduce=False)
+    assert dense.complete and not sparse.complete
+    assert dense.multipliers[0].real < -10.0
+    # ARPACK tol 1e-8 on the shifted-inverted Ritz values (test_stability): the moduli to 1e-7
+    assert np.allclose(np.sort(np.abs(sparse.multipliers)), np.sort(np.abs(dense.multipliers)), rtol=1e-7)
