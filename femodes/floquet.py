@@ -37,7 +37,7 @@ from .solvers.checks import InputTypeError, InputValueError, entry_point
 from .solvers.threads import limit_blas_threads
 from .stability_methods import (AUTO_MAX_STIFFNESS, MAX_CORRECTION, METHODS, Auto, Orbit, ShootingError,
                                 StabilityMethod, StabilityResult, as_stability_method, by_name, checked_lead,
-                                harmonic_check, is_stable)
+                                describe_unconverged, harmonic_check, is_stable)
 
 # the location helpers live in femodes.branch_stability; they are re-exported here, where
 # switch_branch and scripts import them from
@@ -274,8 +274,7 @@ def _check_harmonics(results: list, orbit, tol: float, forced: bool) -> tuple[li
            if out[i].unconverged(tol, not forced)]
     log.info("stability: Hill's truncation check at %d points, %.3g s", len(at), time.perf_counter() - start)
     if bad:
-        shown = ", ".join(f"{d['index']} ({d['modulus']:.3g} / {d['coarse']:.3g})"
-                          for d in bad[:6]) + (", ..." if len(bad) > 6 else "")
+        shown = describe_unconverged(bad, 6)
         log.warning("stability: at %d of %d points checked, Hill's verdict changes when the perturbation is truncated "
                     "to %d%% of the harmonics (largest |mu| but for real positive ones, at H / at the coarser truncation: "
                     "%s): those verdicts "

@@ -43,7 +43,7 @@ from .solvers.checks import InputValueError, entry_point, strategy
 from .time.shooting import shoot, unsupported
 
 __all__ = ["StabilityMethod", "Orbit", "Hill", "Shooting", "Auto", "StabilityResult", "ShootingError",
-           "as_stability_method", "by_name", "harmonic_check", "checked_lead", "METHODS", "AUTO_MAX_STIFFNESS", "MAX_CORRECTION"]
+           "as_stability_method", "by_name", "harmonic_check", "checked_lead", "describe_unconverged", "METHODS", "AUTO_MAX_STIFFNESS", "MAX_CORRECTION"]
 
 log = logging.getLogger(__name__)
 
@@ -190,6 +190,15 @@ def checked_lead(mu: np.ndarray, free: bool) -> float:
     m = significant(mu, free)
     kept = [abs(z) for z in m if crossing_kind(complex(z), m) != "branch_point"]
     return float(max(kept)) if kept else 0.0
+
+
+def describe_unconverged(records: list[dict], limit: int) -> str:
+    """The points that failed Hill's truncation check, as the warning and ``summary.txt`` list
+    them: ``"5 (1.14 / 1), 6 (2.8 / 1), ..."`` (point, leading modulus at H / with fewer
+    harmonics), at most ``limit`` of them (records of
+    :attr:`~femodes.results.Branch.stability_unconverged`)."""
+    shown = ", ".join(f"{d['index']} ({d['modulus']:.3g} / {d['coarse']:.3g})" for d in records[:limit])
+    return shown + (", ..." if len(records) > limit else "")
 
 
 @dataclasses.dataclass(frozen=True)

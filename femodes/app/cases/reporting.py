@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...stability_methods import describe_unconverged
 from .building import as_location
 from .schema import Case
 
@@ -96,10 +97,10 @@ def stability_lines(branch) -> list[str]:
     lines = [f"stability ({methods or '-'}): {n_stable} stable, {n - n_stable} unstable of {n} points"]
     bad = branch.meta.get("stability_unconverged", [])
     if bad:
-        shown = ", ".join(f"{d['index']} ({d['modulus']:.3g} / {d['coarse']:.3g})" for d in bad[:8])
+        shown = describe_unconverged(bad, 8)
         lines.append(f"Hill's truncation check: the verdict of {len(bad)} of the "
                      f"{branch.meta.get('stability_checked', len(bad))} points checked changes with fewer "
-                     f"harmonics (point (|mu| / with 75 % of the harmonics): {shown}{', ...' if len(bad) > 8 else ''}); "
+                     f"harmonics (point (|mu| / with 75 % of the harmonics): {shown}); "
                      f"not converged: raise the harmonics or check them by shooting")
     if not branch.bifurcations:
         return lines + ["bifurcations: none"]
