@@ -129,7 +129,9 @@ def _has_copy(si: ShiftInvert, s: complex, c: float, base: float) -> bool:
     ``m = sign(c)``, within :data:`COPY_TOL` of its multiplier (``exp((e - s - i m w/nu) T)`` for
     the exponent ``e`` found there, ``T = 2 pi / (w/nu)``).
 
-    A genuine family has a copy at every harmonic shift the truncation resolves. A family of the
+    A genuine family has a copy at every harmonic shift the truncation resolves, and this one has
+    its content as near the centre as the member's (centroid ``c - m``, ``|c - m| < 0.6``): it is
+    resolved as well as the member itself, and gives the same multiplier. A family of the
     truncation without a central member has none: its members' real parts differ from one to the
     next, and the exponent nearest the target is the member's conjugate (FE cantilever of
     examples/cantilever_tip_stop.py, whole model, H = 10, at the peak of its backbone: ``Re s``
