@@ -507,7 +507,7 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
         capped = m == red.max_modes
         if last is not None and last[0] == m and (capped or (abs(omega / last[2] - 1.0) <= REUSE_SPAN
                                                              and last[3] < REUSE_POINTS
-                                                             and (last[1] <= REDUCTION_TOL or _decides(fine, last[1])))):
+                                                             and (not last[4] or _decides(fine, last[1])))):
             # a neighbouring point of the branch with the same reduction: its estimate. Or the
             # largest reduction there is (max_modes: half the model's DOFs, 5 or 6 modes of the
             # 11-DOF blade of examples/blade_casing.py), wherever its last estimate was made: the
@@ -517,13 +517,16 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
             # curve, a fifth of its stability run; measured: the multipliers of the blade's forced
             # curve and backbone, and of the user blade's (examples/user_blade_3d.py), the same
             # to the last bit either way.
+            # (an estimate kept only because it decided its point's verdict, last[4], must decide
+            # this one's too)
             err = last[1]
-            red.last_estimate = (m, err, last[2], last[3] + 1)
+            red.last_estimate = (m, err, last[2], last[3] + 1, last[4])
             break
         assert m_coarse is not None  # m_next is None otherwise
         err = 0.0 if m_coarse == m else _error_near(red, m_coarse, fine, x, omega, xi, ratio)
-        red.last_estimate = (m, err, omega, 0)
-        if err <= REDUCTION_TOL or _decides(fine, err):
+        decided = err > REDUCTION_TOL and _decides(fine, err)
+        red.last_estimate = (m, err, omega, 0, decided)
+        if err <= REDUCTION_TOL or decided:
             break
         log.debug("hill_exponents: %d modes (cut-off %.3g x (H + 1/2) w), error estimate %.2e", m, cutoff / top, err)
         # the cut-off the omega_c^-3 rate asks for, with a margin; at least doubled

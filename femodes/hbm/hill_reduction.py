@@ -167,7 +167,8 @@ class FreeInterfaceReduction:
             _CACHE.put(model, basis)
         self.basis = basis
         self.alpha = alpha
-        # (modes, estimate, omega, reuses) of the last point whose estimate was computed
+        # (modes, estimate, omega, reuses, kept only because it decided the verdict) of the last
+        # point whose estimate was computed
         self.last_estimate: tuple | None = None
         self.systems: dict[int, tuple[HBMSystem, np.ndarray]] = {}
         # the reduced problem must be much smaller than the whole (at most half its DOFs), and the
