@@ -14,6 +14,7 @@ import pytest
 
 import femodes as fm
 from femodes.hbm import hill as hill_mod
+from femodes.hbm import hill_reduction
 from femodes.hbm.hill import REDUCTION_TOL, hill_exponents, hill_matrices
 from femodes.hbm.system import HBMSystem
 
@@ -212,7 +213,7 @@ def test_a_reduction_that_decides_the_verdict_stops_growing(monkeypatch):
     the estimate, which assumes at least ^-2, is optimistic: 3.7e-4 at 11 modes where the true
     error is 1.15e-3. Growing it to the target 1e-5 took 100 modes (and 394 on 1000 elements,
     12-19 s a solve). The leading multiplier, 0.945, is 50 times the estimate inside the circle:
-    the 11-mode reduction decides the verdict and is kept (hill.VERDICT_MARGIN = 10 covers the
+    the 11-mode reduction decides the verdict and is kept (hill_reduction.VERDICT_MARGIN = 10 covers the
     estimate's optimism)."""
     model = _bar("penalty")
     b = fm.frequency_response(model, (1.3, 1.9), 5, options=fm.ContinuationOptions(max_points=25))
@@ -225,9 +226,9 @@ def test_a_reduction_that_decides_the_verdict_stops_growing(monkeypatch):
     true = abs(abs(r.multipliers[0]) - whole)
     assert r.n_modes is not None and r.n_modes <= 24
     assert r.reduction_error > REDUCTION_TOL  # kept above the target: it decides
-    assert true <= hill_mod.VERDICT_MARGIN * r.reduction_error
+    assert true <= hill_reduction.VERDICT_MARGIN * r.reduction_error
     assert abs(r.multipliers[0]) < 1.0 - true  # the verdict (stable) is the whole model's
     # without the stop the reduction grows to the target (or half the model)
-    monkeypatch.setattr(hill_mod, "VERDICT_MARGIN", np.inf)
+    monkeypatch.setattr(hill_reduction, "VERDICT_MARGIN", np.inf)
     grown = hill_exponents(HBMSystem(model, sol.harmonics), y, sol.omega)
     assert grown.n_modes > 2 * r.n_modes

@@ -45,7 +45,7 @@ import scipy.sparse as sp
 
 from .harmonics import Harmonics
 from .hill_elimination import algebraic_unknowns, dense_array, eliminate
-from .hill_reduction import FreeInterfaceReduction
+from .hill_reduction import Estimate, FreeInterfaceReduction, decides_verdict
 from .hill_sparse import ShiftInvert, sparse_exponents
 from .hill_rest import XI_TOL, at_rest
 from .system import HBMSystem
@@ -158,7 +158,7 @@ def _complex_harmonics(system: HBMSystem | _Truncated, V: np.ndarray) -> np.ndar
     H = h.n_harmonics
     Q = V[: system.nq].reshape(h.n_coef, n, -1)
     Md = np.abs(system.M.diagonal())
-    w = Md if np.any(Md > 0) else np.ones(n)  # massless DOFs (redistributed contact nodes) weigh 0
+    w = Md if _weighs_mass(system) else np.ones(n)  # massless DOFs (redistributed contact nodes) weigh 0
     power = np.zeros((2 * H + 1, V.shape[1]))
     power[H] = np.einsum("d,dv->v", w, np.abs(Q[0]) ** 2)
     k = np.arange(1, H + 1)
@@ -168,6 +168,11 @@ def _complex_harmonics(system: HBMSystem | _Truncated, V: np.ndarray) -> np.ndar
     power[H + k] = plus
     power[H - k] = minus
     return power
+
+
+def _weighs_mass(system: HBMSystem | _Truncated) -> bool:
+    """Whether the centroids weigh the DOFs by their mass (some DOF has mass), or all alike."""
+    return bool(np.any(system.M.diagonal() != 0))
 
 
 def _centroids(system: HBMSystem | _Truncated, V: np.ndarray) -> np.ndarray:
@@ -296,15 +301,14 @@ def _solve(system: HBMSystem | _Truncated, J0, J1, J2, omega: float, n_shifts: i
     fill = _whole
     if dense:
         s, V, fill = _dense(J0, J1, J2, base, algebraic)
-        if not np.any(system.M.diagonal() != 0):  # no DOF with mass: the centroids weigh all
+        if not _weighs_mass(system):  # no DOF with mass: the centroids weigh all
             V, fill = fill(V), _whole
         complete = True
     else:
         k = k_per_shift or max(6, 2 * (system.nonlinear_dofs.size + system.n_uc))
         s, V = sparse_exponents(J0, J1, J2, base, n_shifts, k, lambda V: _centroids(system, V))
         complete = False
-    # the centroids weigh the DOFs with mass only, which the algebraic unknowns (zero in V until
-    # fill) are not
+    # the centroids weigh DOFs with mass only: not the algebraic unknowns (zero in V until fill)
     idx, cen = _select(system, s, V, base, n_keep)
     if not complete:  # central members only (_sparse followed the copies to them)
         idx = idx[np.abs(cen[idx]) <= CENTRAL]
@@ -387,10 +391,9 @@ def _dense(J0, J1, J2, base, algebraic=None, vectors=True):
     ``J0_aa v_a + J0_ad v_d = 0`` at every ``s``, so the pencil on the others is
     ``S0 + s J1_dd + s^2 J2_dd`` with ``S0 = J0_dd - J0_da J0_aa^-1 J0_ad``, and
     ``v_a = -J0_aa^-1 J0_ad v_d``. (When ``J0_aa`` is singular, e.g. a contact closed over the
-    whole period, the whole pencil is solved instead.) ``V`` holds the eigenvectors with their
-    algebraic rows zero; ``fill(V[:, idx])`` completes the columns selected (the back-substitution
-    of all ``2N`` of them was a tenth of the user blade's stability run at H = 10, 27 contacts,
-    where 20 are kept). ``V`` and ``fill`` are None without ``vectors``."""
+    whole period, the whole pencil is solved instead.) ``V``: the eigenvectors, algebraic rows
+    zero; ``fill(V[:, idx])`` completes the columns selected (all ``2N`` took a tenth of the user
+    blade's stability run at H = 10, where 20 are kept). None without ``vectors``."""
     if algebraic is not None and np.any(algebraic):
         a, d = np.flatnonzero(algebraic), np.flatnonzero(~algebraic)
         if J0.shape[0] <= SMALL:  # dense slicing: scipy.sparse's per-call overhead dominates there
@@ -505,9 +508,10 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
             m_coarse, ratio = m // 2, 2.0
         last = red.last_estimate
         capped = m == red.max_modes
-        if last is not None and last[0] == m and (capped or (abs(omega / last[2] - 1.0) <= REUSE_SPAN
-                                                             and last[3] < REUSE_POINTS
-                                                             and (not last[4] or _decides(fine, last[1])))):
+        if last is not None and last.modes == m and (capped or (abs(omega / last.omega - 1.0) <= REUSE_SPAN
+                                                             and last.reuses < REUSE_POINTS
+                                                             and (not last.decided
+                                                                  or decides_verdict(fine.multipliers, last.error)))):
             # a neighbouring point of the branch with the same reduction: its estimate. Or the
             # largest reduction there is (max_modes: half the model's DOFs, 5 or 6 modes of the
             # 11-DOF blade of examples/blade_casing.py), wherever its last estimate was made: the
@@ -517,15 +521,14 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
             # curve, a fifth of its stability run; measured: the multipliers of the blade's forced
             # curve and backbone, and of the user blade's (examples/user_blade_3d.py), the same
             # to the last bit either way.
-            # (an estimate kept only because it decided its point's verdict, last[4], must decide
-            # this one's too)
-            err = last[1]
-            red.last_estimate = (m, err, last[2], last[3] + 1, last[4])
+            # (an estimate kept only because it decided its point's verdict must decide this one's)
+            err = last.error
+            red.last_estimate = last._replace(reuses=last.reuses + 1)
             break
         assert m_coarse is not None  # m_next is None otherwise
         err = 0.0 if m_coarse == m else _error_near(red, m_coarse, fine, x, omega, xi, ratio)
-        decided = err > REDUCTION_TOL and _decides(fine, err)
-        red.last_estimate = (m, err, omega, 0, decided)
+        decided = err > REDUCTION_TOL and decides_verdict(fine.multipliers, err)
+        red.last_estimate = Estimate(m, err, omega, 0, decided)
         if err <= REDUCTION_TOL or decided:
             break
         log.debug("hill_exponents: %d modes (cut-off %.3g x (H + 1/2) w), error estimate %.2e", m, cutoff / top, err)
@@ -533,33 +536,10 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
         ratio = min(8.0, max(2.0, 1.25 * (err / REDUCTION_TOL) ** (1.0 / 3.0)))
         m_coarse, cutoff = m, cutoff * ratio
     assert fine is not None  # the first pass solved (or returned None)
-    if err > REDUCTION_TOL and not _decides(fine, err):
+    if err > REDUCTION_TOL and not decides_verdict(fine.multipliers, err):
         log.info("hill_exponents: reduction error estimate %.1e above %.0e with %d modes", err, REDUCTION_TOL, m)
     red.alpha = used / top
     return dataclasses.replace(fine, vectors=red.expand(fine.vectors, m), reduction_error=err, complete=False)
-
-
-#: A reduction whose estimated error is above :data:`REDUCTION_TOL` is kept when every multiplier
-#: lies farther than this many times the estimate from the unit circle (:func:`_decides`): its
-#: verdict cannot change as the reduction grows. The margin covers an estimate that is optimistic
-#: by up to 10x: it assumes an error falling like ``omega_c^-2`` at least, and a stiffness-
-#: proportional damping converges like ``omega_c^-1`` (the reduction's kept DOFs carry no damping:
-#: a clamped bar of 1000 P1 elements, penalty stop, beta = 0.01, H = 5, w = 1.633: true error
-#: 1.15e-3 at 11 modes where the estimate read 3.7e-4, and 2.7e-5 at 394 modes, 12-19 s a solve,
-#: where it read 1.0e-5).
-VERDICT_MARGIN = 10.0
-
-#: ... and when the estimate is at most this (a coarser one is not trusted).
-VERDICT_MAX_ERROR = 1e-2
-
-
-def _decides(r: HillResult, err: float) -> bool:
-    """Whether ``r``'s verdict holds whatever its reduction's error ``err`` (the estimate):
-    every multiplier at least :data:`VERDICT_MARGIN` times ``err`` away from the unit circle. A
-    free orbit's trivial multipliers (+1) never are: backbones keep the target
-    :data:`REDUCTION_TOL`."""
-    mu = np.abs(r.multipliers)
-    return bool(err <= VERDICT_MAX_ERROR and mu.size and np.all(np.abs(mu - 1.0) > VERDICT_MARGIN * err))
 
 
 #: Along a branch, a point whose reduction is that of the last estimated point, within this
