@@ -23,7 +23,7 @@ from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .model import StructuralModel
 from .results import Branch, ContactInfo
-from .runs import checkpoint_spec, model_fingerprint, run_continuation
+from .runs import checkpoint_spec, model_fingerprint, run_continuation, shows_progress
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.checks import entry_point, user_stacklevel
@@ -64,6 +64,7 @@ def branch_from_continuation(problem, result, *, kind: str, model: StructuralMod
 
 @entry_point("frequency_response")
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
+@shows_progress
 def frequency_response(
     model: StructuralModel,
     omega: tuple[float, float],
@@ -91,15 +92,14 @@ def frequency_response(
     omega : (float, float)
         Start and end frequencies (rad/s); the branch may run downwards.
     harmonics : Harmonics or int
-    options : ContinuationOptions, optional
-        Step control, Newton options, callback.
-    x0 : ndarray, optional
-        Initial guess at ``omega[0]`` (default: the linear response).
+    options, x0 : ContinuationOptions, ndarray, optional
+        Step control, Newton options, callback; initial guess at ``omega[0]`` (default: the linear response).
     projection : ExactProjection or SampledProjection, optional
         How ``max(0, .)`` of the contact laws is projected on the harmonics: exactly (default) or
         sampled (``femodes.hbm.SampledProjection()``, only for comparison).
     progress : bool or callable
-        ``True`` logs one INFO line per point; a callable gets every accepted ``ContinuationPoint``.
+        ``True`` shows femodes' INFO records (a line per point, the stability pass, ``rtol``'s levels),
+        on stderr if logging is not configured; a callable gets every accepted ``ContinuationPoint``.
     checkpoint : str, PathLike or femodes.Checkpoint, optional
         Final branch file (``.npz`` or ``.h5``), journaled point by point; ``Checkpoint(path, resume=True)``
         continues a run, a plain path never overwrites one (:doc:`/howto/checkpoints`).
@@ -324,6 +324,7 @@ _REQUIRED = _Required()
 
 @entry_point("nonlinear_mode")
 @limit_blas_threads()  # one BLAS thread unless FEMODES_BLAS_THREADS says otherwise
+@shows_progress
 def nonlinear_mode(
     model: StructuralModel,
     mode: int = 1,

@@ -14,13 +14,16 @@ would outgrow the memory available at its start (:class:`_MemoryGuard`).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import functools
 import json
 import logging
 import os
+import sys
 import time
 from typing import Any
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -31,7 +34,7 @@ from .solvers import ContinuationOptions, continuation
 from .solvers.checks import InputTypeError, InputValueError, available_memory
 from .solvers.continuation import ContinuationResult, ContinuationState
 
-__all__ = ["run_continuation", "checkpoint_spec", "model_fingerprint"]
+__all__ = ["run_continuation", "checkpoint_spec", "model_fingerprint", "shows_progress", "progress_shown"]
 
 log = logging.getLogger(__name__)
 
@@ -303,3 +306,44 @@ def _progress_callback(user_cb: Callable | None, span, label: str, progress: boo
         return None
 
     return cb
+
+
+@contextlib.contextmanager
+def progress_shown(progress: bool | Callable) -> Iterator[None]:
+    """With ``progress=True``, femodes' INFO records (the branch's points, the stability pass's size,
+    time estimate and progress, the accuracy levels) reach the user for the block's duration even
+    where logging is not configured: ``True`` is a request to see them, and Python's default shows
+    warnings only (a user's ``progress=True`` printed nothing at all, its 70 s error estimate
+    included). The ``femodes`` logger is set to INFO when it would drop them, and given a handler on
+    stderr (message only) when no handler would receive them; both are undone on exit. A logging
+    configuration that shows INFO already is left alone, and so is ``progress=False`` or a callable."""
+    if progress is not True:
+        yield
+        return
+    logger = logging.getLogger("femodes")
+    level = logger.level
+    handler = None
+    if not logger.isEnabledFor(logging.INFO):
+        logger.setLevel(logging.INFO)
+    if not logger.hasHandlers():
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        logger.addHandler(handler)
+    try:
+        yield
+    finally:
+        if handler is not None:
+            logger.removeHandler(handler)
+        logger.setLevel(level)
+
+
+def shows_progress(fn: Callable) -> Callable:
+    """Decorator of an analysis with a keyword ``progress``: the whole call runs under
+    :func:`progress_shown` (the continuation, its stability pass and ``rtol``'s levels)."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with progress_shown(kwargs.get("progress", False)):
+            return fn(*args, **kwargs)
+
+    return wrapper

@@ -47,3 +47,46 @@ def test_progress_callable_receives_every_point():
     assert len(seen) == len(br) and all(isinstance(p, ContinuationPoint) for p in seen)
     with pytest.raises(TypeError, match="progress must be"):
         fm.frequency_response(OSC, omega=(0.5, 2.0), harmonics=5, progress="yes")
+
+
+_QUIET_RUN = """
+import femodes as fm
+osc = (fm.StructuralModel(M=[[1.0]], K=[[1.0]], C=[[0.1]]).with_contact(fm.UnilateralContact(at=0, gap=1.0))
+       .with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
+br = fm.frequency_response(osc, omega=(0.5, 2.0), harmonics=5, progress={progress}, stability=True)
+print(len(br))
+"""
+
+
+@pytest.mark.parametrize("progress", [True, False])
+def test_progress_true_is_shown_without_a_logging_configuration(progress):
+    """``progress=True`` in a script that configures no logging (Python then shows warnings only):
+    a line per point on stderr, and the stability pass's; ``progress=False`` prints nothing there."""
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-c", _QUIET_RUN.format(progress=progress)], capture_output=True, text=True,
+                       timeout=120, check=True)
+    n = int(r.stdout.split()[-1])
+    lines = re.findall(r"frequency_response: point (\d+)", r.stderr)
+    if progress:
+        assert [int(k) for k in lines] == list(range(1, n + 1)), r.stderr
+        assert "stability:" in r.stderr
+    else:
+        assert lines == [] and "stability:" not in r.stderr, r.stderr
+
+
+def test_progress_true_leaves_the_logging_configuration_as_it_was(caplog):
+    """Under a configuration that drops INFO (pytest's capture, root at WARNING), ``progress=True``
+    lets femodes' records through for the call only."""
+    import logging
+
+    logger = logging.getLogger("femodes")
+    before = (logger.level, list(logger.handlers))
+    br = fm.frequency_response(OSC, omega=(0.5, 2.0), harmonics=5, progress=True)
+    points = [r for r in caplog.records if r.name == "femodes.runs" and "point" in r.getMessage()]
+    assert len(points) == len(br)
+    assert (logger.level, list(logger.handlers)) == before
+    caplog.clear()
+    fm.frequency_response(OSC, omega=(0.5, 2.0), harmonics=5)
+    assert not [r for r in caplog.records if r.levelno < logging.WARNING and r.name.startswith("femodes")]

@@ -536,8 +536,8 @@ def _reduced(system: HBMSystem, x: np.ndarray, omega: float, xi: float, **kw) ->
         ratio = min(8.0, max(2.0, 1.25 * (err / REDUCTION_TOL) ** (1.0 / 3.0)))
         m_coarse, cutoff = m, cutoff * ratio
     assert fine is not None  # the first pass solved (or returned None)
-    if err > REDUCTION_TOL and not decides_verdict(fine.multipliers, err):
-        log.info("hill_exponents: reduction error estimate %.1e above %.0e with %d modes", err, REDUCTION_TOL, m)
+    if err > REDUCTION_TOL and not decides_verdict(fine.multipliers, err):  # a branch warns where it matters
+        log.debug("hill_exponents: reduction error estimate %.1e above %.0e with %d modes", err, REDUCTION_TOL, m)
     red.alpha = used / top
     return dataclasses.replace(fine, vectors=red.expand(fine.vectors, m), reduction_error=err, complete=False)
 

@@ -496,7 +496,9 @@ def shoot(
         3: f"iteration {nit + 1}: Phi - I is singular (a multiplier at +1: fold) and no least-squares step reduced "
            f"max|x(T) - x0| = {norm:.3g}",
     }[status]
-    (log.info if status == 0 else log.debug)("shoot: %s", message)  # reported in the result
+    # reported in the result; DEBUG, not INFO: a branch's stability pass shoots every point, and its
+    # progress (progress=True shows femodes' INFO records) would drown in one line per orbit
+    log.debug("shoot: %s", message)
     return ShootingResult(
         x=x, success=status == 0, status=status, message=message, nit=nit, residual_norm=norm,
         multipliers=mono.multipliers, monodromy=mono.matrix, impacts=mono.impacts, period=T,
