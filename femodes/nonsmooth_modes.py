@@ -43,7 +43,7 @@ from .hbm.problems import NonlinearModeProblem, PeriodDrivenModeProblem
 from .laws import UnilateralContact
 from .linear import grazing_energy, linear_modes
 from .model import StructuralModel
-from .resonance import modal_energy_shares
+from .resonance import close_partner, modal_energy_shares
 from .results import Branch
 from .solvers import NewtonOptions, semismooth_newton
 from .sweep_guide import Guide, solve_in_stages
@@ -494,9 +494,19 @@ def captured_past_grazing(branch, problem: NonlinearModeProblem, model: Structur
     x = problem.pack(branch.Q[i], branch.P[i], branch.omega_truncated[i], branch.xi[i])
     f = modal_energy_fractions(problem, x, lm.omega, lm.shapes)
     k = int(np.argmax(f))
-    return (f"the energy continuation grazed past grazing: from 1.5 to {branch.energy[i] / eg:.3g} E_g its frequency "
-            f"stayed within {np.max(shift):.1e} of linear mode {problem.mode}'s, and at the end mode {k + 1} held "
-            f"{100 * f[k]:.0f} % of the energy (an internal resonance)")
+    why = (f"the energy continuation grazed past grazing: from 1.5 to {branch.energy[i] / eg:.3g} E_g its frequency "
+           f"stayed within {np.max(shift):.1e} of linear mode {problem.mode}'s, and at the end mode {k + 1} held "
+           f"{100 * f[k]:.0f} % of the energy")
+    if k + 1 != problem.mode:
+        return why + " (an internal resonance)"
+    why += " (its orbits barely touch the stop)"
+    partner = close_partner(model, problem.mode, lm)
+    if partner is not None:
+        j, ratio, energies = partner
+        why += (f"; mode {j}, a close pair with it (w_{j} / w_{problem.mode} = {ratio:.3f}), reaches the contacts at "
+                f"{energies:.2g} of its grazing energy: the stop acts on mode {j}, whose backbone is "
+                f"nonlinear_mode(model, {j}, ...)")
+    return why
 
 
 def family_caveat(branch: Branch) -> str | None:

@@ -12,17 +12,19 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from collections.abc import Sequence
 
 import numpy as np
 
-from .linear import linear_modes
+from .linear import grazing_energy, linear_modes
 from .results import Branch
 from .solvers.checks import entry_name, entry_point
 
 log = logging.getLogger(__name__)
 
-__all__ = ["ResonancePeak", "compare_resonance", "modal_energy_shares", "point_shares", "TONGUE_MARGIN", "ON_BACKBONE", "CAPTURED"]
+__all__ = ["ResonancePeak", "compare_resonance", "modal_energy_shares", "point_shares", "TONGUE_MARGIN", "ON_BACKBONE", "CAPTURED",
+           "CLOSE_PAIR", "close_partner"]
 
 
 def modal_energy_shares(harmonics, Q: np.ndarray, omega: float, M, omegas: np.ndarray, shapes: np.ndarray) -> np.ndarray:
@@ -91,6 +93,13 @@ class ResonancePeak:
         if self.captured_by is not None:
             k = self.captured_by
             r = self.ratios[k - 1]
+            pair = r / self.ratios[self.mode - 1] if len(self.ratios) >= self.mode else math.nan
+            if abs(pair - 1.0) <= CLOSE_PAIR:
+                # a near-degenerate pair (an axisymmetric section's two bending modes): the force
+                # loads the other member, whose own backbone is the one to compare with
+                return (f"mode {k} holds {self.shares[k - 1]:.0%} of the energy: modes {self.mode} and {k} are a close "
+                        f"pair (w_{k} / w_{self.mode} = {pair:.3f}) and the force drives mode {k}; compare with its "
+                        f"backbone, nonlinear_mode(model, {k}, ...); {where}")
             listed = (f"in the tongue {self.tongue} listed on the backbone" if self.tongue is not None
                       else "a tongue the backbone does not list")
             return (f"caught by an internal resonance: mode {k} holds {self.shares[k - 1]:.0%} of the energy "
@@ -102,6 +111,28 @@ class ResonancePeak:
             return f"off the backbone, {self.distance:+.2%}"
         return "outside the backbone's energy range"
 
+
+
+def close_partner(model, mode: int, modes) -> tuple[int, float, float] | None:
+    """The mode of a close pair with ``mode`` (linear frequencies of ``modes`` within
+    :data:`CLOSE_PAIR`) that reaches the contacts of ``model`` first, as ``(j, w_j / w_mode,
+    E_g(j) / E_g(mode))``, or None when every such mode needs more energy (or there is none). On a
+    rod of circular section with a tip stop (P2 tetrahedra) the bending mode across the stop's
+    normal needs 13 times the grazing energy of its partner 1.1 % away: its orbits mix in a little
+    of the partner and barely touch the stop, and the forced peak follows the partner's backbone."""
+    w = float(modes.omega[mode - 1])
+    eg = grazing_energy(model, mode, modes=modes)
+    best = None
+    for j in range(modes.omega.size):
+        if j + 1 == mode or abs(float(modes.omega[j]) / w - 1.0) > CLOSE_PAIR:
+            continue
+        try:
+            ej = grazing_energy(model, j + 1, modes=modes)
+        except ValueError:  # mode j + 1 moves no contact
+            continue
+        if ej < eg and (best is None or ej / eg < best[2]):
+            best = (j + 1, float(modes.omega[j]) / w, float(ej / eg))
+    return best
 
 #: A forced peak within this relative distance of a tongue's frequencies is held by that tongue.
 TONGUE_MARGIN = 0.01
@@ -115,6 +146,12 @@ ON_BACKBONE = 0.01
 #: the bar's largest other share 10-13 %, the 3-D blade's 21-39 % near its own 5:1 resonance, the
 #: beam's 95-98 % where its backbone rides the 6:1 one with mode 2).
 CAPTURED = 0.25
+
+#: :attr:`ResonancePeak.predicted`: a mode that captures the peak with a linear frequency within
+#: this relative distance of the backbone mode's makes a close pair with it (a tip stop on a rod of
+#: circular section, P2 tetrahedra: w_2 / w_1 = 1.011; the forced peak, 79 % in mode 2, lies on
+#: mode 2's backbone to 0.04 %, while mode 1's barely loads the stop).
+CLOSE_PAIR = 0.05
 
 #: Lowest linear modes over which a forced peak's energy shares are taken.
 SHARE_MODES = 12
