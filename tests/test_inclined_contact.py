@@ -343,6 +343,31 @@ def test_errors():
         rom.with_contact(fm.UnilateralContact(at="right", gap=GAP, direction=(-1.0, 0.0)))
 
 
+def test_forcing_a_reduced_model_along_its_contact_normal():
+    """A reduced model keeps a contact node's normal DOF only: a force given after the reduction in
+    the physical component along a negative normal (no share on the dropped tangential DOFs) is the
+    force given before it; one with a share on a dropped DOF is refused with the fixes named."""
+    model = strip().with_contact(fm.UnilateralContact(at="bottom", gap=GAP, direction=(0.0, -1.0)))
+    load = fm.HarmonicForce(at=("bottom", "u_y"), amplitude=AMPLITUDE)
+
+    def forces(m):
+        f = np.zeros(m.n_dofs)
+        np.add.at(f, [a.dof for a in m.forces], [a.item.amplitude for a in m.forces])
+        return f
+
+    before = fm.craig_bampton(model.with_forcing(load), 4)
+    after = fm.craig_bampton(model, 4).with_forcing(load)
+    assert np.array_equal(forces(after), forces(before))
+    # all the force the whole model carries (its share on the clamped corner goes to the support)
+    assert np.sum(np.abs(forces(after))) == pytest.approx(np.sum(np.abs(forces(model.with_forcing(load)))), rel=1e-14)
+    assert np.count_nonzero(forces(after)) == 8
+    with pytest.raises(ValueError, match=r"share 1 on DOFs of rotated node \d+ that this reduced model does not keep "
+                                         r".*u_n@.*before reducing.*craig_bampton\(keep=\.\.\.\).*component 'u_n'"):
+        fm.craig_bampton(model, 4).with_forcing(fm.HarmonicForce(at=("bottom", "u_x"), amplitude=AMPLITUDE))
+    inclined = strip().with_contact(fm.UnilateralContact(at="right", gap=GAP, direction=(0.6, 0.8)))
+    with pytest.raises(ValueError, match=r"share 0\.8 on DOFs"):  # e_x on the tangent (-0.8, 0.6)
+        fm.craig_bampton(inclined, 4).with_forcing(fm.HarmonicForce(at=("right", "u_x"), amplitude=AMPLITUDE))
+
 def test_named_points_of_rotated_nodes():
     """``at=(point, "u_x")`` of a rotated node is an error naming the rotation; ``"u_n"``/``"u_t"``
     are its DOFs; forces in physical components are rotated by with_forcing."""

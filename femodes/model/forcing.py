@@ -49,16 +49,17 @@ def bind_forces(model, forces) -> list[Attached]:
         nodes = np.asarray(dm.groups[name])
         dofs = dm.node_dof[nodes, c]
         weights = np.asarray(dm.group_weights[name], dtype=float)
-        if np.any(dofs == -2):
+        framed_nodes = np.array([int(k) in dm.frames for k in nodes], dtype=bool)  # their DOFs: _rotated_force
+        if np.any((dofs == -2) & ~framed_nodes):
             raise ValueError(f"with_forcing: HarmonicForce(at={f.at!r}): boundary {name!r} is not kept in this "
                              f"reduced model; attach the force before reducing")
-        lost = float(weights[dofs < 0].sum())
+        lost = float(weights[dofs == -1].sum())
         if lost > 0:
             log.info("with_forcing: %.3g %% of the force on %r acts on supported nodes", 100 * lost, name)
-        for node, d, w in zip(nodes, dofs, weights):
-            if d < 0 or w == 0.0:
-                continue
-            if int(node) in dm.frames:
+        for node, d, w, rot in zip(nodes, dofs, weights, framed_nodes):
+            if w == 0.0 or (d < 0 and not rot) or (rot and np.all(dm.node_dof[node] == -1)):
+                continue  # no share, or a supported node
+            if rot:
                 new.extend(_rotated_force(dm, f, int(node), c, float(w)))
             else:
                 new.append(Attached(dataclasses.replace(f, at=int(d), amplitude=f.amplitude * float(w)), int(d)))
@@ -123,7 +124,13 @@ def _rotated_force(dm: DofMap, f: HarmonicForce, node: int, c: int, weight: floa
     """The share ``weight`` of force ``f`` along physical component ``c`` of rotated ``node``, on
     the node's nodal-frame DOFs (``R^T e_c``)."""
     dofs = dm.node_dof[node]
-    if np.any(dofs < 0):
-        raise ValueError(f"{force_label(f)}: the DOFs of rotated node {node} are not all kept in this reduced model; "
-                         f"attach the force before reducing or keep the node (craig_bampton(keep=...))")
-    return frame_forces(f, dm.frames[node].rotation, dofs, c, weight)
+    R = dm.frames[node].rotation
+    # a reduced model keeps a contact node's normal DOF only: a force along the normal (no share on
+    # the dropped tangential DOFs, to round-off of the unit rotation) acts on what is kept
+    lost = (dofs < 0) & (np.abs(R[c]) > 1e-12)
+    if np.any(lost):
+        raise ValueError(f"{force_label(f)}: the force has a share {float(np.abs(R[c][lost]).max()):.3g} on DOFs of rotated "
+                         f"node {node} that this reduced model does not keep (it keeps "
+                         f"{[dm.label(int(d)) for d in dofs[dofs >= 0]]}); attach the force before reducing, keep the "
+                         f"node (craig_bampton(keep=...)), or force it along the contact normal (component 'u_n')")
+    return frame_forces(f, R, dofs, c, weight)
