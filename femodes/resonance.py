@@ -59,6 +59,7 @@ class ResonancePeak:
     ``on_tongue`` and ``tongue_distance``: of the tongue branches given to
     :func:`compare_resonance` (:func:`femodes.tongue_branch`), the index of the one nearest the
     peak in frequency at its energy and that distance (None and NaN without one covering it).
+    ``at_end``: the largest energy is at an end of the forced branch, so its span holds no peak.
     """
 
     omega: float
@@ -74,12 +75,17 @@ class ResonancePeak:
     captured_by: int | None = None
     on_tongue: int | None = None
     tongue_distance: float = float("nan")
+    at_end: bool = False
 
     @property
     def predicted(self) -> str:
         """One line: on the backbone (within :data:`ON_BACKBONE`, with the distance), else caught
         by an internal resonance (the mode, its share and frequency ratio) and whether the backbone
-        lists its tongue, else in a listed tongue, else off it or outside its energy range."""
+        lists its tongue, else in a listed tongue, else off it or outside its energy range; first of
+        all, whether the forced branch has a peak at all (``at_end``)."""
+        if self.at_end:
+            return (f"no peak: the forced branch's largest energy is at its end (w = {self.omega:.6g}); "
+                    "widen its frequency span past the resonance")
         if np.isfinite(self.distance) and abs(self.distance) <= ON_BACKBONE:
             return f"on the backbone, {self.distance:+.2%}"
         where = (f"{self.distance:+.2%} from the backbone's family" if np.isfinite(self.distance)
@@ -242,6 +248,10 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch], *,
             raise ValueError("compare_resonance: a forced branch has no point")
         i = int(np.argmax(b.energy))
         e, w = float(b.energy[i]), float(b.omega[i])
+        at_end = i in (0, len(b) - 1)
+        if at_end:
+            log.warning("compare_resonance: forced branch %d has no peak: its largest energy is at its end "
+                        "(w = %.6g); widen its frequency span past the resonance", len(out), w)
         w_bb = _omega_at(backbone, e)
         tongue: int | None = None
         modes: tuple[int, ...] = ()
@@ -259,5 +269,5 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch], *,
                                  distance=w / w_bb - 1.0, index=i,
                                  tongue=tongue, tongue_modes=modes, mode=mode,
                                  shares=tuple(float(v) for v in shares), ratios=tuple(float(v) for v in ratios),
-                                 captured_by=captured, on_tongue=on_tongue, tongue_distance=d_tongue))
+                                 captured_by=captured, on_tongue=on_tongue, tongue_distance=d_tongue, at_end=at_end))
     return tuple(out)

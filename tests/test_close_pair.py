@@ -50,3 +50,18 @@ def test_the_grazing_backbone_and_the_forced_peak_name_the_partner(caplog):
     assert "modes 1 and 2 are a close pair (w_2 / w_1 = 1.010) and the force drives mode 2" in peak1.predicted
     peak2 = fm.compare_resonance(bb2, [forced])[0]
     assert peak2.predicted.startswith("on the backbone"), peak2.predicted
+
+
+def test_a_forced_branch_without_a_peak_is_said_to_have_none(caplog):
+    """A span that stops before the resonance (a curved P2 bracket, forced to 1.4 w1 while its peak
+    lies beyond, read "on the backbone, -0.73 %" at the span's end): no peak, and the fix."""
+    eg2 = fm.grazing_energy(PAIR, 2)
+    bb2 = fm.nonlinear_mode(PAIR, 2, energy=(0.5 * eg2, 20 * eg2), harmonics=5)
+    model = PAIR.with_forcing(fm.HarmonicForce(at=1, amplitude=0.02)).with_damping(modal=0.01)
+    short = fm.frequency_response(model, (0.8, 0.95), 5)
+    assert np.argmax(short.energy) == len(short) - 1  # the response still rises at the span's end
+    peak = fm.compare_resonance(bb2, short)[0]
+    assert peak.at_end and peak.predicted.startswith("no peak: the forced branch's largest energy is at its end")
+    assert any("forced branch 0 has no peak" in r.getMessage() and "widen" in r.getMessage() for r in caplog.records)
+    whole = fm.compare_resonance(bb2, fm.frequency_response(model, (0.9, 1.4), 5))[0]
+    assert not whole.at_end and whole.predicted.startswith("on the backbone")
