@@ -85,6 +85,10 @@ def test_one_dimensional_contact_unchanged():
     assert len(c.contacts) == 1 and c.contacts[0].item.at == "right" and c.contacts[0].dof == bar.dof("right")
     with pytest.raises(ValueError, match="needs a meshed solid"):
         bar.with_contact(fm.UnilateralContact(at="right", gap=0.1, direction=(1.0,)))
+    # a stop on the negative side (a beam between two stops): not available, and said so
+    with pytest.raises(ValueError, match=r"stop sits on its positive side \(q <= gap\): a stop on the negative side or "
+                                         r"on both sides of such a DOF is not available"):
+        bar.with_contact(fm.UnilateralContact(at="right", gap=0.1, direction=(-1.0,)))
 
 
 def test_contact_errors():

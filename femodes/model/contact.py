@@ -255,7 +255,9 @@ def _direction_component(dm, law) -> int | None:
     label, direction = contact_label(law), law.direction
     if not dm.displacement:
         raise ValueError(f"{label}: direction= needs a meshed solid (femodes.solid); for bars, beams and discrete "
-                         "models give the DOF with at=(name, component)")
+                         "models give the DOF with at=(name, component), whose stop sits on its positive side "
+                         "(q <= gap): a stop on the negative side or on both sides of such a DOF is not available "
+                         "(of a discrete model, flip the DOF's sign in M, K and C for the negative side)")
     dim = len(dm.displacement)
     if len(direction) != dim:
         raise ValueError(f"{label}: direction={direction} has {len(direction)} components, this model is {dim}-D "
