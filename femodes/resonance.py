@@ -241,7 +241,7 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch], *,
         ws = np.asarray(t.get("omega", ()), dtype=float)
         ws = ws[np.isfinite(ws)]
         bands.append(_tongue_band(backbone, ws) if ws.size else None)
-    out = []
+    out: list[ResonancePeak] = []
     cache: dict = {}
     for b in branches:
         if not len(b):

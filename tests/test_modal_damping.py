@@ -110,7 +110,7 @@ def two_stops():
 
 @pytest.mark.parametrize("ne, H, solver", [
     (20, 5, BlockSolver()),       # <= 500 unknowns: dense LAPACK
-    (80, 5, BlockSolver()),       # < 2000: SuperLU on the augmented sparse matrix
+    (30, 5, BlockSolver()),       # < 500: SuperLU on the augmented sparse matrix
     (200, 5, BlockSolver()),      # structured: modal coordinates in the Schur complement
     (200, 5, AssembledSolver()),
     (0, 4, BlockSolver()),        # no interior DOF at all

@@ -21,12 +21,12 @@ class BlockSolverOptions:
 
     Parameters
     ----------
-    structured_min_size : int, default 2000
-        Systems smaller than this are solved by a sparse LU of the assembled matrix (SuperLU at these sizes).
-    dense_max_size : int, default 250
-        Systems up to this many unknowns are assembled densely and factorised by LAPACK.
-    dense_fill : float, default 0.25
-        Below ``structured_min_size``, dense too when the nonlinear block fills this fraction.
+    structured_min_size, structured_min_size_band, narrow_band_kl : int, default 500, 2000, 3
+        Smaller systems go to a sparse LU of the assembled matrix (SuperLU); the second size for band
+        blocks of width at most ``narrow_band_kl`` (bars 1, beams 3) or none, without modal damping.
+    dense_max_size, dense_fill : int, float, default 250, 0.25
+        Systems up to this many unknowns, or below the size above with a nonlinear block this full,
+        are assembled densely and factorised by LAPACK.
     dense_operators_max : int, default 1000
         Displacement coefficients up to which a dense ``HarmonicBlockJacobian.toarray`` comes from the
         system's cached dense operators, not from the sparse matrix.
@@ -56,7 +56,9 @@ class BlockSolverOptions:
         interior rows (2-D/3-D meshes), never on band blocks.
     """
 
-    structured_min_size: int = 2000
+    structured_min_size: int = 500
+    structured_min_size_band: int = 2000
+    narrow_band_kl: int = 3
     dense_max_size: int = 250
     dense_fill: float = 0.25
     dense_operators_max: int = 1000

@@ -2,8 +2,8 @@
 
 It picks the factorisation of each Jacobian from its size and fill (``BlockSolverOptions``):
 LAPACK on the dense matrix for small or half-full systems (:mod:`.assembled`), SuperLU on the
-assembled matrix for mid-size ones, and from ``structured_min_size`` unknowns the structured
-factorisation (:mod:`.factorization`), optionally reusing the factors of a nearby frequency
+assembled matrix for mid-size ones, and from ``structured_min_size`` unknowns (line meshes without
+modal damping: ``structured_min_size_band``) the structured factorisation (:mod:`.factorization`), optionally reusing the factors of a nearby frequency
 (:mod:`.reuse`); a structure that does not apply (an interior resonance) falls back to SuperLU.
 """
 
@@ -103,9 +103,10 @@ class BlockSolver:
 
     def factorize(self, J: HarmonicBlockJacobian, *, threads: int | None = None):
         n, o = J.shape[0], self.options
-        if n <= o.dense_max_size or (n < o.structured_min_size and J.N.nnz >= o.dense_fill * n * n):
+        limit = self.structured_from(J)
+        if n <= o.dense_max_size or (n < limit and J.N.nnz >= o.dense_fill * n * n):
             return DenseFactorization(J, o)
-        if n < o.structured_min_size:
+        if n < limit:
             return AssembledFactorization(J)
         try:
             state = self._state(J.system)
@@ -128,6 +129,26 @@ class BlockSolver:
         except StructureFailure as exc:
             log.debug("structured HBM factorisation not applicable (%s); the assembled matrix", exc)
             return AssembledFactorization(J)
+
+    def structured_from(self, J: HarmonicBlockJacobian) -> int:
+        """The size from which ``J`` takes the structured factorisation: ``structured_min_size``, or
+        ``structured_min_size_band`` for narrow band blocks (bars, beams: a bandwidth of at most
+        ``narrow_band_kl``) or none (every DOF nonlinear) without modal damping, where SuperLU on
+        the assembled matrix, or LAPACK on a half-full one, stays ahead longer
+        (``BlockSolverOptions``)."""
+        o = self.options
+        n = J.shape[0]
+        if n < o.structured_min_size or n >= o.structured_min_size_band:
+            return o.structured_min_size  # the answer does not depend on the blocks
+        system = J.system
+        if system.stiffness.Z.lowrank is not None:
+            return o.structured_min_size
+        try:
+            pat = system.linear.block_pattern()
+        except StructureFailure:
+            return o.structured_min_size  # the structured path reports its own failure
+        narrow = pat.interior.size == 0 or (pat.banded and pat.kl <= o.narrow_band_kl)
+        return o.structured_min_size_band if narrow else o.structured_min_size
 
     # -- reuse ------------------------------------------------------------------------------
     def reuses(self, J: HarmonicBlockJacobian) -> bool:
