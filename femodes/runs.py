@@ -315,7 +315,8 @@ def progress_shown(progress: bool | Callable) -> Iterator[None]:
     where logging is not configured: ``True`` is a request to see them, and Python's default shows
     warnings only (a user's ``progress=True`` printed nothing at all, its 70 s error estimate
     included). The ``femodes`` logger is set to INFO when it would drop them, and given a handler on
-    stderr (message only) when no handler would receive them; both are undone on exit. A logging
+    stderr (message only) when no handler would receive them; both are undone on exit (process-wide
+    while the call runs: calls in other threads show their INFO records too). A logging
     configuration that shows INFO already is left alone, and so is ``progress=False`` or a callable."""
     if progress is not True:
         yield
