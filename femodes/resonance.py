@@ -118,28 +118,6 @@ class ResonancePeak:
         return "outside the backbone's energy range"
 
 
-
-def close_partner(model, mode: int, modes) -> tuple[int, float, float] | None:
-    """The mode of a close pair with ``mode`` (linear frequencies of ``modes`` within
-    :data:`CLOSE_PAIR`) that reaches the contacts of ``model`` first, as ``(j, w_j / w_mode,
-    E_g(j) / E_g(mode))``, or None when every such mode needs more energy (or there is none). On a
-    rod of circular section with a tip stop (P2 tetrahedra) the bending mode across the stop's
-    normal needs 13 times the grazing energy of its partner 1.1 % away: its orbits mix in a little
-    of the partner and barely touch the stop, and the forced peak follows the partner's backbone."""
-    w = float(modes.omega[mode - 1])
-    eg = grazing_energy(model, mode, modes=modes)
-    best = None
-    for j in range(modes.omega.size):
-        if j + 1 == mode or abs(float(modes.omega[j]) / w - 1.0) > CLOSE_PAIR:
-            continue
-        try:
-            ej = grazing_energy(model, j + 1, modes=modes)
-        except ValueError:  # mode j + 1 moves no contact
-            continue
-        if ej < eg and (best is None or ej / eg < best[2]):
-            best = (j + 1, float(modes.omega[j]) / w, float(ej / eg))
-    return best
-
 #: A forced peak within this relative distance of a tongue's frequencies is held by that tongue.
 TONGUE_MARGIN = 0.01
 
@@ -161,6 +139,28 @@ CLOSE_PAIR = 0.05
 
 #: Lowest linear modes over which a forced peak's energy shares are taken.
 SHARE_MODES = 12
+
+
+def close_partner(model, mode: int, modes) -> tuple[int, float, float] | None:
+    """The mode of a close pair with ``mode`` (linear frequencies of ``modes`` within
+    :data:`CLOSE_PAIR`) that reaches the contacts of ``model`` first, as ``(j, w_j / w_mode,
+    E_g(j) / E_g(mode))``, or None when every such mode needs more energy (or there is none). On a
+    rod of circular section with a tip stop (P2 tetrahedra) the bending mode across the stop's
+    normal needs 13 times the grazing energy of its partner 1.1 % away: its orbits mix in a little
+    of the partner and barely touch the stop, and the forced peak follows the partner's backbone."""
+    w = float(modes.omega[mode - 1])
+    eg = grazing_energy(model, mode, modes=modes)
+    best = None
+    for j in range(modes.omega.size):
+        if j + 1 == mode or abs(float(modes.omega[j]) / w - 1.0) > CLOSE_PAIR:
+            continue
+        try:
+            ej = grazing_energy(model, j + 1, modes=modes)
+        except ValueError:  # mode j + 1 moves no contact
+            continue
+        if ej < eg and (best is None or ej / eg < best[2]):
+            best = (j + 1, float(modes.omega[j]) / w, float(ej / eg))
+    return best
 
 
 def _tongue_band(backbone: Branch, ws: np.ndarray) -> tuple[float, float]:

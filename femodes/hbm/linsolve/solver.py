@@ -2,9 +2,10 @@
 
 It picks the factorisation of each Jacobian from its size and fill (``BlockSolverOptions``):
 LAPACK on the dense matrix for small or half-full systems (:mod:`.assembled`), SuperLU on the
-assembled matrix for mid-size ones, and from ``structured_min_size`` unknowns (line meshes without
-modal damping: ``structured_min_size_band``) the structured factorisation (:mod:`.factorization`), optionally reusing the factors of a nearby frequency
-(:mod:`.reuse`); a structure that does not apply (an interior resonance) falls back to SuperLU.
+assembled matrix for mid-size ones, and from ``structured_min_size`` unknowns (bars and beams
+without modal damping: ``structured_min_size_band``) the structured factorisation
+(:mod:`.factorization`), optionally reusing the factors of a nearby frequency (:mod:`.reuse`); a
+structure that does not apply (an interior resonance) falls back to SuperLU.
 """
 
 from __future__ import annotations
