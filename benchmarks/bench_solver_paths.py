@@ -5,7 +5,7 @@ path of ``BlockSolver`` side by side, on line, 2-D and 3-D meshes with Rayleigh 
 a 1-DOF contact at many harmonics and a Craig-Bampton blade. Writes
 ``benchmarks/results_solver_paths.json``; discussion in ``benchmarks/README_solver_paths.md``.
 
-    python benchmarks/bench_solver_paths.py            # ~2 min
+    python benchmarks/bench_solver_paths.py            # ~6 min
 
 Paths: ``dense`` (LAPACK on the assembled dense matrix, ``DenseFactorization``), ``assembled``
 (SuperLU on the assembled sparse matrix; with modal damping its augmented form,
@@ -14,7 +14,9 @@ the nonlinear DOFs and border, ``StructuredFactorization``), and ``default`` (wh
 ``BlockSolver()`` picks). Each: median of 7 of ``factorize + solve`` (wall time, one BLAS
 thread), at a random state of the unknowns (the cost does not depend on it), 10 % above the first
 linear frequency, each factorisation at a frequency of its own (no cached factors). The paths run
-interleaved, so that the machine's load falls on all alike.
+interleaved, so that the machine's load falls on all alike. Then, for each case, the time of a
+40-point frequency response with the block solver's defaults before and after the change
+(:func:`branch_times`), the measure the defaults were chosen on.
 """
 import dataclasses
 import json
@@ -31,10 +33,11 @@ sys.path.insert(0, str(HERE.parent / "examples"))
 import femodes as fm  # noqa: E402
 from femodes.hbm.linsolve import (AssembledFactorization, BlockSolver, BlockSolverOptions,  # noqa: E402
                                   DEFAULT_OPTIONS, DenseFactorization)
+import femodes.hbm.linsolve.solver as S  # noqa: E402 (the default options a BlockSolver() takes)
 from _machine import cpu_model  # noqa: E402
 
 #: the structured path at every size above ``dense_max_size``, otherwise the default tuning
-STRUCTURED = dataclasses.replace(DEFAULT_OPTIONS, structured_min_size=0, structured_min_size_band=0)
+STRUCTURED = dataclasses.replace(DEFAULT_OPTIONS, structured_min_size=0, structured_min_size_narrow=0)
 
 
 def damped(model, damping):
@@ -123,15 +126,43 @@ def measure(model, H, reps=7):
     return out
 
 
+#: The rule before 2026-11-30: one threshold, 2000 unknowns, for every system.
+PREVIOUS = dataclasses.replace(DEFAULT_OPTIONS, structured_min_size=2000)
+
+
+def branch_times(model, H, points=40, reps=2):
+    """CPU time of a frequency response over ``(0.8, 1.6) w1`` capped at ``points`` points, with the
+    defaults before and after the change (the solver's options swapped in, alternating); the
+    best of ``reps``. The measure that decides: a continuation's solves (corrector, tangent,
+    refinement) and its states (contacts open and closed as the orbit has them), which the random
+    state of :func:`measure` lacks."""
+    w1 = float(fm.linear_modes(model, 1).omega[0])
+    opts = fm.analyses.frequency_response_options(max_points=points)
+    out = {"previous": [], "now": []}
+    for _ in range(reps):
+        for k, o in (("previous", PREVIOUS), ("now", DEFAULT_OPTIONS)):
+            S.DEFAULT_OPTIONS = o
+            try:
+                c = time.process_time()
+                b = fm.frequency_response(model, (0.8 * w1, 1.6 * w1), H, options=opts)
+                out[k].append(time.process_time() - c)
+            finally:
+                S.DEFAULT_OPTIONS = DEFAULT_OPTIONS
+    return {k: min(v) for k, v in out.items()} | {"points": len(b)}
+
+
 def main():
     rows = {}
     with threadpool_limits(1):
         for name, model, H in cases():
             r = measure(model, H)
+            r["branch"] = branch_times(model, H)
             rows[name] = r
+            br = r["branch"]
             print(f"{name:48s} n = {r['n']:5d}  dense {r.get('dense', float('nan')):7.2f}  assembled "
                   f"{r['assembled']:7.2f}  structured {r['structured']:7.2f}  default {r['default']:7.2f} ms "
-                  f"({r['default_path']})", flush=True)
+                  f"({r['default_path']});  branch {br['points']} pts: previous {br['previous']:6.3f} s, "
+                  f"now {br['now']:6.3f} s", flush=True)
     meta = {"cpu": cpu_model(), "defaults": repr(BlockSolverOptions())}
     (HERE / "results_solver_paths.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
 

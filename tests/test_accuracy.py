@@ -429,3 +429,22 @@ def test_walk_deadline_abandons_a_stalling_solve(caplog):
     assert again is not None
     assert abs(again.omega - exact.omega) <= 1e-8
     np.testing.assert_allclose(again.Q, exact.Q, rtol=0, atol=1e-8)
+
+
+def test_frequency_bracket_is_withheld_far_from_the_asymptotic_range():
+    """The bracket ``[w2 + d2, w2 + d2 / (r - 1)]`` of the last three levels is reported only where it
+    is at most ``BRACKET_MAX_HALF_WIDTH`` (10 %) wide and around a positive frequency: ratios just
+    above 1 with large changes (a user's curved bracket near its peak) extrapolated to negative
+    frequencies, which the branch reported as its own."""
+    from types import SimpleNamespace
+
+    from femodes.accuracy.extrapolation import BRACKET_MAX_HALF_WIDTH, PointLevels
+
+    def bracket(*ws):
+        return PointLevels([SimpleNamespace(omega=w) for w in ws], 1.0, 1000.0).frequency_bracket()
+
+    assert BRACKET_MAX_HALF_WIDTH == 0.1
+    assert bracket(1000.0, 990.0, 985.0) == (980.0, 0.0)                    # ratio 2: a point
+    assert bracket(1000.0, 950.0, 910.0) == pytest.approx((810.0, 0.06))    # ratio 1.25, 6 % wide
+    assert all(math.isnan(v) for v in bracket(1000.0, 900.0, 820.0))      # the same ratio, 12 % wide
+    assert all(math.isnan(v) for v in bracket(5300.0, 4800.0, 4324.0))    # ratio 1.05: below zero

@@ -25,7 +25,7 @@ from femodes.solvers.continuation import bordered_matrix, bordered_solver
 
 #: Small systems normally go to LAPACK (dense_max_size) or SuperLU (structured_min_size): the
 #: solvers of this module take the structured path at any size
-STRUCTURED = BlockSolverOptions(structured_min_size=0, structured_min_size_band=0, dense_max_size=0)
+STRUCTURED = BlockSolverOptions(structured_min_size=0, structured_min_size_narrow=0, dense_max_size=0)
 
 
 def structured(**kw) -> BlockSolver:
@@ -645,13 +645,17 @@ def test_module_constants_are_deprecated_names_of_the_options():
 
 def test_block_solver_path_by_size_mesh_and_damping():
     """The structured factorisation from ``structured_min_size`` (500) unknowns on 2-D/3-D meshes and
-    with modal damping; bars and beams (band width at most ``narrow_band_kl``) without it keep
-    SuperLU's assembled LU up to ``structured_min_size_band`` (2000), where it stays ahead
-    (benchmarks/README_solver_paths.md: a 3-D box at 573 unknowns 3.0 ms structured vs 8.3 SuperLU,
-    a modally damped beam at 862 5.2 vs 16; a bar with Rayleigh damping at 862, 1.6 SuperLU vs 2.3).
-    Each path solves to round-off (backward error below 1e-13, as the other tests of this module)."""
+    with modal damping; without modal damping, bars and beams (band width at most
+    ``narrow_band_kl``) and models whose DOFs are mostly nonlinear (a reduced model with many
+    contacts: its structured path is a large dense Schur complement) keep SuperLU's assembled LU up
+    to ``structured_min_size_narrow`` (2000), where it stays ahead (benchmarks/README_solver_paths.md:
+    40-point frequency responses, a 3-D box 0.37 s instead of 0.79, a modally damped beam 0.73
+    instead of 1.96; the user's blade reduced to 37 DOFs with 27 contacts took 2.1 s structured
+    against 0.88 s). Each path solves to round-off (backward error below 1e-13, as the other tests of
+    this module)."""
     o = BlockSolverOptions()
-    assert (o.structured_min_size, o.structured_min_size_band, o.narrow_band_kl) == (500, 2000, 3)
+    assert (o.structured_min_size, o.structured_min_size_narrow, o.narrow_band_kl, o.narrow_boundary_share) == (
+        500, 2000, 3, 0.25)
     mesh = fm.line_mesh(1.0, 20, boundaries={"clamp": 0.0, "tip": 1.0})
     beam = (fm.beam(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0, inertia=1.0), clamped="clamp")
             .with_contact(fm.UnilateralContact(at="tip", gap=0.01)).with_forcing(fm.HarmonicForce(at="tip", amplitude=0.01)))
@@ -659,12 +663,17 @@ def test_block_solver_path_by_size_mesh_and_damping():
            .with_contact(fm.UnilateralContact(at="right", gap=0.01, direction=(1.0, 0.0, 0.0)))
            .with_forcing(fm.HarmonicForce(at=("right", "u_y"), amplitude=0.01)).with_damping(beta=1e-3))
     rng = np.random.default_rng(5)
+    A = rng.standard_normal((12, 12))
+    dense = (fm.StructuralModel(M=np.eye(12), K=A @ A.T + 12.0 * np.eye(12), C=0.01 * np.eye(12))  # a reduced model's blocks
+             .with_contact(*[fm.UnilateralContact(at=k, gap=0.1) for k in range(6)])
+             .with_forcing(fm.HarmonicForce(at=0, amplitude=0.01)))
     for model, H, kind in ((beam.with_damping(beta=1e-3), 10, AssembledFactorization),
                            (beam.with_damping(modal=0.01), 10, StructuredFactorization),
-                           (box, 5, StructuredFactorization)):
+                           (box, 5, StructuredFactorization),
+                           (dense, 30, AssembledFactorization)):
         prob = ForcedResponseProblem(model, fm.Harmonics(H))
         J = prob.residual(1e-3 * rng.standard_normal(prob.size), 1.3)[1]
-        assert o.structured_min_size <= J.shape[0] < o.structured_min_size_band
+        assert o.structured_min_size <= J.shape[0] < o.structured_min_size_narrow
         F = BlockSolver().factorize(J)
         assert type(F) is kind
         b = rng.standard_normal(J.shape[0])

@@ -16,7 +16,7 @@ import numpy as np
 from ..hbm.harmonics import Harmonics
 from .options import AccuracyOptions
 
-__all__ = ["PointLevels", "bounded_by_bracket", "contracting", "estimate_levels"]
+__all__ = ["PointLevels", "bounded_by_bracket", "contracting", "estimate_levels", "BRACKET_MAX_HALF_WIDTH"]
 
 
 @dataclass
@@ -50,7 +50,8 @@ class PointLevels:
         """The frequency extrapolated to ``H -> inf`` from the last three levels and the relative
         half-width of the interval that contains it, assuming first-order convergence approached
         from below (rigid impacts; docs/guide/accuracy.md, "Levels"); NaN when the levels do not
-        support that assumption."""
+        support that assumption, or bracket a non-positive frequency or one wider than
+        :data:`BRACKET_MAX_HALF_WIDTH`."""
         w0, w1, w2 = (st.omega for st in self.states[-3:])
         d1, d2 = w1 - w0, w2 - w1
         dmax = max(abs(d1), abs(d2))
@@ -63,7 +64,10 @@ class PointLevels:
             return math.nan, math.nan
         lo, hi = w2 + d2, w2 + d2 / (r - 1.0)
         mid = 0.5 * (lo + hi)
-        return mid, 0.5 * abs(hi - lo) / self.omega_ref
+        half = 0.5 * abs(hi - lo) / self.omega_ref
+        if not (mid > 0.0 and half <= BRACKET_MAX_HALF_WIDTH):
+            return math.nan, math.nan  # levels far from their asymptotic range: no limit to report
+        return mid, half
 
     def error(self, j: int, of: int) -> tuple[float, float, float]:
         """Estimated relative error (frequency, displacement) of level ``of`` (``j - 2``,
@@ -77,6 +81,16 @@ class PointLevels:
             return dw, dq, r
         f = 1.0 / (r - 1.0) if of == j else r / (r - 1.0)
         return dw * f, dq * f, r
+
+
+#: A bracket of the converged frequency wider than this (relative half-width) is not reported: the
+#: levels are then far from the first-order range the bracket assumes. Near the peak of a user's
+#: curved P2 bracket (a Craig-Bampton model, 11 contacts, levels 5-10-20) the levels changed the
+#: frequency by tens of percent with ratios just above 1; the brackets were 30-142 % wide and
+#: their middles 615-2504 rad/s and -3420 rad/s for series at 5294-5366 rad/s, which the branch
+#: then reported as its frequencies. The brackets of the references are below 0.3 %
+#: (docs/guide/accuracy.md, "Levels").
+BRACKET_MAX_HALF_WIDTH = 0.1
 
 
 def estimate_levels(H: int) -> tuple[list[int], int]:

@@ -21,9 +21,9 @@ class BlockSolverOptions:
 
     Parameters
     ----------
-    structured_min_size, structured_min_size_band, narrow_band_kl : int, default 500, 2000, 3
-        Smaller systems go to a sparse LU of the assembled matrix (SuperLU); the second size for band
-        blocks of width at most ``narrow_band_kl`` (bars 1, beams 3) or none, without modal damping.
+    structured_min_size, structured_min_size_narrow, narrow_band_kl, narrow_boundary_share : default 500, 2000, 3, 0.25
+        Smaller systems go to SuperLU on the assembled matrix; the second size (no modal damping) for band
+        blocks of width at most ``narrow_band_kl``, none, or more than this share of nonlinear DOFs.
     dense_max_size, dense_fill : int, float, default 250, 0.25
         Systems up to this many unknowns, or below the size above with a nonlinear block this full,
         are assembled densely and factorised by LAPACK.
@@ -57,8 +57,9 @@ class BlockSolverOptions:
     """
 
     structured_min_size: int = 500
-    structured_min_size_band: int = 2000
+    structured_min_size_narrow: int = 2000
     narrow_band_kl: int = 3
+    narrow_boundary_share: float = 0.25
     dense_max_size: int = 250
     dense_fill: float = 0.25
     dense_operators_max: int = 1000

@@ -2,8 +2,8 @@
 
 It picks the factorisation of each Jacobian from its size and fill (``BlockSolverOptions``):
 LAPACK on the dense matrix for small or half-full systems (:mod:`.assembled`), SuperLU on the
-assembled matrix for mid-size ones, and from ``structured_min_size`` unknowns (bars and beams
-without modal damping: ``structured_min_size_band``) the structured factorisation
+assembled matrix for mid-size ones, and from ``structured_min_size`` unknowns (systems SuperLU
+factorises with little fill: ``structured_min_size_narrow``) the structured factorisation
 (:mod:`.factorization`), optionally reusing the factors of a nearby frequency (:mod:`.reuse`); a
 structure that does not apply (an interior resonance) falls back to SuperLU.
 """
@@ -133,13 +133,14 @@ class BlockSolver:
 
     def structured_from(self, J: HarmonicBlockJacobian) -> int:
         """The size from which ``J`` takes the structured factorisation: ``structured_min_size``, or
-        ``structured_min_size_band`` for narrow band blocks (bars, beams: a bandwidth of at most
-        ``narrow_band_kl``) or none (every DOF nonlinear) without modal damping, where SuperLU on
-        the assembled matrix, or LAPACK on a half-full one, stays ahead longer
+        ``structured_min_size_narrow`` for systems SuperLU factorises with little fill, without
+        modal damping: narrow band blocks (bars, beams: a bandwidth of at most ``narrow_band_kl``),
+        no interior DOF, or mostly nonlinear DOFs (more than ``narrow_boundary_share`` of them: a
+        reduced model with many contacts, whose structured path is a large dense Schur complement)
         (``BlockSolverOptions``)."""
         o = self.options
         n = J.shape[0]
-        if n < o.structured_min_size or n >= o.structured_min_size_band:
+        if n < o.structured_min_size or n >= o.structured_min_size_narrow:
             return o.structured_min_size  # the answer does not depend on the blocks
         system = J.system
         if system.stiffness.Z.lowrank is not None:
@@ -148,8 +149,9 @@ class BlockSolver:
             pat = system.linear.block_pattern()
         except StructureFailure:
             return o.structured_min_size  # the structured path reports its own failure
-        narrow = pat.interior.size == 0 or (pat.banded and pat.kl <= o.narrow_band_kl)
-        return o.structured_min_size_band if narrow else o.structured_min_size
+        narrow = (pat.interior.size == 0 or (pat.banded and pat.kl <= o.narrow_band_kl)
+                  or pat.bdofs.size > o.narrow_boundary_share * (pat.bdofs.size + pat.interior.size))
+        return o.structured_min_size_narrow if narrow else o.structured_min_size
 
     # -- reuse ------------------------------------------------------------------------------
     def reuses(self, J: HarmonicBlockJacobian) -> bool:
