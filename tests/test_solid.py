@@ -316,3 +316,27 @@ def test_load_quadratic_triangles_by_their_corners(tmp_path):
     assert mesh.p.shape == (2, 4) and len(mesh.boundaries["root"]) == 1
     model = fm.solid(mesh, fm.Material(E=E, rho=RHO), clamped="root", order=2)
     assert len(model.dofmap.groups["root"]) == 3
+
+
+def test_named_set_of_points_takes_supports_and_refuses_laws(tmp_path):
+    """A gmsh physical point of several vertices (the two ends of a pinned arch, "left" with its inner
+    and outer corner) was dropped: clamped="left" read "the mesh has the named locations ['crown']".
+    Supports now take every point of the set; a contact law or a force names the set and the fix."""
+    pts = [[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0], [1, 1, 0], [2, 1, 0]]
+    path = write_gmsh(tmp_path / "pinned.msh", pts, [
+        ("quad", [[0, 1, 4, 3], [1, 2, 5, 4]], 3), ("vertex", [[0], [3]], 1), ("vertex", [[2], [5]], 2),
+        ("vertex", [[4]], 4)], {"plate": (3, 2), "left": (1, 0), "right": (2, 0), "top": (4, 0)})
+    mesh = fm.load_mesh(path)
+    model = fm.solid(mesh, fm.Material(E=E, rho=RHO), clamped=["left", "right"], order=2)
+    fixed = {node for node, _ in model.dofmap.constrained_by}
+    assert fixed == {0, 3, 2, 5} and model.n_dofs == 2 * 15 - 8  # Q2: 15 nodes, 4 pinned
+    assert np.all(fm.linear_modes(model, 2).omega > 0)
+    pinned = fm.solid(mesh, fm.Material(E=E, rho=RHO), supports={"left": ["u_y"]}, clamped="right")
+    assert set(pinned.dofmap.constrained_by) == {(0, 1), (3, 1), (2, 0), (2, 1), (5, 0), (5, 1)}
+    with pytest.raises(ValueError, match=r"'left' is a set of 2 points .* name each point alone"):
+        model.with_contact(fm.UnilateralContact(at=("left", "u_y"), gap=0.1))
+    with pytest.raises(ValueError, match=r"'right' is a set of 2 points"):
+        model.with_forcing(fm.HarmonicForce(at="right"))
+    with pytest.raises(ValueError, match=r"points\['left'\]: the name is a set of points of the mesh"):
+        fm.solid(mesh, fm.Material(E=E, rho=RHO), points={"left": (1.0, 1.0)})
+    assert model.dofmap.label(model.dof(("top", "u_y"))) == "top.u_y"  # a single point stays a location

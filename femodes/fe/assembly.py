@@ -14,7 +14,7 @@ group of nodes (``DofMap.groups``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 from collections.abc import Mapping, Sequence
 
@@ -368,6 +368,7 @@ def build_fe_model(
     locations: Mapping[str, int] | None = None,
     groups: Mapping[str, np.ndarray] | None = None,
     group_weights: Mapping[str, np.ndarray] | None = None,
+    point_sets: Mapping[str, np.ndarray] | None = None,
     node_coordinates: np.ndarray | None = None,
     displacement: tuple = (),
     fe_options: Mapping | None = None,
@@ -378,7 +379,8 @@ def build_fe_model(
     optional arguments describe meshes whose locations are not single vertices (solids):
     ``nodal`` (default ``basis.nodal_dofs``), ``locations`` (named points -> node; default: every
     mesh boundary of a line mesh), ``groups`` (named boundaries -> nodes), ``group_weights``
-    (consistent weights of the nodes of each group, summing to 1), ``node_coordinates``
+    (consistent weights of the nodes of each group, summing to 1), ``point_sets`` (named sets of
+    several points -> nodes: supports take them, laws and forces refuse them), ``node_coordinates``
     (``(dim, n_nodes)``), ``displacement`` (the components along x, y(, z)) and ``fe_options``
     (extra :class:`FEInfo` fields).
     """
@@ -391,8 +393,9 @@ def build_fe_model(
         locations = {name: _location_node(mesh, name, "mesh boundaries") for name in (mesh.boundaries or {})}
     groups = {} if groups is None else {k: np.asarray(v, dtype=int) for k, v in groups.items()}
     coords = np.asarray(mesh.p if node_coordinates is None else node_coordinates, dtype=float)
+    point_sets = {k: np.asarray(v, dtype=int) for k, v in (point_sets or {}).items()}
     dofs = _NodalDofs(mesh=mesh, nodal=nodal, components=tuple(components), aliases=aliases,
-                      locations=dict(locations), groups=groups)
+                      locations=dict(locations), groups=groups, point_sets=point_sets)
     constrained = _constrained_dofs(dofs, constraints)
     added_mass = _lumped_values(dofs, "point_masses", point_masses)
     added_stiffness = _lumped_values(dofs, "springs", springs)
@@ -409,6 +412,7 @@ def build_fe_model(
         labels=tuple(_dof_labels(coords, components, free, node_dof, locations)),
         groups=groups,
         group_weights=dict(group_weights or {}),
+        point_sets=point_sets,
         node_coordinates=coords,
         displacement=tuple(displacement),
     )
@@ -427,6 +431,7 @@ class _NodalDofs:
     aliases: Mapping[str, str]
     locations: Mapping[str, int]
     groups: Mapping[str, np.ndarray]
+    point_sets: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def component(self, comp: str, arg: str) -> int:
         """Index of component ``comp`` (or its alias), else ValueError naming ``arg``."""
@@ -444,13 +449,20 @@ class _NodalDofs:
                 f"{arg} names boundary {name!r} with {len(self.groups[name])} nodes; this needs one "
                 f"point: name it (gmsh physical point, or points={{...}} of femodes.solid)"
             )
-        known = sorted(set(self.locations) | set(self.groups))
+        if name in self.point_sets:
+            raise InputValueError(
+                f"{arg} names {name!r}, a set of {len(self.point_sets[name])} points; this needs one point: name "
+                f"it alone (a gmsh physical point of one vertex, or points={{...}} of femodes.solid)"
+            )
+        known = sorted(set(self.locations) | set(self.groups) | set(self.point_sets))
         raise InputValueError(f"{arg} names location {name!r}, but the mesh has the named locations {known}")
 
     def nodes(self, name: str, arg: str) -> np.ndarray:
-        """Nodes of a named point or boundary."""
+        """Nodes of a named point, boundary or set of points."""
         if name in self.groups:
             return np.asarray(self.groups[name], dtype=int)
+        if name in self.point_sets:
+            return np.asarray(self.point_sets[name], dtype=int)
         return np.array([self.node(name, arg)])
 
     def resolve(self, at: Any, arg: str) -> tuple[int, int]:

@@ -110,11 +110,14 @@ def _groups(mesh: Any, basis: Any, scalar: Any, nodal: np.ndarray, node_of_full:
     return groups, weights
 
 
-def _points(mesh: Any, coords: np.ndarray, points: Mapping | None, groups: Mapping) -> dict:
-    """Named points: gmsh physical points of the mesh and ``points={name: coordinates}``."""
-    located = {name: int(v[0]) for name, v in named_points(mesh).items() if len(v) == 1}
+def _points(mesh: Any, coords: np.ndarray, points: Mapping | None, groups: Mapping) -> tuple[dict, dict]:
+    """Named points: gmsh physical points of the mesh and ``points={name: coordinates}``; and the
+    point sets, gmsh physical points of several vertices (``{name: nodes}``: supports take them)."""
+    named = named_points(mesh)
+    located = {name: int(v[0]) for name, v in named.items() if len(v) == 1}
+    sets = {name: np.unique(np.asarray(v, dtype=int)) for name, v in named.items() if len(v) > 1 and name not in groups}
     if points is None:
-        return located
+        return located, sets
     if not isinstance(points, Mapping):
         raise TypeError(f"solid: points must be a mapping {{name: coordinates}}, got {type(points).__name__}")
     dim = coords.shape[0]
@@ -122,8 +125,9 @@ def _points(mesh: Any, coords: np.ndarray, points: Mapping | None, groups: Mappi
     for name, xy in points.items():
         if not isinstance(name, str) or not name:
             raise TypeError(f"solid: names in points must be non-empty strings, got {name!r}")
-        if name in groups:
-            raise ValueError(f"solid: points[{name!r}]: the name is a boundary of the mesh; choose another name")
+        if name in groups or name in sets:
+            what = "a boundary" if name in groups else "a set of points"
+            raise ValueError(f"solid: points[{name!r}]: the name is {what} of the mesh; choose another name")
         try:
             x = np.asarray(xy, dtype=float).reshape(-1)
         except (TypeError, ValueError):
@@ -138,7 +142,7 @@ def _points(mesh: Any, coords: np.ndarray, points: Mapping | None, groups: Mappi
                 f"{tuple(float(v) for v in coords[:, k])} (distance {d[k]:.3g} > {tol:.3g})"
             )
         located[name] = k
-    return located
+    return located, sets
 
 
 def _plane_options(dim: int, plane: Any, thickness: Any) -> tuple[str | None, float]:
@@ -257,7 +261,7 @@ def solid(
     node_of_full[nodal] = np.arange(nodal.shape[1])[None, :]
     coords = np.asarray(basis.doflocs)[:, nodal[0]]
     groups, weights = _groups(mesh, basis, scalar, nodal, node_of_full)
-    locations = _points(mesh, coords, points, groups)
+    locations, point_sets = _points(mesh, coords, points, groups)
     return build_fe_model(
         kind="solid",
         mesh=mesh,
@@ -273,6 +277,7 @@ def solid(
         locations=locations,
         groups=groups,
         group_weights=weights,
+        point_sets=point_sets,
         node_coordinates=coords,
         displacement=components,
         fe_options={"thickness": t, "plane": plane},

@@ -52,6 +52,9 @@ class DofMap:
     displacement : tuple of str
         The components along the coordinate axes x, y(, z) (``("u_x", "u_y")`` for 2-D solids;
         empty for bars, beams and discrete models): what a contact ``direction`` selects.
+    point_sets : mapping str -> ndarray
+        Named sets of several points of a meshed solid (a gmsh physical point of several vertices)
+        -> their nodes: supports take them; a contact law or a force asks for a boundary or one point.
     frames : mapping int -> NodalFrame
         Nodes of a meshed solid whose DOFs are rotated into a nodal frame (contacts with an
         inclined or negative normal): DOFs ``"u_n"``, ``"u_t"`` (2-D) or ``"u_t1"``, ``"u_t2"`` (3-D);
@@ -71,6 +74,7 @@ class DofMap:
     node_coordinates: Any = None
     displacement: tuple = ()
     frames: Mapping[int, NodalFrame] = field(default_factory=dict)
+    point_sets: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     @classmethod
     def discrete(cls, n_dofs: int, dof_names: Sequence[str] | None = None) -> DofMap:
@@ -141,8 +145,14 @@ class DofMap:
                 f"and forces accept boundaries, for anything else name a point (gmsh physical point, or "
                 f"points={{...}} of femodes.solid)"
             )
+        if loc in self.point_sets and loc not in self.locations:
+            raise InputValueError(
+                f"{where}: {loc!r} is a set of {len(self.point_sets[loc])} points (a gmsh physical point of several "
+                f"vertices), not one DOF; name each point alone (one gmsh physical point per vertex, or "
+                f"points={{...}} of femodes.solid), or put the law or force on a named boundary"
+            )
         if loc not in self.locations:
-            known = sorted(set(self.locations) | set(self.groups)) + list(self.dof_names)
+            known = sorted(set(self.locations) | set(self.groups) | set(self.point_sets)) + list(self.dof_names)
             raise InputValueError(f"{where}: unknown location {loc!r}; known names are {known}")
         if comp is None:
             raise InputValueError(f"{where}: location {loc!r} has no components in this model")
