@@ -35,7 +35,7 @@ from .results.branch import fill_in_place
 from .solvers import NewtonOptions
 from .solvers.checks import InputTypeError, InputValueError, entry_point
 from .solvers.threads import limit_blas_threads
-from .stability_methods import (AUTO_MAX_STIFFNESS, MAX_CORRECTION, METHODS, Auto, Orbit, ShootingError,
+from .stability_methods import (AUTO_MAX_STIFFNESS, MAX_CORRECTION, METHODS, Auto, Hill, Orbit, ShootingError,
                                 StabilityMethod, StabilityResult, as_stability_method, by_name, checked_lead,
                                 describe_unconverged, harmonic_check, is_stable)
 
@@ -195,7 +195,8 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
     opts = StabilityOptions(method=Auto() if method is None else method, tol=tol, locate=locate, check=check)
     if not isinstance(problem, (ForcedResponseProblem, NonlinearModeProblem)):
         raise TypeError(f"annotate_branch: problem must be an HBM problem, got {type(problem).__name__}")
-    method, tol = opts.method, opts.tol
+    chosen: StabilityMethod = opts.method
+    tol = opts.tol
     forced = isinstance(problem, ForcedResponseProblem)
     system = problem.system
 
@@ -211,16 +212,27 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
         """The multipliers at a solution ``x`` by ``method``; :class:`Auto` takes the method
         ``how`` names (the one a neighbouring point used), so that a bifurcation is located with
         the method that found it."""
-        strategy = by_name(how) if how and isinstance(method, Auto) else method
+        strategy = by_name(how) if how and isinstance(chosen, Auto) else chosen
         return strategy(orbit(x, p), tol)
 
     results = []
     start = time.perf_counter()
-    last = start
+    last = last_point = start
     b = branch
+    failed_time = 0.0
     for i in range(len(b)):
-        results.append(method(orbit_of(i), tol))
+        results.append(chosen(orbit_of(i), tol))
         now = time.perf_counter()
+        if results[-1].message:  # Auto's shooting failed there
+            failed_time += now - last_point
+        if isinstance(chosen, Auto) and chosen.gives_up(failed_time):
+            # one method along the branch: a bifurcation is only looked for between points of the same one
+            log.info("stability: shooting failed at %d of the first %d points (%.3g s); Hill's method along the whole "
+                     "branch", sum(r.message != "" for r in results), i + 1, failed_time)
+            chosen = Hill()
+            results = [chosen(orbit_of(j), tol) for j in range(i + 1)]
+            now = time.perf_counter()
+        last_point = now
         if i == 0 and len(b) > 1:
             # the first point carries the set-up (reduction modes, factorisations): an upper bound
             log.info("stability: %d points, about %.3g s (first point %.3g s)", len(b), (now - start) * len(b),

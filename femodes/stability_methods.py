@@ -43,7 +43,7 @@ from .solvers.checks import InputValueError, entry_point, strategy
 from .time.shooting import shoot, unsupported
 
 __all__ = ["StabilityMethod", "Orbit", "Hill", "Shooting", "Auto", "StabilityResult", "ShootingError",
-           "as_stability_method", "by_name", "harmonic_check", "checked_lead", "describe_unconverged", "METHODS", "AUTO_MAX_STIFFNESS", "MAX_CORRECTION"]
+           "as_stability_method", "by_name", "harmonic_check", "checked_lead", "describe_unconverged", "METHODS", "AUTO_MAX_STIFFNESS", "MAX_CORRECTION", "AUTO_MAX_ITER", "AUTO_MAX_FAILED_TIME"]
 
 log = logging.getLogger(__name__)
 
@@ -57,6 +57,21 @@ AUTO_MAX_STIFFNESS = 50.0
 #: Shooting that moves the HBM start state by more than this fraction of its size has found
 #: another orbit (:class:`Auto` then uses Hill's method at that point).
 MAX_CORRECTION = 0.2
+
+#: Newton iterations :class:`Auto` gives one shooting (an explicit ``Shooting()`` takes 30). From
+#: the HBM orbit a shooting that converges does so in a few: 0 to 8 along the forced curve of the
+#: seed impact oscillator (H = 20; most 4 or 5), where the ones that fail stall after 16 to 24. On
+#: a shallow arch's Craig-Bampton model (11 DOFs, deep contact at H = 7) every contact orbit
+#: stalled after 11 to 21 iterations, 6 to 11 s each, against 0.06 s for Hill's method.
+AUTO_MAX_ITER = 12
+
+#: :class:`Auto` gives shooting up along a branch once its failed shootings took this many seconds
+#: (:meth:`Auto.gives_up`), and the whole branch takes Hill's method. Failures alone do not tell:
+#: the seed impact oscillator at H = 6 fails at 13 points in a row near its upper fold and then
+#: shoots its period doubling, a few milliseconds each; a shallow arch's Craig-Bampton model (11
+#: DOFs) failed at every contact orbit, 105 of 129 points at 6-11 s each (650 s for a 0.7 s
+#: branch). A budget in time bounds what shooting can waste without touching cheap models.
+AUTO_MAX_FAILED_TIME = 10.0
 
 
 #: Hill's truncation check (:func:`harmonic_check`): a verdict that changes with the truncation is
@@ -239,9 +254,14 @@ class Auto:
         if not self.shoots(orbit):
             return Hill()(orbit, tol)
         try:
-            return shooting_multipliers(orbit, tol)
+            return shooting_multipliers(orbit, tol, AUTO_MAX_ITER)
         except (ShootingFailed, ValueError) as exc:
             return Hill()(orbit, tol, message=f"shooting failed ({exc}); Hill's method used")
+
+    def gives_up(self, failed_time: float) -> bool:
+        """Whether shooting is given up for a branch once its failed shootings took
+        ``failed_time`` seconds (more than :data:`AUTO_MAX_FAILED_TIME`)."""
+        return failed_time > AUTO_MAX_FAILED_TIME
 
     def shoots(self, orbit: Orbit) -> bool:
         """Whether this orbit is shot: forced, complementarity contacts, a model shooting takes,
@@ -315,9 +335,10 @@ def _start_time(system: HBMSystem, Q: np.ndarray, omega: float) -> float:
     return float(theta / (2.0 * np.pi) * h.grid.period(omega))
 
 
-def shooting_multipliers(orbit: Orbit, tol: float) -> StabilityResult:
+def shooting_multipliers(orbit: Orbit, tol: float, max_iter: int = 30) -> StabilityResult:
     """The multipliers of the true periodic orbit shot from the HBM orbit (:class:`ShootingFailed`
-    when shooting does not converge, or converges on another orbit)."""
+    when shooting does not converge in ``max_iter`` Newton iterations, or converges on another
+    orbit)."""
     model, system, Q, omega = orbit.model, orbit.system, orbit.Q, orbit.omega
     free = not orbit.forced
     h = system.h
@@ -328,7 +349,8 @@ def shooting_multipliers(orbit: Orbit, tol: float) -> StabilityResult:
     v0 = (E @ (omega * (system.D1 @ Q)))[0]
     x0 = np.concatenate([q0, v0])
     # a free orbit is shot on the free model (its period an unknown); a forced one with its forcing
-    res = shoot(model.without_forcing() if free else model, omega, x0, period=h.grid.period(omega), t0=t0)
+    res = shoot(model.without_forcing() if free else model, omega, x0, period=h.grid.period(omega), t0=t0,
+                max_iter=max_iter)
     if not res.success:
         raise ShootingFailed(res.message)
     mu = np.asarray(res.multipliers)

@@ -288,3 +288,43 @@ def test_auto_takes_hill_for_a_stiff_model(monkeypatch):
     assert fm.stability(b[0], method=fm.stability_methods.Auto(max_stiffness=1e4)).method == "shooting"
     with pytest.raises(ValueError, match="max_stiffness must be a positive number"):
         fm.stability_methods.Auto(max_stiffness=0)
+
+
+def test_auto_gives_shooting_up_along_a_branch(monkeypatch, caplog):
+    """Shooting is given up for the whole branch once its failures took AUTO_MAX_FAILED_TIME (10 s):
+    on a shallow arch's Craig-Bampton model every contact orbit but the grazing one failed, 6-11 s
+    each, and stability=True took 650 s for a 0.7 s branch. The branch is then Hill's throughout
+    (one method: bifurcations are looked for between every two points). Cheap failures keep
+    shooting: the seed oscillator at H = 6 fails at 13 points in a row near its upper fold, then
+    shoots its period doubling (tests/test_moved_names.py). Here failures take 50 ms against a
+    budget of 0.12 s (patched): the third one gives up."""
+    import time
+    methods = importlib.import_module("femodes.stability_methods")
+    model = oscillator(gap=1.0, force=0.2)
+    b = fm.frequency_response(model, (0.5, 2.0), 10)
+    contact = [bool(np.any(b.P[i])) for i in range(len(b))]
+    assert 5 < sum(contact) < len(b) - 5
+    real = methods.shooting_multipliers
+
+    def run(pause):
+        calls = []
+
+        def fake(orbit, tol, max_iter=30):
+            assert max_iter == methods.AUTO_MAX_ITER
+            touching = bool(np.any(orbit.y[orbit.system.nq:]))
+            calls.append(touching)
+            if touching:
+                time.sleep(pause)
+                raise methods.ShootingFailed("no progress")
+            return real(orbit, tol, max_iter)
+        with monkeypatch.context() as m:
+            m.setattr(methods, "shooting_multipliers", fake)
+            m.setattr(methods, "AUTO_MAX_FAILED_TIME", 0.12)
+            return fm.frequency_response(model, (0.5, 2.0), 10, stability=True), calls
+
+    with caplog.at_level("INFO", logger="femodes"):
+        s, calls = run(0.05)
+    assert set(s.stability_method) == {"hill"} and sum(calls) == 3 and len(calls) == contact.index(True) + 3
+    assert "shooting failed at 3 of the first" in caplog.text and "Hill's method along the whole branch" in caplog.text
+    s, calls = run(0.0)  # instant failures: shooting goes on, Hill where it fails
+    assert len(calls) == len(b) and list(s.stability_method).count("shooting") == len(b) - sum(contact)
