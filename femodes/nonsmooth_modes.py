@@ -473,17 +473,25 @@ def captured_past_grazing(branch, problem: NonlinearModeProblem, model: Structur
     oscillators more). A branch whose orbits from ``1.5 E_g`` on all stay within
     ``strategy.grazing_shift`` of the linear frequency while their energy at least doubles past
     grazing only grazes the stop: an internal resonance takes the energy (on the bar, mode 4).
-    A continuation that stopped past grazing is not trusted either; ``strategy.always`` traces
-    past grazing by frequency whatever the energy continuation did. ``spectrum``: the linear
-    modes of :func:`_spectrum`, if already computed."""
+    A continuation that stopped past grazing is not trusted either, nor one that turned back in
+    energy short of the span's end (a damped arch's: at 4.7 E_g, back to its start energy);
+    ``strategy.always`` traces past grazing by frequency whatever the energy continuation did.
+    ``spectrum``: the linear modes of :func:`_spectrum`, if already computed."""
     lm = spectrum if spectrum is not None else _spectrum(model, problem, strategy)
-    eg = grazing_energy(model, problem.mode, modes=lm)
+    try:
+        eg = grazing_energy(model, problem.mode, modes=lm)
+    except ValueError:  # the mode moves no contact: it never touches, nothing lies past grazing
+        log.warning("nonlinear_mode: linear mode %d moves no contact DOF: its backbone is the linear mode's at every "
+                    "energy (fm.grazing_energy names the modes that touch)", problem.mode)
+        return None
     if energy_max <= 1.05 * eg or not len(branch):
         return None
     if strategy.always:
         return "PeriodDriven(always=True)"
     if not branch.success and branch.energy.max() > 1.05 * eg:
         return f"the energy continuation stopped past grazing ({branch.message})"
+    if 1.05 * eg < branch.energy.max() < 0.99 * energy_max:  # turned back (a damped arch: at 4.7 E_g)
+        return f"the energy continuation turned back at {branch.energy.max() / eg:.3g} E_g, short of {energy_max / eg:.3g} E_g"
     if energy_max <= 2.0 * eg or branch.energy.max() < 2.0 * eg:
         return None
     above = np.flatnonzero(branch.energy >= 1.5 * eg)
@@ -565,7 +573,7 @@ def _compose(below: Branch, problem: NonlinearModeProblem, orbits: list[_Orbit],
              message: str, why: str, eg: float, energy_max: float) -> Branch:
     """One branch: the energy continuation's orbits up to the grazing energy ``eg``, then the
     period sweep's; successful when they reach ``energy_max``."""
-    keep = below.energy <= eg
+    keep = np.cumsum(below.energy > eg) == 0  # the orbits before the first past grazing (not a way back)
     parts = [problem.unpack(o.x, 0.0) for o in orbits]
     energy = np.array([o.energy for o in orbits])
     residual = [float(np.max(np.abs(problem.residual(o.x, math.log10(o.energy))[0]))) for o in orbits]

@@ -60,6 +60,9 @@ class ResonancePeak:
     :func:`compare_resonance` (:func:`femodes.tongue_branch`), the index of the one nearest the
     peak in frequency at its energy and that distance (None and NaN without one covering it).
     ``at_end``: the largest energy is at an end of the forced branch, so its span holds no peak.
+    ``backbone_held_by``: off the backbone and not captured, the mode other than ``mode`` that
+    holds most of the energy of the backbone's orbit nearest the peak's energy (the energy
+    continuation rides an internal resonance the forced response does not follow), else None.
     """
 
     omega: float
@@ -76,6 +79,7 @@ class ResonancePeak:
     on_tongue: int | None = None
     tongue_distance: float = float("nan")
     at_end: bool = False
+    backbone_held_by: int | None = None
 
     @property
     def predicted(self) -> str:
@@ -113,6 +117,8 @@ class ResonancePeak:
         if self.tongue is not None:
             modes = ", ".join(str(m) for m in self.tongue_modes) or "?"
             return f"in the tongue of internal resonance {self.tongue} (modes {modes}) listed on the backbone, {where}"
+        if np.isfinite(self.distance) and self.backbone_held_by is not None:
+            return off_family(self)
         if np.isfinite(self.distance):
             return f"off the backbone, {self.distance:+.2%}"
         return "outside the backbone's energy range"
@@ -191,6 +197,33 @@ def point_shares(branch: Branch, i: int, cache: dict | None = None) -> tuple[np.
     return modal_energy_shares(branch.harmonics, branch.Q[i], w, model.M, lm.omega, lm.shapes), lm.omega / w
 
 
+def off_family(peak: ResonancePeak) -> str:
+    """What :attr:`ResonancePeak.predicted` says of a peak off a backbone whose orbit at its
+    energy is another mode's (``backbone_held_by``), and the call that traces the family."""
+    k, m = peak.backbone_held_by, peak.mode
+    return (f"off the backbone, {peak.distance:+.2%}: at the peak's energy the backbone's orbit is mode {k}'s (it "
+            f"rides an internal resonance the forced response does not follow), the peak mode {m}'s "
+            f"({peak.shares[m - 1]:.0%} of its energy); trace mode {m}'s contact-phase family: "
+            f"nonlinear_mode(model, {m}, ..., past_grazing=fm.PeriodDriven(always=True))")
+
+
+#: A backbone orbit whose energy is at least this share in one mode other than the backbone's is
+#: that mode's (:attr:`ResonancePeak.backbone_held_by`): the energy continuation of a shallow
+#: arch's mode 2 ends with mode 5 holding 100 % (its 4:1 tongue), 16 % below the forced peak.
+HELD = 0.5
+
+
+def _held_by(backbone: Branch, e: float, mode: int, cache: dict) -> int | None:
+    """The mode other than ``mode`` holding at least :data:`HELD` of the energy of the backbone's
+    orbit nearest (in ``log E``) the energy ``e``, or None."""
+    j = int(np.argmin(np.abs(np.log(backbone.energy) - np.log(e))))
+    shares, _ = point_shares(backbone, j, cache)
+    if not shares.size:
+        return None
+    k = int(np.argmax(shares))
+    return k + 1 if k != mode - 1 and shares[k] >= HELD else None
+
+
 def _omega_at(branch: Branch, e: float) -> float:
     """The frequency of ``branch`` at the energy ``e`` (linear interpolation in ``log E`` between its
     orbits in energy order), NaN outside its energies."""
@@ -265,9 +298,16 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch], *,
         near = [(abs(d), j, d) for j, d in ((j, w / _omega_at(t, e) - 1.0) for j, t in enumerate(tongues))
                 if np.isfinite(d)]
         _, on_tongue, d_tongue = min(near) if near else (0.0, None, float("nan"))
-        out.append(ResonancePeak(omega=w, energy=e, omega_backbone=w_bb,
-                                 distance=w / w_bb - 1.0, index=i,
-                                 tongue=tongue, tongue_modes=modes, mode=mode,
-                                 shares=tuple(float(v) for v in shares), ratios=tuple(float(v) for v in ratios),
-                                 captured_by=captured, on_tongue=on_tongue, tongue_distance=d_tongue, at_end=at_end))
+        held = None
+        if (not at_end and captured is None and tongue is None and np.isfinite(w_bb) and abs(w / w_bb - 1.0) > ON_BACKBONE
+                and backbone.meta.get("family") != "contact phase"):
+            held = _held_by(backbone, e, mode, cache)
+        peak = ResonancePeak(omega=w, energy=e, omega_backbone=w_bb, distance=w / w_bb - 1.0, index=i,
+                             tongue=tongue, tongue_modes=modes, mode=mode,
+                             shares=tuple(float(v) for v in shares), ratios=tuple(float(v) for v in ratios),
+                             captured_by=captured, on_tongue=on_tongue, tongue_distance=d_tongue, at_end=at_end,
+                             backbone_held_by=held)
+        if held is not None:
+            log.warning("compare_resonance: forced branch %d: %s", len(out), off_family(peak))
+        out.append(peak)
     return tuple(out)
