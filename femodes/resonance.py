@@ -299,8 +299,8 @@ def compare_resonance(backbone: Branch, forced: Branch | Sequence[Branch], *,
                 if np.isfinite(d)]
         _, on_tongue, d_tongue = min(near) if near else (0.0, None, float("nan"))
         held = None
-        if (not at_end and captured is None and tongue is None and np.isfinite(w_bb) and abs(w / w_bb - 1.0) > ON_BACKBONE
-                and backbone.meta.get("family") != "contact phase"):
+        if (not at_end and captured is None and tongue is None and len(shares) >= mode and np.isfinite(w_bb)
+                and abs(w / w_bb - 1.0) > ON_BACKBONE and backbone.meta.get("family") != "contact phase"):
             held = _held_by(backbone, e, mode, cache)
         peak = ResonancePeak(omega=w, energy=e, omega_backbone=w_bb, distance=w / w_bb - 1.0, index=i,
                              tongue=tongue, tongue_modes=modes, mode=mode,
