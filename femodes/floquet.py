@@ -209,7 +209,7 @@ def annotate_branch(branch: Branch, problem, model: StructuralModel, *, method: 
         return orbit(problem.pack(b.Q[i], b.P[i], b.omega_truncated[i], b.xi[i]), b.parameter[i])
 
     def point(x: np.ndarray, p: float, how: str | None = None) -> StabilityResult:
-        """The multipliers at a solution ``x`` by ``method``; :class:`Auto` takes the method
+        """The multipliers at a solution ``x`` by the branch's strategy; :class:`Auto` takes the method
         ``how`` names (the one a neighbouring point used), so that a bifurcation is located with
         the method that found it."""
         strategy = by_name(how) if how and isinstance(chosen, Auto) else chosen
