@@ -430,3 +430,63 @@ def test_old_import_paths_warn_and_give_the_moved_names(old):
     with pytest.raises(AttributeError):
         getattr(module, "no_such_name")
 
+
+
+@pytest.mark.parametrize("amplitude, clear", [(0.5, True), (0.95, False), (1.2, False)])
+def test_an_orbit_clear_of_the_stop_is_no_counterpart(amplitude, clear):
+    """The exact orbit found for a point with contact force counts as its counterpart only if it
+    touches the stop or comes within ``shooting_clearance`` (10 %) of the gap, as just above
+    grazing: the forced linear orbit of the seed oscillator (c = 0.2, F = 1, g = 2.5) at the
+    frequency where its amplitude is ``amplitude`` times the gap stays 50 % clear (not a
+    counterpart), 5 % clear (one), or runs into the stop (touches: one)."""
+    from types import SimpleNamespace
+
+    from femodes.accuracy.shooting import stays_clear
+    c, F, g = 0.2, 1.0, 2.5
+    # amplitude a g below resonance: (1 - w^2)^2 + (c w)^2 = (F / (a g))^2, the root with w < 1
+    b, q = 2.0 - c * c, 1.0 - (F / (amplitude * g)) ** 2
+    w = math.sqrt(0.5 * (b - math.sqrt(b * b - 4.0 * q)))
+    flow = LinearImpactFlow(_oscillator(c, F, g), w)
+    t = np.linspace(0.0, 2 * math.pi / w, 65)
+    t0 = float(t[np.argmin(flow.particular(t)[:, 0])])  # start where the orbit is farthest from the stop
+    run = flow.run(flow.particular(t0), t0)
+    assert run.touches == (amplitude > 1.0)
+    sh = SimpleNamespace(flow=flow)
+    assert stays_clear(sh, 0, (run.x_end, w, 0.0, run, 0.0, None), AccuracyOptions()) is clear
+    assert stays_clear(sh, 0, (run.x_end, w, 0.0, run, 0.0, None), AccuracyOptions(shooting_clearance=0.6)) is False
+
+
+@pytest.mark.slow
+def test_arch_contact_points_get_no_orbit_without_contact_as_exact_answer():
+    """A shallow pinned arch (benchmarks/bench_arch.py: Craig-Bampton, 11 DOFs, a stop 1 mm under
+    the crown, 1 % modal damping, 2 kN, H = 7): shooting found no exact orbit with contact near
+    its contact points, but orbits without contact on their hyperplanes, up to 2.7 w2 away, and
+    reported them as the points' exact answers (frequency error 1e-9, rtol met, the peak at
+    1.228 w2 with a crown amplitude of 0.12 mm). Those orbits stay 13-100 % of the gap clear of the
+    stop. Now no point with contact force takes such an orbit: every exact answer of a point with
+    contact reaches within 10 % of the gap, and rtol is not met at the peak (the levels: 13-42 %,
+    no convergence), where the time integration of the reduced and of the 802-DOF model falls off
+    the branch within 5 periods."""
+    import importlib.util
+    from pathlib import Path
+    spec = importlib.util.spec_from_file_location(
+        "bench_arch", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_arch.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    forced = fm.craig_bampton(bench.arch().with_damping(modal=0.01).with_forcing(
+        fm.HarmonicForce(at=("crown", "u_y"), amplitude=-2000.0)), 10)
+    w2 = fm.linear_modes(forced, 2).omega[1]
+    frc = fm.frequency_response(forced, (0.9 * w2, 1.3 * w2), 7, rtol=1e-2)
+    acc, d = frc.accuracy, forced.contacts[0].dof
+    P = np.abs(frc.P).reshape(len(frc), -1).max(axis=1)
+    exact = (acc.method == "shooting") & (P > 1e-12 * P.max())
+    assert exact.any() and np.all(acc.amplitude_limit[exact, d] >= 0.9 * 1e-3)
+    peak = int(np.argmax(frc.energy))
+    assert frc.omega_truncated[peak] / w2 == pytest.approx(1.20, abs=0.01)
+    assert not acc.met[peak] and acc.method[peak] != "shooting" and frc.omega[peak] / w2 < 1.21
+    # the backbone rides mode 5's tongue 16 % below that peak: compare_resonance says the peak is not converged
+    rom = fm.craig_bampton(bench.arch(), 10)
+    eg = fm.grazing_energy(rom, 2)
+    riding = fm.nonlinear_mode(rom, 2, energy=(0.5 * eg, 10.0 * eg), harmonics=7)
+    res, = fm.compare_resonance(riding, frc)
+    assert res.converged is False and res.backbone_held_by == 5 and "not converged" in res.predicted

@@ -29,7 +29,7 @@ from .points import contact_force_peak, near_fold, without_contact
 from .protocol import PointErrors, orbit_amplitudes
 from .shooter import Shooter
 
-__all__ = ["GLANCING", "Shooting", "shoot_branch", "shooting_unsupported", "shooting_unsupported_for"]
+__all__ = ["GLANCING", "Shooting", "shoot_branch", "stays_clear", "shooting_unsupported", "shooting_unsupported_for"]
 
 log = logging.getLogger(__name__)
 
@@ -162,15 +162,38 @@ def shoot_branch(sh: Shooter, exact: ExactBranchCache, options: AccuracyOptions)
         if nxt is not None:
             out[i] = sh.solve(i, guess=sh.warm(i, nxt[:3] + (i + 1,))) or sh.solve_from(i, i + 1, nxt)
     for i, r in out.items():
-        if r is not None and not near_fold(branch, i):
+        if r is not None and stays_clear(sh, i, r, options):
+            out[i] = None
+        elif r is not None and not near_fold(branch, i):
             out[i] = counterpart(sh, i, r, options)
             if out[i] is GLANCING:  # the exact orbit at the point's own frequency instead
                 at_w = sh.at_frequency(i)
-                if at_w is not None:
+                if at_w is not None and not stays_clear(sh, i, at_w, options):
                     log.info("accuracy: point %d: the exact orbit at its frequency w = %.6g instead", i,
                              branch.omega_truncated[i])
                     out[i] = at_w
     return out
+
+
+def stays_clear(sh: Shooter, i: int, r, options: AccuracyOptions) -> bool:
+    """Whether the exact orbit ``r`` found for point ``i`` (a point with contact force) touches no
+    obstacle and stays more than ``options.shooting_clearance`` of every gap clear of it: the orbit
+    without contact, another branch, not the point's counterpart (just above grazing the exact
+    orbit may miss an obstacle that the truncated series touches, by far less). Logged."""
+    run = r[3]
+    if run.touches:
+        return False
+    flow = sh.flow
+    t = np.linspace(run.t0, run.t1, 257)
+    q = run.displacement(t)[:, flow.dofs]
+    reach = np.max(q, axis=0)  # the contact DOFs' largest approach to their obstacles
+    scale = np.maximum(np.abs(flow.gaps), np.max(np.abs(q), axis=0))
+    clear = float(np.min((flow.gaps - reach) / np.where(scale > 0.0, scale, 1.0)))
+    if clear <= options.shooting_clearance:
+        return False
+    log.info("accuracy: point %d: the exact orbit found (w = %.6g) touches no obstacle and stays %.0f %% of the "
+             "gap clear of it: the orbit without contact, not this point's counterpart", i, r[1], 100.0 * clear)
+    return True
 
 
 def start_from_exact(sh: Shooter, exact: ExactBranchCache, i: int, options: AccuracyOptions, check: bool = True):
@@ -182,7 +205,7 @@ def start_from_exact(sh: Shooter, exact: ExactBranchCache, i: int, options: Accu
         return None
     for k in exact.crossings(i, sh.plane(i)):
         r = sh.solve(i, guess=(eb.states[k].copy(), float(eb.omega[k]), 0.0))
-        if r is not None:
+        if r is not None and not stays_clear(sh, i, r, options):
             log.info("accuracy: point %d: exact orbit from the exact branch's crossing at w = %.6g", i, eb.omega[k])
             return r if near_fold(sh.branch, i) or not check else counterpart(sh, i, r, options)
     return None
