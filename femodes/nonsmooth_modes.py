@@ -12,11 +12,10 @@ grazes the stop while mode 4 takes 95 % of the energy.
 The contact-phase family is followed here by its frequency instead: harmonic balance solved at
 given ``w`` (:class:`~femodes.hbm.PeriodDrivenModeProblem`), ``w`` increased step by step from
 just above the linear frequency, each solve started from the secant through the last two orbits.
-This is the period sweep of the wave-equation harmonic balance of Lu & Legrand; it steps over
-the near-vertical tongues of internal resonance that an energy continuation climbs, because a
-tongue is only a narrow band of frequencies. A solve that fails, or whose orbit has given most of
-its energy to other modes, is such a tongue: it is left out of the branch and listed with the
-modes that took the energy (:class:`InternalResonance`).
+This is the period sweep of Lu & Legrand's wave-equation harmonic balance; it steps over the
+near-vertical tongues of internal resonance that an energy continuation climbs (narrow bands). A
+solve that fails, or whose orbit has given most of its energy to other modes, is such a tongue:
+it is left out of the branch and listed with the modes that took the energy (:class:`InternalResonance`).
 
 With many harmonics the tongues are dense, and past a cluster of them the secant through the last
 orbits leads Newton onto a neighbouring family with more energy. With more harmonics than
@@ -25,9 +24,7 @@ that many (:func:`_coarse_family`): the predictor follows it, an orbit off it (i
 energy, or with an energy rising over it) is solved again from its orbit, and the tongues' and the
 end's tests are drawn against it (issue 35; ``benchmarks/README_bar_convergence.md``).
 
-Checked against the continuum's first nonsmooth mode of the bar (d'Alembert, ``tests/
-bar_stop_reference.py``; Yoong, Thorin & Legrand, Nonlinear Dynamics 91, 2018): see
-``tests/test_nonsmooth_modes.py``.
+Checked against the bar's continuum nonsmooth mode (d'Alembert; Yoong, Thorin & Legrand 2018).
 """
 
 from __future__ import annotations
@@ -43,7 +40,7 @@ from .hbm.problems import NonlinearModeProblem, PeriodDrivenModeProblem
 from .laws import UnilateralContact
 from .linear import grazing_energy, linear_modes
 from .model import StructuralModel
-from .resonance import close_partner, modal_energy_shares
+from .resonance import another_mode_at_end, close_partner, modal_energy_shares
 from .results import Branch
 from .solvers import NewtonOptions, semismooth_newton
 from .sweep_guide import Guide, solve_in_stages
@@ -547,6 +544,9 @@ def continue_past_grazing(branch: Branch, problem: NonlinearModeProblem, model: 
     lm = _spectrum(model, problem, strategy or PeriodDriven())
     why = captured_past_grazing(branch, problem, model, strategy or PeriodDriven(), energy_max, spectrum=lm)
     if why is None:
+        if ends_in := another_mode_at_end(branch, problem.mode, lm):
+            branch.meta["ends_in"] = ends_in
+            log.warning("nonlinear_mode: %s", ends_in)
         return branch
     if strategy is None:  # kept as asked, but said: it does not predict the forced resonance
         branch.meta["energy_continuation"] = why

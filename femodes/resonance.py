@@ -23,7 +23,8 @@ from .solvers.checks import entry_name, entry_point
 
 log = logging.getLogger(__name__)
 
-__all__ = ["ResonancePeak", "compare_resonance", "modal_energy_shares", "point_shares", "TONGUE_MARGIN", "ON_BACKBONE", "CAPTURED",
+__all__ = ["ResonancePeak", "compare_resonance", "modal_energy_shares", "point_shares", "another_mode_at_end",
+           "TONGUE_MARGIN", "ON_BACKBONE", "CAPTURED",
            "CLOSE_PAIR", "close_partner"]
 
 
@@ -236,6 +237,22 @@ def _held_by(backbone: Branch, e: float, mode: int, cache: dict) -> int | None:
         return None
     k = int(np.argmax(shares))
     return k + 1 if k != mode - 1 and shares[k] >= HELD else None
+
+
+def another_mode_at_end(backbone: Branch, mode: int, lm) -> str | None:
+    """What to say when a mode other than ``mode`` holds at least :data:`HELD` of the energy of the
+    backbone's last orbit (linear modes ``lm``): it climbed an internal resonance (a curved 3-D
+    beam's mode 1: mode 3 with 100 % at 4:1 past 1.25 w1 at H = 5 and 10, mode 5 with 97 % at
+    14:1 and 1.047 w1 at H = 15), else None."""
+    w = float(backbone.omega_truncated[-1])
+    f = modal_energy_shares(backbone.harmonics, backbone.Q[-1], w, backbone.model.M, lm.omega, lm.shapes)
+    k = int(np.argmax(f)) + 1
+    if k == mode or f[k - 1] < HELD:
+        return None
+    return (f"mode {k} holds {f[k - 1]:.0%} of the energy of the last orbit (w_{k} / w = {lm.omega[k - 1] / w:.2f}): "
+            f"the backbone of mode {mode} climbs an internal resonance, which a forced response may or may not follow "
+            f"(compare_resonance says; past_grazing=fm.PeriodDriven(always=True) traces mode {mode}'s contact-phase "
+            "family)")
 
 
 def _omega_at(branch: Branch, e: float) -> float:

@@ -132,7 +132,7 @@ class AccuracyOptions:
     shooting_fold_search: bool = True
     #: Just above grazing the exact orbit comes within 1e-3 of the gap or less (the seed cases); the
     #: orbits without contact that shooting returned on the contact branch of a shallow arch
-    #: (benchmarks/bench_arch.py, H = 7) stayed 42-99 % of the gap clear of the stop.
+    #: (benchmarks/bench_arch.py, H = 7) stayed 13-100 % of the gap clear of the stop.
     shooting_clearance: float = 0.1
     #: Seed case 1: the lower fold is point 79, contact ends at point 81.
     grazing_points: int = 4

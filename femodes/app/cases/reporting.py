@@ -53,6 +53,8 @@ def summary_lines(case: Case, model, branch) -> list[str]:
     if branch.internal_resonances:
         ws = ", ".join(f"{t['omega'][0]:.5g}" for t in branch.internal_resonances)
         lines.append(f"internal-resonance tongues stepped over at w = {ws} (branch.internal_resonances)")
+    if branch.meta.get("ends_in"):
+        lines.append(f"at its end: {branch.meta['ends_in']}")
     lines.extend(stability_lines(branch))
     return lines
 

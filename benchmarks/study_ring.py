@@ -1,0 +1,89 @@
+"""A curved 3-D beam against a stop, built for checking femodes on a structure nobody tuned it for:
+a quarter ring (mean radius 0.1 m, 10 x 6 mm section, steel) meshed with gmsh in P1 tetrahedra
+(4 mm) and solved at ``order=2`` (6192 DOFs), clamped at one end, its free end face 0.2 mm under
+a stop along +z (43 contact nodes), Craig-Bampton with 10 modes (53 DOFs), 1 % modal damping and
+2 N along z at the tip for the forced response. For each H given: the backbone of mode 1 over
+0.5-20 E_g, its largest frequency, where its energy ends (``branch.meta["ends_in"]``), and the
+forced response's peak against it (``fm.compare_resonance``). Needs gmsh (``pip install -e
+".[meshes]"``). Measured 2026-12-01 (with other jobs on the 2 cores):
+
+    H = 5:  backbone 19 orbits, 5 s, up to 1.265 w1, ends in mode 3 (100 %, 4:1); forced 98 points,
+            24 s, peak 1.288 w1 at 11.1 E_g (+6.5 % from the backbone at that energy)
+    H = 10: backbone 51 orbits, 146 s, up to 1.251 w1, ends in mode 3 (100 %, 4:1); forced 166
+            points, 122 s, peak 1.267 w1 at 8.3 E_g (+3.8 %)
+    H = 15: backbone 14 orbits, 22 s, 1.046-1.048 w1 from 1.8 to 20 E_g, ends in mode 5 (97 %,
+            14:1); forced 489 points, 1334 s, 12 folds, peak 1.447 w1 at 33 E_g
+
+The results do not converge in H on this model; which family the structure shows is open.
+
+    python benchmarks/study_ring.py 5 10 [15]
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import femodes as fm
+
+
+def ring_mesh(path: Path) -> Path:
+    """The quarter ring's gmsh mesh: physical volume ``ring``, surfaces ``root``, ``tip``, ``top``."""
+    import gmsh
+    R, w, h = 0.1, 0.010, 0.006
+    gmsh.initialize()
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        occ = gmsh.model.occ
+        r = occ.addRectangle(R - w / 2, 0, 0, w, h)
+        occ.rotate([(2, r)], 0, 0, 0, 1, 0, 0, math.pi / 2)  # into the xz plane
+        occ.revolve([(2, r)], 0, 0, 0, 0, 0, 1, math.pi / 2, numElements=[24])  # 24 layers along the arc
+        occ.synchronize()
+        faces = [t for _, t in gmsh.model.getEntities(2)]
+
+        def at(axis, value):
+            return [t for t in faces if abs(occ.getCenterOfMass(2, t)[axis] - value) < 1e-9]
+
+        gmsh.model.addPhysicalGroup(3, [t for _, t in gmsh.model.getEntities(3)], name="ring")
+        gmsh.model.addPhysicalGroup(2, at(1, 0.0), name="root")
+        gmsh.model.addPhysicalGroup(2, at(0, 0.0), name="tip")
+        gmsh.model.addPhysicalGroup(2, at(2, h), name="top")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.004)
+        gmsh.model.mesh.generate(3)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+    return path
+
+
+def main(harmonics: list[int]) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        mesh = fm.load_mesh(ring_mesh(Path(tmp) / "ring.msh"))
+    model = fm.solid(mesh, fm.Material(E=210e9, rho=7800.0, nu=0.3), clamped="root", order=2)
+    contact = model.with_contact(fm.UnilateralContact(at="tip", gap=2e-4, direction=(0, 0, 1)))
+    rom = fm.craig_bampton(contact, 10)
+    forced = fm.craig_bampton(contact.with_damping(modal=0.01).with_forcing(
+        fm.HarmonicForce(at=("tip", "u_z"), amplitude=2.0)), 10)
+    w1, eg = float(fm.linear_modes(rom, 1).omega[0]), fm.grazing_energy(rom, 1)
+    print(f"{model.n_dofs} DOFs, {len(rom.contacts)} contacts, reduced to {rom.n_dofs}; w1 = {w1:.1f} rad/s")
+    for H in harmonics:
+        t = time.perf_counter()
+        bb = fm.nonlinear_mode(rom, 1, energy=(0.5 * eg, 20 * eg), harmonics=H)
+        tb = time.perf_counter() - t
+        t = time.perf_counter()
+        frc = fm.frequency_response(forced, (0.8 * w1, 1.5 * w1), H)
+        tf = time.perf_counter() - t
+        peak, = fm.compare_resonance(bb, frc)
+        print(f"H = {H}: backbone {len(bb)} orbits, {tb:.1f} s, up to {np.max(bb.omega) / w1:.4f} w1; "
+              f"ends in: {bb.meta.get('ends_in', 'its own mode')}")
+        print(f"   forced {len(frc)} points, {tf:.1f} s, {len(frc.folds)} folds, peak {peak.omega / w1:.4f} w1 at "
+              f"{peak.energy / eg:.2f} E_g: {peak.predicted}")
+
+
+if __name__ == "__main__":
+    main([int(a) for a in sys.argv[1:]] or [5, 10])
