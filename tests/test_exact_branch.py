@@ -431,7 +431,6 @@ def test_old_import_paths_warn_and_give_the_moved_names(old):
         getattr(module, "no_such_name")
 
 
-
 @pytest.mark.parametrize("amplitude, clear", [(0.5, True), (0.95, False), (1.2, False)])
 def test_an_orbit_clear_of_the_stop_is_no_counterpart(amplitude, clear):
     """The exact orbit found for a point with contact force counts as its counterpart only if it
