@@ -232,7 +232,11 @@ def _held_by(backbone: Branch, e: float, mode: int, cache: dict) -> int | None:
     """The mode other than ``mode`` holding at least :data:`HELD` of the energy of the backbone's
     orbit nearest (in ``log E``) the energy ``e``, or None."""
     j = int(np.argmin(np.abs(np.log(backbone.energy) - np.log(e))))
-    shares, _ = point_shares(backbone, j, cache)
+    return _holder(point_shares(backbone, j, cache)[0], mode)
+
+
+def _holder(shares: np.ndarray, mode: int) -> int | None:
+    """The mode other than ``mode`` holding at least :data:`HELD` of the ``shares``, or None."""
     if not shares.size:
         return None
     k = int(np.argmax(shares))
@@ -241,15 +245,14 @@ def _held_by(backbone: Branch, e: float, mode: int, cache: dict) -> int | None:
 
 def another_mode_at_end(backbone: Branch, mode: int, lm) -> str | None:
     """What to say when a mode other than ``mode`` holds at least :data:`HELD` of the energy of the
-    backbone's last orbit (linear modes ``lm``): it climbed an internal resonance (a curved 3-D
-    beam's mode 1: mode 3 with 100 % at 4:1 past 1.25 w1 at H = 5 and 10, mode 5 with 97 % at
-    14:1 and 1.047 w1 at H = 15), else None."""
-    w = float(backbone.omega_truncated[-1])
-    f = modal_energy_shares(backbone.harmonics, backbone.Q[-1], w, backbone.model.M, lm.omega, lm.shapes)
-    k = int(np.argmax(f)) + 1
-    if k == mode or f[k - 1] < HELD:
+    backbone's last orbit (linear modes ``lm`` of its model): it climbed an internal resonance (a
+    curved 3-D beam's mode 1: mode 3 with 100 % at 4:1 past 1.25 w1 at H = 5 and 10, mode 5 with
+    97 % at 14:1 and 1.047 w1 at H = 15), else None."""
+    shares, ratios = point_shares(backbone, len(backbone) - 1, {id(backbone.model): lm})
+    k = _holder(shares, mode)
+    if k is None:
         return None
-    return (f"mode {k} holds {f[k - 1]:.0%} of the energy of the last orbit (w_{k} / w = {lm.omega[k - 1] / w:.2f}): "
+    return (f"mode {k} holds {shares[k - 1]:.0%} of the energy of the last orbit (w_{k} / w = {ratios[k - 1]:.2f}): "
             f"the backbone of mode {mode} climbs an internal resonance, which a forced response may or may not follow "
             f"(compare_resonance says; past_grazing=fm.PeriodDriven(always=True) traces mode {mode}'s contact-phase "
             "family)")

@@ -19,6 +19,7 @@ from femodes import ExactBranch, exact_frequency_response
 from femodes.time.exact import LinearImpactFlow
 
 from .impact_reference import upper_fold
+from .test_examples import BENCHMARKS, load
 
 
 def _oscillator(c, F, g):
@@ -466,14 +467,8 @@ def test_arch_contact_points_get_no_orbit_without_contact_as_exact_answer():
     contact reaches within 10 % of the gap, and rtol is not met at the peak (the levels: 13-42 %,
     no convergence), where the time integration of the reduced and of the 802-DOF model falls off
     the branch within 5 periods."""
-    import importlib.util
-    from pathlib import Path
-    spec = importlib.util.spec_from_file_location(
-        "bench_arch", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_arch.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    forced = fm.craig_bampton(bench.arch().with_damping(modal=0.01).with_forcing(
-        fm.HarmonicForce(at=("crown", "u_y"), amplitude=-2000.0)), 10)
+    bench = load("bench_arch", BENCHMARKS)
+    forced = bench.forced_rom(bench.arch())
     w2 = fm.linear_modes(forced, 2).omega[1]
     frc = fm.frequency_response(forced, (0.9 * w2, 1.3 * w2), 7, rtol=1e-2)
     acc, d = frc.accuracy, forced.contacts[0].dof

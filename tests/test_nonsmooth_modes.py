@@ -20,6 +20,7 @@ import femodes as fm
 
 from .bar_stop_fd_check import fd_period_and_return_error
 from .bar_stop_reference import REFERENCE, first_nonsmooth_mode, period
+from .test_examples import BENCHMARKS, load
 
 GAP = 0.01
 W1 = math.pi / 2
@@ -307,12 +308,7 @@ def test_arch_backbone_riding_a_tongue_the_forced_peak_does_not_follow():
     which at H = 7 holds the H = 7 peak (0.06 % measured, 1 % allowed: the family's points bracket
     the peak's energy 0.5 % apart in frequency). The damped model's energy continuation turns back
     at 4.7 E_g to its start energy, "successful": it is not trusted (traced by frequency)."""
-    import importlib.util
-    from pathlib import Path
-    spec = importlib.util.spec_from_file_location(
-        "bench_arch", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_arch.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load("bench_arch", BENCHMARKS)
     model = bench.arch()  # the arch the benchmark times, built in code
     rom = fm.craig_bampton(model, 10)
     with pytest.raises(ValueError, match=r"linear mode 1 does not move any contact DOF.*modes \[2, 3, 5\] move it"):
@@ -327,8 +323,7 @@ def test_arch_backbone_riding_a_tongue_the_forced_peak_does_not_follow():
     # it ends in mode 5's 4:1 tongue, and says so (measured: 93 % of the last orbit's energy, w_5 / w = 3.99)
     assert re.match(r"mode 5 holds 9\d% of the energy of the last orbit \(w_5 / w = 3\.9", riding.meta["ends_in"])
     assert any("climbs an internal resonance" in r.getMessage() for r in records) and "ends_in" not in flat.meta
-    forced = fm.craig_bampton(model.with_damping(modal=0.01).with_forcing(
-        fm.HarmonicForce(at=("crown", "u_y"), amplitude=-2000.0)), 10)
+    forced = bench.forced_rom(model)
     frc = fm.frequency_response(forced, (0.9 * w2, 1.3 * w2), 7)
     with caplog_warning() as records:
         peak, = fm.compare_resonance(riding, frc)
