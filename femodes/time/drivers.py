@@ -42,6 +42,22 @@ _MAX_STORED = 2**28
 #: is a floor, not a recommendation.
 MIN_STEPS_PER_PERIOD = 20
 
+#: A rigid stop can only take energy out of the structure, so a positive net work of the contact
+#: impulses (:func:`femodes.time.stepper.contact_work`) is energy the steps put in. steady_state
+#: warns when the periods it integrated got more than this fraction of the orbit's largest energy
+#: per period, on average (the last periods alone can miss it: a motion that touches the stop now
+#: and then). Energy put in at a rate ``p`` a period against damping that takes out ``d`` raises the
+#: energy by about ``p / (d - p)``: 2.4 % at this tolerance for 1 % damping (``d`` = 12.6 %).
+#: Measured on a Craig-Bampton ring with 43 contact nodes (benchmarks/study_ring.py, 0.96 w1,
+#: restitution 0, theta = 1/2): +5 % a period at dt = T/400 (energy 8-22x the harmonic balance's),
+#: +14 to +25 % at T/1600 (2x), -0.02 % and +0.07 % (100 and 200 periods) at T/6400 (within 10 %);
+#: with theta = 0.55, -0.6 to -6 % at T/400 and -4 % at T/1600.
+PERIOD_WORK_TOL = 3e-3
+
+#: simulate warns when the whole run's contact impulses put in more than this fraction of its
+#: largest energy (a run has no period to normalise by).
+RUN_WORK_TOL = 1e-2
+
 
 # --------------------------------------------------------------------------------------------
 # Validation
@@ -273,10 +289,26 @@ def simulate(
     if failure:
         log.warning("simulate: %s", failure)
     message = failure or f"{n_steps} steps of {h:.6g} from t = {t0:g} to {t_end:g}, every local problem solved"
+    injected = _energy_injected(seg.contact_work, seg.energy, RUN_WORK_TOL, "over the run")
+    if injected:
+        log.warning("simulate: %s", injected)
+        message += "; " + injected
     log.info("simulate: %s", message)
     status = 1 if failure else 0
     return TimeHistory(t=seg.t, u=seg.u, v=seg.v, impulse=seg.impulse, energy=seg.energy, gap=seg.gap, dt=h,
-                       success=status == 0, status=status, message=message)
+                       success=status == 0, status=status, message=message, contact_work=seg.contact_work)
+
+
+def _energy_injected(work: float, energy: np.ndarray, tol: float, window: str) -> str:
+    """The sentence that says the contact impulses put energy in (positive ``work`` above ``tol``
+    times the largest of ``energy``, per ``window``), or ``""``."""
+    scale = float(np.max(energy)) if energy.size else 0.0
+    if not (scale > 0.0 and work > tol * scale):
+        return ""
+    return (f"the contact impulses put {work:.3g} J into the structure {window} ({100 * work / scale:.3g} % of its "
+            "largest energy), where a rigid stop can only take energy out: the steps excite motions of the contact "
+            "DOFs that they do not resolve, and the result overstates the energy. Use "
+            "TimeSteppingOptions(theta=0.55), which damps those motions, or a smaller dt (compare two)")
 
 
 def _warn_massless_trapezoidal(st) -> None:
@@ -371,11 +403,15 @@ def steady_state(
                                      f"{orbit.change:.3g} <= tol={tol:g}), every local problem solved")
     if failure:
         log.warning("steady_state: %s", failure)
+    injected = _energy_injected(orbit.work / j, E, PERIOD_WORK_TOL, f"per period (mean of {j})")
+    if injected:
+        log.warning("steady_state: %s", injected)
+        message += "; " + injected
     log.info("steady_state: w = %.6g, nu = %d, %d periods, change %.3g, converged %s", w, nu, j, orbit.change,
              converged)
     return SteadyState(t=tt, u=U, v=V, impulse=IMP, gap=G, energy=E, period=nu * T, nu=nu,
                        amplitude=np.max(np.abs(U), axis=0), converged=converged, n_periods=j, change=orbit.change,
-                       dt=st.h, success=status == 0, status=status, message=message)
+                       dt=st.h, success=status == 0, status=status, message=message, contact_work=orbit.work)
 
 
 class _PeriodMap:
@@ -390,11 +426,13 @@ class _PeriodMap:
         self.change = math.inf
         self.n_failed, self.failed_period = 0, 0
         self.first_failure: tuple[float, str] | None = None
+        self.work = 0.0  # net work of the contact impulses over all periods
 
     def advance(self) -> None:
         """Integrate one period (time restarts at 0 each period: the forcing is T-periodic)."""
         out = integrate(self.st, 0.0, self.N, self.q, self.v)
         self.n_periods += 1
+        self.work += out.contact_work
         if out.n_failed:
             if self.first_failure is None:
                 assert out.first_failure is not None  # the recorder keeps the first failure of n_failed > 0

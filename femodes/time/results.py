@@ -76,6 +76,11 @@ class TimeHistory:
         0 every step's local problem solved; 1 some were not (see the module docstring).
     message : str
         What happened: on failure, how many steps failed, the first time and the solver's reason.
+    contact_work : float
+        Net work of the unilateral contacts' impulses over the run (J): ``<= 0`` for a rigid stop,
+        which can only take energy out; a positive value is energy the steps put in
+        (:func:`femodes.simulate` warns above :data:`~femodes.time.drivers.RUN_WORK_TOL` of the
+        largest energy).
     """
 
     t: np.ndarray
@@ -88,6 +93,7 @@ class TimeHistory:
     success: bool = True
     status: int = 0
     message: str = ""
+    contact_work: float = 0.0
 
     @property
     def mean_contact_force(self) -> np.ndarray:
@@ -152,6 +158,11 @@ class SteadyState:
         ``n_periods_max`` (see the module docstring).
     message : str
         What happened, in words.
+    contact_work : float
+        Net work of the unilateral contacts' impulses over all ``n_periods`` periods integrated
+        (J), as in :attr:`TimeHistory.contact_work` (:func:`femodes.steady_state` warns when the
+        mean per period exceeds :data:`~femodes.time.drivers.PERIOD_WORK_TOL` of the orbit's
+        largest energy).
     """
 
     t: np.ndarray
@@ -170,6 +181,7 @@ class SteadyState:
     success: bool = True
     status: int = 0
     message: str = ""
+    contact_work: float = 0.0
 
     @property
     def nit(self) -> int:

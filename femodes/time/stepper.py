@@ -33,6 +33,7 @@ class Segment:
     gap: np.ndarray
     n_failed: int
     first_failure: tuple[float, str] | None  # (time, solver message)
+    contact_work: float = 0.0  # net work of the unilateral contacts' impulses (:func:`integrate`)
 
 
 class _Recorder:
@@ -52,6 +53,7 @@ class _Recorder:
         self.k = 1
         self.n_failed = 0
         self.first_failure: tuple[float, str] | None = None
+        self.work = 0.0  # net work of the unilateral contacts' impulses
 
     def failed(self, t: float, message: str) -> None:
         self.n_failed += 1
@@ -66,7 +68,11 @@ class _Recorder:
 
 
 def integrate(st: Stepper, t0: float, n_steps: int, q, v, store_every: int = 1) -> Segment:
-    """Run ``n_steps`` steps from ``(q, v)`` at ``t0``; store every ``store_every`` step (and the last)."""
+    """Run ``n_steps`` steps from ``(q, v)`` at ``t0``; store every ``store_every`` step (and the last).
+
+    ``Segment.contact_work`` sums the work of the unilateral contacts' impulses, ``-P_c`` times the
+    velocity of the contact DOF that moves its position on the step (:func:`contact_work`): a
+    rigid stop can only take energy out, so a positive sum is energy the steps put in."""
     rec = _Recorder(st, n_steps, store_every, q, v)
     tk = t0 + st.h * np.arange(n_steps + 1)
     fall = _forcing_samples(st, tk, n_steps) if st.fidx.size > 0 else None
@@ -117,6 +123,7 @@ class _DenseRun:
         self.uc_col = np.asarray(st.uc, dtype=int)  # impulse columns of the unilateral contacts
         self.acc = np.zeros(st.n_contacts)
         self.acc_used = False  # impulses accumulated since the last stored sample
+        self.th_uc = st.th[st.uc_dof]
 
     def run(self, q, v, n_steps: int):
         """Step ``n_steps`` times from ``(q, v)``; the final ``(q, v)``."""
@@ -173,6 +180,7 @@ class _DenseRun:
         if st.n_contacts:
             if st.uc:
                 self.acc[self.uc_col] += P
+                self.rec.work += contact_work(P, self.th_uc, x[self.ucv], xf[self.ucv])
             if st.pc:
                 self.acc += st.penalty_impulse(x[: st.n], xf[: st.n])
             self.acc_used = True
@@ -185,14 +193,18 @@ def _run_sparse(st: Stepper, rec: _Recorder, tk: np.ndarray, fall: np.ndarray | 
     acc = np.zeros(nc)
     Kq = st.K @ q
     f0 = f1 = None
+    uc, th_uc = st.uc_dof, st.th[st.uc_dof]
     for k in range(n_steps):
         if fall is not None:
             f0, f1 = fall[k], fall[k + 1]
+        v0 = v
         q, v, Kq, imp, failure = st.step(q, v, Kq, f0, f1)
         if failure is not None:
             rec.failed(tk[k], failure)
         if nc:
             acc += imp
+            if st.uc:
+                rec.work += contact_work(imp[st.uc], th_uc, v0[uc], v[uc])
         if store[k + 1]:
             rec.sample(q, v, acc)
             acc = np.zeros(nc)
@@ -205,4 +217,15 @@ def _segment(st: Stepper, rec: _Recorder, tk: np.ndarray) -> Segment:
     G = (np.column_stack([law.gap_function(U[:, d]) for law, d in zip(st.c_law, st.c_dof)]) if st.n_contacts
          else np.zeros((U.shape[0], 0)))
     return Segment(t=tk[rec.idx], u=U, v=V, impulse=rec.IMP, energy=st.energies(U, V), gap=G,
-                   n_failed=rec.n_failed, first_failure=rec.first_failure)
+                   n_failed=rec.n_failed, first_failure=rec.first_failure, contact_work=rec.work)
+
+
+def contact_work(P: np.ndarray, th: np.ndarray, v0: np.ndarray, v1: np.ndarray) -> float:
+    """Work of the impulses ``P >= 0`` of unilateral contacts on one step: each pushes its DOF
+    back (``-P``) while the step moves it by ``h (th v1 + (1 - th) v0)``, so the work is
+    ``-sum P (th v1 + (1 - th) v0)``. Exact for the step's discrete energy balance with ``th =
+    1/2`` (the trapezoidal rule conserves the rest); ``-P v0 (1 - th - th e) <= 0`` under Newton's
+    law with ``e <= 1`` and ``th = 1/2`` when the contact DOF approaches the stop (``v0 >= 0``),
+    positive when an impulse stops one that was moving away (the activation tests a gap predicted
+    from inside the stop)."""
+    return -float(P @ (th * v1 + (1.0 - th) * v0))
