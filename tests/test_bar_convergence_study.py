@@ -2,21 +2,15 @@
 mesh: the harmonic bias over H = 10-40 and the mesh rate at fixed frequencies up to 320 elements.
 Slow (about 2 min of CPU): run with ``-m slow``."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-STUDY = Path(__file__).resolve().parents[1] / "benchmarks" / "study_bar_convergence.py"
+from .test_examples import BENCHMARKS, load
 
 
 @pytest.fixture(scope="module")
 def study():
-    spec = importlib.util.spec_from_file_location("study_bar_convergence", STUDY)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("study_bar_convergence", BENCHMARKS)
 
 
 @pytest.mark.slow

@@ -13,9 +13,6 @@ ratio 1.5); the exact value lies inside the extrapolation bracket. Odd H uses th
 (H // 2 would not be a doubling).
 """
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 from scipy.special import ellipk
@@ -23,8 +20,8 @@ from scipy.special import ellipk
 import femodes as fm
 
 from .impact_reference import free_frequency, upper_fold
+from .test_examples import load
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 BACKBONE_OPTIONS = fm.ContinuationOptions(step=0.1, max_step=0.2, newton=fm.NewtonOptions(atol=1e-9, max_iter=20))
 A_FREE = 1.9
 
@@ -185,18 +182,11 @@ def test_fe_bar_mesh_error_is_separate_from_harmonic_error(bar10_h8):
 
 
 # -- the example ----------------------------------------------------------------------------------------
-def _load_example(name):
-    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 @pytest.mark.slow
 def test_accuracy_vs_harmonics_example(tmp_path):
     """The example's numbers (about 100 s of CPU): first order in 1/H for the impacts, safe and close
     estimates for even H, exact values inside the brackets, Duffing exponential, rtol met."""
-    ex = _load_example("accuracy_vs_harmonics")
+    ex = load("accuracy_vs_harmonics")
     for rows in (ex.forced, ex.free):
         true = np.array([rows[H]["true"] for H in (10, 20, 40)])
         assert np.all(1.6 < true[:-1] / true[1:]) and np.all(true[:-1] / true[1:] <= 2.0)  # first order, from below

@@ -7,13 +7,12 @@ use small meshes; the refinement and slenderness studies run examples/validation
 (marked slow). Measured numbers are quoted next to each tolerance.
 """
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 import femodes as fm
+
+from .test_examples import load
 
 # The whole module runs in the slow step (make test-slow, CI): the strip/bar and blade/beam
 # comparisons cost ~25 s of CPU, and the fast suite must stay well under 10 minutes on 2 cores.
@@ -195,11 +194,7 @@ def test_bending_backbone_of_a_slender_blade_against_the_beam():
 # -- 3. refinement and slenderness studies (the example) ---------------------------------------------
 @pytest.fixture(scope="module")
 def study():
-    path = Path(__file__).resolve().parents[1] / "examples" / "validation_solids.py"
-    spec = importlib.util.spec_from_file_location("validation_solids", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load("validation_solids")
 
 
 @pytest.mark.slow

@@ -3,9 +3,7 @@
 Measured numbers quoted in the comments come from the runs that set the tolerances.
 """
 
-import importlib.util
 import logging
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +13,7 @@ from femodes.time import SteadyState, TimeHistory, simulate, steady_state
 from femodes.time.impact import solve_lcp
 from femodes.time.stepper import LOCAL_NEWTON
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+from .test_examples import load
 T_IMPACT = 2 * np.pi / 1.5  # free impacting oscillator, gap 1, energy 2: w = pi / (pi - arccos(1/2))
 
 
@@ -324,9 +322,7 @@ def test_bad_input_forced():
 
 # --------------------------------------------------------------------------------- the example
 def test_time_vs_hbm_example(tmp_path):
-    spec = importlib.util.spec_from_file_location("time_vs_hbm", EXAMPLES / "time_vs_hbm.py")
-    ex = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(ex)
+    ex = load("time_vs_hbm")
     for w, r in ex.results.items():
         assert r["ts"].converged
         err = r["error"]
@@ -346,8 +342,6 @@ def test_time_vs_hbm_example(tmp_path):
 # ------------------------------------------------------------- dt-order with impacts (the example)
 @pytest.fixture(scope="module")
 def convergence():
-    from .test_examples import load
-
     return load("time_step_convergence")
 
 
