@@ -202,13 +202,18 @@ def test_trapezoidal_rule_with_a_massless_contact_warns(caplog):
     assert "massless" not in caplog.text
 
 
+@pytest.mark.parametrize("loop", ["dense", "sparse"])
 @pytest.mark.parametrize("restitution", [0.0, 0.5, 1.0])
-def test_contact_work_is_the_energy_the_impacts_take(restitution):
+def test_contact_work_is_the_energy_the_impacts_take(restitution, loop, monkeypatch):
     """theta = 1/2 conserves the energy of a free undamped flight exactly, so an oscillator bouncing
     on its stop loses exactly the contact impulses' work (``TimeHistory.contact_work``), to
-    round-off: about eps times the energy per step (1000 steps here; tolerance 1e-10). Newton's
-    law takes ``(1 - e^2)`` of the kinetic energy at each impact in the exact flow; the scheme's
-    impacts take ``O(dt)`` of it more or less, so its sign only is asserted for ``e < 1``."""
+    round-off: about eps times the energy per step (1000 steps here; tolerance 1e-10), in both
+    stepping loops (the sparse one of large models forced here). Newton's law takes ``(1 - e^2)``
+    of the kinetic energy at each impact in the exact flow; the scheme's impacts take ``O(dt)`` of
+    it more or less (measured: 0.75 and 0.70 of the energy for e = 0 and 0.5), so only a bound is
+    asserted for ``e < 1``."""
+    if loop == "sparse":
+        monkeypatch.setattr("femodes.time.moreau_step.DENSE_LIMIT", 0)
     h = simulate(impacting(), 10.0, 0.01, v0=[2.0], restitution=restitution)
     lost = h.energy[-1] - h.energy[0]
     assert abs(lost - h.contact_work) <= 1e-10 * h.energy[0]
@@ -238,7 +243,8 @@ def test_steady_state_warns_when_the_contacts_put_energy_in(caplog):
     (+11 % over 100; the mean energy 25-33 % above that of 3200 steps a period), 20x the tolerance
     PERIOD_WORK_TOL = 0.3 %; steady_state and simulate say so and name the fix. theta = 0.55 at
     the same step takes energy out (-4.4 % a period) and says nothing. (The motion is not
-    periodic: only these margins are asserted, not its energy.)"""
+    periodic: only these margins are asserted, not its energy.) The message of a run that does not
+    settle at theta = 1/2 says that the scheme leaves fast modes undamped."""
     rom, w = plate_against_a_stop()
     T = 2 * np.pi / w
     runs = {}
@@ -253,6 +259,9 @@ def test_steady_state_warns_when_the_contacts_put_energy_in(caplog):
     assert "contact impulses put" in runs[0.5, "log"] and "TimeSteppingOptions(theta=0.55)" in runs[0.5, "log"]
     assert "contact impulses put" in bad.message
     assert good.contact_work < 0 and "contact impulses put" not in runs[0.55, "log"]
+    # neither settles in 30 periods; theta = 1/2 says why that can be and what damps it
+    assert not bad.converged and "TimeSteppingOptions(theta=0.55) damps them" in bad.message
+    assert not good.converged and "damps them" not in good.message
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger="femodes.time"):
         h = simulate(rom, 30 * T, T / 400, omega=w, restitution=0.0, options=fm.TimeSteppingOptions(store_every=20))
