@@ -413,7 +413,7 @@ def steady_state(
                                      f"{orbit.change:.3g} <= tol={tol:g}), every local problem solved")
     if failure:
         log.warning("steady_state: %s", failure)
-    injected = _energy_injected(orbit.work / j, E, PERIOD_WORK_TOL, f"per period (mean of {j})")
+    injected = _energy_injected(orbit.work / j, E, PERIOD_WORK_TOL, f"a period on average over {j} periods")
     if injected:
         log.warning("steady_state: %s", injected)
         message += "; " + injected
