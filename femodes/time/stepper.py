@@ -223,9 +223,9 @@ def _segment(st: Stepper, rec: _Recorder, tk: np.ndarray) -> Segment:
 def contact_work(P: np.ndarray, th: np.ndarray, v0: np.ndarray, v1: np.ndarray) -> float:
     """Work of the impulses ``P >= 0`` of unilateral contacts on one step: each pushes its DOF
     back (``-P``) while the step moves it by ``h (th v1 + (1 - th) v0)``, so the work is
-    ``-sum P (th v1 + (1 - th) v0)``. Exact for the step's discrete energy balance with ``th =
-    1/2`` (the trapezoidal rule conserves the rest); ``-P v0 (1 - th - th e) <= 0`` under Newton's
-    law with ``e <= 1`` and ``th = 1/2`` when the contact DOF approaches the stop (``v0 >= 0``),
+    ``-sum P (th v1 + (1 - th) v0)``: with ``th = 1/2`` the impulses' exact term of the step's
+    discrete energy balance (the other terms: the work of the forcing and of the damping);
+    ``-P v0 (1 - th - th e) <= 0`` under Newton's law with ``e <= 1`` and ``th = 1/2`` when the contact DOF approaches the stop (``v0 >= 0``),
     positive when an impulse stops one that was moving away (the activation tests a gap predicted
     from inside the stop)."""
     return -float(P @ (th * v1 + (1.0 - th) * v0))
