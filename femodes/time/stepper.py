@@ -123,7 +123,6 @@ class _DenseRun:
         self.uc_col = np.asarray(st.uc, dtype=int)  # impulse columns of the unilateral contacts
         self.acc = np.zeros(st.n_contacts)
         self.acc_used = False  # impulses accumulated since the last stored sample
-        self.th_uc = st.th[st.uc_dof]
 
     def run(self, q, v, n_steps: int):
         """Step ``n_steps`` times from ``(q, v)``; the final ``(q, v)``."""
@@ -180,7 +179,7 @@ class _DenseRun:
         if st.n_contacts:
             if st.uc:
                 self.acc[self.uc_col] += P
-                self.rec.work += contact_work(P, self.th_uc, x[self.ucv], xf[self.ucv])
+                self.rec.work += contact_work(P, st.th_uc, x[self.ucv], xf[self.ucv])
             if st.pc:
                 self.acc += st.penalty_impulse(x[: st.n], xf[: st.n])
             self.acc_used = True
@@ -193,7 +192,7 @@ def _run_sparse(st: Stepper, rec: _Recorder, tk: np.ndarray, fall: np.ndarray | 
     acc = np.zeros(nc)
     Kq = st.K @ q
     f0 = f1 = None
-    uc, th_uc = st.uc_dof, st.th[st.uc_dof]
+    uc = st.uc_dof
     for k in range(n_steps):
         if fall is not None:
             f0, f1 = fall[k], fall[k + 1]
@@ -204,7 +203,8 @@ def _run_sparse(st: Stepper, rec: _Recorder, tk: np.ndarray, fall: np.ndarray | 
         if nc:
             acc += imp
             if st.uc:
-                rec.work += contact_work(imp[st.uc], th_uc, v0[uc], v[uc])
+                # st.step keeps this step's impulses of the unilateral contacts in P_prev
+                rec.work += contact_work(st.P_prev, st.th_uc, v0[uc], v[uc])
         if store[k + 1]:
             rec.sample(q, v, acc)
             acc = np.zeros(nc)
@@ -225,7 +225,7 @@ def contact_work(P: np.ndarray, th: np.ndarray, v0: np.ndarray, v1: np.ndarray) 
     back (``-P``) while the step moves it by ``h (th v1 + (1 - th) v0)``, so the work is
     ``-sum P (th v1 + (1 - th) v0)``: with ``th = 1/2`` the impulses' exact term of the step's
     discrete energy balance (the other terms: the work of the forcing and of the damping);
-    ``-P v0 (1 - th - th e) <= 0`` under Newton's law with ``e <= 1`` and ``th = 1/2`` when the contact DOF approaches the stop (``v0 >= 0``),
-    positive when an impulse stops one that was moving away (the activation tests a gap predicted
-    from inside the stop)."""
+    ``-P v0 (1 - th - th e) <= 0`` under Newton's law with ``e <= 1`` and ``th = 1/2`` when the
+    contact DOF approaches the stop (``v0 >= 0``), positive when an impulse stops one that was
+    moving away (the activation tests a gap predicted from inside the stop)."""
     return -float(P @ (th * v1 + (1.0 - th) * v0))
