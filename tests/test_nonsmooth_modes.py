@@ -195,8 +195,12 @@ def test_guided_sweep_reaches_the_end_of_the_span():
     traced first with that many (issue 35). 40 elements with H = 20 used to stop at 18.9 E_g: past a
     cluster of tongues the secant through the last orbits led onto a neighbouring family with about
     twice the energy, whose orbits the lower envelope then removed. Now it reaches 25 E_g on the
-    contact-phase family, mode 1 holding most of the energy, every orbit past 1.5 E_g within 1 % of
-    the continuum (0.6 % measured; benchmarks/README_bar_convergence.md has the grid)."""
+    contact-phase family, mode 1 holding most of the energy. Its orbits past 1.5 E_g follow the
+    continuum: their median within 0.5 % (the harmonic bias is 0.3-0.5 % at H = 10-40), each within
+    2 % (an orbit beside a tongue of internal resonance is pulled by it: every orbit of the grid of
+    benchmarks/README_bar_convergence.md lies within 1.5 %; where the sweep's steps fall next to
+    the tongues depends on round-off, and this run's largest was 0.6 % on one machine, 1.45 % on
+    another)."""
     from femodes.hbm import NonlinearModeProblem
     from femodes.nonsmooth_modes import modal_energy_fractions
 
@@ -208,7 +212,8 @@ def test_guided_sweep_reaches_the_end_of_the_span():
     past = br.energy >= 1.5 * eg
     assert past.sum() >= 15
     err = br.omega[past] / first_nonsmooth_mode(br.energy[past] / eg)[0] - 1
-    assert np.max(np.abs(err)) < 1e-2, err
+    assert np.median(np.abs(err)) < 5e-3, err
+    assert np.max(np.abs(err)) < 2e-2, err
     # the family's energy rises with its frequency: no neighbouring family on the branch
     assert np.all(np.diff(br.energy[past]) > 0)
     problem = NonlinearModeProblem(model, fm.Harmonics(n_harmonics=20), 1, reference_energy=eg)
