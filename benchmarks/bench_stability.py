@@ -283,6 +283,7 @@ def child_compare(ne: int, H: int, contact: str, repeat: int) -> dict:
 
     from femodes.hbm import HBMSystem
     from femodes.hbm import hill as hm
+    from femodes.hbm.hill_dense import dense_spectrum
 
     rec: dict = {"kind": "compare", "N": ne, "H": H, "contact": contact}
     model, b, i = branch_and_point(ne, H, contact, rec)
@@ -341,7 +342,7 @@ def child_compare(ne: int, H: int, contact: str, repeat: int) -> dict:
         m = rec[key]["max_abs_mu"]
         rec[key]["rel_diff_max_abs_mu"] = (m - ref) / ref if m is not None else None
 
-    # pieces of the dense path (as in hill._dense) when it is femodes' path, and the dense spectrum
+    # pieces of the dense path (as in hill_dense.dense_pencil) when it is femodes' path, and the dense spectrum
     # near the leading exponent with the eigenvectors' harmonic centroids (the exponent families)
     N = J0.shape[0]
     if system.size <= saved:
@@ -367,7 +368,7 @@ def child_compare(ne: int, H: int, contact: str, repeat: int) -> dict:
         finite = np.abs(theta) > 1e-10 * max(1.0, float(np.max(np.abs(theta))))
         s_all, V_all = sigma + 1.0 / theta[finite], Zv[:N, finite]
     else:
-        s_all, V_all, _ = hm._dense(J0, J1, J2, w)
+        s_all, V_all, _ = dense_spectrum(J0, J1, J2, w)
     cen_all = hm._centroids(system, V_all)
     lead_re = rec["dense"]["lead_exponent"][0]
     near = np.flatnonzero(np.abs(s_all.real - lead_re) < 0.25 * abs(lead_re) + 1e-12)

@@ -26,7 +26,7 @@ nearest the boundary only, ``HillResult.complete`` False). With more than :data:
 unknowns with mass or damping, the exponents are those of the model reduced to its
 free-interface modes up to a cut-off ``omega_c = ALPHA (H + 1/2) w / nu`` plus the residual
 flexibility of the DOFs the laws act on
-(:mod:`femodes.hbm.hill_reduction`), whose unknowns are eliminated exactly (:func:`_dense`);
+(:mod:`femodes.hbm.hill_reduction`), whose unknowns are eliminated exactly (:mod:`femodes.hbm.hill_dense`);
 ``omega_c`` is raised until the estimated truncation error is below :data:`REDUCTION_TOL`
 (``HillResult.reduction_error``) or the reduction would hold half of the model's DOFs. Accuracy,
 cost and measurements: :doc:`/guide/stability` (Hill's method).
@@ -40,11 +40,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 
 from .harmonics import Harmonics
-from .hill_elimination import algebraic_unknowns, dense_array, eliminate
+from .hill_dense import SMALL, Pencil, dense_pencil, dense_spectrum, pencil_on_dynamic
+from .hill_elimination import algebraic_unknowns
 from .hill_reduction import Estimate, FreeInterfaceReduction, decides_verdict
 from .hill_sparse import ShiftInvert, sparse_exponents
 from .hill_rest import XI_TOL, at_rest
@@ -290,7 +290,7 @@ def _solve(system: HBMSystem | _Truncated, J0, J1, J2, omega: float, n_shifts: i
            k_per_shift: int | None, dense: bool | None = None) -> HillResult:
     """The selected exponents of the pencil ``J0 + s J1 + s^2 J2`` on the unknowns of ``system``;
     ``dense`` forces the path (default: dense up to :data:`DENSE_LIMIT` unknowns with mass or
-    damping)."""
+    damping; the algebraic unknowns eliminated first, :mod:`femodes.hbm.hill_dense`)."""
     base = omega / system.h.subharmonic          # spacing of the copies, w / nu
     T = system.h.grid.period(omega)
     N = J0.shape[0]
@@ -298,33 +298,36 @@ def _solve(system: HBMSystem | _Truncated, J0, J1, J2, omega: float, n_shifts: i
     algebraic = algebraic_unknowns(J1, J2)
     if dense is None:
         dense = N - np.count_nonzero(algebraic) <= DENSE_LIMIT
-    fill = _whole
-    if dense:
-        s, V, fill = _dense(J0, J1, J2, base, algebraic)
-        if not _weighs_mass(system):  # no DOF with mass: the centroids weigh all
-            V, fill = fill(V), _whole
-        complete = True
-    else:
+    if not dense:
         k = k_per_shift or max(6, 2 * (system.nonlinear_dofs.size + system.n_uc))
         s, V = sparse_exponents(J0, J1, J2, base, n_shifts, k, lambda V: _centroids(system, V))
-        complete = False
-    # the centroids weigh DOFs with mass only: not the algebraic unknowns (zero in V until fill)
-    idx, cen = _select(system, s, V, base, n_keep)
-    if not complete:  # central members only (_sparse followed the copies to them)
-        idx = idx[np.abs(cen[idx]) <= CENTRAL]
+        idx, cen = _select(system, s, V, base, n_keep)
+        idx = idx[np.abs(cen[idx]) <= CENTRAL]  # central members only (_sparse followed the copies to them)
+        return _result(s, V, idx, cen, base, T, False)
+    p = pencil_on_dynamic(J0, J1, J2, algebraic)
+    s, Vd = dense_pencil(p.A0, p.A1, p.A2, base)
+    # the centroids weigh DOFs with mass only: not the algebraic unknowns (zero until filled)
+    idx, cen = _select(system, s, _whole_vectors(system, p, Vd), base, n_keep)
+    if idx.size < n_keep:
+        log.warning("hill_exponents: found %d of %d exponents (singular Hill pencil?)", idx.size, n_keep)
+    return _result(s, p.embed(Vd), idx, cen, base, T, idx.size == n_keep, p.fill)
+
+
+def _result(s, V, idx, cen, base: float, T: float, complete: bool, fill=None) -> HillResult:
+    """The selected exponents ``s[idx]``, folded, with their multipliers, largest first."""
     s_sel = _fold(s[idx], base)
     mu = np.exp(s_sel * T)
     order = np.argsort(-np.abs(mu), kind="stable")
-    if complete and idx.size < n_keep:
-        log.warning("hill_exponents: found %d of %d exponents (singular Hill pencil?)", idx.size, n_keep)
-        complete = False
+    W = V[:, idx][:, order]
     return HillResult(exponents=s_sel[order], multipliers=mu[order], centroids=cen[idx][order],
-                      vectors=fill(V[:, idx][:, order]), complete=complete, period=T, central=s[idx][order])
+                      vectors=W if fill is None else fill(W), complete=complete, period=T, central=s[idx][order])
 
 
-def _whole(V: np.ndarray) -> np.ndarray:
-    """Eigenvectors already whole (no algebraic unknowns left to fill in)."""
-    return V
+def _whole_vectors(system: HBMSystem | _Truncated, p: Pencil, Vd: np.ndarray) -> np.ndarray:
+    """Eigenvectors on the pencil's unknowns in the whole layout, for the centroids: eliminated rows
+    zero, or filled in when no DOF has mass (the centroids then weigh all unknowns)."""
+    V = p.embed(Vd)
+    return V if _weighs_mass(system) else p.fill(V)
 
 
 #: Hill's truncation check (:func:`coarse_multipliers`): the perturbation's harmonics cut to this
@@ -382,92 +385,6 @@ def _n_dynamic_unknowns(system: HBMSystem) -> int:
     term = system.stiffness.term
     dyn = np.asarray(abs(term("IM")).sum(axis=1)).ravel() + np.asarray(abs(term("IC")).sum(axis=1)).ravel()
     return int(np.count_nonzero(dyn))
-
-
-def _dense(J0, J1, J2, base, algebraic=None, vectors=True):
-    """All finite eigenvalues of Hill's pencil, densely: ``(s, V, fill)``.
-
-    The algebraic unknowns (:func:`~.hill_elimination.algebraic_unknowns`) are eliminated first, exactly: their rows read
-    ``J0_aa v_a + J0_ad v_d = 0`` at every ``s``, so the pencil on the others is
-    ``S0 + s J1_dd + s^2 J2_dd`` with ``S0 = J0_dd - J0_da J0_aa^-1 J0_ad``, and
-    ``v_a = -J0_aa^-1 J0_ad v_d``. (When ``J0_aa`` is singular, e.g. a contact closed over the
-    whole period, the whole pencil is solved instead.) ``V``: the eigenvectors, algebraic rows
-    zero; ``fill(V[:, idx])`` completes the columns selected (all ``2N`` took a tenth of the user
-    blade's stability run at H = 10, where 20 are kept). None without ``vectors``."""
-    if algebraic is not None and np.any(algebraic):
-        a, d = np.flatnonzero(algebraic), np.flatnonzero(~algebraic)
-        if J0.shape[0] <= SMALL:  # dense slicing: scipy.sparse's per-call overhead dominates there
-            J0, J1, J2 = (dense_array(A) for A in (J0, J1, J2))
-
-            def block(A, r, c):
-                return A[np.ix_(r, c)]
-        else:
-            J0, J1, J2 = (A.tocsr() for A in (J0, J1, J2))
-
-            def block(A, r, c):
-                return A[r][:, c]
-        X = eliminate(block(J0, a, a), block(J0, a, d)) if d.size else None
-        if X is not None:
-            S0 = dense_array(block(J0, d, d)) - block(J0, d, a) @ X
-            s, Vd = _dense_pencil(S0, dense_array(block(J1, d, d)), dense_array(block(J2, d, d)), base, vectors)
-            if not vectors:
-                return s, None, None
-            V = np.zeros((J0.shape[0], Vd.shape[1]), dtype=complex)
-            V[d] = Vd
-
-            def fill(W: np.ndarray) -> np.ndarray:
-                W = W.copy()
-                W[a] = -X @ W[d]
-                return W
-            return s, V, fill
-    s, V = _dense_pencil(dense_array(J0), dense_array(J1), dense_array(J2), base, vectors)
-    return s, V, (_whole if vectors else None)
-
-
-#: Hill problems of at most this many unknowns are eliminated with dense arrays (:func:`_dense`):
-#: scipy.sparse's per-call overhead dominates below it (the 11-DOF blade of blade_casing.py, 225
-#: unknowns); above it the algebraic block is sliced sparse (a 27-contact blade: 594 of 660, 3 %
-#: nonzeros, which a dense slice and its conversion back to sparse cost 2x the factorisation).
-SMALL = 300
-
-
-def _dense_pencil(A0, A1, A2, base, vectors=True):
-    """All finite eigenvalues of the pencil ``[[0, I], [-A0, -A1]] - s [[I, 0], [0, A2]]`` (dense
-    arrays), by a shift-and-invert of the whole spectrum (standard dense eigenproblem instead of
-    QZ; the infinite eigenvalues of algebraic rows map to 0 and are dropped)."""
-    N = A0.shape[0]
-    sigma = 0.37 * base  # a real shift away from the spectrum near Re s = 0 (any non-eigenvalue works)
-    Js = A0 + sigma * A1 + sigma * sigma * A2
-    try:
-        lu = sla.lu_factor(Js, check_finite=False)
-    except (sla.LinAlgError, ValueError):
-        sigma = 0.53 * base
-        lu = sla.lu_factor(A0 + sigma * A1 + sigma * sigma * A2, check_finite=False)
-    # OP = (A - sigma B)^{-1} B on z = [v; w]:  (J(sigma)) z1 = -J2 y2 - (J1 + sigma J2) y1, z2 = y1 + sigma z1
-    rhs1 = -(A1 + sigma * A2)
-    rhs2 = -A2
-    Z1 = sla.lu_solve(lu, np.hstack([rhs1, rhs2]), check_finite=False)
-    OP = np.empty((2 * N, 2 * N))
-    OP[:N] = Z1
-    OP[N:] = sigma * Z1
-    OP[N:, :N] += np.eye(N)
-    if vectors:
-        theta, Zv = sla.eig(OP, check_finite=False)
-    else:
-        theta, Zv = sla.eigvals(OP, check_finite=False), None
-    tol = 1e-10 * max(1.0, float(np.max(np.abs(theta))) if theta.size else 1.0)
-    finite = np.abs(theta) > tol
-    s = sigma + 1.0 / theta[finite]
-    # round-off: theta carries an absolute error of about (2N) eps |OP|, which 1/theta magnifies
-    # by |s - sigma|^2; a real part below that bound is not resolved (the stiff constraint modes
-    # that the elimination of a contact closed over most of the period leaves, |s| ~ 1e9 on the
-    # blade of examples/blade_casing.py, came out with Re s = +-1e5..1e6): it is set to 0
-    bound = 2 * N * np.finfo(float).eps * float(np.abs(OP).sum(axis=0).max()) * np.abs(s - sigma) ** 2
-    unresolved = np.abs(s.real) <= bound
-    if np.any(unresolved):
-        log.debug("hill_exponents: %d exponents with real parts below round-off set to 0", np.count_nonzero(unresolved))
-        s = np.where(unresolved, 1j * s.imag, s)
-    return s, (Zv[:N, finite] if vectors else None)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -569,7 +486,7 @@ def _error_near(red: FreeInterfaceReduction, m_coarse: int, fine: HillResult, x,
     J0, J1, J2 = hill_matrices(rs, red.state(x, rs), omega, xi, dense=rs.size <= SMALL)
     algebraic = algebraic_unknowns(J1, J2)
     if J0.shape[0] - np.count_nonzero(algebraic) <= DENSE_LIMIT:
-        s_all = _dense(J0, J1, J2, omega / rs.h.subharmonic, algebraic, vectors=False)[0]
+        s_all = dense_spectrum(J0, J1, J2, omega / rs.h.subharmonic, algebraic, vectors=False)[0]
 
         def near(s):
             return s_all

@@ -56,10 +56,10 @@ class Pencil:
 
     def fill(self, W: np.ndarray) -> np.ndarray:
         """Eigenvectors in the whole layout with their eliminated rows completed."""
-        if self.d is None:
+        if self.d is None or self.X is None:
             return W
         W = W.copy()
-        W[self.a] = -self.X @ W[self.d]
+        W[self.a] = -(self.X @ W[self.d])
         return W
 
 

@@ -2,7 +2,7 @@
 
 The contact forces, and the kept DOFs of a free-interface reduction (massless there), have no
 row or column in ``J1`` and ``J2``: their equations ``J0_aa v_a + J0_ad v_d = 0`` hold at every
-exponent ``s``, so :func:`femodes.hbm.hill._dense` eliminates them through ``X = J0_aa^-1 J0_ad``
+exponent ``s``, so :func:`femodes.hbm.hill_dense.pencil_on_dynamic` eliminates them through ``X = J0_aa^-1 J0_ad``
 (:func:`eliminate`) before the dense eigen-solve.
 """
 
