@@ -162,6 +162,7 @@ def craig_bampton(model: StructuralModel, n_modes: int = 10, *, keep: Sequence |
     """
     if not isinstance(model, StructuralModel):
         raise TypeError(f"craig_bampton: model must be a StructuralModel, got {type(model).__name__}")
+    check_int("n_modes", n_modes, 0)  # its own error before the kept DOFs' (-1 read "no DOF to keep")
     kept = kept_dofs(model, keep)
     n = model.n_dofs
     interior = np.setdiff1d(np.arange(n), kept)

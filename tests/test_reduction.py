@@ -168,6 +168,8 @@ def test_craig_bampton_bad_input():
         fm.craig_bampton(model, 2)
     with pytest.raises(ValueError, match="n_modes"):
         fm.craig_bampton(model, -1, keep=["tip"])
+    with pytest.raises(ValueError, match="n_modes must be an integer >= 0, got -1"):
+        fm.craig_bampton(model, -1)  # its own error, not "no DOF to keep"
     with pytest.raises(ValueError, match="n_modes"):
         fm.craig_bampton(model, 100, keep=["tip"])
     with pytest.raises(ValueError, match="constrained"):
