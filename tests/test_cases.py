@@ -233,6 +233,17 @@ def test_bad_stability_value(tmp_path):
         assert str(ei.value).endswith(f"got {quoted}")
 
 
+def test_bad_branch_path(tmp_path):
+    """[outputs] branch names a file of the output folder: a path would be written elsewhere, while
+    the run reports the outputs in that folder ("../x.npz" went to the folder's parent)."""
+    for bad in ("../escape.npz", "sub/branch.npz", "/tmp/branch.npz", "..\\branch.npz"):
+        t = _frc(**{'branch = "response.npz"': f"branch = {bad!r}"})
+        with pytest.raises(cases.CaseError) as ei:
+            cases.parse_case(t, "x.toml")
+        assert ei.value.line == _line(t, "branch =") and "written in the output folder (choose it with --out)" in str(ei.value)
+    cases.parse_case(_frc(), "x.toml")
+
+
 def test_bad_location(tmp_path):
     t = _nnm(**{'at = "tip"': 'at = "tipp"'})
     err = _bad(tmp_path, "tipp.toml", t)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import re
 import tomllib
-from pathlib import Path
+from pathlib import Path, PurePosixPath, PureWindowsPath
 
 from .schema import (ANALYSES, ARRAY_TABLES, LINE_MESH_KEYS, MODEL_KINDS, SCHEMA, SOLID_DIVISIONS, SOLID_MESH_KEYS,
                      TYPE_TEXT, Case, CaseError, all_finite, check_type, fmt_value, key_line, suggest)
@@ -285,8 +285,13 @@ def _check_analysis_settings(case: Case, an: dict, typ: str) -> None:
 
 def _check_outputs(case: Case) -> None:
     outs = case.data.get("outputs", {})
-    if isinstance(outs.get("branch"), str) and not outs["branch"].strip():
+    name = outs.get("branch")
+    if isinstance(name, str) and not name.strip():
         raise case.error("outputs", "branch", "branch must be a file name like \"branch.npz\" (or false), got ''")
+    if isinstance(name, str) and (PurePosixPath(name).name != name or PureWindowsPath(name).name != name):
+        # a path: written outside the output folder, where the run's report says the outputs are
+        raise case.error("outputs", "branch", f"branch must be a file name like \"branch.npz\", written in the "
+                         f"output folder (choose it with --out), got {name!r}")
 
 
 def _check_reduction(case: Case, kind: str) -> None:
