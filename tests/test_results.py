@@ -236,6 +236,15 @@ def test_branch_amplitude_is_max_over_fine_grid(which, request):
     for i in (0, len(br) // 2, len(br) - 1):
         a = br[i].amplitude(0)
         assert amp[i] - ev[i] <= a <= ref[i] + ev[i]
+    # a DOF the branch does not have is named, not numpy's "index 5 is out of bounds for axis 2"
+    n_dofs = br.Q.shape[2]
+    with pytest.raises(IndexError, match=f"dof={n_dofs} is out of range for a branch of {n_dofs} DOFs"):
+        br.amplitude(n_dofs)
+    with pytest.raises(TypeError, match="dof must be an integer DOF index"):
+        br.amplitude("tip")
+    with pytest.raises(IndexError, match="PeriodicSolution.amplitude: dof=-7 is out of range"):
+        br[0].amplitude(-7)
+    assert np.array_equal(br.amplitude(-n_dofs), amp)
 
 
 # ========================================================================= persistence

@@ -19,7 +19,7 @@ from .branch_annotations import answer, checked_accuracy, checked_stability, poi
 from .branch_record import FORMAT_VERSION, branch_arrays, branch_header
 from .contacts import ContactInfo, contact_differences, contact_quality
 from .error_estimate import ErrorEstimate
-from .solution import PeriodicSolution
+from .solution import PeriodicSolution, checked_dof
 
 __all__ = ["Branch", "FORMAT_VERSION", "fill_in_place"]
 
@@ -206,6 +206,7 @@ class Branch:
         With ``Q`` (a coefficient stack of shape ``(m, n_coef, n_dofs)`` on this branch's
         harmonics, e.g. ``branch.Q`` itself or its bifurcations'), that series' amplitude."""
         series = self.Q if Q is None else np.asarray(Q, dtype=float)
+        checked_dof(dof, series.shape[-1], "Branch.amplitude")
         n = max(512, 16 * self.harmonics.n_coef)
         E = self.harmonics.grid.synthesis(2 * np.pi * np.arange(n) / n)
         amp = np.max(np.abs(E @ series[:, :, dof].T), axis=0)

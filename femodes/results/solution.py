@@ -156,6 +156,7 @@ class PeriodicSolution:
         """``max_t |q_dof(t)|``: that of the exact orbit where the branch's error estimate found
         it (:attr:`amplitude_limit`, as :meth:`Branch.amplitude`), else of the series on a fine
         grid."""
+        checked_dof(dof, self.Q.shape[-1], "PeriodicSolution.amplitude")
         if self.amplitude_limit is not None:
             return float(self.amplitude_limit[dof])
         return float(np.max(np.abs(self.displacement(self._fine_t())[:, dof])))
@@ -165,3 +166,15 @@ class PeriodicSolution:
         if self.model is None:
             raise ValueError("full_displacement needs the model: this solution was loaded from a file; use Branch.attach(model)")
         return self.model.mesh_map.to_owner(self.displacement(t))
+
+
+def checked_dof(dof, n_dofs: int, where: str) -> int:
+    """``dof`` as an index into ``n_dofs`` DOFs (negative from the end); a TypeError or IndexError
+    that names ``where`` and the range otherwise."""
+    if isinstance(dof, (bool, np.bool_)) or not isinstance(dof, (int, np.integer)):
+        raise TypeError(f"{where}: dof must be an integer DOF index, got {dof!r} (a location name: "
+                        "model.dof(name) gives its index)")
+    if not -n_dofs <= dof < n_dofs:
+        raise IndexError(f"{where}: dof={dof} is out of range for a branch of {n_dofs} DOFs "
+                         f"(0 .. {n_dofs - 1}, or negative from the end)")
+    return int(dof)
