@@ -5,6 +5,8 @@ Measured numbers quoted in the comments come from the runs that set the toleranc
 
 import logging
 
+import math
+
 import numpy as np
 import pytest
 
@@ -79,6 +81,22 @@ def test_forced_linear_steady_state(w):
         assert ss.period == pytest.approx(2 * np.pi / w)
         errs.append(abs(ss.amplitude[0] / exact - 1))
     assert errs[1] < 1e-3 and 3.0 < errs[0] / errs[1] < 5.0  # O(dt^2): measured ratios 4.07, 3.89
+
+
+def test_a_decaying_transient_is_not_a_subharmonic_orbit():
+    """A linear oscillator forced at three times its natural frequency: its free transient turns by
+    about 2 pi / 3 a period, so the period-start states come back near each other every three
+    periods and the change over three periods met ``tol`` first: steady_state reported a period-3
+    orbit. A shorter order whose change is only a few ``tol`` is that transient (a genuine
+    period-3 orbit differs from one period to the next by its own size): it is period 1, as the
+    exact response says."""
+    model = oscillator(C=[[0.02]]).with_forcing(fm.HarmonicForce(at=0, amplitude=0.5))
+    w = 3.0
+    ss = steady_state(model, w, dt=2 * np.pi / w / 400, u0=[0.0], v0=[3.0])
+    assert ss.converged and ss.nu == 1
+    assert ss.change <= 1e-8 and f"relative change {ss.change:.3g} <= tol" in ss.message
+    # O(dt^2), and the peak sampled at 400 steps a period ((pi / 400)^2 / 2 = 3e-5): measured 7e-5
+    assert ss.amplitude[0] == pytest.approx(0.5 / math.hypot(1 - w**2, 0.02 * w), rel=3e-4)
 
 
 def test_steady_state_reports_non_convergence():

@@ -339,7 +339,9 @@ def steady_state(
     The step is ``h = T / N`` with ``T = 2 pi / omega`` and ``N = ceil(T / dt)``, so the discrete
     map over one forcing period ``x_j -> x_{j+1}`` (``x = (q, v)`` at ``t = j T``) is iterated until
     ``|x_j - x_{j-nu}| <= tol |x_j|`` (displacements and velocities measured separately) for the
-    smallest ``nu`` in 1..4. The last ``nu`` periods are returned.
+    smallest ``nu`` in 1..4, where every shorter order changes by more than ``sqrt(tol)`` (a
+    decaying transient is not a sub-harmonic orbit: ``_PeriodMap.periodic_order``). The last
+    ``nu`` periods are returned.
 
     Parameters
     ----------
@@ -467,8 +469,18 @@ class _PeriodMap:
 
     def periodic_order(self, tol: float) -> int | None:
         """Smallest ``nu`` in 1..4 with ``|x_j - x_{j-nu}| <= tol |x_j|`` (for ``nu > 1`` also one
-        period earlier: a genuine period-``nu`` orbit), else ``None``; updates :attr:`change`."""
+        period earlier, and every shorter ``m`` with a change above ``sqrt(tol)``: a genuine
+        period-``nu`` orbit), else ``None``; updates :attr:`change`: the change over ``nu`` periods
+        when one is found (over one period, that of a period-2 orbit read 0.07 "<= tol = 1e-8"),
+        else over one period.
+
+        A decaying transient that turns by about ``2 pi / m`` a period comes back near its start
+        every ``m`` periods: its change over ``m`` periods falls below ``tol`` first (a linear
+        oscillator forced at three times its natural frequency was reported as a period-3 orbit),
+        while its change over one period is then a few ``tol``; a genuine period-``m`` orbit's is
+        of the order of its amplitude."""
         starts = self.starts
+        shorter: list[float] = []
         for m in range(1, 5):
             if len(starts) > m + (1 if m > 1 else 0):
                 c = self._rel(starts[-1], starts[-1 - m])
@@ -476,9 +488,12 @@ class _PeriodMap:
                     self.change = c
                 ok = c <= tol
                 if ok and m > 1:
-                    ok = self._rel(starts[-2], starts[-2 - m]) <= tol
+                    c = max(c, self._rel(starts[-2], starts[-2 - m]))
+                    ok = c <= tol and min(shorter) > math.sqrt(tol)
                 if ok:
+                    self.change = c
                     return m
+                shorter.append(c)
         return None
 
     def iterate(self, n_periods_max: int, periods_per_check: int, tol: float) -> tuple[int, bool]:

@@ -148,7 +148,8 @@ class SteadyState:
     n_periods : int
         Forcing periods integrated (also :attr:`nit`, the iterations of the period map).
     change : float
-        Last relative change of the period-start state (the convergence measure).
+        Last relative change of the period-start state (the convergence measure): over the orbit's
+        ``nu`` periods when it converged, over one period when it did not.
     dt : float
         Time step used (``2 pi / (omega N)``).
     success : bool
