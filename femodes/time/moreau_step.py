@@ -217,7 +217,9 @@ class Stepper:
         self.uc = [j for j, a in enumerate(contacts) if isinstance(a.item, UnilateralContact)]
         self.uc_dof = np.asarray([contacts[j].dof for j in self.uc], dtype=int)
         self.uc_loc = np.asarray([self.pos[d] for d in self.uc_dof], dtype=int)
-        self.th_uc = self.th[self.uc_dof]  # their row weights (the impulses' work, stepper.contact_work)
+        # the weights of v_{k+1} in the velocity an impulse works on (stepper.contact_work): the mean
+        # of the two velocities on a DOF with mass, the end one on a massless (algebraic) DOF
+        self.work_w_uc = np.where(self.massless[self.uc_dof], 1.0, 0.5)
         self.impact = ImpactLaw([contacts[j].item for j in self.uc], self.uc_dof, self.massless[self.uc_dof],
                                 self.e, self.h)
         self.pc = [j for j, a in enumerate(contacts) if isinstance(a.item, PenaltyContact)]
