@@ -50,3 +50,12 @@ def test_committed_meshes_are_what_the_gmsh_script_writes(tmp_path):
         old = meshio.read(path)
         assert np.allclose(new.points, old.points, atol=1e-12)
         assert set(new.field_data) == set(old.field_data) >= {"root", "tip", "pad", "blade"}
+
+
+def test_help_explains_the_command_line_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    # '--help' was taken for the output folder: the script ran the whole study into './--help'
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as stop:
+        ex.main(["--help"])
+    assert stop.value.code == 0
+    assert "out_dir" in capsys.readouterr().out and not any(tmp_path.iterdir())
