@@ -270,8 +270,10 @@ def _lumps(MSS: sp.csr_matrix, dm: np.ndarray, ds: np.ndarray, rtol: float = 1e-
     for lump in np.flatnonzero(alive):
         if mass[lump] <= tiny:
             raise ValueError(
-                "with_contact: the consistent mass of a contact patch is not positive (an isolated P2 vertex?); "
-                "use contact_mass=fm.ConsistentMass() or order=1"
+                "with_contact: the consistent mass of a contact patch is not positive: an isolated P2 vertex, or "
+                "contacts on two faces too close for both (the mass moved off one face went onto the other with "
+                "a negative weight); use contact_mass=fm.ConsistentMass(), more elements across the thickness, "
+                "or order=1 for an isolated P2 vertex"
             )
         out.append((np.array(sorted(members[lump]), dtype=int), float(mass[lump]), mom[:, lump]))
     return out
