@@ -17,13 +17,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .analysis_inputs import (check_continuation_options, check_harmonics, check_model, check_span, largest_unknown,
-                              start_vector, warn_rigid_body, warn_undamped)
+from .analysis_inputs import (check_continuation_options, check_harmonics, check_model, check_span, commensurate_modes,
+                              largest_unknown, resonant_harmonics, start_vector, warn_rigid_body, warn_undamped)
 from .hbm.harmonics import Harmonics
 from .hbm.problems import ForcedResponseProblem, NonlinearModeProblem
 from .model import StructuralModel
 from .results import Branch, ContactInfo
-from .runs import checkpoint_spec, model_fingerprint, run_continuation, shows_progress
+from .runs import checkpoint_spec, model_fingerprint, run_continuation, shows_progress, warn_short_of_span
 from .store import Checkpoint
 from .solvers import ContinuationOptions, NewtonOptions, continuation, semismooth_newton
 from .solvers.checks import entry_point, user_stacklevel
@@ -157,6 +157,10 @@ def frequency_response(
     stab = StabilityOptions.parse(stability)
 
     def wrap(res, meta) -> Branch:
+        if res.status == 6 and (why := resonant_harmonics(model, span[0], h)):  # say it in the user's terms
+            res = dataclasses.replace(res, message=(
+                f"the harmonic balance is singular at the start: {why}, and the model has no damping (an undamped "
+                "resonance has no finite response); start the span away from it, or add damping"))
         branch = branch_from_continuation(problem, res, kind="forced", model=model, meta={"span": list(span), **meta})
         return _with_stability(branch, problem, model, stab, opts)
 
@@ -164,19 +168,22 @@ def frequency_response(
                    "projection": repr(problem.system.projection), "n_unknowns": int(problem.size),
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
     started = time.perf_counter()
+    describe = _frequency_named
     branch = run_continuation(problem, span, opts, "frequency_response", progress, x0=start, wrap=wrap, model=model,
-                              checkpoint=checkpoint, description=description)
+                              checkpoint=checkpoint, description=description, describe=describe)
+    warn_short_of_span(branch, span, "frequency_response", describe, opts)
     branch = _with_stability(branch, problem, model, stab, opts)  # a finished checkpoint saved without it
-    if rtol is None:
+    if rtol is None or _already_refined(branch, rtol):
         return branch
 
     def rerun(H: int) -> Branch:
         return frequency_response(model, omega, Harmonics(H, subharmonic=h.subharmonic), options=options,
                                   projection=projection, progress=progress, stability=stab or False)
 
-    return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method,
-                          time_limit=rtol_time_limit(time.perf_counter() - started, error_options),
-                          options=error_options)
+    final = meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection, method=error_method,
+                           time_limit=rtol_time_limit(time.perf_counter() - started, error_options),
+                           options=error_options)
+    return _saved_as_returned(final, branch, checkpoint)
 
 
 def frequency_response_options(**changes) -> ContinuationOptions:
@@ -407,6 +414,13 @@ def nonlinear_mode(
                 f"no periodic motion found at the start energy {e0:g} by Newton from linear mode {mode} ({res.message}); "
                 f"start at a lower energy, where the motion is nearly linear (e.g. below first contact), "
                 f"or raise the harmonics"))
+        elif res.status == 6:  # the first tangent: p is log10(E) there too
+            ratio = commensurate_modes(model, mode, h)
+            res = dataclasses.replace(res, message=(
+                f"the harmonic balance is singular at the start energy {e0:g} (no unique tangent to follow)"
+                + (f": {ratio}, an exact internal resonance whose orbits form a continuum there; starting at another "
+                   "energy will not help while the frequencies stay commensurate: detune the model slightly"
+                   if ratio else "; start at a slightly different energy")))
         branch = branch_from_continuation(problem, res, kind="nonlinear mode", model=model,
                                           meta={"mode": int(mode), "energy_span": [e0, e1], **meta})
         return _with_stability(branch, problem, model, stab, options)
@@ -416,19 +430,50 @@ def nonlinear_mode(
                    "model": model_fingerprint(model)} if checkpoint is not None else {}
     started = time.perf_counter()
     branch = run_continuation(problem, span, options, "nonlinear_mode", progress, x0=lambda o: (x0, o), wrap=wrap,
-                              model=model, checkpoint=checkpoint, description=description)
-    branch = continue_past_grazing(branch, problem, model, past_grazing, e1, options.newton)
+                              model=model, checkpoint=checkpoint, description=description, describe=_energy_named)
+    continued = branch
+    if branch.meta.get("family") != "contact phase":  # a finished checkpoint holds the composed branch
+        branch = continue_past_grazing(branch, problem, model, past_grazing, e1, options.newton)
+    warn_short_of_span(branch, span, "nonlinear_mode", _energy_named, options)
     branch = _with_stability(branch, problem, model, stab, options)
-    if rtol is None:
-        return branch
+    if rtol is None or _already_refined(branch, rtol):
+        return _saved_as_returned(branch, continued, checkpoint)
 
     def rerun(H: int) -> Branch:
         return nonlinear_mode(model, mode, energy, Harmonics(H, subharmonic=h.subharmonic), options=user_options,
                               projection=projection, progress=progress, stability=stab or False, past_grazing=past_grazing)
 
-    return meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection,
-                          time_limit=rtol_time_limit(time.perf_counter() - started, error_options),
-                          options=error_options)
+    final = meet_tolerance(branch, rtol, max_harmonics, rerun, projection=projection,
+                           time_limit=rtol_time_limit(time.perf_counter() - started, error_options),
+                           options=error_options)
+    return _saved_as_returned(final, continued, checkpoint)
+
+
+def _already_refined(branch: Branch, rtol: float) -> bool:
+    """A finished checkpoint's branch that holds the error estimate of this ``rtol`` already."""
+    return branch.accuracy is not None and branch.accuracy.rtol == rtol and "checkpoint" in branch.meta
+
+
+def _saved_as_returned(final: Branch, continued: Branch, checkpoint: Checkpoint | None) -> Branch:
+    """``final``, also written to the checkpoint's file when it is not the branch the continuation
+    saved there (the whole of it: its notes too): the file held the branch before ``rtol``'s
+    estimate (an upper fold 9 % low, no error estimate) or before a nonlinear mode's past-grazing
+    family (11 grazing points instead of 42), while the call returned the other. It keeps the run's description, so that resuming the
+    finished run returns it as it is."""
+    if checkpoint is None:
+        return final
+    if "checkpoint" in continued.meta:
+        final.meta["checkpoint"] = continued.meta["checkpoint"]
+    final.save(checkpoint.path)
+    return final
+
+
+def _frequency_named(p: float) -> str:
+    return f"w = {p:.6g} rad/s"
+
+
+def _energy_named(p: float) -> str:  # a nonlinear mode's continuation parameter is log10(E)
+    return f"the energy {10.0 ** p:.6g}"
 
 
 def _with_stability(branch: Branch, problem, model: StructuralModel, stability: StabilityOptions | None,

@@ -18,7 +18,8 @@ from .solvers import ContinuationOptions
 from .solvers.checks import InputTypeError, InputValueError
 
 __all__ = ["check_harmonics", "check_span", "check_continuation_options", "check_model", "start_vector", "largest_unknown",
-           "warn_rigid_body", "warn_undamped"]
+           "warn_rigid_body", "warn_undamped", "resonant_harmonics",
+           "commensurate_modes"]
 
 
 def check_harmonics(h: Any) -> Harmonics:
@@ -104,3 +105,42 @@ def largest_unknown(size: int) -> float:
     the Newton merit ``|r|^2 / 2`` and the arclength norm square the unknowns (above it they
     overflow to inf and every step fails as a "non-finite residual")."""
     return math.sqrt(np.finfo(float).max / max(int(size), 1)) / 10.0
+
+
+def resonant_harmonics(model: StructuralModel, omega: float, h: Harmonics, *, n_modes: int = 12,
+                       rtol: float = 1e-6) -> str:
+    """Why the harmonic balance's Jacobian can be singular at ``omega`` on a model without damping:
+    ``"harmonic k of w = ... equals the natural frequency w_j = ... of mode j"`` for every harmonic
+    ``k w / nu`` (k = 1..H) within ``rtol`` of one of the lowest ``n_modes`` natural frequencies;
+    ``""`` for a damped model, a model whose modes cannot be computed, or none. An undamped forced
+    response started at 0.5 rad/s on an oscillator of 1 rad/s stopped with "r_x singular at the
+    start point p=0.5 (start exactly at a fold?)": its second harmonic is the resonance."""
+    if model.damping.nonzero:
+        return ""
+    try:
+        w = normal_modes(model.K, model.M, min(n_modes, model.n_dofs))[0]
+    except Exception:  # noqa: BLE001 - a diagnosis for a message, never a new failure
+        return ""
+    found = []
+    for k in range(1, h.n_harmonics + 1):
+        wk = k * omega / h.subharmonic
+        for j in np.flatnonzero(np.abs(w - wk) <= rtol * wk):
+            found.append(f"harmonic {k} of w = {omega:.6g} rad/s is the natural frequency w_{j + 1} = {w[j]:.6g} "
+                         f"rad/s of mode {j + 1}")
+    return "; ".join(found)
+
+
+def commensurate_modes(model: StructuralModel, mode: int, h: Harmonics, *, n_modes: int = 12,
+                       rtol: float = 1e-6) -> str:
+    """The natural frequencies at an integer multiple ``k <= H`` of mode ``mode``'s (to ``rtol``):
+    ``"w_2 = 2 w_1 (2.0 rad/s)"``, ``""`` if none (or the modes cannot be computed). Such a mode
+    makes the orbits of the start energy a continuum (an exact internal resonance), and the
+    backbone's first tangent singular."""
+    try:
+        w = normal_modes(model.K, model.M, min(max(n_modes, mode + 1), model.n_dofs))[0]
+    except Exception:  # noqa: BLE001 - a diagnosis for a message, never a new failure
+        return ""
+    w0 = w[mode - 1]
+    found = [f"w_{j + 1} = {k} w_{mode} ({w[j]:.6g} rad/s)" for j in range(len(w)) if j != mode - 1 and w0 > 0
+             for k in range(1, h.n_harmonics + 1) if abs(w[j] - k * w0) <= rtol * k * w0]
+    return ", ".join(found)

@@ -46,6 +46,11 @@ def krylov_start(n: int, complex_: bool = False) -> np.ndarray:
     return v + 1j * rng.uniform(-1.0, 1.0, n) if complex_ else v
 
 
+#: A negative eigenvalue below ``-NEGATIVE_FLOORS * eigenvalue_floor`` (about -2e-8 of the stiffest
+#: DOF's K_ii / M_ii) is no round-off of a rigid-body mode: K or M is indefinite.
+NEGATIVE_FLOORS = 1e5
+
+
 def eigenvalue_floor(K, M) -> float:
     """Round-off floor of the eigenvalues of ``(K, M)``: ``1e3 eps max(K_ii / M_ii)`` over the DOFs
     with mass (``max |K_ii|`` if none has any). The largest diagonal ratio bounds the largest
@@ -198,6 +203,17 @@ def normal_modes(K: sp.spmatrix, M: sp.spmatrix, n: int, *, sigma: float | None 
     frequencies of fine meshes, whose lambda_max grows like h^-4).
     """
     lam, vec = generalized_eigh(K, M, n, sigma=sigma, factor=factor, check=check)
+    floor = eigenvalue_floor(K, M)
+    if np.any(lam < -NEGATIVE_FLOORS * floor):
+        # no round-off: K or M is indefinite (a raw model's are checked fully up to 400 DOFs only)
+        raise ValueError(f"{entry_name() or 'linear_modes'}: the model has {int(np.sum(lam < -NEGATIVE_FLOORS * floor))} "
+                         f"eigenvalue(s) w^2 < 0, the lowest {lam.min():.6g} (its stiffest DOF: K_ii / M_ii = "
+                         f"{floor / (1e3 * np.finfo(float).eps):.3g}): K is not positive semidefinite, or M not positive "
+                         "definite on the DOFs with mass; check how K and M were built (signs, a material, a spring)")
+    mm = np.einsum("ij,ij->j", vec, M @ vec)
+    if np.any(mm <= 0):
+        raise ValueError(f"{entry_name() or 'linear_modes'}: a mode has zero or negative modal mass (phi^T M phi = "
+                         f"{mm.min():.6g}): M is not positive semidefinite; check how it was built")
     if np.any(lam < 0):
         log.info("%s: eigenvalues %s < 0 (round-off of rigid-body modes) set to zero frequency", entry_name(),
                  lam[lam < 0])

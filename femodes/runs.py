@@ -34,7 +34,7 @@ from .solvers import ContinuationOptions, continuation
 from .solvers.checks import InputTypeError, InputValueError, available_memory
 from .solvers.continuation import ContinuationResult, ContinuationState
 
-__all__ = ["run_continuation", "checkpoint_spec", "model_fingerprint", "shows_progress", "progress_shown"]
+__all__ = ["run_continuation", "warn_short_of_span", "checkpoint_spec", "model_fingerprint", "shows_progress", "progress_shown"]
 
 log = logging.getLogger(__name__)
 
@@ -70,18 +70,97 @@ POINT_COPIES = 3
 POINT_MEMORY_FRACTION = 0.5
 
 
+#: A frequency at or below this fraction of the branch's first is taken as zero (the guard's 6e-10
+#: rad/s on a softening backbone that started at 1 rad/s: a period 1e9 times the linear one).
+OMEGA_FLOOR = 1e-6
+
+
+class _FrequencyGuard:
+    """Stops a continuation whose frequency (an unknown of a nonlinear mode) falls to zero or below:
+    the period of the orbits grows without bound there (a softening backbone at its separatrix),
+    and past it the "orbits" have negative frequencies (a softening cubic spring's backbone went
+    through w = 6e-10 to w = -0.999 with success True and three folds). :meth:`cut` drops that
+    point and any after it."""
+
+    def __init__(self, problem, label: str, describe: Callable[[float], str]):
+        self.unpack = getattr(problem, "unpack", None)
+        self.label, self.describe, self.message = label, describe, ""
+        self.first: float | None = None
+
+    def omega(self, x, p) -> float:
+        return float(self.unpack(x, p).omega)
+
+    def __call__(self, point) -> bool:
+        """False (stop) at a point whose frequency is not positive (:data:`OMEGA_FLOOR`)."""
+        if self.unpack is None:
+            return True
+        omega = self.omega(point.x, point.p)
+        if self.first is None:
+            self.first = abs(omega)
+        return omega > OMEGA_FLOOR * self.first
+
+    def cut(self, res: ContinuationResult) -> ContinuationResult:
+        """``res`` up to its first point of non-positive frequency (unchanged if none)."""
+        if self.unpack is None or not len(res.p):
+            return res
+        omega = np.array([self.omega(x, p) for x, p in zip(res.x, res.p)])
+        bad = np.flatnonzero(~(omega > OMEGA_FLOOR * abs(omega[0])))
+        if not bad.size:
+            return res
+        k = int(bad[0])
+        last = (f"; the {k} point(s) before it are kept, the last at {self.describe(float(res.p[k - 1]))} (w = "
+                f"{omega[k - 1]:.4g} rad/s)") if k else ""
+        self.message = (f"stopped at {self.describe(float(res.p[k]))}: the frequency fell to {omega[k]:.3g} rad/s, "
+                        "where the period of the orbits grows without bound (a softening nonlinearity's separatrix: "
+                        f"no periodic motion of this family lies beyond){last}; orbits near w = 0 need many more "
+                        "harmonics (check them with rtol=)")
+        log.warning("%s: %s", self.label, self.message)
+        cut = slice(0, k)
+        return dataclasses.replace(
+            res, x=res.x[cut], p=res.p[cut], nit=res.nit[cut], residual_norm=res.residual_norm[cut],
+            step=res.step[cut], folds=tuple(int(i) for i in res.folds if i < k),
+            tangents=None if res.tangents is None else res.tangents[cut], status=3, success=True,
+            message=self.message)
+
+
+def warn_short_of_span(branch: Branch, span, label: str, describe: Callable[[float], str],
+                       options: ContinuationOptions) -> None:
+    """A logged warning when a successful branch does not reach the end of its span: it turned back
+    and left through the start (status 1), or stopped at ``max_points`` (status 2); in both the
+    result said ``success=True`` and nothing else (a forced response asked for 0.5-2 rad/s covered
+    0.5-0.599). A nonlinear mode whose contact-phase family replaced the energy continuation
+    says so itself."""
+    p = np.asarray(branch.parameter, dtype=float)
+    if not branch.success or branch.status not in (1, 2) or not p.size or branch.meta.get("family") == "contact phase":
+        return
+    sign = 1.0 if span[1] >= span[0] else -1.0
+    far = float(p[np.argmax(sign * (p - span[0]))])
+    share = 100.0 * (far - span[0]) / (span[1] - span[0])
+    if branch.status == 2:
+        why = (f"it stopped at max_points = {options.max_points} at {describe(float(p[-1]))}; give "
+               "ContinuationOptions(max_points=...) more points (or a larger max_step)")
+    elif options.direction == -1 and p.size <= 2:
+        why = ("it left the span at its start: ContinuationOptions(direction=-1) points out of the span; use "
+               "direction=+1 (the default), or swap the span's ends to run the other way")
+    else:
+        why = (f"it turned back at {describe(far)} (a fold) and left the span through its start; the rest of the "
+               "span lies on another branch: run again from the span's other end (the span's ends swapped)")
+    log.warning("%s: the branch does not reach the end of its span (%s, %.0f %% of the way): %s", label,
+                describe(float(span[1])), share, why)
+
+
 def _run(problem, span, x0, options: ContinuationOptions, label: str, progress, *,
-         start: ContinuationState | None = None, journal: Callable | None = None, guard: _MemoryGuard | None = None):
-    """Continuation with the journal writer, the memory guard and the progress callback chained in
-    front of the user's callback."""
+         start: ContinuationState | None = None, journal: Callable | None = None, guards: tuple = ()):
+    """Continuation with the journal writer, the guards (memory, frequency) and the progress
+    callback chained in front of the user's callback."""
     cb = _progress_callback(options.callback, span, label, progress)
-    if journal is not None or guard is not None:
+    if journal is not None or guards:
         after = cb
 
         def cb(point):
             if journal is not None:
                 journal(point)  # saved before the user's callback can stop the run
-            if guard is not None and not guard(point):
+            if not all(g(point) for g in guards):
                 return False
             return after(point) if after is not None else None
 
@@ -176,7 +255,7 @@ def checkpoint_spec(checkpoint) -> Checkpoint | None:
 
 def run_continuation(problem, span, options: ContinuationOptions, label: str, progress, *, x0: Callable,
                      wrap: Callable, model: StructuralModel, checkpoint: Checkpoint | None,
-                     description: dict) -> Branch:
+                     description: dict, describe: Callable[[float], str] | None = None) -> Branch:
     """Run (or resume, or return the finished) continuation of ``problem``; ``wrap(res, meta)`` -> Branch.
 
     Parameters
@@ -201,6 +280,9 @@ def run_continuation(problem, span, options: ContinuationOptions, label: str, pr
         ``resume=True``: continue the saved run, return its finished branch, or start a new one.
     description : dict
         JSON description of the run, saved in the journal and compared on resume.
+    describe : callable, optional
+        ``describe(p)`` names a parameter value in the analysis' terms (``"w = 1.2 rad/s"``, ``"the
+        energy 0.03"``) for the messages; default ``"p = ..."``.
     """
     if not isinstance(progress, bool) and not callable(progress):
         raise TypeError(f"{label}: progress must be True, False or a callable(point), got {progress!r}")
@@ -208,9 +290,11 @@ def run_continuation(problem, span, options: ContinuationOptions, label: str, pr
         raise TypeError(f"{label}: checkpoint must be a femodes.Checkpoint or None, got {checkpoint!r}")
 
     guard = _MemoryGuard(problem.size, label)
+    frequency = _FrequencyGuard(problem, label, describe or (lambda p: f"p = {p:.8g}"))
+    guards = (guard, frequency)
 
     def finish(res, meta) -> Branch:
-        branch = wrap(res, meta)
+        branch = wrap(frequency.cut(res), meta)
         if guard.message:
             branch.message = guard.message
         if not branch.success:
@@ -219,15 +303,15 @@ def run_continuation(problem, span, options: ContinuationOptions, label: str, pr
 
     if checkpoint is None:
         start_x, start_options = x0(options)
-        return finish(_run(problem, span, start_x, start_options, label, progress, guard=guard), {})
+        return finish(_run(problem, span, start_x, start_options, label, progress, guards=guards), {})
     ck = CheckpointStore(checkpoint.path)
     with ck.lock(label):  # a second run on the same checkpoint is refused, not raced
         return _run_checkpointed(problem, span, options, label, progress, x0, finish, model, checkpoint, ck,
-                                 description, guard)
+                                 description, guards)
 
 
 def _run_checkpointed(problem, span, options, label, progress, x0, finish, model, checkpoint, ck, description,
-                      guard):
+                      guards):
     """:func:`run_continuation` with a checkpoint, under its lock."""
     desc = json.loads(json.dumps(description))  # as it reads back from the JSON header
     if not checkpoint.resume and (ck.path.exists() or ck.journal.exists()):
@@ -245,10 +329,10 @@ def _run_checkpointed(problem, span, options, label, progress, x0, finish, model
         start = _state_from_records(records, ck)
         log.info("%s: resuming %s from point %d at p = %.8g", label, ck.journal, start.index, start.p)
         res = _merge(records, _run(problem, span, None, options, label, progress, start=start, journal=journal,
-                                   guard=guard))
+                                   guards=guards))
     else:
         start_x, start_options = x0(options)
-        res = _run(problem, span, start_x, start_options, label, progress, journal=journal, guard=guard)
+        res = _run(problem, span, start_x, start_options, label, progress, journal=journal, guards=guards)
     branch = finish(res, {"checkpoint": desc})
     ck.finish(branch)
     return branch

@@ -82,7 +82,7 @@ NUMERICS_MODULES = {
     "test_solid_outputs", "test_time", "test_mesh", "test_impact_reference", "test_results", "test_time_units",
     "test_io", "test_validation_impact_oscillator", "test_switching_branch_point", "test_phase_predictor", "test_sweep",
     "test_solid_contact", "test_resume", "test_examples_solids", "test_examples_accuracy",
-    "test_dynamic_stiffness",
+    "test_dynamic_stiffness", "test_silent_answers",
 }
 
 

@@ -241,6 +241,15 @@ def test_bad_branch_path(tmp_path):
         with pytest.raises(cases.CaseError) as ei:
             cases.parse_case(t, "x.toml")
         assert ei.value.line == _line(t, "branch =") and "written in the output folder (choose it with --out)" in str(ei.value)
+    # checked before the run: "response.txt" ended in a traceback after it, and the run's points were
+    # removed; "checkpoint.npz" was written and then removed as the run's own checkpoint, while the run
+    # reported it among its outputs
+    for bad, says in (("response.txt", "branch must end in .npz, .h5, .hdf5"),
+                      ("checkpoint.npz", "is the name of the run's own checkpoint")):
+        t = _frc(**{'branch = "response.npz"': f"branch = {bad!r}"})
+        with pytest.raises(cases.CaseError) as ei:
+            cases.parse_case(t, "x.toml")
+        assert ei.value.line == _line(t, "branch =") and says in str(ei.value)
     cases.parse_case(_frc(), "x.toml")
 
 

@@ -13,13 +13,10 @@ import logging
 import sys
 from pathlib import Path
 
+from .cases.schema import CHECKPOINT_NAME  # the checkpoint of `femodes run` in its output folder
 from .progress import BranchProgress
 
 log = logging.getLogger(__name__)
-
-#: The checkpoint of `femodes run` in its output folder (journal CHECKPOINT_NAME.points/ while it
-#: runs; removed when the outputs are written): an interrupted run is resumed by the same command.
-CHECKPOINT_NAME = "checkpoint.npz"
 
 DESCRIPTION = """\
 femodes: nonlinear vibration modes of finite-element structures with unilateral contact.
@@ -95,9 +92,11 @@ def run_case_cli(path: Path, out: Path | None, progress: bool | None) -> int:
         except (KeyboardInterrupt, CheckpointInUse):
             raise
         except BaseException:
-            if ours:  # a run that failed (not interrupted) leaves no journal to block the corrected case
+            if store.path.exists():  # the branch was computed: what failed came after it, keep it
+                print(f"femodes run: the computed branch is kept in {str(store.path)!r}; the same command "
+                      "reuses it once the cause below is fixed", file=sys.stderr)
+            elif ours:  # a run that failed (not interrupted) leaves no journal to block the corrected case
                 store.remove_journal()
-                store.path.unlink(missing_ok=True)
             raise
     except CaseError as exc:  # an interrupted run of another case left its journal: say how to start over
         print(f"femodes run: {exc}".replace("or use another checkpoint file", f"or delete {str(store.journal)!r} to "
@@ -111,6 +110,10 @@ def run_case_cli(path: Path, out: Path | None, progress: bool | None) -> int:
         if bar:
             bar.close()
             bar = None
+        if store.path.exists():  # after the continuation: its whole branch is kept (the journal is gone)
+            print(f"femodes run: interrupted while writing the outputs; the computed branch is kept in "
+                  f"{str(checkpoint.path)!r}; run the same command again to write them", file=sys.stderr)
+            return 130
         n = len(store.indices()) if store.journal.is_dir() else 0
         print(f"femodes run: interrupted; {n} point{'s' * (n != 1)} kept in {str(checkpoint.path)!r} (journal "
               f"{checkpoint.path.name}.points/); run the same command again to resume", file=sys.stderr)

@@ -309,12 +309,23 @@ def element_property(mesh: Any, value: Any, cls: type, arg: str) -> np.ndarray:
     if isinstance(value, Mapping):
         subs = mesh.subdomains or {}
         out = np.full(n_el, None, dtype=object)
+        assigned = np.zeros(n_el, dtype=bool)
         for name, v in value.items():
             if name not in subs:
                 raise InputValueError(f"{arg} names subdomain {name!r}, but the mesh has subdomains {sorted(subs)}")
             if not isinstance(v, cls):
                 raise InputTypeError(f"{arg}[{name!r}] must be a {cls.__name__}, got {type(v).__name__}")
-            out[np.asarray(subs[name])] = v
+            elements = np.asarray(subs[name], dtype=int)
+            taken = elements[assigned[elements]]
+            claimed = [(i, w) for i, w in zip(taken, out[taken]) if w != v]
+            if claimed:  # the mapping's order chose the value of these elements without a word
+                other = next(k for k in value if k != name and claimed[0][0] in np.asarray(subs[k]))
+                raise InputValueError(
+                    f"{arg}: subdomains {other!r} and {name!r} overlap with different values ({len(claimed)} "
+                    f"element(s), first: element {claimed[0][0]}); give the shared elements one value (make the "
+                    "subdomains disjoint, or give both the same)")
+            out[elements] = v
+            assigned[elements] = True
         missing = np.flatnonzero(out == None)  # noqa: E711 (object array comparison)
         if missing.size:
             raise InputValueError(

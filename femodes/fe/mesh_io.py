@@ -182,11 +182,71 @@ def load_mesh(path) -> skfem.Mesh:
         raise ValueError(f"load_mesh: {fname!r} is a directory, not a mesh file")
 
     raw = _read_meshio(fname)
+    _warn_shared_physical_groups(fname)
     if any(block.type in _SOLID_TYPES for block in raw.cells):
         mesh = _from_meshio_solid(raw, fname)
         _warn_duplicate_nodes(mesh, fname)
         return mesh
     return _from_meshio(raw, fname)
+
+
+def _gmsh4_shared_groups(fname: str) -> list[tuple[int, int, list[str]]]:
+    """``[(dim, entity tag, [physical group names])]`` of the entities of an ASCII gmsh 4 file that
+    belong to more than one physical group (read from its ``$Entities`` and ``$PhysicalNames``);
+    ``[]`` for other files, binary ones included."""
+    try:
+        with open(fname, "rb") as f:
+            head = f.read(64)
+            if not head.startswith(b"$MeshFormat") or head.split()[1:3] != [b"4.1", b"0"]:
+                return []
+            f.seek(0)
+            names: dict[tuple[int, int], str] = {}
+            shared = []
+            section = None
+            counts: list[int] = []
+            for raw in f:
+                line = raw.decode("utf-8", "replace").strip()
+                if line.startswith("$"):
+                    if line == "$EndEntities":
+                        break
+                    section, counts = line, []
+                    continue
+                if section == "$PhysicalNames" and line.count('"') == 2:
+                    d_text, t_text, name = line.split(maxsplit=2)
+                    names[(int(d_text), int(t_text))] = name.strip('"')
+                elif section == "$Entities":
+                    words = line.split()
+                    if not counts:
+                        counts = [int(w) for w in words[:4]]
+                        dims = [d for d in range(4) for _ in range(counts[d])]
+                        row = 0
+                        continue
+                    dim = dims[row]
+                    row += 1
+                    k = 4 if dim == 0 else 7          # tag, x y z | tag, min xyz, max xyz
+                    n_phys = int(words[k])
+                    if n_phys > 1:
+                        tags = [abs(int(w)) for w in words[k + 1:k + 1 + n_phys]]
+                        shared.append((dim, int(words[0]), [names.get((dim, t), f"region_{t}") for t in tags]))
+            return shared
+    except (OSError, ValueError, IndexError):
+        return []
+
+
+def _warn_shared_physical_groups(fname: str) -> None:
+    """Warn when an entity of a gmsh 4 file is in several physical groups: meshio gives its cells
+    the first group only, so the others lose them without a word (a corner point in "tip" and
+    "tipcorners": "tipcorners" had 3 of its 4 nodes, and clamped="tipcorners" clamped 3)."""
+    shared = _gmsh4_shared_groups(fname)
+    if not shared:
+        return
+    dim, tag, groups = shared[0]
+    warnings.warn(
+        f"load_mesh: {fname!r}: {len(shared)} gmsh {'entities belong' if len(shared) > 1 else 'entity belongs'} to "
+        f"more than one physical group (e.g. the {('point', 'curve', 'surface', 'volume')[dim]} {tag} in "
+        f"{', '.join(map(repr, groups))}); meshio keeps only the first group of each, so the group"
+        f"{'s' * (len(groups) > 2)} {', '.join(map(repr, groups[1:]))} miss its elements or nodes; save the mesh in gmsh's 2.2 format (gmsh.option.setNumber('Mesh.MshFileVersion', 2.2)), which keeps "
+        "every group, or put each entity in one group", UserWarning, stacklevel=3)
 
 
 def _warn_duplicate_nodes(mesh, fname: str) -> None:

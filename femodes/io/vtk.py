@@ -160,7 +160,7 @@ def _write_series(fields: MeshFields, stem: Path, scale: float | None, extra: di
 #: Units of the written quantities for ``units="SI"`` (field data ``"unit <quantity>: <unit>"``).
 SI_UNITS = {"displacement": "m", "velocity": "m/s", "rotation": "rad", "contact_force": "N",
             "contact_pressure": "Pa", "contact_gap": "m", "contact_measure": "m^2 (3-D), m^2 per m of thickness "
-            "(2-D) or 1 (bars, beams)", "omega": "rad/s", "period": "s", "TimeValue": "s"}
+            "(2-D) or 1 (bars, beams)", "omega": "rad/s", "omega_truncated": "rad/s", "period": "s", "TimeValue": "s"}
 
 
 def _units_and_quality(solution: PeriodicSolution, units: Any) -> dict:
@@ -176,6 +176,11 @@ def _units_and_quality(solution: PeriodicSolution, units: Any) -> dict:
                     f"obstacle (max {pen:.3g}) and pulls (max tension {ten:.3g}): negative contact_pressure and "
                     "contact_force off contact are truncation artefacts; raise the harmonics to reduce them")
             out[note] = np.array([1], dtype=np.int64)
+    if solution.omega_truncated != solution.omega:  # an error-controlled point: say which is which
+        out["omega_truncated"] = np.array([solution.omega_truncated])
+        out[f"note: the frames are the truncated series (H = {solution.harmonics.n_harmonics}) over its own period "
+            f"2 pi / omega_truncated; omega = {solution.omega:.8g} is the error estimate's converged frequency"] = \
+            np.array([1], dtype=np.int64)
     return out
 
 

@@ -19,7 +19,7 @@ from .contact_mass import redistributed_mass
 from .damping import redamped_after_contact
 from .declarations import CONTACT_LAWS, SMOOTH_LAWS, Attached, show_vector
 from .frames import AXIS_TOL, nodal_frame, rotated_model, same_normal
-from ..solvers.checks import named_by
+from ..solvers.checks import named_by, user_stacklevel
 
 __all__ = ["add_contacts", "bind_contacts", "contact_label", "expand_contact", "two_normals"]
 
@@ -74,6 +74,14 @@ def bind_contacts(model, laws, node_of: np.ndarray, comp_of: np.ndarray) -> tupl
         if law.direction is None and not callable(law.gap) and dm.group_of(law.at) is None:
             with named_by(f"with_contact: {type(law).__name__}"):
                 pairs, rot = [(law, dm.find(law.at))], {}
+            if isinstance(law.at, str) and model.fe is not None and len(dm.displacement) > 1:
+                # a named point of a 2-D/3-D solid: +x without a word (a boundary says so, below)
+                n_d = len(dm.displacement)
+                warnings.warn(f"{contact_label(law)}: no direction= for point {law.at!r} of a {n_d}-D solid; the "
+                              f"contact acts along +x ({dm.displacement[0]!r}). Give the stop's direction, e.g. "
+                              f"direction={tuple(1.0 if i == n_d - 1 else 0.0 for i in range(n_d))}, or "
+                              f"at=({law.at!r}, {dm.displacement[0]!r}) to keep +x and silence this", UserWarning,
+                              stacklevel=user_stacklevel())
         else:
             pairs, rot = expand_contact(model, law)
         for k, frame in rot.items():
@@ -271,6 +279,23 @@ def _direction_component(dm, law) -> int | None:
     return None
 
 
+def _same_per_node(gap, x: np.ndarray, g: np.ndarray) -> bool:
+    """Does the vectorised result ``g`` of the gap function agree with its value at the first and
+    last node called one at a time? A function written per node (``0.01 + 0.5 * np.dot(x, n)``)
+    also runs on the ``(dim, n)`` array when ``n == dim``, as a matrix product: a boundary of 2
+    nodes in 2-D got gaps [0.51, 0.06] instead of [0.01, 0.06]. A function that cannot take one
+    node counts as vectorised."""
+    for k in {0, g.size - 1}:
+        try:
+            with np.errstate(all="ignore"):
+                one = float(np.asarray(gap(x[:, k]), dtype=float).reshape(()))
+        except Exception:  # noqa: BLE001 - vectorised only
+            return True
+        if not abs(one - g[k]) <= 1e-12 * max(abs(one), abs(g[k]), 1e-300):
+            return False
+    return True
+
+
 def _contact_gaps(dm, law, nodes, dofs) -> np.ndarray:
     """The gap of each contact DOF: the law's number, or its callable at the nodes' coordinates."""
     label, gap = contact_label(law), law.gap
@@ -293,6 +318,8 @@ def _contact_gaps(dm, law, nodes, dofs) -> np.ndarray:
             g = v.reshape(n)
     except Exception:  # noqa: BLE001 - a pointwise function may fail on arrays; it is called per node below
         g = None
+    if g is not None and not _same_per_node(gap, x, g):
+        g = None  # a per-node function that also ran on the (dim, n) array, with another meaning (n == dim)
     if g is None:
         try:
             g = np.array([float(gap(x[:, k])) for k in range(n)])

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import warnings
 
 import numpy as np
 
@@ -14,7 +15,7 @@ from ..laws import Location
 from .declarations import Attached, HarmonicForce
 from .dofs import DofMap
 from .frames import frame_forces
-from ..solvers.checks import named_by
+from ..solvers.checks import named_by, user_stacklevel
 
 __all__ = ["bind_forces"]
 
@@ -27,6 +28,7 @@ def bind_forces(model, forces) -> list[Attached]:
         raise ValueError("with_forcing: give at least one HarmonicForce")
     new: list[Attached] = []
     dm = model.dofmap
+    implicit: list[str] = []
     for f in forces:
         if not isinstance(f, HarmonicForce):
             raise TypeError(f"with_forcing: expected HarmonicForce, got {type(f).__name__}")
@@ -37,6 +39,8 @@ def bind_forces(model, forces) -> list[Attached]:
                        for d, w in zip(dofs, weights) if w != 0.0)
             continue
         group = dm.group_of(f.at)
+        if isinstance(f.at, str) and model.fe is not None and len(dm.displacement) > 1:
+            implicit.append(f.at)  # said once the forces are bound (a bad name is an error first)
         if group is None:
             rotated = _rotated_point(dm, f.at)
             if rotated is None:
@@ -63,6 +67,12 @@ def bind_forces(model, forces) -> list[Attached]:
                 new.extend(_rotated_force(dm, f, int(node), c, float(w)))
             else:
                 new.append(Attached(dataclasses.replace(f, at=int(d), amplitude=f.amplitude * float(w)), int(d)))
+    for at in dict.fromkeys(implicit):  # a bare name on a 2-D/3-D solid: +x, without a word (a contact says so)
+        n_d = len(dm.displacement)
+        warnings.warn(f"with_forcing: HarmonicForce(at={at!r}) names no component on a {n_d}-D solid; the force acts "
+                      f"along +x ({dm.displacement[0]!r}). Give one, e.g. at=({at!r}, {dm.displacement[n_d - 1]!r}), "
+                      f"or at=({at!r}, {dm.displacement[0]!r}) to keep +x and silence this", UserWarning,
+                      stacklevel=user_stacklevel())
     return new
 
 

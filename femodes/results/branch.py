@@ -17,7 +17,7 @@ from ..store import RECORD_SUFFIXES, model_signature, signature_differences, wri
 from ..solvers.checks import user_stacklevel
 from .branch_annotations import answer, checked_accuracy, checked_stability, point_harmonics
 from .branch_record import FORMAT_VERSION, branch_arrays, branch_header
-from .contacts import ContactInfo, contact_differences, contact_quality
+from .contacts import ContactInfo, contact_differences, contact_quality, peak_amplitude
 from .error_estimate import ErrorEstimate
 from .solution import PeriodicSolution, checked_dof
 
@@ -207,9 +207,7 @@ class Branch:
         harmonics, e.g. ``branch.Q`` itself or its bifurcations'), that series' amplitude."""
         series = self.Q if Q is None else np.asarray(Q, dtype=float)
         checked_dof(dof, series.shape[-1], "Branch.amplitude")
-        n = max(512, 16 * self.harmonics.n_coef)
-        E = self.harmonics.grid.synthesis(2 * np.pi * np.arange(n) / n)
-        amp = np.max(np.abs(E @ series[:, :, dof].T), axis=0)
+        amp = peak_amplitude(self.harmonics, series[:, :, dof], n=max(512, 16 * self.harmonics.n_coef))
         acc = self.accuracy
         if Q is not None or acc is None or acc.amplitude_limit is None:
             return amp

@@ -12,7 +12,7 @@ import numpy as np
 from ..hbm.harmonics import Harmonics
 from ..laws import PenaltyContact, UnilateralContact
 
-__all__ = ["ContactInfo", "contact_differences", "contact_quality", "fine_points"]
+__all__ = ["ContactInfo", "contact_differences", "contact_quality", "fine_points", "peak_amplitude"]
 
 @dataclass(frozen=True, eq=False)
 class ContactInfo:
@@ -86,6 +86,37 @@ def contact_differences(contacts: ContactInfo, model) -> list[str]:
 def fine_points(harmonics: Harmonics) -> int:
     """Samples per period of the fine grid on which contact quality is measured."""
     return max(2048, 64 * harmonics.n_coef)
+
+
+def peak_amplitude(harmonics: Harmonics, C: np.ndarray, n: int | None = None) -> np.ndarray:
+    """``max_t |q(t)|`` of the series with coefficients ``C`` (shape ``(m, n_coef)``, one DOF), one
+    per row: the largest sample of an equidistant grid of ``n`` phases (default
+    :func:`fine_points`), refined by parabolas through three points around it (spacings
+    ``2 pi / n``, then 1/16, 1/256 and 1/4096 of it). The grid alone reads low by about
+    ``(pi k / n)^2 / 2`` (2e-5 for a pure first harmonic on 512 points); the series at the last
+    parabola's vertex is exact to round-off (a contact orbit's sharp peak needs the smaller
+    spacings: two of them left 3e-11). Never below the grid's largest sample."""
+    C = np.atleast_2d(np.asarray(C, dtype=float))
+    if not len(C):
+        return np.zeros(0)
+    n = fine_points(harmonics) if n is None else int(n)
+    grid = harmonics.grid
+    theta = 2.0 * np.pi * np.arange(n) / n
+    q = C @ grid.synthesis(theta).T                     # (m, n)
+    k = np.argmax(np.abs(q), axis=1)
+    best = np.abs(q[np.arange(len(C)), k])
+    centre = theta[k]
+    for step in 2.0 * np.pi / n / 16.0 ** np.arange(4):
+        around = centre[:, None] + step * np.array([-1.0, 0.0, 1.0])[None, :]
+        E = grid.synthesis(around.ravel()).reshape(len(C), 3, -1)
+        f = np.abs(np.einsum("mpc,mc->mp", E, C))
+        curv = f[:, 0] - 2.0 * f[:, 1] + f[:, 2]
+        ok = curv < 0.0                                  # a maximum between the three
+        shift = np.where(ok, 0.5 * (f[:, 0] - f[:, 2]) / np.where(ok, curv, -1.0), 0.0)
+        centre = centre + np.clip(shift, -1.0, 1.0) * step
+    # the series itself at the vertex (a parabola's value would overshoot by O(step^3))
+    at = np.abs(np.einsum("mc,mc->m", grid.synthesis(centre).reshape(len(C), -1), C))
+    return np.maximum(best, at)
 
 
 def contact_quality(harmonics: Harmonics, contacts: ContactInfo, Q: np.ndarray, P: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..hbm.harmonics import Harmonics
-from .contacts import ContactInfo, contact_quality, fine_points
+from .contacts import ContactInfo, contact_quality, fine_points, peak_amplitude
 
 __all__ = ["PeriodicSolution"]
 
@@ -159,7 +159,7 @@ class PeriodicSolution:
         checked_dof(dof, self.Q.shape[-1], "PeriodicSolution.amplitude")
         if self.amplitude_limit is not None:
             return float(self.amplitude_limit[dof])
-        return float(np.max(np.abs(self.displacement(self._fine_t())[:, dof])))
+        return float(peak_amplitude(self.harmonics, self.Q[:, dof])[0])
 
     def full_displacement(self, t) -> np.ndarray:
         """Displacement expanded to the full model (Craig-Bampton parents) DOFs."""

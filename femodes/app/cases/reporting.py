@@ -21,6 +21,9 @@ def summary_lines(case: Case, model, branch) -> list[str]:
     from ...results.error_estimate import largest_text
 
     lines = [f"case: {case.name}", f"model: {model!r}"]
+    if not len(branch):  # an IndexError on omega[0] left no summary at all
+        lines.append(f"{branch.kind}: no points, success={branch.success} ({branch.message})")
+        return lines
     lines.append(f"{branch.kind}: {len(branch)} points, success={branch.success} ({branch.message}), "
                  f"w from {branch.omega[0]:.6g} to {branch.omega[-1]:.6g} rad/s (min {branch.omega.min():.6g}, "
                  f"max {branch.omega.max():.6g}), energy {branch.energy.min():.4g}..{branch.energy.max():.4g}")
@@ -36,10 +39,12 @@ def summary_lines(case: Case, model, branch) -> list[str]:
             lines.append("  (converged by the error estimate; the truncated series (H = "
                          f"{branch.harmonics.n_harmonics}) has them at w = "
                          f"{', '.join(f'{w:.6g}' for w in branch.omega_truncated[f])}: branch.omega_truncated)")
-    if len(branch) and len(branch.contacts.dofs):
-        pen, ten = branch.penetration, branch.tension
-        lines.append(f"contact quality (truncated Fourier series, relative): max penetration {np.max(pen):.3g}, "
-                     f"max tension {np.max(ten):.3g}")
+    if len(branch.contacts.dofs):
+        # relative: over the largest contact displacement and force (the absolute values were labelled so)
+        pen, ten = branch.contact_quality()
+        lines.append(f"contact quality (truncated Fourier series, relative): max penetration {np.max(pen):.3g} of "
+                     f"the largest contact displacement ({np.max(branch.penetration):.3g} absolute), max tension "
+                     f"{np.max(ten):.3g} of the largest contact force ({np.max(branch.tension):.3g} absolute)")
     if branch.error_estimate is not None:
         acc = branch.accuracy
         met = f", rtol = {acc.rtol:g} met at {int(np.sum(acc.met))} of {len(branch)} points" if acc.rtol else ""

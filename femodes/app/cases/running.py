@@ -52,9 +52,10 @@ def run_case(case: Case, out: Path, *, progress: bool | Callable = False, checkp
     files, lines = [], summary_lines(case, model, branch)
     if outs["branch"]:
         files.append(branch.save(out / outs["branch"]))
-    if outs["plot"]:
-        files.append(write_plot(case, model, branch, out))
-    write_animations(model, branch, out, outs, files, lines)
+    if len(branch):  # a run that found no point (its start failed) has nothing to draw
+        if outs["plot"]:
+            files.append(write_plot(case, model, branch, out))
+        write_animations(model, branch, out, outs, files, lines)
     summary = out / "summary.txt"
     files.append(summary)
     summary.write_text("\n".join(lines) + "\n")

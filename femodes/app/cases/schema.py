@@ -10,6 +10,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+#: The checkpoint of `femodes run` in its output folder (journal CHECKPOINT_NAME.points/ while it
+#: runs; removed when the outputs are written): an interrupted run is resumed by the same command.
+CHECKPOINT_NAME = "checkpoint.npz"
+
 __all__ = ["CaseError", "Case", "SCHEMA", "ARRAY_TABLES", "MODEL_KINDS", "LINE_MESH_KEYS", "SOLID_MESH_KEYS",
            "SOLID_DIVISIONS", "ANALYSES", "TYPE_TEXT", "key_line", "schema_type_error", "check_type", "all_finite",
            "fmt_value", "is_number", "suggest"]

@@ -7,8 +7,8 @@ import re
 import tomllib
 from pathlib import Path, PurePosixPath, PureWindowsPath
 
-from .schema import (ANALYSES, ARRAY_TABLES, LINE_MESH_KEYS, MODEL_KINDS, SCHEMA, SOLID_DIVISIONS, SOLID_MESH_KEYS,
-                     TYPE_TEXT, Case, CaseError, all_finite, check_type, fmt_value, key_line, suggest)
+from .schema import (ANALYSES, ARRAY_TABLES, CHECKPOINT_NAME, LINE_MESH_KEYS, MODEL_KINDS, SCHEMA, SOLID_DIVISIONS,
+                     SOLID_MESH_KEYS, TYPE_TEXT, Case, CaseError, all_finite, check_type, fmt_value, key_line, suggest)
 
 __all__ = ["parse_case", "load_case"]
 
@@ -292,6 +292,16 @@ def _check_outputs(case: Case) -> None:
         # a path: written outside the output folder, where the run's report says the outputs are
         raise case.error("outputs", "branch", f"branch must be a file name like \"branch.npz\", written in the "
                          f"output folder (choose it with --out), got {name!r}")
+    if isinstance(name, str):
+        from ...store import RECORD_SUFFIXES
+
+        # checked before the run: after it, a bad name ended in a traceback and the run's points were removed
+        if PurePosixPath(name).suffix.lower() not in RECORD_SUFFIXES:
+            raise case.error("outputs", "branch", f"branch must end in {', '.join(RECORD_SUFFIXES)} (a .npz or HDF5 "
+                             f"file), got {name!r}")
+        if name.lower() == CHECKPOINT_NAME:  # the run's checkpoint, removed once the outputs are written
+            raise case.error("outputs", "branch", f"branch = {name!r} is the name of the run's own checkpoint "
+                             "in the output folder; choose another name, like \"branch.npz\"")
 
 
 def _check_reduction(case: Case, kind: str) -> None:

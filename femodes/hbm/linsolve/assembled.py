@@ -48,7 +48,9 @@ class DenseFactorization:
             self._factor()
 
     def _factor(self) -> None:
-        self.lu = lu = sla.lu_factor(self.A, check_finite=False)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", sla.LinAlgWarning)  # zero pivots are checked below (and said)
+            self.lu = lu = sla.lu_factor(self.A, check_finite=False)
         if np.any(np.diagonal(lu[0]) == 0.0):
             raise RuntimeError("Factor is exactly singular")
 
