@@ -148,6 +148,9 @@ def linear_modes(model: StructuralModel, n: int = 6, *, sigma: float | None = No
             raise InputValueError(f"sigma must be finite, got {sigma!r}")
         sigma = float(sigma)
     omega, shapes = normal_modes(model.K, model.M, n, sigma=sigma)
+    if omega.size < n:  # massless DOFs have no natural frequency: fewer modes than asked, said
+        log.warning("linear_modes: %d modes asked, the model has %d: %d of its %d DOFs are massless (no inertia, no "
+                    "natural frequency)", n, omega.size, model.n_dofs - omega.size, model.n_dofs)
     return LinearModes(omega=omega, shapes=shapes)
 
 

@@ -32,6 +32,7 @@ def test_contact_forced_cases_trace_both_folds(contact):
         assert br.nit.mean() <= 4.0 and br.nit.max() <= 8
 
 
+@pytest.mark.slow  # the example's whole study: 100-160 s on 2 cores, a sixth of the suite (CI's slow step runs it)
 def test_bar_refinement_against_the_continuum(tmp_path):
     """The bar's first nonsmooth mode against the continuum's (d'Alembert), with the rates the example
     measures (benchmarks/README_bar_convergence.md has the full study).

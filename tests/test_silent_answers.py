@@ -366,3 +366,62 @@ def test_a_force_on_a_solid_without_a_component_is_said():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         s.with_forcing(fm.HarmonicForce(at=("right", "u_y"), amplitude=1.0))
+
+
+def test_branch_meta_that_a_file_cannot_hold_is_named(tmp_path):
+    b = fm.frequency_response(oscillator(), (0.8, 1.0), 3)
+    b.meta["user"] = np.int64(3)
+    with pytest.raises(TypeError, match=r"Branch\.save: meta\['user'\] = np\.int64\(3\) cannot be stored|"
+                       r"Branch\.save: meta\['user'\] = 3 cannot be stored"):
+        b.save(tmp_path / "b.npz")
+    b.meta["user"] = 3
+    assert fm.load_branch(b.save(tmp_path / "b.npz")).meta["user"] == 3
+
+
+def test_an_animation_path_that_names_a_folder_is_refused(tmp_path):
+    """``write_animation(sol, model, "d/")`` wrote d.pvd and d_0000.vtu next to the folder, and
+    ``"x.vtk"`` gave x.vtk.pvd."""
+    mesh = fm.line_mesh(1.0, 4, boundaries={"clamp": 0.0, "tip": 1.0})
+    model = (fm.bar(mesh, fm.Material(E=1.0, rho=1.0), fm.Section(area=1.0), clamped="clamp").with_damping(beta=0.02)
+             .with_contact(fm.UnilateralContact(at="tip", gap=0.01)).with_forcing(fm.HarmonicForce(at="tip", amplitude=0.004)))
+    sol = fm.frequency_response(model, omega=(1.0, 1.2), harmonics=3)[0]
+    with pytest.raises(ValueError, match=r"got the folder '.*d/'; give a stem inside it, e\.g\. '.*d/mode1'"):
+        fm.io.write_animation(sol, model, str(tmp_path / "d") + "/", n_frames=2)
+    pvd = fm.io.write_animation(sol, model, tmp_path / "x.vtk", n_frames=2)
+    assert pvd.name == "x.pvd" and (tmp_path / "x_0001.vtu").exists()
+
+
+def test_a_spring_or_point_mass_on_a_support_is_an_error():
+    """Accepted and without effect (the DOF is eliminated), where a contact or force is refused."""
+    m = fm.line_mesh(1.0, 4, boundaries={"clamp": 0.0, "tip": 1.0})
+    for arg in ("springs", "point_masses"):
+        with pytest.raises(ValueError, match=rf"bar: {arg}\['clamp'\] acts on a supported DOF"):
+            fm.bar(m, fm.Material(1.0, 1.0), fm.Section(1.0), clamped="clamp", **{arg: {"clamp": 5.0}})
+    tip = fm.bar(m, fm.Material(1.0, 1.0), fm.Section(1.0), clamped="clamp", point_masses={"tip": 5.0})
+    assert tip.M.diagonal().max() > 5.0
+
+
+def test_fewer_linear_modes_than_asked_are_said(caplog):
+    m = fm.StructuralModel(M=[[1.0, 0.0], [0.0, 0.0]], K=[[2.0, -1.0], [-1.0, 2.0]])
+    with caplog.at_level(logging.WARNING):
+        w = fm.linear_modes(m, 2).omega
+    assert w.size == 1 and abs(w[0] - np.sqrt(1.5)) < 1e-12     # the massless DOF condensed: k = 2 - 1/2
+    assert any("2 modes asked, the model has 1: 1 of its 2 DOFs are massless" in r.getMessage() for r in caplog.records)
+
+
+def test_femodes_run_into_the_folder_of_another_case_is_refused(tmp_path, capsys):
+    """The second case's outputs were written beside the first's (its animation, backbone and plot
+    stayed) under the second's summary, without a word."""
+    from pathlib import Path
+
+    from femodes.app import cli
+    cases_dir = Path(__file__).resolve().parents[1] / "examples" / "cases"
+    out = tmp_path / "o"
+    assert cli.main(["run", str(cases_dir / "oscillator_frc.toml"), "--out", str(out), "--no-progress"]) == 0
+    capsys.readouterr()
+    assert cli.main(["run", str(cases_dir / "oscillator_stability.toml"), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"femodes run: --out {str(out)!r} holds the outputs of case") and "oscillator_frc.toml" in err
+    # the same case again (by another path) is fine
+    assert cli.main(["run", str(cases_dir / ".." / "cases" / "oscillator_frc.toml"), "--out", str(out),
+                     "--no-progress"]) == 0

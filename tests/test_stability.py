@@ -285,7 +285,15 @@ def test_auto_takes_hill_for_a_stiff_model(monkeypatch):
         m.setattr(methods, "shooting_multipliers", lambda *a, **kw: pytest.fail("shooting attempted"))
         assert fm.stability(b[0]).method == "hill"
         assert fm.stability(b[0], method=fm.stability_methods.Auto()).method == "hill"
-    assert fm.stability(b[0], method=fm.stability_methods.Auto(max_stiffness=1e4)).method == "shooting"
+    # a larger max_stiffness shoots: on a model whose fastest frequency is 47 times the orbit's
+    # (k = 100; shooting the k = 1e6 model itself integrated 4700 fast periods: 140-160 s), the default
+    # (50) shoots and max_stiffness=10 takes Hill
+    soft = (fm.StructuralModel(M=np.eye(2), K=[[101.0, -100.0], [-100.0, 100.0]], C=0.1 * np.eye(2))
+            .with_contact(fm.UnilateralContact(at=1, gap=1.0)).with_forcing(fm.HarmonicForce(at=0, amplitude=0.2)))
+    assert methods.fastest_frequency(soft) / 0.3 == pytest.approx(47.2, rel=1e-2)
+    p = fm.frequency_response(soft, (0.3, 0.35), 6)[0]
+    assert fm.stability(p).method == "shooting"
+    assert fm.stability(p, method=fm.stability_methods.Auto(max_stiffness=10.0)).method == "hill"
     with pytest.raises(ValueError, match="max_stiffness must be a positive number"):
         fm.stability_methods.Auto(max_stiffness=0)
 

@@ -75,6 +75,11 @@ def run_case_cli(path: Path, out: Path | None, progress: bool | None) -> int:
     out = command_out_folder(out, Path("out") / path.stem, "run")
     if out is None:
         return 2
+    other = _outputs_of_another_case(out, case.name)
+    if other:  # its plots, animations and branch would stay beside this case's, under one summary
+        print(f"femodes run: --out {str(out)!r} holds the outputs of case {other!r} (summary.txt); choose another "
+              "--out, or delete that folder", file=sys.stderr)
+        return 2
     show = sys.stderr.isatty() if progress is None else progress
     bar = None
     if show:
@@ -132,6 +137,17 @@ def run_case_cli(path: Path, out: Path | None, progress: bool | None) -> int:
     names = ", ".join(Path(f).name for f in res.files)
     print(f"outputs written to {out.resolve()} ({names})")
     return 0 if res.branch.success else 1
+
+
+def _outputs_of_another_case(out: Path, name: str) -> str | None:
+    """The case whose ``summary.txt`` is in ``out``, when it is not ``name`` (None otherwise)."""
+    try:
+        first = (out / "summary.txt").read_text(encoding="utf-8").splitlines()[0]
+    except (OSError, IndexError, UnicodeDecodeError):
+        return None
+    other = first[len("case: "):] if first.startswith("case: ") else None
+    # the same file run from another folder or by another path is the same case
+    return other if other is not None and Path(other).name != Path(name).name else None
 
 
 SWEEP_HELP = """Run a case file for many parameter values, as independent tasks on Dask workers.

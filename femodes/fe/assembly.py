@@ -410,6 +410,8 @@ def build_fe_model(
     constrained = _constrained_dofs(dofs, constraints)
     added_mass = _lumped_values(dofs, "point_masses", point_masses)
     added_stiffness = _lumped_values(dofs, "springs", springs)
+    _refuse_on_supports(dofs, constrained, {"point_masses": (point_masses, added_mass),
+                                            "springs": (springs, added_stiffness)})
     M = _add_diagonal(M, added_mass, n_full)
     K = _add_diagonal(K, added_stiffness, n_full)
     free, node_dof = _free_dofs(nodal, n_full, constrained, constraints)
@@ -513,6 +515,17 @@ def _lumped_values(dofs: _NodalDofs, arg: str, table: Mapping | None) -> tuple[l
         idx.append(int(dofs.nodal[c, node]))
         vals.append(float(value))
     return idx, vals
+
+
+def _refuse_on_supports(dofs: _NodalDofs, constrained: Mapping, tables: Mapping) -> None:
+    """ValueError for a point mass or spring on a supported DOF: it was accepted and had no effect
+    (the DOF is eliminated), where a contact or a force there is refused."""
+    fixed = {int(dofs.nodal[c, node]) for node, c in constrained}
+    for arg, (table, (idx, _)) in tables.items():
+        for at, i in zip((table or {}), idx):
+            if i in fixed:
+                raise InputValueError(f"{arg}[{at!r}] acts on a supported DOF (clamped or fixed by supports=), where "
+                                      f"it has no effect; put it on a free point, or remove that support")
 
 
 def _add_diagonal(A: sp.spmatrix, added: tuple[list, list], n_full: int) -> sp.spmatrix:

@@ -49,8 +49,13 @@ log = logging.getLogger(__name__)
 def _stem(path: Any) -> Path:
     if not isinstance(path, (str, os.PathLike)):
         raise InputTypeError(f"path must be a str or os.PathLike file stem (e.g. 'out/mode1'), got {type(path).__name__}")
-    p = Path(path)
-    if p.suffix.lower() in (".pvd", ".vtu"):
+    text = os.fspath(path)
+    p = Path(text)
+    if isinstance(text, str) and text.endswith(("/", os.sep)):
+        # a folder: the files went next to it ('d/' wrote d.pvd and d_0000.vtu in the parent)
+        raise InputValueError(f"path must name a file stem such as 'out/mode1', got the folder {text!r}; "
+                              f"give a stem inside it, e.g. {str(p / 'mode1')!r}")
+    if p.suffix.lower() in (".pvd", ".vtu", ".vtk"):
         p = p.with_suffix("")
     if not p.name:
         raise InputValueError(f"path must name a file stem such as 'out/mode1', got {str(path)!r}")

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from ..store import model_signature
@@ -41,6 +43,19 @@ def branch_arrays(branch, bifurcations: tuple) -> dict:
     return out
 
 
+def _stored_meta(meta: dict) -> dict:
+    """``meta`` as the file stores it (JSON), or a TypeError naming the entry it cannot store (it
+    was json's "Object of type int64 is not JSON serializable", naming neither ``meta`` nor the key)."""
+    for key, value in meta.items():
+        try:
+            json.dumps({key: value})
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"Branch.save: meta[{key!r}] = {value!r} cannot be stored in the file ({exc}); keep "
+                            "meta to numbers, strings, lists, dicts (string keys), True/False/None: e.g. int(...), "
+                            "float(...) or array.tolist()") from None
+    return meta
+
+
 def branch_header(branch) -> dict:
     """The JSON header of a branch file: format, kind, harmonics, contacts, status, model signature, and what
     the error estimate and stability were computed with."""
@@ -48,7 +63,7 @@ def branch_header(branch) -> dict:
         "format": "femodes.Branch", "version": FORMAT_VERSION, "kind": branch.kind,
         "harmonics": [branch.harmonics.n_harmonics, branch.harmonics.n_time, branch.harmonics.subharmonic],
         "contacts": branch.contacts.to_json(), "success": branch.success, "status": branch.status,
-        "message": branch.message, "meta": branch.meta,
+        "message": branch.message, "meta": _stored_meta(branch.meta),
         "model": model_signature(branch.model) if branch.model is not None else branch.model_signature,
         "accuracy": None if branch.accuracy is None else {
             "method": [str(m) for m in branch.accuracy.method], "rtol": branch.accuracy.rtol,
