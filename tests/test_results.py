@@ -172,11 +172,13 @@ def test_branch_contact_quality_is_the_points(mixed, duffing_branch):
     """Branch.tension and Branch.contact_quality (one synthesis for the branch) are the points'
     own measures: tension to the rounding of two series evaluations, the relative penetration
     and tension (error estimate's contact quality) against their definition point by point."""
+    from femodes.results.contacts import fine_points
     ten = mixed.tension
     pen_rel, ten_rel = mixed.contact_quality()
     assert pen_rel.shape == ten_rel.shape == (len(mixed),)
     for i, s in enumerate(mixed):
-        t = s._fine_t()
+        n = fine_points(s.harmonics)                 # the grid contact_quality samples
+        t = np.arange(n) * (s.period / n)
         amp = np.abs(s.displacement(t)[:, list(mixed.contacts.dofs)]).max()
         fmax = s.contact_force(t).max()
         scale = 4 * np.finfo(float).eps * (1 + 2 * np.pi * s.harmonics.n_harmonics) * np.abs(s.P).sum()

@@ -21,6 +21,18 @@ def warnings_of(caplog, name):
     return [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING and name in r.getMessage()]
 
 
+def assert_warns_at_the_users_line(match, call, quiet):
+    """``call()`` warns (UserWarning matching ``match``) at the calling line of this file, and
+    ``quiet()``, the same done as the warning advises, says nothing."""
+    import warnings
+    with pytest.warns(UserWarning, match=match) as rec:
+        call()
+    assert rec[0].filename == __file__
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        quiet()
+
+
 def test_a_softening_backbone_stops_at_its_separatrix(caplog):
     """u'' + u - u^3 = 0 has periodic orbits below the energy 1/4 only (the separatrix), with w -> 0
     there. The backbone went on through w = 6e-10 to w = -0.999 and reported 97 points, three folds
@@ -331,41 +343,28 @@ def test_a_gmsh_4_entity_in_two_physical_groups_is_said(tmp_path):
 def test_a_modal_damping_ratio_above_1_is_said():
     """``with_damping(modal=5.0)`` (5 % meant) made every mode overdamped without a word."""
     m = fm.StructuralModel(M=np.eye(2), K=[[2.0, -1.0], [-1.0, 2.0]])
-    with pytest.warns(UserWarning, match=r"damping ratios >= 1 \(largest 5\).*5 % is 0\.05") as rec:
-        m.with_damping(modal=5.0)
-    assert rec[0].filename == __file__              # the user's line
-    import warnings
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        m.with_damping(modal=0.05)
+    assert_warns_at_the_users_line(r"damping ratios >= 1 \(largest 5\).*5 % is 0\.05", lambda: m.with_damping(modal=5.0),
+                                   lambda: m.with_damping(modal=0.05))
 
 
 def test_a_contact_at_a_named_point_of_a_solid_without_direction_is_said():
     """On a boundary the contact without ``direction=`` warns that it acts along +x; at a named
     point it did so silently. ``at=(name, "u_x")`` keeps +x and says nothing."""
-    import warnings
     s = fm.solid(fm.rectangle_mesh(1.0, 0.1, 8, 2, quadrilaterals=True), fm.Material(1.0, 1.0, 0.3), clamped="left",
                  points={"top_mid": (0.5, 0.1)})
-    with pytest.warns(UserWarning, match=r"no direction= for point 'top_mid' of a 2-D solid; the contact acts along "
-                      r"\+x \('u_x'\)\. Give the stop's direction, e.g\. direction=\(0\.0, 1\.0\)") as rec:
-        s.with_contact(fm.UnilateralContact(at="top_mid", gap=0.01))
-    assert rec[0].filename == __file__
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        s.with_contact(fm.UnilateralContact(at=("top_mid", "u_x"), gap=0.01))
+    assert_warns_at_the_users_line(
+        r"no direction= for point 'top_mid' of a 2-D solid; the contact acts along \+x \('u_x'\)\. Give the stop's "
+        r"direction, e\.g\. direction=\(0\.0, 1\.0\)", lambda: s.with_contact(fm.UnilateralContact(at="top_mid", gap=0.01)),
+        lambda: s.with_contact(fm.UnilateralContact(at=("top_mid", "u_x"), gap=0.01)))
 
 
 def test_a_force_on_a_solid_without_a_component_is_said():
     """``HarmonicForce(at="right")`` on a 2-D solid acted along +x without a word."""
-    import warnings
     s = fm.solid(fm.rectangle_mesh(1.0, 0.1, 8, 2, quadrilaterals=True), fm.Material(1.0, 1.0, 0.3), clamped="left")
-    with pytest.warns(UserWarning, match=r"HarmonicForce\(at='right'\) names no component on a 2-D solid; the force "
-                      r"acts along \+x \('u_x'\)\. Give one, e.g\. at=\('right', 'u_y'\)") as rec:
-        s.with_forcing(fm.HarmonicForce(at="right", amplitude=1.0))
-    assert rec[0].filename == __file__
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        s.with_forcing(fm.HarmonicForce(at=("right", "u_y"), amplitude=1.0))
+    assert_warns_at_the_users_line(
+        r"HarmonicForce\(at='right'\) names no component on a 2-D solid; the force acts along \+x \('u_x'\)\. Give "
+        r"one, e\.g\. at=\('right', 'u_y'\)", lambda: s.with_forcing(fm.HarmonicForce(at="right", amplitude=1.0)),
+        lambda: s.with_forcing(fm.HarmonicForce(at=("right", "u_y"), amplitude=1.0)))
 
 
 def test_branch_meta_that_a_file_cannot_hold_is_named(tmp_path):

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..hbm.harmonics import Harmonics
-from .contacts import ContactInfo, contact_quality, fine_points, peak_amplitude
+from .contacts import ContactInfo, contact_quality, peak_amplitude
 
 __all__ = ["PeriodicSolution"]
 
@@ -138,10 +138,6 @@ class PeriodicSolution:
             return np.zeros((u.shape[0], 0))
         return np.column_stack([law.gap_function(u[:, dof]) for law, dof in zip(ci.laws, ci.dofs)])
 
-    def _fine_t(self) -> np.ndarray:
-        n = fine_points(self.harmonics)
-        return np.arange(n) * (self.period / n)
-
     @property
     def penetration(self) -> float:
         """Max penetration ``max(0, max_t -g_N(t))`` over a fine time grid (0 without contacts)."""
@@ -154,8 +150,8 @@ class PeriodicSolution:
 
     def amplitude(self, dof: int) -> float:
         """``max_t |q_dof(t)|``: that of the exact orbit where the branch's error estimate found
-        it (:attr:`amplitude_limit`, as :meth:`Branch.amplitude`), else of the series on a fine
-        grid."""
+        it (:attr:`amplitude_limit`, as :meth:`Branch.amplitude`), else the series' peak
+        (:func:`~femodes.results.contacts.peak_amplitude`)."""
         checked_dof(dof, self.Q.shape[-1], "PeriodicSolution.amplitude")
         if self.amplitude_limit is not None:
             return float(self.amplitude_limit[dof])
