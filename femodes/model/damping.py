@@ -225,9 +225,9 @@ def _modal_ratios(model, modal, n_modes) -> tuple[np.ndarray, int]:
         raise TypeError(f"with_damping: modal must be a damping ratio or a list of ratios, got {modal!r}") from exc
     if zeta.ndim != 1 or zeta.size == 0 or not np.all(np.isfinite(zeta)) or np.any(zeta < 0):
         raise ValueError(f"with_damping: modal must be non-negative finite damping ratios, got {modal!r}")
-    if np.any(zeta >= 1.0):  # legal (overdamped), but a percentage given as a ratio looks the same
-        warnings.warn(f"with_damping: modal={modal!r} gives damping ratios >= 1 (largest {zeta.max():g}): those modes are "
-                      f"overdamped and do not vibrate; a ratio is a fraction of critical damping (1 % is 0.01, so "
+    if np.any(zeta > 1.0):  # legal (overdamped), but a percentage given as a ratio looks the same
+        warnings.warn(f"with_damping: modal={modal!r} gives damping ratios above 1 (largest {zeta.max():g}): those modes "
+                      f"are overdamped and do not vibrate; a ratio is a fraction of critical damping (1 % is 0.01, so "
                       f"{zeta.max():g} % is {zeta.max() / 100:g})", UserWarning, stacklevel=user_stacklevel())
     n = model.n_dofs
     if n_modes is not None:
