@@ -455,10 +455,10 @@ def _already_refined(branch: Branch, rtol: float) -> bool:
 
 
 def _saved_as_returned(final: Branch, continued: Branch, checkpoint: Checkpoint | None) -> Branch:
-    """``final``, also written to the checkpoint's file when it is not the branch the continuation
-    saved there (the whole of it: its notes too): the file held the branch before ``rtol``'s
-    estimate (an upper fold 9 % low, no error estimate) or before a nonlinear mode's past-grazing
-    family (11 grazing points instead of 42), while the call returned the other. It keeps the run's description, so that resuming the
+    """``final``, also written to the checkpoint's file, whole (its notes too): the file held the
+    continuation's branch, from before ``rtol``'s estimate (an upper fold 9 % low, no error
+    estimate) or before a nonlinear mode's past-grazing family (11 grazing points instead of 42),
+    while the call returned the other. It keeps the run's description, so that resuming the
     finished run returns it as it is."""
     if checkpoint is None:
         return final
