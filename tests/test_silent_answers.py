@@ -280,52 +280,15 @@ def test_a_singular_start_is_explained_in_the_users_terms():
     assert not b.success and "start energy 0.01" in b.message and "w_2 = 2 w_1 (2 rad/s)" in b.message
 
 
-#: A line of 4 elements written by gmsh 4.11 (format 4.1), its end point in the groups "tip" and "stop".
-SHARED_POINT_MSH = """$MeshFormat
-4.1 0 8
-$EndMeshFormat
-$PhysicalNames
-4
-0 2 "clamp"
-0 3 "tip"
-0 4 "stop"
-1 1 "beam"
-$EndPhysicalNames
-$Entities
-2 1 0 0
-1 0 0 0 1 2
-2 1 0 0 2 3 4
-1 0 0 0 1 0 0 1 1 2 1 -2
-$EndEntities
-$Nodes
-3 5 1 5
-0 1 0 1
-1
-0 0 0
-0 2 0 1
-2
-1 0 0
-1 1 0 3
-3
-4
-5
-0.2499999999994109 0 0
-0.4999999999986921 0 0
-0.7499999999993406 0 0
-$EndNodes
-$Elements
-3 6 1 6
-0 1 15 1
-1 1
-0 2 15 1
-2 2
-1 1 1 4
-3 1 3
-4 3 4
-5 4 5
-6 5 2
-$EndElements
-"""
+def _shared_point_msh() -> str:
+    """tests/test_mesh.py's gmsh 4.1 line, its end point (entity 2) also in a group "stop"."""
+    from .test_mesh import GMSH41
+    text = GMSH41
+    for old, new in (('$PhysicalNames\n3\n', '$PhysicalNames\n4\n'), ('0 2 "tip"\n', '0 2 "tip"\n0 4 "stop"\n'),
+                     ('2 1 0 0 1 2\n', '2 1 0 0 2 2 4\n')):
+        assert old in text
+        text = text.replace(old, new)
+    return text
 
 
 def test_a_gmsh_4_entity_in_two_physical_groups_is_said(tmp_path):
@@ -333,7 +296,7 @@ def test_a_gmsh_4_entity_in_two_physical_groups_is_said(tmp_path):
     3-D corner in "tip" and "tipcorners" left "tipcorners" 3 of its 4 nodes, and clamped= clamped
     3) without a word."""
     path = tmp_path / "shared.msh"
-    path.write_text(SHARED_POINT_MSH)
+    path.write_text(_shared_point_msh())
     with pytest.warns(UserWarning, match=r"the point 2 in 'tip', 'stop'\); meshio keeps only the first group of each, "
                       r"so the group 'stop' miss"):
         mesh = fm.load_mesh(path)

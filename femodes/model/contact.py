@@ -76,11 +76,7 @@ def bind_contacts(model, laws, node_of: np.ndarray, comp_of: np.ndarray) -> tupl
                 pairs, rot = [(law, dm.find(law.at))], {}
             if isinstance(law.at, str) and model.fe is not None and len(dm.displacement) > 1:
                 # a named point of a 2-D/3-D solid: +x without a word (a boundary says so, below)
-                n_d = len(dm.displacement)
-                warnings.warn(f"{contact_label(law)}: no direction= for point {law.at!r} of a {n_d}-D solid; the "
-                              f"contact acts along +x ({dm.displacement[0]!r}). Give the stop's direction, e.g. "
-                              f"direction={tuple(1.0 if i == n_d - 1 else 0.0 for i in range(n_d))}, or "
-                              f"at=({law.at!r}, {dm.displacement[0]!r}) to keep +x and silence this", UserWarning,
+                warnings.warn(_implicit_x(contact_label(law), "point", law.at, dm), UserWarning,
                               stacklevel=user_stacklevel())
         else:
             pairs, rot = expand_contact(model, law)
@@ -133,10 +129,7 @@ def expand_contact(model, law) -> tuple[list, dict]:
     if law.direction is None and isinstance(at, str) and group is not None and len(dm.displacement) > 1:
         # a boundary of a 2-D/3-D solid without a direction: the contact acts along +x, which is
         # rarely what was meant (a stop above a blade tip is along z)
-        warnings.warn(f"{label}: no direction= for boundary {at!r} of a {len(dm.displacement)}-D solid; the contact "
-                      f"acts along +x ({dm.displacement[0]!r}). Give the stop's direction, e.g. "
-                      f"direction={tuple(1.0 if i == len(dm.displacement) - 1 else 0.0 for i in range(len(dm.displacement)))}, "
-                      f"or at=({at!r}, {dm.displacement[0]!r}) to keep +x and silence this", UserWarning,
+        warnings.warn(_implicit_x(label, "boundary", at, dm), UserWarning,
                       stacklevel=_DEPTH + 2)  # the frame above the caller of with_contact, as before the split
     if group is None:
         with named_by(label):
@@ -277,6 +270,17 @@ def _direction_component(dm, law) -> int | None:
     if d[axis] >= 1.0 - AXIS_TOL:
         return dm.component_index(dm.displacement[axis])
     return None
+
+
+def _implicit_x(label: str, kind: str, name: str, dm) -> str:
+    """The warning for a contact without ``direction=`` at a named ``kind`` ("boundary" or "point")
+    of a 2-D/3-D solid: it acts along +x, which is rarely what was meant (a stop above a blade tip
+    is along z)."""
+    n_d = len(dm.displacement)
+    return (f"{label}: no direction= for {kind} {name!r} of a {n_d}-D solid; the contact acts along +x "
+            f"({dm.displacement[0]!r}). Give the stop's direction, e.g. "
+            f"direction={tuple(1.0 if i == n_d - 1 else 0.0 for i in range(n_d))}, or at=({name!r}, "
+            f"{dm.displacement[0]!r}) to keep +x and silence this")
 
 
 def _same_per_node(gap, x: np.ndarray, g: np.ndarray) -> bool:
